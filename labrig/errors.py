@@ -1,0 +1,49 @@
+"""Errors meant for people: what went wrong, where (file, line, field), and what would be valid.
+
+The CLI prints these without a traceback and exits with :attr:`LabrigError.exit_code`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+class LabrigError(Exception):
+    """An expected failure with a message for the user."""
+
+    exit_code = 1
+
+
+@dataclass
+class InputIssue:
+    """One problem in an input file."""
+
+    file: str
+    line: int | None
+    field: str
+    message: str
+
+    def __str__(self) -> str:
+        where = f"{self.file}:{self.line}" if self.line else self.file
+        fld = f" [{self.field}]" if self.field else ""
+        return f"{where}:{fld} {self.message}"
+
+
+class InputFileError(LabrigError):
+    """A protocol, rig or data file that cannot be used as it is (exit code 2)."""
+
+    exit_code = 2
+
+    def __init__(self, issues: list[InputIssue]):
+        self.issues = issues
+        super().__init__("\n".join(str(i) for i in issues))
+
+
+class DeviceError(LabrigError):
+    """An instrument failed or refused: names the device and the operation (exit code 3)."""
+
+    exit_code = 3
+
+    def __init__(self, device: str, operation: str, detail: str):
+        self.device, self.operation, self.detail = device, operation, detail
+        super().__init__(f"{device}: {operation} failed: {detail}")

@@ -1,0 +1,110 @@
+"""Load a YAML file into a pydantic model, reporting problems as file:line and field.
+
+PyYAML's composer keeps the line of every node, so each pydantic error location (a path of keys
+and indices) is mapped back to the line where that value (or its parent) was written.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TypeVar
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+from labrig.errors import InputFileError, InputIssue
+
+M = TypeVar("M", bound=BaseModel)
+MAX_BYTES = 5_000_000
+
+
+def _line_index(node: yaml.Node, path: tuple = (), out: dict | None = None) -> dict:
+    """Map every key path in the YAML document to its 1-based line number."""
+    out = {} if out is None else out
+    out[path] = node.start_mark.line + 1
+    if isinstance(node, yaml.MappingNode):
+        for k, v in node.value:
+            key = k.value if isinstance(k, yaml.ScalarNode) else str(k.value)
+            out[(*path, key)] = k.start_mark.line + 1
+            _line_index(v, (*path, key), out)
+            out[(*path, key)] = k.start_mark.line + 1
+    elif isinstance(node, yaml.SequenceNode):
+        for i, v in enumerate(node.value):
+            _line_index(v, (*path, i), out)
+    return out
+
+
+def _line_for(loc: tuple, lines: dict) -> int | None:
+    path = tuple(loc)
+    while path:
+        if path in lines:
+            return lines[path]
+        path = path[:-1]
+    return lines.get(())
+
+
+def read_yaml(path: Path | str) -> tuple[object, dict, str]:
+    """Parse a YAML file: ``(data, line_index, text)``; syntax problems raise InputFileError."""
+    p = Path(path)
+    name = str(path)
+    try:
+        raw = p.read_bytes()
+    except OSError as e:
+        raise InputFileError([InputIssue(name, None, "", f"cannot read file: {e.strerror}")]) from e
+    if len(raw) > MAX_BYTES:
+        raise InputFileError([InputIssue(name, None, "", "file is too large for a YAML file")])
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = raw[: e.start].count(b"\n") + 1
+        msg = "not a text file (invalid UTF-8); expected a YAML file"
+        raise InputFileError([InputIssue(name, line, "", msg)]) from e
+    if "\x00" in text:
+        line = text[: text.index("\x00")].count("\n") + 1
+        raise InputFileError([InputIssue(name, line, "", "binary data in a YAML file")])
+    try:
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        data = yaml.safe_load(text)
+    except yaml.MarkedYAMLError as e:
+        mark = e.problem_mark or e.context_mark
+        line = mark.line + 1 if mark else None
+        msg = f"YAML syntax error: {e.problem or e}" + (f" ({e.context})" if e.context else "")
+        raise InputFileError([InputIssue(name, line, "", msg)]) from e
+    except yaml.YAMLError as e:
+        raise InputFileError([InputIssue(name, None, "", f"YAML error: {e}")]) from e
+    lines = _line_index(node) if node is not None else {}
+    return data, lines, text
+
+
+def issues_from_validation(name: str, err: ValidationError, lines: dict) -> list[InputIssue]:
+    """Turn pydantic errors into file:line issues with a readable field path."""
+    issues = []
+    for e in err.errors():
+        loc = tuple(x for x in e["loc"] if not (isinstance(x, str) and x.startswith("function-")))
+        field = ".".join(str(x) if isinstance(x, str) else f"[{x}]" for x in loc).replace(".[", "[")
+        msg = e["msg"]
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key (not part of the schema; check the spelling)"
+        elif e["type"] == "missing":
+            msg = "required key is missing"
+        if "input" in e and e["type"] not in ("missing", "extra_forbidden"):
+            shown = repr(e["input"])
+            if len(shown) < 60:
+                msg += f" (got {shown})"
+        issues.append(InputIssue(name, _line_for(loc, lines), field, msg))
+    return issues
+
+
+def load_model(path: Path | str, model: type[M], context: dict | None = None) -> M:
+    """Read ``path`` and validate it as ``model``; raise :class:`InputFileError` on any problem."""
+    data, lines, _ = read_yaml(path)
+    name = str(path)
+    if data is None:
+        raise InputFileError([InputIssue(name, 1, "", "file is empty; expected a YAML mapping")])
+    if not isinstance(data, dict):
+        msg = f"expected a YAML mapping (key: value) at the top, got {type(data).__name__}"
+        raise InputFileError([InputIssue(name, 1, "", msg)])
+    try:
+        return model.model_validate(data, context=context)
+    except ValidationError as e:
+        raise InputFileError(issues_from_validation(name, e, lines)) from e
