@@ -223,7 +223,7 @@ def run_bank(
     u: NDArray,
     state: list[NDArray] | None = None,
     u_prev: float = 0.0,
-    block: int = 128,
+    block: int = 256,
 ) -> tuple[NDArray[np.float64], list[NDArray]]:
     """Run the bank over a record ``u``; returns ``(y, final_state)``.
 
