@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from pathlib import Path
 
 import typer
 
 from labrig import __version__
+from labrig.errors import LabrigError
 
 app = typer.Typer(
     name="labrig",
@@ -17,6 +20,28 @@ app = typer.Typer(
 )
 model_app = typer.Typer(help="The dynamic hysteresis model: demo and the seed's figures.")
 app.add_typer(model_app, name="model")
+sim_app = typer.Typer(help="The simulated bench: run its instrument simulators standalone.")
+app.add_typer(sim_app, name="sim")
+
+
+def friendly(fn: Callable) -> Callable:
+    """Expected failures print one clear message (no traceback) and exit with their code."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except LabrigError as e:
+            typer.echo(f"error: {e}", err=True)
+            raise typer.Exit(e.exit_code) from None
+        except FileExistsError as e:
+            typer.echo(f"error: {e}", err=True)
+            raise typer.Exit(2) from None
+        except KeyboardInterrupt:
+            typer.echo("interrupted", err=True)
+            raise typer.Exit(130) from None
+
+    return wrapper
 
 
 def _version(value: bool) -> None:
@@ -57,6 +82,85 @@ def model_figures(
 
     for path in write_model_figures(out):
         typer.echo(str(path))
+
+
+@app.command("check")
+@friendly
+def check(
+    protocol: Path = typer.Argument(..., help="Protocol file (YAML)."),
+    rig: Path | None = typer.Option(
+        None,
+        "--rig",
+        help="Rig file (default: the protocol's `rig`, else the built-in simulated rig).",
+    ),
+) -> None:
+    """Validate a protocol and preflight it against the rig's limits; touches no hardware."""
+    from rich.console import Console
+
+    from labrig.protocol.check import format_plan
+    from labrig.runner import preflight
+
+    plan, _ = preflight(protocol, rig)
+    Console().print(format_plan(plan))
+    typer.echo(f"{protocol}: OK, {len(plan.steps)} entries, {plan.total_duration_s:.1f} s")
+
+
+@app.command("run")
+@friendly
+def run(
+    protocol: Path = typer.Argument(..., help="Protocol file (YAML)."),
+    rig: Path | None = typer.Option(
+        None,
+        "--rig",
+        help="Rig file (default: the protocol's `rig`, else the built-in simulated rig).",
+    ),
+    out: Path | None = typer.Option(
+        None, "--out", help="Run file to write (default: runs/NAME-DATE-TIME.h5)."
+    ),
+    seed: int | None = typer.Option(None, "--seed", help="Random seed of the simulated rig."),
+    realtime: bool = typer.Option(False, "--realtime", help="Pace a simulated rig to the clock."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing --out file."),
+) -> None:
+    """Preflight a protocol, run it on the rig, and log every step to an HDF5 run file."""
+    from labrig.cli_run import run_with_progress
+
+    code = run_with_progress(protocol, rig, out, seed, realtime, overwrite)
+    raise typer.Exit(code)
+
+
+@app.command("info")
+@friendly
+def info(run_file: Path = typer.Argument(..., help="Run file (HDF5).")) -> None:
+    """Summarise a run file: entries, status, durations, ranges."""
+    from rich.console import Console
+
+    from labrig.store import run_info
+
+    Console().print(run_info(run_file))
+
+
+@app.command("export")
+@friendly
+def export(
+    run_file: Path = typer.Argument(..., help="Run file (HDF5)."),
+    csv: Path = typer.Option(..., "--csv", help="Directory for one CSV file per entry."),
+) -> None:
+    """Export every entry of a run file to CSV (header: column names with units)."""
+    from labrig.store import export_csv
+
+    for p in export_csv(run_file, csv):
+        typer.echo(str(p))
+
+
+@sim_app.command("serve")
+@friendly
+def sim_serve(
+    rig: Path | None = typer.Option(None, "--rig", help="Rig file (default: built-in sim rig)."),
+) -> None:
+    """Start the simulated amplifier (GCS) and conditioner (Modbus) servers; Ctrl-C stops."""
+    from labrig.drivers.sim.serve import serve
+
+    serve(rig)
 
 
 if __name__ == "__main__":  # pragma: no cover
