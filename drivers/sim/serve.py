@@ -1,0 +1,117 @@
+"""Start the simulators of a virtual bench: for :func:`labrig.rigfile.open_rig` and for
+``labrig sim serve`` (standalone, so a person can point the real drivers, a terminal or a Modbus
+tool at them).
+
+Started together, all on 127.0.0.1 (free ports unless given): the GCS responder (amplifier,
+``socket://127.0.0.1:PORT``), the Modbus TCP server and the Modbus RTU-framed server (conditioner,
+``127.0.0.1:PORT`` and ``socket://127.0.0.1:PORT``). The DAQ is in-process only; in ``serve``
+the bench clock runs in real time with the DAQ output held at 0 V, so ``SVA`` in ONLINE mode
+moves the output and ``VOL?`` follows it.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+from labrig.drivers.sim.bench import BenchConfig, VirtualBench
+from labrig.drivers.sim.gcs_server import GCSServer
+from labrig.drivers.sim.modbus_server import ModbusConditionerServer
+
+from labrig.limits import RigLimits
+
+
+class Simulators:
+    """A virtual bench and its protocol servers; ``endpoints`` maps kinds to addresses."""
+
+    def __init__(
+        self,
+        config: BenchConfig | None = None,
+        limits: RigLimits | None = None,
+        seed: int | None = None,
+        ports: dict[str, int] | None = None,
+        axis: str = "A",
+        channel: str = "1",
+        unit: int = 1,
+    ):
+        self.bench = VirtualBench(config, limits, seed)
+        ports = ports or {}
+        self.gcs = GCSServer(self.bench, port=ports.get("gcs", 0), axis=axis, channel=channel)
+        self.modbus_tcp = ModbusConditionerServer(
+            self.bench, "tcp", port=ports.get("modbus_tcp", 0), unit=unit
+        )
+        self.modbus_rtu = ModbusConditionerServer(
+            self.bench, "rtu", port=ports.get("modbus_rtu", 0), unit=unit
+        )
+        self._started: list = []
+        self._clock: threading.Thread | None = None
+        self._clock_stop = threading.Event()
+
+    def start(self) -> Simulators:
+        try:
+            for srv in (self.gcs, self.modbus_tcp, self.modbus_rtu):
+                srv.start()
+                self._started.append(srv)
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    @property
+    def endpoints(self) -> dict[str, str]:
+        return {
+            "gcs": self.gcs.url,
+            "modbus_tcp": self.modbus_tcp.address,
+            "modbus_rtu": self.modbus_rtu.address,
+        }
+
+    def run_clock(self, period_s: float = 0.05) -> None:
+        """Advance the bench in real time (for standalone serving; not during DAQ playback)."""
+
+        def tick():
+            last = time.monotonic()
+            while not self._clock_stop.wait(period_s):
+                now = time.monotonic()
+                self.bench.settle(now - last)
+                last = now
+
+        self._clock = threading.Thread(target=tick, name="bench-clock", daemon=True)
+        self._clock.start()
+
+    def stop(self) -> None:
+        self._clock_stop.set()
+        if self._clock is not None:
+            self._clock.join(1.0)
+        while self._started:
+            self._started.pop().stop()
+
+    def describe(self) -> dict:
+        d = self.bench.describe()
+        d["endpoints"] = self.endpoints
+        return d
+
+
+def serve(rig_path: Path | None) -> None:
+    """Start the simulators of a rig file's bench (default rig if None), print their addresses
+    and run until Ctrl-C."""
+    from labrig.rigfile import load_rig
+
+    spec = load_rig(rig_path)
+    sims = Simulators(
+        spec.bench_config or BenchConfig(), spec.limits, spec.seed_hint, spec.sim_ports
+    ).start()
+    sims.run_clock()
+    print(f"labrig virtual bench for rig {spec.name!r} (truth: {sims.bench.config.truth.preset})")
+    print(f"  amplifier (GCS, pyserial URL):     {sims.endpoints['gcs']}")
+    print(f"  conditioner (Modbus TCP):          {sims.endpoints['modbus_tcp']}  unit 1")
+    print(f"  conditioner (Modbus RTU framing):  {sims.endpoints['modbus_rtu']}  unit 1")
+    print("  try: python -m serial.tools.miniterm --eol LF " + sims.endpoints["gcs"])
+    print("Press Ctrl-C to stop.", flush=True)
+    try:
+        while True:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        print("stopping the simulators")
+    finally:
+        sims.stop()

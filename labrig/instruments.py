@@ -1,0 +1,336 @@
+"""The three device roles (DAQ, amplifier, conditioner) and the :class:`Rig` that joins them.
+
+Drivers live in ``labrig.drivers`` (the repository's ``drivers/``) and are found through the
+``labrig.drivers`` entry-point group: each entry point names a :class:`DriverInfo` (role, the
+pydantic model of its rig-file section, and a factory). :func:`labrig.rigfile.open_rig` reads a
+rig file, starts the simulators when the rig is simulated, creates the drivers and returns a
+:class:`Rig`.
+
+Units: V, s, Hz, ue (microstrain). Raw DAQ data are volts at the DAQ input; the Rig's helpers
+convert them (``gauge_to_strain``, ``monitor_to_volts``, ``temperature_to_degC``).
+
+Safety contract: every driver that can move the actuator brings its output to 0 V (best effort)
+before it raises a :class:`~labrig.errors.DeviceError`; :meth:`Rig.safe_zero` never raises.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any, Literal, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from pydantic import BaseModel
+
+from labrig.errors import DeviceError
+from labrig.limits import RigLimits
+
+log = logging.getLogger("labrig.instruments")
+
+Role = Literal["daq", "amplifier", "conditioner"]
+
+#: conversion of the optional ``temperature`` AI channel: degC = volts / TEMPERATURE_V_PER_DEGC
+#: (an LM35-style sensor, 10 mV/degC, 0 V at 0 degC)
+TEMPERATURE_V_PER_DEGC = 0.01
+
+
+@dataclass
+class AcquiredBlock:
+    """One block of a playback: AI volts per channel name, samples ``start .. start+len-1``."""
+
+    start: int
+    channels: dict[str, NDArray[np.float64]]
+
+    def __len__(self) -> int:
+        return len(next(iter(self.channels.values()))) if self.channels else 0
+
+
+@dataclass(frozen=True)
+class AmplifierStatus:
+    """Amplifier fault state. ``overflow``: output clipped or current-limited (latched until
+    read); ``over_temperature``: output stage shut down; ``error_code``: the device's last
+    error (0 = none); ``online``: digital control (analog input ignored) when True."""
+
+    overflow: bool
+    over_temperature: bool
+    error_code: int = 0
+    online: bool | None = None
+    detail: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return not (self.overflow or self.over_temperature or self.error_code)
+
+    def problems(self) -> list[str]:
+        out = []
+        if self.over_temperature:
+            out.append("over-temperature: the output stage shut down")
+        if self.overflow:
+            out.append("overflow: the output was clipped or current-limited")
+        if self.error_code:
+            out.append(f"device error code {self.error_code}")
+        return out
+
+
+@dataclass(frozen=True)
+class ConditionerStatus:
+    """Conditioner fault state (see the register map in docs/instruments.md)."""
+
+    over_range: bool
+    excitation_fault: bool
+    balance_failed: bool
+    error_code: int = 0
+    filter_on: bool = False
+    detail: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return not (
+            self.over_range or self.excitation_fault or self.balance_failed or self.error_code
+        )
+
+    def problems(self) -> list[str]:
+        out = []
+        if self.excitation_fault:
+            out.append("bridge excitation fault (open or shorted gauge)")
+        if self.over_range:
+            out.append("input over range")
+        if self.balance_failed:
+            out.append("zero balance failed (imbalance beyond the balance range)")
+        if self.error_code:
+            out.append(f"device error code {self.error_code}")
+        return out
+
+
+@runtime_checkable
+class DAQ(Protocol):
+    """Hardware-timed AO playback with synchronised AI (one AI sample per AO sample)."""
+
+    def identify(self) -> str: ...
+    def configure(self, rate_hz: float, ai_channels: list[str]) -> None: ...
+    def ai_channel_names(self) -> list[str]: ...
+    def play(self, ao_volts: NDArray, block_size: int) -> Iterator[AcquiredBlock]: ...
+    def write_static(self, volts: float) -> None: ...
+    def stop(self) -> None: ...
+    def close(self) -> None: ...
+
+
+@runtime_checkable
+class Amplifier(Protocol):
+    """Piezo amplifier: gain, limits, enable (analog control) / disable (held at 0 V)."""
+
+    gain: float
+
+    def identify(self) -> str: ...
+    def output_limits(self) -> tuple[float, float]: ...
+    def enable(self) -> None: ...
+    def disable(self) -> None: ...
+    def read_voltage(self) -> float: ...
+    def read_current(self) -> float | None: ...
+    def status(self) -> AmplifierStatus: ...
+    def safe_zero(self) -> None: ...
+    def close(self) -> None: ...
+
+
+@runtime_checkable
+class Conditioner(Protocol):
+    """Strain-gauge conditioner: excitation, gain, filter, balance, calibration."""
+
+    def identify(self) -> str: ...
+    def configure(self, excitation_V: float, gain: float, filter_hz: float) -> None: ...
+    def zero(self) -> None: ...
+    def status(self) -> ConditionerStatus: ...
+    def sensitivity_mV_per_ue(self) -> float: ...
+    def gain(self) -> float: ...
+    def close(self) -> None: ...
+
+
+# -- driver registry ----------------------------------------------------------------------------
+
+
+@dataclass
+class DriverContext:
+    """What :func:`labrig.rigfile.open_rig` hands a driver factory.
+
+    ``endpoints`` maps simulator kinds (``"gcs"``, ``"modbus_tcp"``, ``"modbus_rtu"``) to the
+    address of the simulator started for this rig; a rig-file address ``sim`` resolves to it.
+    """
+
+    limits: RigLimits
+    bench: Any = None
+    endpoints: dict[str, str] = field(default_factory=dict)
+    seed: int | None = None
+
+    def resolve(self, kind: str, address: str) -> str:
+        if address != "sim":
+            return address
+        if kind not in self.endpoints:
+            raise DeviceError(kind, "open", "address 'sim' but no simulator of this kind runs")
+        return self.endpoints[kind]
+
+
+@dataclass(frozen=True)
+class DriverInfo:
+    """A driver as registered under the ``labrig.drivers`` entry-point group."""
+
+    name: str
+    role: Role
+    settings: type[BaseModel]
+    create: Callable[[Any, DriverContext], Any]
+    summary: str = ""
+
+
+# -- the rig ------------------------------------------------------------------------------------
+
+
+def _describe(dev: Any) -> dict:
+    fn = getattr(dev, "describe", None)
+    if callable(fn):
+        try:
+            return fn()
+        except Exception as e:  # describing must never break a run
+            return {"error": str(e)}
+    return {"class": type(dev).__name__}
+
+
+@dataclass
+class Rig:
+    """A DAQ, an amplifier and a conditioner with the rig's limits and calibrations.
+
+    ``closers`` are called by :meth:`close` after the devices (simulators started for this rig);
+    ``sim`` gives tests access to the running simulators (``None`` on a real rig).
+    """
+
+    name: str
+    daq: DAQ
+    amplifier: Amplifier
+    conditioner: Conditioner
+    limits: RigLimits
+    rate_limits: tuple[float, float]
+    rig_text: str
+    monitor_V_per_V: float = 0.05
+    seed: int | None = None
+    sim: Any = None
+    closers: list[Callable[[], None]] = field(default_factory=list)
+    _closed: bool = field(default=False, repr=False)
+
+    # -- calibrations --------------------------------------------------------------------------
+    def volts_to_ao(self, v_actuator: ArrayLike) -> NDArray[np.float64]:
+        """DAQ analog-output volts for the actuator voltage ``v_actuator`` (V): divide by gain."""
+        return np.asarray(v_actuator, dtype=float) / float(self.amplifier.gain)
+
+    def ao_to_volts(self, ao: ArrayLike) -> NDArray[np.float64]:
+        return np.asarray(ao, dtype=float) * float(self.amplifier.gain)
+
+    def strain_scale_V_per_ue(self) -> float:
+        """Gauge-channel volts per ue: sensitivity (mV/ue at gain 1) x conditioner gain."""
+        return self.conditioner.sensitivity_mV_per_ue() * 1e-3 * float(self.conditioner.gain())
+
+    def gauge_to_strain(self, raw_volts: ArrayLike) -> NDArray[np.float64]:
+        """Strain (ue) from the ``gauge`` channel's volts."""
+        return np.asarray(raw_volts, dtype=float) / self.strain_scale_V_per_ue()
+
+    def monitor_to_volts(self, raw_volts: ArrayLike) -> NDArray[np.float64]:
+        """Actuator voltage (V) from the ``amp_monitor`` channel (``monitor_V_per_V`` V/V)."""
+        return np.asarray(raw_volts, dtype=float) / self.monitor_V_per_V
+
+    @staticmethod
+    def temperature_to_degC(raw_volts: ArrayLike) -> NDArray[np.float64]:
+        """Temperature (degC) from the ``temperature`` channel (10 mV/degC, 0 V at 0 degC)."""
+        return np.asarray(raw_volts, dtype=float) / TEMPERATURE_V_PER_DEGC
+
+    def convert(self, channel: str, raw_volts: ArrayLike) -> tuple[NDArray[np.float64], str]:
+        """A channel's values in physical units and the unit: gauge -> ue, amp_monitor -> V,
+        temperature -> degC, anything else stays V."""
+        if channel == "gauge":
+            return self.gauge_to_strain(raw_volts), "ue"
+        if channel == "amp_monitor":
+            return self.monitor_to_volts(raw_volts), "V"
+        if channel == "temperature":
+            return self.temperature_to_degC(raw_volts), "degC"
+        return np.asarray(raw_volts, dtype=float), "V"
+
+    # -- logging -------------------------------------------------------------------------------
+    def describe(self) -> dict:
+        """Identity and settings of every device (for the run file's NXinstrument groups)."""
+        out = {
+            "name": self.name,
+            "seed": self.seed,
+            "simulated": self.sim is not None,
+            "limits": self.limits.model_dump(),
+            "calibration": {
+                "amplifier_gain_V_per_V": float(self.amplifier.gain),
+                "monitor_V_per_V": self.monitor_V_per_V,
+                "temperature_V_per_degC": TEMPERATURE_V_PER_DEGC,
+            },
+            "daq": _describe(self.daq),
+            "amplifier": _describe(self.amplifier),
+            "conditioner": _describe(self.conditioner),
+        }
+        try:
+            out["calibration"]["sensitivity_mV_per_ue"] = self.conditioner.sensitivity_mV_per_ue()
+            out["calibration"]["conditioner_gain"] = float(self.conditioner.gain())
+        except DeviceError as e:
+            out["calibration"]["error"] = str(e)
+        if self.sim is not None:
+            out["bench"] = self.sim.describe()
+        return out
+
+    # -- health and safety ---------------------------------------------------------------------
+    def check(self) -> None:
+        """Raise :class:`DeviceError` if the amplifier or the conditioner reports a fault (the
+        amplifier is brought to 0 V first)."""
+        amp = self.amplifier.status()
+        if not amp.ok:
+            self.safe_zero()
+            raise DeviceError("amplifier", "status check", "; ".join(amp.problems()))
+        cond = self.conditioner.status()
+        if not cond.ok:
+            self.safe_zero()
+            raise DeviceError("conditioner", "status check", "; ".join(cond.problems()))
+
+    def safe_zero(self) -> None:
+        """DAQ output to 0 V and the amplifier to 0 V / disabled; best effort, never raises."""
+        try:
+            self.daq.stop()
+        except Exception as e:
+            log.error("safe_zero: DAQ stop failed: %s", e)
+        try:
+            self.amplifier.safe_zero()
+        except Exception as e:  # safe_zero must not raise, but be sure
+            log.error("safe_zero: amplifier safe_zero failed: %s", e)
+
+    @contextmanager
+    def zero_on_error(self):
+        """``with rig.zero_on_error(): ...`` brings the output to 0 V on any exception."""
+        try:
+            yield self
+        except BaseException:
+            self.safe_zero()
+            raise
+
+    def close(self) -> None:
+        """Zero the output, close the devices, then stop the simulators this rig started."""
+        if self._closed:
+            return
+        self._closed = True
+        self.safe_zero()
+        for dev in (self.daq, self.amplifier, self.conditioner):
+            try:
+                dev.close()
+            except Exception as e:
+                log.error("close: %s: %s", type(dev).__name__, e)
+        for fn in reversed(self.closers):
+            try:
+                fn()
+            except Exception as e:
+                log.error("close: stopping a simulator failed: %s", e)
+
+    def __enter__(self) -> Rig:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
