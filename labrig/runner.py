@@ -112,7 +112,9 @@ def _channels(rig: Rig) -> tuple[list[str], list[Channel]]:
 
 
 def _run_step(rig, writer, step: PlannedStep, ai: list[str], chans, progress, k, n_steps, left):
-    entry = writer.begin_entry(step.name, step.definition, step.rate_hz, chans)
+    entry = writer.begin_entry(
+        step.name, step.definition, step.rate_hz, chans, title=getattr(step, "title", None)
+    )
     command = step.samples()
     ao = rig.volts_to_ao(command)
     block = max(1, round(BLOCK_S * step.rate_hz))

@@ -16,6 +16,39 @@ from labrig.errors import InputFileError, InputIssue
 
 M = TypeVar("M", bound=BaseModel)
 MAX_BYTES = 5_000_000
+#: a document whose aliases expand to more YAML nodes than this is refused ("billion laughs")
+MAX_EXPANDED_NODES = 200_000
+
+
+def _expanded_size_issue(root: yaml.Node, name: str) -> InputIssue | None:
+    """Refuse YAML whose aliases (``*name``) expand to an enormous document.
+
+    Counts the nodes of the alias-expanded tree without expanding it (post-order over the
+    shared node graph), before anything walks or validates the expanded data.
+    """
+    sizes: dict[int, int] = {}
+    order, stack = [], [root]
+    while stack:
+        node = stack.pop()
+        if node is None or id(node) in sizes:
+            continue
+        sizes[id(node)] = 0
+        order.append(node)
+        if isinstance(node, yaml.MappingNode):
+            stack.extend(v for kv in node.value for v in kv)
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(node.value)
+    for node in reversed(order):
+        kids = []
+        if isinstance(node, yaml.MappingNode):
+            kids = [v for kv in node.value for v in kv]
+        elif isinstance(node, yaml.SequenceNode):
+            kids = node.value
+        sizes[id(node)] = 1 + sum(sizes.get(id(k), 1) for k in kids)
+        if sizes[id(node)] > MAX_EXPANDED_NODES:
+            msg = f"aliases expand this document to more than {MAX_EXPANDED_NODES} values"
+            return InputIssue(name, node.start_mark.line + 1, "", msg)
+    return None
 
 
 def _line_index(node: yaml.Node, path: tuple = (), out: dict | None = None) -> dict:
@@ -64,6 +97,9 @@ def read_yaml(path: Path | str) -> tuple[object, dict, str]:
         raise InputFileError([InputIssue(name, line, "", "binary data in a YAML file")])
     try:
         node = yaml.compose(text, Loader=yaml.SafeLoader)
+        bomb = _expanded_size_issue(node, name) if node is not None else None
+        if bomb is not None:
+            raise InputFileError([bomb])
         data = yaml.safe_load(text)
     except yaml.MarkedYAMLError as e:
         mark = e.problem_mark or e.context_mark

@@ -1,0 +1,550 @@
+"""Expand a validated protocol into a flat list of concrete steps (the plan).
+
+Sweeps become one sine step per amplitude x frequency pair, ``repeat`` copies a step (a whole
+sweep is repeated as a block), rests become ``rest_after_s`` on the step before them. Every
+concrete step gets a unique entry name (the run file's NXentry name): the derived base name
+(``sine_100V_40Hz``, ``vanishing_100V_1Hz``, ``hold_50V_2s``, ``ramp_0V_to_100V``,
+``csv_<file stem>``; a step's ``name`` replaces it, or prefixes a sweep's names), then ``_2``,
+``_3``, ... for later occurrences of the same name (repeats).
+
+Nothing here touches hardware or checks the rig's limits: see :mod:`.preflight`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from labrig.errors import InputFileError, InputIssue
+from labrig.limits import RigLimits
+from labrig.protocol import waveforms as wf
+from labrig.protocol.csvsource import CsvError, load_csv, resolve_csv_path
+from labrig.protocol.schema import (
+    CsvStep,
+    HoldStep,
+    Protocol,
+    RampStep,
+    SineStep,
+    SweepStep,
+    VanishingStep,
+)
+
+if TYPE_CHECKING:
+    from labrig.protocol.preflight import StepCheck
+
+#: refuse single entries longer than this many samples (split them or lower rate_hz)
+MAX_STEP_SAMPLES = 50_000_000
+#: refuse plans with more concrete steps than this
+MAX_ENTRIES = 10_000
+#: refuse plans lasting longer than this (s), rests included
+MAX_TOTAL_S = 7 * 86400.0
+
+
+def field_name(path: tuple) -> str:
+    """``("steps", 0, "frequencies_hz", 3)`` -> ``"steps[0].frequencies_hz[3]"``."""
+    out = ""
+    for p in path:
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
+    return out
+
+
+def line_of(path: tuple, lines: dict) -> int | None:
+    """Line of ``path`` in the YAML file, else of its nearest written parent."""
+    p = tuple(path)
+    while p:
+        if p in lines:
+            return lines[p]
+        p = p[:-1]
+    return lines.get(())
+
+
+@dataclass(frozen=True)
+class Where:
+    """A place in the protocol file: dotted field path and line."""
+
+    field: str
+    line: int | None
+
+
+@dataclass
+class PlannedStep:
+    """One concrete step: an entry of the run file.
+
+    ``definition`` is the JSON-able description stored with the entry; ``waveform`` produces
+    the command samples (V) at ``rate_hz``, starting and ending at 0 V; ``where`` maps the keys
+    that shaped the step (``amplitude_V``, ``frequency_hz``, ``length``, ``step``, ...) to their
+    place in the protocol file.
+    """
+
+    index: int
+    name: str
+    kind: str
+    source_step: int
+    repeat_index: int
+    definition: dict
+    rate_hz: float
+    waveform: wf.Waveform
+    rest_after_s: float = 0.0
+    amplitude_V: float | None = None
+    frequency_hz: float | None = None
+    where: dict[str, Where] = field(default_factory=dict)
+
+    @property
+    def n_samples(self) -> int:
+        return self.waveform.n_samples
+
+    @property
+    def duration_s(self) -> float:
+        return self.waveform.duration_s
+
+    def samples(self, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Command voltage samples ``start .. stop-1`` (V)."""
+        return self.waveform.samples(start, stop)
+
+    def times(self, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Sample times ``start .. stop-1`` (s since the start of the entry)."""
+        return self.waveform.times(start, stop)
+
+    @property
+    def title(self) -> str:
+        """Human-readable one-liner, e.g. ``sine 100 V, 40 Hz, 160 cycles (4 s)``."""
+        d = self.definition
+        if self.kind == "sine":
+            what = f"sine {d['amplitude_V']:g} V, {d['frequency_hz']:g} Hz, {d['cycles']:g} cycles"
+        elif self.kind == "vanishing":
+            what = (
+                f"vanishing envelope {d['amplitude_V']:g} V, {d['frequency_hz']:g} Hz carrier, "
+                f"{d['shape']} decay over {d['decay_s']:g} s, {d['hold_s']:g} s hold"
+            )
+        elif self.kind == "hold":
+            what = f"hold {d['voltage_V']:g} V"
+        elif self.kind == "ramp":
+            what = f"ramp {d['from_V']:g} V to {d['to_V']:g} V"
+        else:
+            what = f"samples from {d.get('file', 'CSV')}"
+        return f"{what} ({self.duration_s:.4g} s)"
+
+    def blame(self, key: str) -> Where:
+        return self.where.get(key) or self.where["step"]
+
+
+@dataclass
+class Plan:
+    """A validated, expanded protocol: what ``labrig run`` would do, step by step."""
+
+    path: Path
+    file: str
+    text: str
+    protocol: Protocol
+    lines: dict
+    steps: list[PlannedStep]
+    rig_path: Path | None = None
+    #: filled by :func:`labrig.protocol.preflight.preflight`
+    checks: list[StepCheck] | None = None
+    limits: RigLimits | None = None
+
+    @property
+    def name(self) -> str:
+        return self.protocol.name
+
+    @property
+    def rate_hz(self) -> float:
+        return self.protocol.rate_hz
+
+    @property
+    def recorded_duration_s(self) -> float:
+        return sum(s.duration_s for s in self.steps)
+
+    @property
+    def total_duration_s(self) -> float:
+        """Recorded time plus rests."""
+        return sum(s.duration_s + s.rest_after_s for s in self.steps)
+
+    @property
+    def total_samples(self) -> int:
+        return sum(s.n_samples for s in self.steps)
+
+    def where(self, path: tuple) -> Where:
+        return Where(field_name(path), line_of(path, self.lines))
+
+    def step(self, name: str) -> PlannedStep:
+        for s in self.steps:
+            if s.name == name:
+                return s
+        raise KeyError(name)
+
+    def to_dict(self) -> dict:
+        """JSON-able summary (name, rate, entries with their definitions and checks)."""
+        checks = {c.name: c for c in self.checks or []}
+        entries = []
+        for s in self.steps:
+            d = {"name": s.name, "rest_after_s": s.rest_after_s, **s.definition}
+            c = checks.get(s.name)
+            if c is not None:
+                d.update(
+                    peak_current_A=c.peak_current_A,
+                    mean_current_A=c.mean_current_A,
+                    v_min_V=c.v_min_V,
+                    v_max_V=c.v_max_V,
+                )
+            entries.append(d)
+        return {
+            "protocol": self.name,
+            "file": self.file,
+            "rig": str(self.rig_path) if self.rig_path else None,
+            "rate_hz": self.rate_hz,
+            "entries": entries,
+            "recorded_duration_s": self.recorded_duration_s,
+            "total_duration_s": self.total_duration_s,
+        }
+
+
+def num_tag(x: float) -> str:
+    """Number for an entry name: 100 -> '100', 2.5 -> '2p5', -10 -> 'm10'."""
+    s = f"{x:.6g}"
+    return s.replace("-", "m").replace("+", "").replace(".", "p")
+
+
+def _sanitize(s: str) -> str:
+    s = re.sub(r"[^A-Za-z0-9_]+", "_", s).strip("_")
+    return s or "data"
+
+
+def _intervals(seconds: float, rate_hz: float) -> int:
+    """``round(seconds * rate_hz)`` without overflowing on absurd inputs."""
+    x = seconds * rate_hz
+    return round(x) if math.isfinite(x) and x < 2.0**62 else 2**62
+
+
+class _PlanError(Exception):
+    def __init__(self, issues: list[InputIssue]):
+        self.issues = issues
+
+
+@dataclass
+class _Concrete:
+    kind: str
+    base_name: str
+    pieces: list[wf.Segment]
+    definition: dict
+    where: dict[str, Where]
+    amplitude_V: float | None = None
+    frequency_hz: float | None = None
+
+
+class _Builder:
+    def __init__(self, protocol: Protocol, lines: dict, file: str, base_dir: Path):
+        self.p = protocol
+        self.lines = lines
+        self.file = file
+        self.base_dir = base_dir
+        self.rate = protocol.rate_hz
+        self.issues: list[InputIssue] = []
+
+    def where(self, path: tuple) -> Where:
+        return Where(field_name(path), line_of(path, self.lines))
+
+    def issue(self, w: Where, msg: str) -> None:
+        self.issues.append(InputIssue(self.file, w.line, w.field, msg))
+
+    def n_of(self, seconds: float, w: Where, what: str) -> int | None:
+        """Sample intervals for ``seconds`` at the protocol rate, or None (issue recorded)."""
+        n = _intervals(seconds, self.rate)
+        if n > MAX_STEP_SAMPLES:
+            self.issue(
+                w,
+                f"{what} lasts {seconds:g} s = {n} samples at {self.rate:g} Hz; one entry may "
+                f"have at most {MAX_STEP_SAMPLES} samples (split it or lower rate_hz)",
+            )
+            return None
+        if n < 2:
+            self.issue(
+                w,
+                f"{what} lasts {seconds:g} s, less than two samples at {self.rate:g} Hz "
+                f"(at least {2 / self.rate:g} s)",
+            )
+            return None
+        return n
+
+    # --- one method per step kind: returns the concrete steps of one repetition ---
+
+    def sine(self, s: SineStep, base: tuple) -> list[_Concrete]:
+        lw = self.where((*base, "cycles" if s.cycles is not None else "duration_s"))
+        where = {
+            "step": self.where(base),
+            "amplitude_V": self.where((*base, "amplitude_V")),
+            "frequency_hz": self.where((*base, "frequency_hz")),
+            "length": lw,
+        }
+        c = self._sine(s.amplitude_V, s.frequency_hz, s.cycles, s.duration_s, None, where)
+        if c is None:
+            return []
+        if s.name:
+            c.base_name = s.name
+        return [c]
+
+    def _sine(self, a, f, cycles, duration_s, min_duration_s, where) -> _Concrete | None:
+        if cycles is not None and min_duration_s is not None:
+            need = min_duration_s * f
+            cycles = max(cycles, math.ceil(need - 1e-9) if need < 2.0**62 else 2.0**62)
+        seconds = cycles / f if cycles is not None else duration_s
+        n = self.n_of(seconds, where["length"], f"the {num_tag(a)} V, {f:g} Hz sine")
+        if n is None:
+            return None
+        definition = {
+            "kind": "sine",
+            "amplitude_V": a,
+            "frequency_hz": f,
+            "cycles": cycles if cycles is not None else duration_s * f,
+            "duration_s": n / self.rate,
+        }
+        seg = wf.sine_segment(a, f, n, "frequency_hz")
+        name = f"sine_{num_tag(a)}V_{num_tag(f)}Hz"
+        return _Concrete("sine", name, [seg], definition, where, a, f)
+
+    def sweep(self, s: SweepStep, base: tuple) -> list[_Concrete]:
+        out = []
+        lkey = "cycles" if s.cycles is not None else "duration_s"
+        pairs = [
+            (ai, fi) for ai in range(len(s.amplitudes_V)) for fi in range(len(s.frequencies_hz))
+        ]
+        if s.order == "by_frequency":
+            pairs.sort(key=lambda p: (p[1], p[0]))
+        for ai, fi in pairs:
+            a, f = s.amplitudes_V[ai], s.frequencies_hz[fi]
+            where = {
+                "step": self.where(base),
+                "amplitude_V": self.where((*base, "amplitudes_V", ai)),
+                "frequency_hz": self.where((*base, "frequencies_hz", fi)),
+                "length": self.where((*base, lkey)),
+            }
+            c = self._sine(a, f, s.cycles, s.duration_s, s.min_duration_s, where)
+            if c is None:
+                continue
+            if s.name:
+                c.base_name = f"{s.name}_{num_tag(a)}V_{num_tag(f)}Hz"
+            c.definition["sweep"] = {"amplitude_index": ai, "frequency_index": fi}
+            out.append(c)
+        return out
+
+    def vanishing(self, s: VanishingStep, base: tuple) -> list[_Concrete]:
+        where = {
+            "step": self.where(base),
+            "amplitude_V": self.where((*base, "amplitude_V")),
+            "frequency_hz": self.where((*base, "frequency_hz")),
+            "length": self.where((*base, "decay_s")),
+            "hold_s": self.where((*base, "hold_s")),
+        }
+        n = self.n_of(0.5 / s.frequency_hz + s.decay_s, where["length"], "the envelope")
+        nh = _intervals(s.hold_s, self.rate)
+        if nh > MAX_STEP_SAMPLES:
+            self.n_of(s.hold_s, where["hold_s"], "the hold")
+            return []
+        if n is None:
+            return []
+        tau = (
+            (s.decay_s / 2.0 if s.tau_s is None else s.tau_s) if s.shape == "exponential" else None
+        )
+        pieces = [
+            wf.vanishing_segment(
+                s.amplitude_V, s.frequency_hz, s.decay_s, s.shape, tau, n, "frequency_hz"
+            ),
+            wf.const_segment(0.0, nh, "hold_s"),
+        ]
+        definition = {
+            "kind": "vanishing",
+            "amplitude_V": s.amplitude_V,
+            "frequency_hz": s.frequency_hz,
+            "first_peak_s": 0.5 / s.frequency_hz,
+            "decay_s": s.decay_s,
+            "envelope_end_s": n / self.rate,
+            "shape": s.shape,
+            "tau_s": tau,
+            "hold_s": nh / self.rate,
+        }
+        name = s.name or f"vanishing_{num_tag(s.amplitude_V)}V_{num_tag(s.frequency_hz)}Hz"
+        return [
+            _Concrete("vanishing", name, pieces, definition, where, s.amplitude_V, s.frequency_hz)
+        ]
+
+    def hold(self, s: HoldStep, base: tuple) -> list[_Concrete]:
+        where = {
+            "step": self.where(base),
+            "voltage_V": self.where((*base, "voltage_V")),
+            "length": self.where((*base, "duration_s")),
+        }
+        n = self.n_of(s.duration_s, where["length"], "the hold")
+        if n is None:
+            return []
+        definition = {"kind": "hold", "voltage_V": s.voltage_V, "duration_s": n / self.rate}
+        name = s.name or f"hold_{num_tag(s.voltage_V)}V_{num_tag(s.duration_s)}s"
+        seg = wf.const_segment(s.voltage_V, n, "voltage_V")
+        return [_Concrete("hold", name, [seg], definition, where, abs(s.voltage_V))]
+
+    def ramp(self, s: RampStep, base: tuple) -> list[_Concrete]:
+        where = {
+            "step": self.where(base),
+            "from_V": self.where((*base, "from_V")),
+            "to_V": self.where((*base, "to_V")),
+            "length": self.where((*base, "duration_s")),
+        }
+        n = self.n_of(s.duration_s, where["length"], "the ramp")
+        if n is None:
+            return []
+        definition = {
+            "kind": "ramp",
+            "from_V": s.from_V,
+            "to_V": s.to_V,
+            "duration_s": n / self.rate,
+        }
+        name = s.name or f"ramp_{num_tag(s.from_V)}V_to_{num_tag(s.to_V)}V"
+        seg = wf.ramp_segment(s.from_V, s.to_V, n, self.rate, "length")
+        amp = max(abs(s.from_V), abs(s.to_V))
+        return [_Concrete("ramp", name, [seg], definition, where, amp)]
+
+    def csv(self, s: CsvStep, base: tuple) -> list[_Concrete]:
+        where = {k: self.where((*base, k)) for k in ("path", "column", "time_column", "scale")}
+        where["step"] = self.where(base)
+        where["length"] = where["path"]
+        try:
+            v, info = load_csv(s, self.base_dir, self.rate)
+        except CsvError as e:
+            self.issue(where.get(e.key, where["path"]), e.message)
+            return []
+        if v.size - 1 > MAX_STEP_SAMPLES:
+            self.issue(where["path"], f"{v.size} samples; at most {MAX_STEP_SAMPLES} per entry")
+            return []
+        definition = {"kind": "csv", **info, "duration_s": (v.size - 1) / self.rate}
+        name = s.name or f"csv_{_sanitize(resolve_csv_path(s, self.base_dir).stem)}"[:60]
+        seg = wf.table_segment(v, self.rate, "path")
+        return [_Concrete("csv", name, [seg], definition, where, float(np.max(np.abs(v))))]
+
+    def count(self) -> int:
+        total = 0
+        for s in self.p.steps:
+            k = len(s.amplitudes_V) * len(s.frequencies_hz) if isinstance(s, SweepStep) else 1
+            total += k * s.repeat
+        return total
+
+    def build(self) -> list[PlannedStep]:
+        n_entries = self.count()
+        if n_entries > MAX_ENTRIES:
+            self.issue(
+                self.where(("steps",)),
+                f"the protocol expands to {n_entries} entries; at most {MAX_ENTRIES} are allowed",
+            )
+            raise _PlanError(self.issues)
+        slew = self.p.edge_slew_V_per_s
+        edge_where = self.where(("edge_slew_V_per_s",))
+
+        steps: list[PlannedStep] = []
+        used: set[str] = set()
+        for si, step in enumerate(self.p.steps):
+            base = ("steps", si)
+            one = getattr(self, step.kind)(step, base)
+            rest = self.p.rest_s if step.rest_s is None else step.rest_s
+            for r in range(step.repeat):
+                for c in one:
+                    name = c.base_name
+                    k = 2
+                    while name.lower() in used or name.lower() == "run":
+                        name = f"{c.base_name}_{k}"
+                        k += 1
+                    used.add(name.lower())
+                    where = dict(c.where)
+                    where["edge_slew_V_per_s"] = edge_where
+                    where["rate_hz"] = self.where(("rate_hz",))
+                    try:
+                        waveform = wf.compose(
+                            c.pieces, self.rate, slew, "edge_slew_V_per_s", MAX_STEP_SAMPLES
+                        )
+                    except wf.TooLongError as e:
+                        self.issue(
+                            edge_where if e.edge else where["length"],
+                            f"{name} would have {e.n} samples, more than the {MAX_STEP_SAMPLES} "
+                            "allowed in one entry"
+                            + (" (the edge ramps are too slow)" if e.edge else ""),
+                        )
+                        continue
+                    definition = {
+                        **c.definition,
+                        "rate_hz": self.rate,
+                        "n_samples": waveform.n_samples,
+                        "total_duration_s": waveform.duration_s,
+                        "edge_ramps": sum(1 for g in waveform.segments if g.role == "edge"),
+                        "source_step": si,
+                        "repeat": r + 1,
+                    }
+                    steps.append(
+                        PlannedStep(
+                            index=len(steps),
+                            name=name,
+                            kind=c.kind,
+                            source_step=si,
+                            repeat_index=r + 1,
+                            definition=definition,
+                            rate_hz=self.rate,
+                            waveform=waveform,
+                            rest_after_s=rest,
+                            amplitude_V=c.amplitude_V,
+                            frequency_hz=c.frequency_hz,
+                            where=where,
+                        )
+                    )
+        if steps:
+            steps[-1].rest_after_s = 0.0
+        total = sum(s.duration_s + s.rest_after_s for s in steps)
+        if total > MAX_TOTAL_S:
+            self.issue(
+                self.where(("steps",)),
+                f"the protocol lasts {total / 3600:.1f} h; at most {MAX_TOTAL_S / 3600:.0f} h "
+                "are allowed in one run (split it into several protocols)",
+            )
+        if self.issues:
+            raise _PlanError(self.issues)
+        return steps
+
+
+def build_plan(
+    protocol: Protocol,
+    *,
+    path: Path | str = "<protocol>",
+    text: str = "",
+    lines: dict | None = None,
+) -> Plan:
+    """Expand ``protocol`` (read from ``path``; CSV and rig paths are relative to its folder).
+
+    Raises :class:`InputFileError` for problems found while expanding (CSV files, lengths).
+    """
+    path = Path(path)
+    file = str(path)
+    lines = lines or {}
+    b = _Builder(protocol, lines, file, path.parent)
+    try:
+        steps = b.build()
+    except _PlanError as e:
+        raise InputFileError(e.issues) from None
+    rig_path = None
+    if protocol.rig is not None:
+        rig_path = Path(protocol.rig).expanduser()
+        if not rig_path.is_absolute():
+            rig_path = path.parent / rig_path
+        if not rig_path.is_file():
+            w = Where("rig", line_of(("rig",), lines))
+            raise InputFileError(
+                [InputIssue(file, w.line, w.field, f"rig file not found: {rig_path}")]
+            )
+    return Plan(
+        path=path,
+        file=file,
+        text=text,
+        protocol=protocol,
+        lines=lines,
+        steps=steps,
+        rig_path=rig_path,
+    )

@@ -1,0 +1,289 @@
+"""Preflight: check every concrete step against the rig's limits before any output moves.
+
+For each entry of a plan:
+
+- sample rate within the DAQ's ``rate_min_hz .. rate_max_hz`` (once, for the protocol);
+- at least :data:`MIN_SAMPLES_PER_CYCLE` samples per cycle of a sine or envelope carrier;
+- every command value within ``v_min_V .. v_max_V``;
+- peak current ``i = C_eff dV/dt`` (``C_eff = capacitance_F * large_signal_factor``) at most
+  ``i_peak_A``;
+- mean ``|i|`` over a sliding window at most ``i_avg_A``; the window is one carrier cycle for
+  sines and envelopes, :data:`AVG_WINDOW_S` otherwise (0 V assumed before the entry starts).
+
+The current is computed with :meth:`RigLimits.current_A` on a grid :data:`OVERSAMPLE` times
+finer than the output rate: waveforms are functions of continuous time, and the finer grid
+sees the slope the amplifier follows after the DAQ's reconstruction, independent of the rate
+(a sampled 100 V, 56 Hz sine at 1 kHz underestimates its peak slope by 2 %). For a unipolar
+sine of amplitude A and frequency f this gives ``i_peak = pi C_eff A f`` and a cycle-mean
+``2 C_eff A f``, so the highest frequency at amplitude A is
+``min(i_peak_A / (pi C_eff A), i_avg_A / (2 C_eff A))`` (56.2 Hz at 100 V on the default rig).
+
+Problems are collected for all entries and raised together as :class:`InputFileError`, each
+naming the protocol file, line and field that produced the step, and what would be valid.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from labrig.errors import InputFileError, InputIssue
+from labrig.limits import RigLimits
+from labrig.protocol.plan import Plan, PlannedStep, Where
+
+OVERSAMPLE = 4
+MIN_SAMPLES_PER_CYCLE = 20
+AVG_WINDOW_S = 1.0
+_CHUNK = 1 << 20
+_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class StepCheck:
+    """What preflight measured on one entry."""
+
+    name: str
+    v_min_V: float
+    v_max_V: float
+    peak_current_A: float
+    peak_time_s: float
+    mean_current_A: float
+    mean_time_s: float
+    window_s: float
+    duration_s: float
+
+
+def max_sine_frequency_hz(amplitude_V: float, limits: RigLimits) -> float:
+    """Highest frequency of a unipolar sine of ``amplitude_V`` within both current limits."""
+    c = limits.effective_capacitance_F
+    return min(
+        limits.i_peak_A / (math.pi * c * amplitude_V), limits.i_avg_A / (2.0 * c * amplitude_V)
+    )
+
+
+def max_sine_amplitude_V(frequency_hz: float, limits: RigLimits) -> float:
+    """Largest unipolar-sine amplitude at ``frequency_hz`` within the current and voltage limits."""
+    c = limits.effective_capacitance_F
+    return min(
+        limits.v_max_V,
+        limits.i_peak_A / (math.pi * c * frequency_hz),
+        limits.i_avg_A / (2.0 * c * frequency_hz),
+    )
+
+
+def sine_currents_A(amplitude_V: float, frequency_hz: float, limits: RigLimits) -> tuple:
+    """``(peak, cycle-mean)`` current of a unipolar sine (A)."""
+    c = limits.effective_capacitance_F
+    return math.pi * c * amplitude_V * frequency_hz, 2.0 * c * amplitude_V * frequency_hz
+
+
+def _window_s(step: PlannedStep) -> float:
+    if step.frequency_hz:
+        return 1.0 / step.frequency_hz
+    return AVG_WINDOW_S
+
+
+def measure(step: PlannedStep, limits: RigLimits, oversample: int = OVERSAMPLE) -> StepCheck:
+    """Voltage range and currents of one entry (chunked: never holds the whole fine grid)."""
+    wave = step.waveform
+    m = (wave.n_samples - 1) * oversample + 1  # fine-grid points
+    fine_rate = step.rate_hz * oversample
+    window_s = _window_s(step)
+    w = max(1, min(round(window_s * fine_rate), 50_000_000))
+    hist = np.zeros(w)  # cumulative |i| at the w fine points before the chunk (0 before t=0)
+    total = 0.0
+    vmin, vmax = math.inf, -math.inf
+    peak, peak_j, mean, mean_j = 0.0, 0, 0.0, 0
+    with np.errstate(all="ignore"):
+        for a in range(0, m, _CHUNK):
+            b = min(m, a + _CHUNK)
+            lo, hi = max(0, a - 1), min(m, b + 1)
+            v = wave.at_index(np.arange(lo, hi, dtype=float) / oversample)
+            cur = np.abs(limits.current_A(v, fine_rate)) if v.size > 1 else np.zeros(v.size)
+            body_v = v[a - lo : a - lo + (b - a)]
+            body = cur[a - lo : a - lo + (b - a)]
+            vmin = min(vmin, float(np.min(body_v)))
+            vmax = max(vmax, float(np.max(body_v)))
+            k = int(np.argmax(body))
+            if body[k] > peak or not math.isfinite(body[k]):
+                peak, peak_j = float(body[k]), a + k
+            cs = total + np.cumsum(body)
+            arr = np.concatenate([hist, cs])
+            means = (arr[w:] - arr[: b - a]) / w
+            k = int(np.argmax(means))
+            if means[k] > mean or not math.isfinite(means[k]):
+                mean, mean_j = float(means[k]), a + k
+            total = float(cs[-1])
+            hist = arr[-w:]
+    return StepCheck(
+        name=step.name,
+        v_min_V=vmin,
+        v_max_V=vmax,
+        peak_current_A=peak,
+        peak_time_s=peak_j / fine_rate,
+        mean_current_A=mean,
+        mean_time_s=mean_j / fine_rate,
+        window_s=w / fine_rate,
+        duration_s=step.duration_s,
+    )
+
+
+def _amps(x: float, other: float | None = None) -> str:
+    """Current for a message; more digits when it would print the same as ``other``."""
+    for digits in (2, 3, 4, 6):
+        s = f"{x:.{digits}f}" if x >= 0.1 else f"{x:.{digits + 1}g}"
+        o = (
+            None
+            if other is None
+            else (f"{other:.{digits}f}" if other >= 0.1 else f"{other:.{digits + 1}g}")
+        )
+        if s != o:
+            return f"{s} A"
+    return f"{x:.6g} A"
+
+
+def _blame_segment(step: PlannedStep, t_s: float) -> tuple[Where, str]:
+    seg = step.waveform.segment_at(t_s * step.rate_hz)
+    if seg.role == "edge":
+        return step.blame("edge_slew_V_per_s"), "edge"
+    return step.blame(seg.field or "step"), seg.kind
+
+
+def _step_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tuple[Where, str]]:
+    out: list[tuple[Where, str]] = []
+    c = lim.effective_capacitance_F
+    a, f = step.amplitude_V, step.frequency_hz
+    periodic = step.kind in ("sine", "vanishing") and a is not None and f is not None
+    what = f"{a:g} V at {f:g} Hz" if periodic else f"entry {step.name}"
+
+    # voltage range
+    if chk.v_max_V > lim.v_max_V + _TOL or chk.v_min_V < lim.v_min_V - _TOL:
+        hi = chk.v_max_V > lim.v_max_V + _TOL
+        bad = chk.v_max_V if hi else chk.v_min_V
+        key = {"sine": "amplitude_V", "vanishing": "amplitude_V", "hold": "voltage_V"}.get(
+            step.kind, "path"
+        )
+        hint = ""
+        if step.kind == "ramp":
+            to = step.definition["to_V"]
+            key = "to_V" if (to > lim.v_max_V or to < lim.v_min_V) else "from_V"
+        if key == "amplitude_V":
+            hint = f"; use amplitude_V <= {lim.v_max_V:g}"
+        elif step.kind == "csv":
+            hint = " (check column and scale)"
+        out.append(
+            (
+                step.blame(key),
+                f"{what if periodic else step.kind + ' ' + step.name} reaches {bad:.4g} V; "
+                f"the rig allows {lim.v_min_V:g} to {lim.v_max_V:g} V{hint}",
+            )
+        )
+
+    # samples per cycle
+    if periodic and step.rate_hz / f < MIN_SAMPLES_PER_CYCLE - _TOL:
+        out.append(
+            (
+                step.blame("frequency_hz"),
+                f"{f:g} Hz sampled at rate_hz {step.rate_hz:g} gives "
+                f"{step.rate_hz / f:.3g} samples per cycle; at least {MIN_SAMPLES_PER_CYCLE} "
+                f"are needed: raise rate_hz to >= {MIN_SAMPLES_PER_CYCLE * f:g} or lower the "
+                "frequency",
+            )
+        )
+
+    # peak current
+    if not chk.peak_current_A <= lim.i_peak_A * (1 + 1e-6):
+        where, seg = _blame_segment(step, chk.peak_time_s)
+        need = _amps(chk.peak_current_A, lim.i_peak_A)
+        gives = f"the amplifier gives {_amps(lim.i_peak_A)}"
+        if seg == "edge":
+            msg = (
+                f"the 0 V edge ramps of {step.name} need {need} peak; {gives}; use "
+                f"edge_slew_V_per_s <= {lim.i_peak_A / c:.0f}"
+            )
+        elif (
+            step.kind == "vanishing"
+            and sine_currents_A(a, f, lim)[0] <= lim.i_peak_A
+            and seg != "edge"
+        ):
+            where = step.blame("length")
+            msg = (
+                f"the envelope of {what} falls too fast: it needs {need} peak; {gives}; "
+                "make decay_s (or tau_s) longer"
+            )
+        elif periodic:
+            msg = (
+                f"{what} needs {need} peak; {gives}; max frequency at {a:g} V is "
+                f"{max_sine_frequency_hz(a, lim):.1f} Hz (max amplitude at {f:g} Hz is "
+                f"{max_sine_amplitude_V(f, lim):.1f} V)"
+            )
+        elif step.kind == "ramp":
+            d = step.definition
+            dv = abs(d["to_V"] - d["from_V"])
+            msg = (
+                f"the ramp {d['from_V']:g} -> {d['to_V']:g} V in {d['duration_s']:g} s needs "
+                f"{need}; {gives}; use duration_s >= {dv * c / lim.i_peak_A:.3g} s"
+            )
+        else:
+            msg = (
+                f"{step.kind} {step.name} needs {need} peak at t = {chk.peak_time_s:.4g} s; "
+                f"{gives}; its slope may be at most {lim.i_peak_A / c:.0f} V/s"
+            )
+        out.append((where, msg))
+
+    # mean current
+    if not chk.mean_current_A <= lim.i_avg_A * (1 + 1e-6):
+        where, _seg = _blame_segment(step, chk.mean_time_s)
+        draws = f"draws {_amps(chk.mean_current_A, lim.i_avg_A)} on average over"
+        if periodic:
+            where = step.blame("frequency_hz")
+            msg = (
+                f"{what} {draws} a cycle; the "
+                f"amplifier's average limit is {_amps(lim.i_avg_A)}; max frequency at {a:g} V "
+                f"is {max_sine_frequency_hz(a, lim):.1f} Hz"
+            )
+        else:
+            msg = (
+                f"{step.kind} {step.name} {draws} "
+                f"{chk.window_s:g} s (around t = {chk.mean_time_s:.4g} s); the amplifier's "
+                f"average limit is {_amps(lim.i_avg_A)}"
+            )
+        out.append((where, msg))
+    return out
+
+
+def preflight(plan: Plan, limits: RigLimits | None = None) -> list[StepCheck]:
+    """Check every entry of ``plan`` against ``limits`` (default: the built-in rig's).
+
+    Returns one :class:`StepCheck` per entry (also stored as ``plan.checks``); raises
+    :class:`InputFileError` listing every problem found.
+    """
+    lim = limits if limits is not None else RigLimits()
+    found: list[tuple[Where, str]] = []
+    rate = plan.rate_hz
+    if not lim.rate_min_hz <= rate <= lim.rate_max_hz:
+        found.append(
+            (
+                plan.where(("rate_hz",)),
+                f"rate_hz {rate:g} is outside the rig's DAQ range {lim.rate_min_hz:g} to "
+                f"{lim.rate_max_hz:g} Hz",
+            )
+        )
+    checks = []
+    # at a rate the DAQ cannot do, scanning the samples would tell nothing useful
+    for step in [] if found else plan.steps:
+        chk = measure(step, lim)
+        checks.append(chk)
+        found.extend(_step_issues(step, chk, lim))
+    issues, seen = [], set()
+    for w, msg in found:
+        if (w.line, w.field, msg) not in seen:
+            seen.add((w.line, w.field, msg))
+            issues.append(InputIssue(plan.file, w.line, w.field, msg))
+    if issues:
+        raise InputFileError(issues)
+    plan.checks = checks
+    plan.limits = lim
+    return checks

@@ -1,0 +1,189 @@
+"""The protocol-file schema (pydantic v2): what a protocol YAML file may contain.
+
+Units are in the key names: ``_V`` volts, ``_hz`` hertz, ``_s`` seconds. Unknown keys are
+refused (a misspelt key is an error, never silently ignored), numbers must be numbers (a quoted
+``"100"`` is refused), and infinities / NaN are refused everywhere. docs/protocol.md is the
+user-facing description of every field; keep the two in step.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+#: entry names become HDF5 group names: a letter, then letters, digits and underscores
+EntryName = Annotated[str, StringConstraints(pattern=r"^[A-Za-z][A-Za-z0-9_]{0,59}$")]
+ColumnRef = (
+    Annotated[str, StringConstraints(min_length=1, max_length=200)]
+    | Annotated[int, Field(ge=0, le=10_000)]
+)
+
+STEP_KINDS = ("sine", "vanishing", "hold", "ramp", "csv", "sweep")
+#: entry names that would collide with the run file's own groups
+RESERVED_NAMES = frozenset({"run"})
+
+
+class _Base(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+
+class _StepBase(_Base):
+    """Keys every step accepts."""
+
+    name: EntryName | None = Field(
+        None,
+        description="entry name in the run file (sweeps: prefix); default: derived from the "
+        "step, e.g. sine_100V_40Hz",
+    )
+    repeat: int = Field(1, ge=1, le=1000, description="run this step (a whole sweep) N times")
+    rest_s: NonNegative | None = Field(
+        None, description="0 V rest after each entry of this step (default: the protocol's)"
+    )
+
+    @model_validator(mode="after")
+    def _not_reserved(self):
+        if self.name is not None and self.name.lower() in RESERVED_NAMES:
+            raise ValueError(f"name {self.name!r} is reserved in run files; choose another")
+        return self
+
+
+def _one_of_cycles_duration(step, what: str = "the step") -> None:
+    if (step.cycles is None) == (step.duration_s is None):
+        raise ValueError(f"give exactly one of cycles or duration_s for {what}")
+
+
+class SineStep(_StepBase):
+    """Unipolar sine ``V = A/2 (1 - cos 2 pi f t)``: starts at 0 V, peaks at ``amplitude_V``."""
+
+    kind: Literal["sine"]
+    amplitude_V: Positive = Field(description="peak voltage A (the sine swings 0..A)")
+    frequency_hz: Positive
+    cycles: Positive | None = Field(None, description="number of cycles (or give duration_s)")
+    duration_s: Positive | None = Field(None, description="length in seconds (or give cycles)")
+
+    @model_validator(mode="after")
+    def _length(self):
+        _one_of_cycles_duration(self)
+        return self
+
+
+class VanishingStep(_StepBase):
+    """Unipolar sine whose amplitude decays to zero over ``decay_s``, then 0 V for ``hold_s``.
+
+    The first half cycle rises to the full ``amplitude_V`` (at ``t0 = 1/(2f)``); from there the
+    envelope ``e(s)``, ``s = t - t0``, goes from 1 to exactly 0 at ``s = decay_s = T``: linear
+    ``1 - s/T``, or exponential ``(exp(-s/tau) - exp(-T/tau)) / (1 - exp(-T/tau))`` (an
+    exponential shifted so that it reaches zero at T). ``V = e(s) A/2 (1 - cos 2 pi f t)``.
+    """
+
+    kind: Literal["vanishing"]
+    amplitude_V: Positive = Field(description="peak voltage at the start of the envelope")
+    frequency_hz: Positive = Field(description="carrier frequency")
+    decay_s: Positive = Field(description="time from the first peak until the envelope is zero")
+    shape: Literal["exponential", "linear"] = "exponential"
+    tau_s: Positive | None = Field(
+        None, description="exponential time constant (default decay_s/2)"
+    )
+    hold_s: NonNegative = Field(0.0, description="0 V hold recorded after the envelope")
+
+    @model_validator(mode="after")
+    def _tau_only_exponential(self):
+        if self.tau_s is not None and self.shape != "exponential":
+            raise ValueError("tau_s applies only to shape: exponential")
+        return self
+
+
+class HoldStep(_StepBase):
+    """A constant voltage for ``duration_s`` (ramped in from and out to 0 V)."""
+
+    kind: Literal["hold"]
+    voltage_V: Finite
+    duration_s: Positive
+
+
+class RampStep(_StepBase):
+    """A straight line from ``from_V`` to ``to_V`` over ``duration_s``."""
+
+    kind: Literal["ramp"]
+    from_V: Finite = 0.0
+    to_V: Finite
+    duration_s: Positive
+
+
+class CsvStep(_StepBase):
+    """Arbitrary voltage samples read from a CSV file.
+
+    ``path`` is relative to the protocol file. The file may have a header line (column names)
+    and ``#`` comment lines; values are separated by commas (or by whitespace when a line has no
+    comma). Without ``time_column`` or ``rate_hz`` the samples are taken to be at the protocol's
+    rate; otherwise they are resampled onto it by linear interpolation.
+    """
+
+    kind: Literal["csv"]
+    path: Annotated[str, StringConstraints(min_length=1, max_length=4096)]
+    column: ColumnRef | None = Field(
+        None, description="voltage column: header name or 0-based index (default: first)"
+    )
+    time_column: ColumnRef | None = Field(None, description="column of sample times (s)")
+    rate_hz: Positive | None = Field(None, description="sample rate of the file's rows")
+    scale: Finite = Field(1.0, description="multiply the values by this (e.g. amplifier gain)")
+
+    @model_validator(mode="after")
+    def _timebase(self):
+        if self.time_column is not None and self.rate_hz is not None:
+            raise ValueError("give time_column or rate_hz for a csv step, not both")
+        if self.scale == 0:
+            raise ValueError("scale must not be 0")
+        return self
+
+
+class SweepStep(_StepBase):
+    """Sine steps for every amplitude x frequency pair.
+
+    Order ``by_amplitude`` (default): for each amplitude in the order listed, every frequency in
+    the order listed; ``by_frequency``: the other way round. With ``min_duration_s`` the cycle
+    count grows at high frequencies so that each entry lasts at least that long.
+    """
+
+    kind: Literal["sweep"]
+    amplitudes_V: list[Positive] = Field(min_length=1, max_length=1000)
+    frequencies_hz: list[Positive] = Field(min_length=1, max_length=1000)
+    cycles: Positive | None = None
+    duration_s: Positive | None = None
+    min_duration_s: Positive | None = Field(
+        None, description="with cycles: at least this long (cycles = max(cycles, ceil(f T)))"
+    )
+    order: Literal["by_amplitude", "by_frequency"] = "by_amplitude"
+
+    @model_validator(mode="after")
+    def _length(self):
+        _one_of_cycles_duration(self, "a sweep")
+        if self.min_duration_s is not None and self.cycles is None:
+            raise ValueError("min_duration_s goes with cycles (not with duration_s)")
+        return self
+
+
+Step = Annotated[
+    SineStep | VanishingStep | HoldStep | RampStep | CsvStep | SweepStep,
+    Field(discriminator="kind"),
+]
+
+
+class Protocol(_Base):
+    """A protocol file: a named list of steps played at one sample rate."""
+
+    name: Annotated[str, StringConstraints(min_length=1, max_length=200)]
+    description: str | None = None
+    rig: Annotated[str, StringConstraints(min_length=1, max_length=4096)] | None = Field(
+        None, description="rig file, relative to this file (default: the built-in simulated rig)"
+    )
+    rate_hz: Positive = Field(description="sample rate for output and acquisition")
+    rest_s: NonNegative = Field(0.0, description="default 0 V rest between entries")
+    edge_slew_V_per_s: Positive = Field(
+        1000.0, description="slope of the ramps inserted to start and end every entry at 0 V"
+    )
+    steps: list[Step] = Field(min_length=1, max_length=10_000)

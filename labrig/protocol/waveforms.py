@@ -1,0 +1,234 @@
+"""Waveform generators: continuous-time voltage functions, sampled on demand.
+
+A concrete step's command is a :class:`Waveform`: a chain of :class:`Segment` pieces (sine,
+envelope, hold, ramp, table) joined end to start. :func:`compose` inserts *edge ramps* wherever
+two neighbours disagree, and before the first / after the last piece when they do not start /
+end at 0 V, so every waveform starts and ends at exactly 0 V. Edge ramps are straight lines at
+the protocol's ``edge_slew_V_per_s`` (default 1000 V/s, i.e. 0.1 s for 100 V), at least one
+sample long.
+
+Sample ``k`` of a waveform is its value at ``t = k / rate_hz``; a piece lasting ``D`` seconds
+spans ``N = round(D rate_hz)`` sample intervals, and neighbouring pieces share their joint
+sample. Because the pieces are functions of continuous time, the preflight can evaluate them
+on a grid finer than the output rate (see :mod:`labrig.protocol.preflight`), and the runner can
+ask for any block of samples without the whole array existing in memory.
+
+Formulas (A amplitude, f frequency, t local time in s):
+
+- unipolar sine: ``V = A/2 (1 - cos 2 pi f t)``: 0 V at t = 0, A at t = 1/(2f), period 1/f;
+- vanishing envelope: ``V = e(t - t0) A/2 (1 - cos 2 pi f t)`` with ``t0 = 1/(2f)`` (the first
+  peak reaches the full amplitude A), ``e(s) = 1`` for ``s <= 0`` and from 1 at s = 0 to 0 at
+  s = T: linear ``1 - s/T`` or exponential ``(exp(-s/tau) - exp(-T/tau))/(1 - exp(-T/tau))``,
+  0 for s >= T; the envelope part lasts ``t0 + T``;
+- ramp: ``V = V0 + (V1 - V0) t/D``; hold: ``V = V0``;
+- table (CSV): linear interpolation between the samples.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+#: two pieces whose joint differs by less than this (V) are considered continuous
+JOIN_TOL_V = 1e-6
+
+
+def unipolar_sine(t: Array, amplitude_V: float, frequency_hz: float) -> Array:
+    """``A/2 (1 - cos 2 pi f t)``."""
+    return 0.5 * amplitude_V * (1.0 - np.cos(2.0 * np.pi * frequency_hz * np.asarray(t)))
+
+
+def envelope(t: Array, decay_s: float, shape: str, tau_s: float | None = None) -> Array:
+    """Vanishing envelope: 1 at t <= 0, exactly 0 at t >= decay_s (see module docstring)."""
+    t = np.clip(np.asarray(t, dtype=float), 0.0, decay_s)
+    if shape == "linear":
+        return 1.0 - t / decay_s
+    tau = decay_s / 2.0 if tau_s is None else tau_s
+    r = decay_s / tau
+    if r > 700:  # exp(-T/tau) underflows: plain exponential
+        return np.where(t >= decay_s, 0.0, np.exp(-t / tau))
+    # (exp(-t/tau) - exp(-T/tau)) / (1 - exp(-T/tau)) = expm1((T - t)/tau) / expm1(T/tau),
+    # written so it neither overflows nor loses precision for tau >> T
+    return np.expm1((decay_s - t) / tau) / np.expm1(r)
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One piece of a waveform: ``n`` sample intervals of ``func(local time in s)``.
+
+    ``role`` is ``"main"`` for the waveform the protocol asked for and ``"edge"`` for ramps
+    inserted to reach 0 V; ``field`` names the protocol key that controls the piece (preflight
+    uses it to point at the right line).
+    """
+
+    kind: str
+    n: int
+    func: Callable[[Array], Array] = field(repr=False)
+    field: str = ""
+    role: str = "main"
+
+    def value(self, tau: Array) -> Array:
+        return np.asarray(self.func(np.asarray(tau, dtype=float)), dtype=float)
+
+    def start_end(self, rate_hz: float) -> tuple[float, float]:
+        v = self.value(np.array([0.0, self.n / rate_hz]))
+        return float(v[0]), float(v[1])
+
+
+def sine_segment(amplitude_V: float, frequency_hz: float, n: int, field: str = "") -> Segment:
+    return Segment("sine", n, lambda t: unipolar_sine(t, amplitude_V, frequency_hz), field)
+
+
+def vanishing_segment(
+    amplitude_V: float,
+    frequency_hz: float,
+    decay_s: float,
+    shape: str,
+    tau_s: float | None,
+    n: int,
+    field: str = "",
+) -> Segment:
+    """Envelope-modulated unipolar sine: full amplitude up to the first peak ``t0 = 1/(2f)``,
+    then ``e(t - t0)`` decaying to exactly zero at ``t0 + decay_s``."""
+    t0 = 0.5 / frequency_hz
+
+    def f(t: Array) -> Array:
+        e = envelope(t - t0, decay_s, shape, tau_s)
+        return e * unipolar_sine(t, amplitude_V, frequency_hz)
+
+    return Segment("vanishing", n, f, field)
+
+
+def const_segment(voltage_V: float, n: int, field: str = "", kind: str = "hold") -> Segment:
+    return Segment(kind, n, lambda t: np.full(np.shape(t), float(voltage_V)), field)
+
+
+def ramp_segment(
+    from_V: float, to_V: float, n: int, rate_hz: float, field: str = "", role: str = "main"
+) -> Segment:
+    d = n / rate_hz
+
+    def f(t: Array) -> Array:
+        return from_V + (to_V - from_V) * np.clip(t / d, 0.0, 1.0)
+
+    return Segment("ramp", n, f, field, role)
+
+
+def table_segment(values: Array, rate_hz: float, field: str = "") -> Segment:
+    """Samples at ``rate_hz`` played as they are (linear interpolation between them)."""
+    v = np.asarray(values, dtype=float)
+    idx = np.arange(v.size, dtype=float)
+
+    def f(t: Array) -> Array:
+        return np.interp(t * rate_hz, idx, v)
+
+    return Segment("table", v.size - 1, f, field)
+
+
+def edge_samples(delta_V: float, rate_hz: float, slew_V_per_s: float) -> int:
+    """Sample intervals of an edge ramp covering ``delta_V`` at ``slew_V_per_s``."""
+    x = abs(delta_V) / slew_V_per_s * rate_hz
+    if not math.isfinite(x) or x > 2.0**62:
+        return 2**62
+    return max(1, math.ceil(x - 1e-9))
+
+
+class Waveform:
+    """A chain of segments sampled at ``rate_hz``; starts and ends at exactly 0 V."""
+
+    def __init__(self, segments: list[Segment], rate_hz: float):
+        self.segments = [s for s in segments if s.n > 0]
+        self.rate_hz = float(rate_hz)
+        starts = [0]
+        for s in self.segments:
+            starts.append(starts[-1] + s.n)
+        self._starts = np.array(starts, dtype=np.int64)  # first sample index of each segment
+        self.n_samples = int(starts[-1]) + 1
+
+    @property
+    def duration_s(self) -> float:
+        """Time from the first to the last sample."""
+        return (self.n_samples - 1) / self.rate_hz
+
+    def segment_at(self, index: float) -> Segment:
+        """The segment that sample ``index`` (possibly fractional) belongs to."""
+        i = int(np.searchsorted(self._starts, index, side="right")) - 1
+        return self.segments[min(max(i, 0), len(self.segments) - 1)]
+
+    def segment_start(self, seg: Segment) -> int:
+        return int(self._starts[self.segments.index(seg)])
+
+    def at_index(self, u: Array) -> Array:
+        """Values at (possibly fractional) sample indices ``u`` in ``[0, n_samples - 1]``."""
+        u = np.asarray(u, dtype=float)
+        out = np.empty(u.shape)
+        if not self.segments:
+            out.fill(0.0)
+            return out
+        which = np.searchsorted(self._starts, u, side="right") - 1
+        np.clip(which, 0, len(self.segments) - 1, out=which)
+        for i in np.unique(which):
+            m = which == i
+            out[m] = self.segments[i].value((u[m] - self._starts[i]) / self.rate_hz)
+        out[(u <= 0) | (u >= self.n_samples - 1)] = 0.0  # exactly 0 V at both ends
+        return out
+
+    def samples(self, start: int = 0, stop: int | None = None) -> Array:
+        """Command samples ``start .. stop-1`` (V)."""
+        stop = self.n_samples if stop is None else min(stop, self.n_samples)
+        return self.at_index(np.arange(max(start, 0), stop, dtype=float))
+
+    def times(self, start: int = 0, stop: int | None = None) -> Array:
+        """Sample times ``start .. stop-1`` (s from the start of the waveform)."""
+        stop = self.n_samples if stop is None else min(stop, self.n_samples)
+        return np.arange(max(start, 0), stop, dtype=float) / self.rate_hz
+
+
+class TooLongError(ValueError):
+    """A composed waveform would exceed the allowed number of samples."""
+
+    def __init__(self, n: int, edge: bool):
+        super().__init__(f"{n} samples")
+        self.n, self.edge = n, edge
+
+
+def compose(
+    pieces: list[Segment],
+    rate_hz: float,
+    slew_V_per_s: float,
+    edge_field: str = "",
+    max_samples: int | None = None,
+) -> Waveform:
+    """Join ``pieces`` into a waveform starting and ending at 0 V, adding edge ramps as needed.
+
+    Raises :class:`TooLongError` when the result would have more than ``max_samples`` intervals.
+    """
+    out: list[Segment] = []
+    level = 0.0
+    total = 0
+
+    def add(seg: Segment) -> None:
+        nonlocal total
+        total += seg.n
+        if max_samples is not None and total > max_samples:
+            raise TooLongError(total, seg.role == "edge")
+        out.append(seg)
+
+    for p in pieces:
+        if p.n <= 0:
+            continue
+        a, b = p.start_end(rate_hz)
+        if abs(a - level) > JOIN_TOL_V:
+            n = edge_samples(a - level, rate_hz, slew_V_per_s)
+            add(ramp_segment(level, a, n, rate_hz, edge_field, role="edge"))
+        add(p)
+        level = b
+    if abs(level) > JOIN_TOL_V:
+        n = edge_samples(level, rate_hz, slew_V_per_s)
+        add(ramp_segment(level, 0.0, n, rate_hz, edge_field, role="edge"))
+    return Waveform(out, rate_hz)
