@@ -6,12 +6,15 @@ acquired channels to physical units, and appends every block to the run file, wh
 after each block (so a crash loses at most the block in flight). On Ctrl-C, a device fault or
 any error the output is ramped to 0 V within the amplifier's current limit, the amplifier is
 disabled, the entry and the run are marked ``aborted`` / ``failed`` with the reason, and the
-file is closed.
+file is closed. Device health (amplifier and conditioner status) is checked every
+``STATUS_CHECK_S`` of protocol time and at the end of each step; rests between entries are
+played as 0 V through the DAQ (not recorded). On every exit path the amplifier's read-back
+voltage after zeroing is stored as ``/run/final_amplifier_voltage_V``.
 """
 
 from __future__ import annotations
 
-import time
+import contextlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -20,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from labrig import __version__
-from labrig.errors import DeviceError, LabrigError
+from labrig.errors import DeviceError, InputFileError, InputIssue, LabrigError
 from labrig.instruments import Rig
 from labrig.limits import RigLimits
 from labrig.protocol.check import load_plan
@@ -31,6 +34,9 @@ from labrig.store import Channel, RunWriter
 
 #: acquisition block length (s): the most a crash can lose
 BLOCK_S = 0.1
+#: device health (amplifier and conditioner status) is checked at least this often during a
+#: step or a rest, in protocol time (s), and at the end of every step
+STATUS_CHECK_S = 1.0
 #: ramp-down current as a fraction of the amplifier's peak current
 RAMP_CURRENT_FRACTION = 0.5
 
@@ -112,15 +118,20 @@ def _channels(rig: Rig) -> tuple[list[str], list[Channel]]:
 
 
 def _run_step(rig, writer, step: PlannedStep, ai: list[str], chans, progress, k, n_steps, left):
+    # the rest that follows matters to analysis: the actuator's long memory spans it
+    meta = {**step.definition, "rest_after_s": step.rest_after_s}
     entry = writer.begin_entry(
-        step.name, step.definition, step.rate_hz, chans, title=getattr(step, "title", None)
+        step.name, meta, step.rate_hz, chans, title=getattr(step, "title", None)
     )
     command = step.samples()
     ao = rig.volts_to_ao(command)
     block = max(1, round(BLOCK_S * step.rate_hz))
+    check_every = max(1, round(STATUS_CHECK_S * step.rate_hz / block))
     dt = 1.0 / step.rate_hz
+    gen = None
     try:
-        for blk in rig.daq.play(ao, block):
+        gen = rig.daq.play(ao, block)
+        for j, blk in enumerate(gen, start=1):
             n = len(blk)
             sl = slice(blk.start, blk.start + n)
             data = {
@@ -135,16 +146,64 @@ def _run_step(rig, writer, step: PlannedStep, ai: list[str], chans, progress, k,
             if progress:
                 frac = (blk.start + n) / max(1, step.n_samples)
                 progress(k, n_steps, step.name, frac, left - frac * step.duration_s)
-        st = rig.amplifier.status()
-        if not st.ok:
-            raise DeviceError("amplifier", f"step {step.name}", "; ".join(st.problems()))
+            if j % check_every == 0:
+                _check_health(rig, step.name)
+        _close_playback(gen)
+        _check_health(rig, step.name)
     except KeyboardInterrupt:
+        _close_playback(gen)
         entry.finish("aborted", "interrupted (Ctrl-C)")
         raise
     except BaseException as e:
+        _close_playback(gen)
         entry.finish("failed", str(e) or type(e).__name__)
         raise
     entry.finish("complete")
+
+
+def _check_health(rig: Rig, where: str) -> None:
+    """Raise :class:`DeviceError` naming the device and the step if a device reports a fault
+    (:meth:`Rig.check`: amplifier overflow / over-temperature / error, conditioner faults)."""
+    try:
+        rig.check()
+    except DeviceError as e:
+        raise DeviceError(e.device, f"{e.operation} during {where}", e.detail) from e
+
+
+def _close_playback(gen) -> None:
+    """End a DAQ playback iterator: a generator left suspended keeps the device "playing"
+    (the simulated DAQ then ignores ``write_static``, so a ramp to 0 V would not happen)."""
+    close = getattr(gen, "close", None)
+    if close is not None:
+        with contextlib.suppress(Exception):
+            close()
+
+
+def _rest(rig: Rig, step: PlannedStep, progress, k: int, n_steps: int, left: float) -> None:
+    """Hold 0 V for the step's ``rest_after_s`` (not recorded).
+
+    The rest is played through the DAQ as zeros, like a step: it takes real time on a real rig
+    (with or without ``--realtime``), is paced with ``--realtime`` on a simulated one, and
+    advances a simulated rig's physics (the strain relaxes as on the bench); Ctrl-C and device
+    faults are seen during a rest as during a step.
+    """
+    n = round(step.rest_after_s * step.rate_hz)
+    if n <= 0:
+        return
+    rig.daq.write_static(0.0)
+    block = max(1, round(BLOCK_S * step.rate_hz))
+    check_every = max(1, round(STATUS_CHECK_S * step.rate_hz / block))
+    where = f"the rest after {step.name}"
+    gen = rig.daq.play(np.zeros(n), block)
+    try:
+        for j, blk in enumerate(gen, start=1):
+            if progress:
+                frac = (blk.start + len(blk)) / n
+                progress(k, n_steps, where, frac, left - frac * step.rest_after_s)
+            if j % check_every == 0:
+                _check_health(rig, where)
+    finally:
+        _close_playback(gen)
 
 
 def execute(
@@ -168,19 +227,28 @@ def execute(
         ai, chans = _channels(rig)
         rig.daq.configure(plan.rate_hz, ["gauge", *[c for c in ai if c != "gauge"]])
         rig.conditioner.zero()
-        with RunWriter(
-            out,
-            plan.text,
-            rig.rig_text,
-            rig.describe(),
-            rig.seed,
-            __version__,
-            protocol_name=plan.name,
-            protocol_file=str(plan.path),
-            rig_file=str(rig_path or ""),
-            planned_entries=[s.name for s in plan.steps],
-            overwrite=overwrite,
-        ) as writer:
+        try:
+            writer = RunWriter(
+                out,
+                plan.text,
+                rig.rig_text,
+                rig.describe(),
+                rig.seed,
+                __version__,
+                protocol_name=plan.name,
+                protocol_file=str(plan.path),
+                rig_file=str(rig_path or ""),
+                planned_entries=[s.name for s in plan.steps],
+                overwrite=overwrite,
+            )
+        except FileExistsError:
+            raise
+        except OSError as e:  # unwritable --out (a directory, no permission, no such place)
+            why = e.strerror or str(e)
+            raise InputFileError(
+                [InputIssue(str(out), None, "--out", f"cannot create the run file: {why}")]
+            ) from None
+        with writer:
             try:
                 rig.amplifier.enable()
                 left = plan.total_duration_s
@@ -189,28 +257,45 @@ def execute(
                     outcome.entries.append(step.name)
                     left -= step.duration_s
                     if step.rest_after_s > 0:
-                        rig.daq.write_static(0.0)
-                        if realtime:
-                            time.sleep(step.rest_after_s)
+                        _rest(rig, step, progress, k, len(plan.steps), left)
                         left -= step.rest_after_s
-                writer.finish("complete")
-                outcome.status = "complete"
+                rig.safe_zero()
+                status, reason, code = "complete", "", 0
             except KeyboardInterrupt:
                 ramp_to_zero(rig, _last_output(rig))
-                writer.finish("aborted", "interrupted (Ctrl-C)")
-                outcome.status, outcome.reason, outcome.exit_code = "aborted", "interrupted", 130
+                status, reason, code = "aborted", "interrupted (Ctrl-C)", 130
             except LabrigError as e:
                 ramp_to_zero(rig, _last_output(rig))
-                writer.finish("failed", str(e))
-                outcome.status, outcome.reason, outcome.exit_code = "failed", str(e), e.exit_code
+                status, reason, code = "failed", str(e), e.exit_code
             except Exception as e:
                 ramp_to_zero(rig, _last_output(rig))
-                writer.finish("failed", f"{type(e).__name__}: {e}")
-                outcome.status, outcome.reason = "failed", f"{type(e).__name__}: {e}"
-                outcome.exit_code = 1
+                status, reason, code = "failed", f"{type(e).__name__}: {e}", 1
+            _record_final_voltage(writer, rig)
+            writer.finish(status, reason or None)
+            outcome.status, outcome.reason, outcome.exit_code = status, reason, code
     finally:
         rig.close()
     return outcome
+
+
+def _record_final_voltage(writer: RunWriter, rig: Rig) -> None:
+    """Store the amplifier's read-back output voltage, taken after the output was brought to
+    0 V at the end of the run (every exit path), as ``/run/final_amplifier_voltage_V`` (NaN and
+    an ``error`` attribute if it could not be read). Never raises."""
+    try:
+        try:
+            volts, err = float(rig.amplifier.read_voltage()), ""
+        except Exception as e:
+            volts, err = float("nan"), str(e) or type(e).__name__
+        group = writer._g  # the /run group: RunWriter has no public API for run-level values
+        ds = group.create_dataset("final_amplifier_voltage_V", data=volts)
+        ds.attrs["units"] = "V"
+        ds.attrs["long_name"] = "amplifier output voltage read back after the output was zeroed"
+        if err:
+            ds.attrs["error"] = err
+        writer.flush()
+    except Exception:
+        pass
 
 
 def _last_output(rig: Rig) -> float:

@@ -1,0 +1,517 @@
+"""Baseline hysteresis models fitted on the same data as ours, for comparison.
+
+Both are classical *rate-independent* models driven by the voltage record (they see only the
+sequence of voltage values, not the time), written here because no maintained package exists.
+Both start from rest at 0 V (the record is preceded by 0 V), the same convention as our model.
+
+Prandtl-Ishlinskii (PI)
+-----------------------
+``S(t) = sum_i w_i F_{r_i}[V](t)`` with play (backlash) operators
+
+    y_r[n] = max(V[n] - r, min(V[n] + r, y_r[n-1])),     y_r[-1] = 0  (at V = 0)
+
+the standard initial-loading convention (every operator relaxed at the start). Thresholds on a
+uniform grid ``r_i = R i / n_ops``, ``i = 0..n_ops-1``, with ``R`` the largest ``|V|`` of the
+training records (``r_0 = 0`` is the linear term); weights ``w_i >= 0`` (ue/V) by non-negative
+least squares (``scipy.optimize.nnls``). The model is linear in the weights, so the fit is exact
+and fast. Between reversals of ``V`` a play operator has the closed form ``max(V - r, y_s)``
+(rising) or ``min(V + r, y_s)`` (falling), so the operators are evaluated run by run.
+
+Bouc-Wen (BW)
+-------------
+The common piezo form
+
+    S = d V - h,      dh/dt = A V' - beta |V'| |h|^(n-1) h - gamma V' |h|^n      (V' = dV/dt)
+
+(units: ``d, A`` ue/V; ``beta, gamma`` 1/V for ``n = 1``). It is rate independent:
+along a run of monotone voltage (direction ``s``, distance ``u = s (V - V_0)``)
+``dh/du = s A - beta |h|^(n-1) h - gamma s |h|^n``. For ``n = 1`` (the usual choice for piezo
+stacks, and the one fitted) this is linear in ``h`` on each side of ``h = 0``, so each run has a
+closed form: ``h = sA/k + (h_0 - sA/k) exp(-k u)`` with ``k = beta - gamma`` while ``h`` is
+opposite to the motion and ``k = beta + gamma`` once it has the motion's sign (the crossing of
+zero is found in closed form). So ``n = 1`` is integrated exactly, with no step size; other
+``n`` use classical RK4 with ``substeps`` per sample interval along ``u`` (checked against the
+closed form and by halving the step in the tests). For ``n = 1``, ``h`` is proportional to
+``A``, so ``S = d V - A h_1`` with ``h_1`` the response for ``A = 1``: ``d`` and ``A`` are solved
+by linear least squares inside a bounded ``least_squares`` over ``beta + gamma > 0`` (log) and
+``(beta - gamma) / (beta + gamma) > -1`` (which keeps ``beta > 0``, so ``h`` stays bounded).
+
+Objective and scores are those of :mod:`labrig.analysis.fit`: residuals weighted per entry by
+``1 / (strain span * sqrt(samples))``, NRMSE per entry and its mean, and the leave-one-entry-out
+held-out NRMSE.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import optimize
+
+from labrig.analysis.fit import single_thread_blas
+from labrig.analysis.metrics import nrmse_pct
+from labrig.analysis.records import Record
+
+__all__ = [
+    "KINDS",
+    "BaselineResult",
+    "BoucWen",
+    "PrandtlIshlinskii",
+    "bouc_wen_response",
+    "fit_baseline",
+    "play_operator",
+    "play_operators",
+]
+
+KINDS = ("prandtl_ishlinskii", "bouc_wen")
+
+
+# -- monotone runs -----------------------------------------------------------------------------
+
+
+def _runs(v: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """Split ``v`` (prefixed with the rest value 0) into monotone runs.
+
+    Returns ``starts, stops, dirs``: run ``j`` goes from sample ``starts[j]`` (its start value)
+    to ``stops[j]`` (inclusive) of the prefixed record, in direction ``dirs[j]`` (+1 or -1);
+    flat stretches join the current run.
+    """
+    d = np.sign(np.diff(v))
+    nz = np.flatnonzero(d)
+    if nz.size == 0:
+        return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
+    # fill zero steps with the previous direction (or the next one at the start)
+    idx = np.where(d != 0, np.arange(d.size), 0)
+    np.maximum.accumulate(idx, out=idx)
+    filled = d[idx]
+    filled[: nz[0]] = d[nz[0]]
+    change = np.flatnonzero(np.diff(filled) != 0) + 1  # first step index of each new run
+    starts = np.concatenate(([0], change))
+    stops = np.concatenate((change, [d.size]))
+    return starts, stops, filled[starts]
+
+
+def _with_rest(v: ArrayLike) -> NDArray:
+    return np.concatenate(([0.0], np.asarray(v, dtype=float)))
+
+
+# -- Prandtl-Ishlinskii ------------------------------------------------------------------------
+
+
+def play_operators(v: ArrayLike, thresholds: ArrayLike) -> NDArray[np.float64]:
+    """Outputs of play operators with the given thresholds (V) for the record ``v``: shape
+    ``(len(v), len(thresholds))``, every operator at 0 with the input at 0 before the record."""
+    r = np.asarray(thresholds, dtype=float)
+    if np.any(r < 0):
+        raise ValueError("play thresholds must be non-negative")
+    vp = _with_rest(v)
+    out = np.zeros((vp.size, r.size))
+    y = np.zeros(r.size)
+    for a, b, s in zip(*_runs(vp), strict=True):
+        seg = vp[a + 1 : b + 1, None]
+        blk = np.maximum(seg - r, y) if s > 0 else np.minimum(seg + r, y)
+        out[a + 1 : b + 1] = blk
+        y = blk[-1]
+    return out[1:]
+
+
+def play_operator(v: ArrayLike, r: float) -> NDArray[np.float64]:
+    """One play operator of threshold ``r`` (V) (see :func:`play_operators`)."""
+    return play_operators(v, [r])[:, 0]
+
+
+@dataclass(frozen=True)
+class PrandtlIshlinskii:
+    """``S = sum_i weights[i] * play_{thresholds[i]}[V]`` (weights in ue/V)."""
+
+    thresholds: tuple[float, ...]
+    weights: tuple[float, ...]
+
+    def predict(self, v: ArrayLike) -> NDArray[np.float64]:
+        return play_operators(v, self.thresholds) @ np.asarray(self.weights)
+
+    def params(self) -> dict[str, Any]:
+        return {"thresholds_V": list(self.thresholds), "weights_ue_per_V": list(self.weights)}
+
+
+# -- Bouc-Wen ----------------------------------------------------------------------------------
+
+
+def _phi(k: NDArray, u: NDArray) -> NDArray:
+    """``(1 - exp(-k u)) / k`` (``u`` when ``k = 0``)."""
+    ku = k * u
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(np.abs(ku) > 1e-12, -np.expm1(-ku) / np.where(k == 0, 1.0, k), u)
+
+
+def _bw_exact(
+    vp: NDArray, A: float, beta: float, gamma: float, runs: tuple | None = None
+) -> NDArray:
+    """``h`` for ``n = 1`` at the samples of the rest-prefixed record ``vp`` (closed form)."""
+    starts, stops, dirs = _runs(vp) if runs is None else runs
+    h = np.zeros(vp.size)
+    if starts.size == 0:
+        return h
+    k_same, k_opp = beta + gamma, beta - gamma
+    nrun = starts.size
+    h0 = np.empty(nrun)  # state at each run's start
+    u_star = np.zeros(nrun)  # distance at which h crosses zero (runs that start opposite)
+    travel = dirs * (vp[stops] - vp[starts])
+    hc = 0.0
+    for j in range(nrun):  # scalar recursion over runs only
+        s, U = float(dirs[j]), float(travel[j])
+        h0[j] = hc
+        us = 0.0
+        if hc * s < 0:
+            x = k_opp * abs(hc) / A if A != 0 else np.inf
+            if abs(x) < 1e-12:
+                us = abs(hc) / A
+            elif 1.0 + x > 0:
+                us = float(np.log1p(x) / k_opp)
+            else:
+                us = np.inf
+            if us >= U:
+                e = np.exp(-k_opp * U)
+                hc = hc * e + s * A * (U if k_opp == 0 else -np.expm1(-k_opp * U) / k_opp)
+                u_star[j] = np.inf
+                continue
+            hc, U = 0.0, U - us
+        u_star[j] = us
+        hc = hc * np.exp(-k_same * U) + s * A * (
+            U if k_same == 0 else -np.expm1(-k_same * U) / k_same
+        )
+    run = np.repeat(np.arange(nrun), stops - starts)
+    s = dirs[run]
+    u = s * (vp[1:] - vp[starts][run])
+    us = u_star[run]
+    hs = h0[run]
+    phase1 = u <= us  # still relaxing towards zero with k_opp (opposite-sign start)
+    ko = np.full(u.size, k_opp)
+    kq = np.full(u.size, k_same)
+    h1 = hs * np.exp(-ko * u) + s * A * _phi(ko, u)
+    u2 = np.where(phase1, 0.0, u - np.where(np.isfinite(us), us, 0.0))
+    start2 = np.where(hs * s < 0, 0.0, hs)
+    h2 = start2 * np.exp(-kq * u2) + s * A * _phi(kq, u2)
+    h[1:] = np.where(phase1, h1, h2)
+    return h
+
+
+def _bw_rhs(h: float, s: float, A: float, beta: float, gamma: float, n: float) -> float:
+    ah = abs(h)
+    return s * A - beta * ah ** (n - 1.0) * h - gamma * s * ah**n if ah > 0 else s * A
+
+
+def bouc_wen_response(
+    v: ArrayLike,
+    A: float,
+    beta: float,
+    gamma: float,
+    n: float = 1.0,
+    substeps: int | None = None,
+) -> NDArray[np.float64]:
+    """Hysteretic state ``h`` (ue) of the Bouc-Wen model for the record ``v`` (V), from ``h = 0``
+    at 0 V before the record. ``n = 1`` without ``substeps``: exact closed form per monotone run;
+    otherwise classical RK4 along the voltage with ``substeps`` steps per sample interval
+    (default 8)."""
+    vp = _with_rest(v)
+    h = np.zeros(vp.size)
+    if n == 1.0 and substeps is None:
+        return _bw_exact(vp, A, beta, gamma)[1:]
+    m = 8 if substeps is None else int(substeps)
+    if m < 1:
+        raise ValueError("substeps must be >= 1")
+    hc = 0.0
+    for i in range(1, vp.size):
+        dv = vp[i] - vp[i - 1]
+        if dv != 0.0:
+            s = 1.0 if dv > 0 else -1.0
+            du = abs(dv) / m
+            for _ in range(m):
+                k1 = _bw_rhs(hc, s, A, beta, gamma, n)
+                k2 = _bw_rhs(hc + 0.5 * du * k1, s, A, beta, gamma, n)
+                k3 = _bw_rhs(hc + 0.5 * du * k2, s, A, beta, gamma, n)
+                k4 = _bw_rhs(hc + du * k3, s, A, beta, gamma, n)
+                hc += du * (k1 + 2 * k2 + 2 * k3 + k4) / 6.0
+        h[i] = hc
+    return h[1:]
+
+
+@dataclass(frozen=True)
+class BoucWen:
+    """``S = d V - h`` with the Bouc-Wen ``h`` (module docstring); units ue/V, ue/V, 1/V, 1/V."""
+
+    d: float
+    A: float
+    beta: float
+    gamma: float
+    n: float = 1.0
+
+    def predict(self, v: ArrayLike, substeps: int | None = None) -> NDArray[np.float64]:
+        v = np.asarray(v, dtype=float)
+        return self.d * v - bouc_wen_response(v, self.A, self.beta, self.gamma, self.n, substeps)
+
+    def params(self) -> dict[str, Any]:
+        return {
+            "d_ue_per_V": self.d,
+            "A_ue_per_V": self.A,
+            "beta_per_V": self.beta,
+            "gamma_per_V": self.gamma,
+            "n": self.n,
+        }
+
+
+# -- fitting -----------------------------------------------------------------------------------
+
+
+@dataclass
+class _Seg:
+    """The scored part of one record inside a simulated sequence."""
+
+    name: str
+    lo: int  # first scored sample in the sequence
+    i0: int  # the same in the record (warm-up length)
+    meas: NDArray
+    w: float  # 1 / (span * sqrt(samples))
+
+    @property
+    def hi(self) -> int:
+        return self.lo + self.meas.size
+
+
+@dataclass
+class _Seq:
+    """One simulated voltage sequence (a record, or a run's records back to back)."""
+
+    v: NDArray
+    segs: list[_Seg]
+    starts: dict[str, int]
+    vp: NDArray = field(init=False, repr=False)
+    runs: tuple = field(init=False, repr=False)
+    _basis: dict = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.vp = _with_rest(self.v)
+        self.runs = _runs(self.vp)
+
+    def play_basis(self, thresholds: tuple[float, ...]) -> NDArray:
+        if thresholds not in self._basis:
+            self._basis[thresholds] = play_operators(self.v, thresholds)
+        return self._basis[thresholds]
+
+
+def _seg(r: Record, lo: int, warmup_s: float) -> _Seg:
+    i0 = round(max(warmup_s, 0.0) * r.rate_hz)
+    meas = np.asarray(r.strain_ue[i0:], dtype=float)
+    if meas.size < 2 or not np.ptp(meas) > 0:
+        raise ValueError(f"entry {r.name!r}: nothing to score after the warm-up")
+    return _Seg(r.name, lo + i0, i0, meas, 1.0 / (np.ptp(meas) * np.sqrt(meas.size)))
+
+
+def _sequences(
+    records: Sequence[Record], scored: Sequence[str], warmup_s: float, chain: bool
+) -> list[_Seq]:
+    keep = set(scored)
+    if not chain:
+        return [
+            _Seq(r.voltage_V, [_seg(r, 0, warmup_s)], {r.name: 0})
+            for r in records
+            if r.name in keep
+        ]
+    parts, segs, starts, pos = [], [], {}, 0
+    for r in records:
+        starts[r.name] = pos
+        if r.name in keep:
+            segs.append(_seg(r, pos, warmup_s))
+        parts.append(r.voltage_V)
+        pos += r.n
+        n_rest = round(max(float(r.meta.get("rest_after_s", 0.0) or 0.0), 0.0) * r.rate_hz)
+        if n_rest:
+            parts.append(np.zeros(n_rest))
+            pos += n_rest
+    return [_Seq(np.concatenate(parts), segs, starts)]
+
+
+Items = list[tuple[_Seq, list[_Seg]]]
+
+
+def _fit_pi(items: Items, n_ops: int) -> PrandtlIshlinskii:
+    r_max = max(float(np.max(np.abs(q.v))) for q, _ in items) or 1.0
+    r = tuple(float(x) for x in r_max * np.arange(n_ops) / n_ops)
+    rows, rhs = [], []
+    for q, segs in items:
+        B = q.play_basis(r)
+        for g in segs:
+            rows.append(B[g.lo : g.hi] * g.w)
+            rhs.append(g.meas * g.w)
+    # same minimiser on the small triangular system: |Mw - b|^2 = |Rw - Q^T b|^2 + const
+    qq, rr = np.linalg.qr(np.vstack(rows), mode="reduced")
+    w, _ = optimize.nnls(rr, qq.T @ np.concatenate(rhs), maxiter=50 * n_ops)
+    return PrandtlIshlinskii(r, tuple(float(x) for x in w))
+
+
+def _bw_linear(items: Items, beta: float, gamma: float) -> tuple[NDArray, NDArray]:
+    """Best ``(d, A)`` for ``(beta, gamma)`` and the weighted residual."""
+    c0s, c1s, rhs = [], [], []
+    for q, segs in items:
+        h1 = _bw_exact(q.vp, 1.0, beta, gamma, q.runs)[1:]
+        for g in segs:
+            c0s.append(g.w * q.v[g.lo : g.hi])
+            c1s.append(-g.w * h1[g.lo : g.hi])
+            rhs.append(g.meas * g.w)
+    c0, c1, b = np.concatenate(c0s), np.concatenate(c1s), np.concatenate(rhs)
+    # two columns: the normal equations of the column-scaled problem
+    n0, n1 = np.linalg.norm(c0) or 1.0, np.linalg.norm(c1) or 1.0
+    cc = c0 @ c1 / (n0 * n1)
+    M = np.array([[1.0, cc], [cc, 1.0]])
+    rhs2 = np.array([c0 @ b / n0, c1 @ b / n1])
+    try:
+        y = np.linalg.solve(M, rhs2)
+    except np.linalg.LinAlgError:
+        y = np.linalg.lstsq(M, rhs2, rcond=None)[0]
+    x = np.array([y[0] / n0, y[1] / n1])
+    return x, x[0] * c0 + x[1] * c1 - b
+
+
+def _fit_bw(items: Items, start: tuple[float, float] | None = None) -> BoucWen:
+    vr = max(float(np.ptp(q.vp)) for q, _ in items) or 1.0
+
+    # z = (log((beta + gamma) * vr), (beta - gamma) / (beta + gamma))
+    def unpack(z: NDArray) -> tuple[float, float]:
+        ks = float(np.exp(z[0])) / vr
+        ko = float(z[1]) * ks
+        return 0.5 * (ks + ko), 0.5 * (ks - ko)
+
+    def fun(z: NDArray) -> NDArray:
+        return _bw_linear(items, *unpack(z))[1]
+
+    lo, hi = np.array([np.log(1e-3), -0.95]), np.array([np.log(1e3), 20.0])
+    if start is not None:
+        b, g = start
+        z0 = np.clip([np.log((b + g) * vr), (b - g) / (b + g)], lo + 1e-9, hi - 1e-9)
+    else:  # a small grid, then the best point
+        grid = [(np.log(x), y) for x in (0.3, 1.0, 3.0, 10.0) for y in (-0.5, 0.3, 1.0, 3.0)]
+        z0 = np.array(min(grid, key=lambda z: float(np.sum(fun(np.array(z)) ** 2))))
+    res = optimize.least_squares(
+        fun, z0, bounds=(lo, hi), x_scale="jac", ftol=1e-10, xtol=1e-10, gtol=1e-10
+    )
+    beta, gamma = unpack(res.x)
+    (d, A), _ = _bw_linear(items, beta, gamma)
+    return BoucWen(float(d), float(A), beta, gamma)
+
+
+@dataclass
+class BaselineResult:
+    """A fitted baseline and its scores (same metrics as :class:`~labrig.analysis.fit.FitResult`).
+
+    :meth:`to_json` has the keys of ``labrig fit --json`` (``uncertainty`` and ``correlation``
+    empty, ``method`` the baseline's kind).
+    """
+
+    kind: str
+    model: PrandtlIshlinskii | BoucWen
+    nrmse_pct: float
+    per_entry: dict[str, float]
+    heldout_nrmse_pct: float | None
+    entries: list[str]
+    heldout_per_entry: dict[str, float] | None = None
+    warmup_s: float = 0.0
+    chain: bool = False
+    #: the fitted baseline's strain for each scored entry (whole record; with ``chain`` the
+    #: run's history included)
+    predictions: dict[str, NDArray[np.float64]] = field(default_factory=dict, repr=False)
+
+    @property
+    def params(self) -> dict[str, Any]:
+        return self.model.params()
+
+    def predict(self, record: Record) -> NDArray[np.float64]:
+        """Strain (ue) for the record's voltage, from rest (see ``predictions`` for a chain)."""
+        return self.model.predict(record.voltage_V)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "params": self.params,
+            "uncertainty": {},
+            "correlation": {},
+            "nrmse_pct": float(self.nrmse_pct),
+            "per_entry": {k: float(v) for k, v in self.per_entry.items()},
+            "heldout_nrmse_pct": (
+                None if self.heldout_nrmse_pct is None else float(self.heldout_nrmse_pct)
+            ),
+            "method": self.kind,
+            "entries": list(self.entries),
+        }
+
+
+def fit_baseline(
+    records: list[Record],
+    kind: str = "prandtl_ishlinskii",
+    heldout: bool = True,
+    warmup_s: float = 0.0,
+    n_ops: int = 16,
+    *,
+    chain: bool = False,
+    scored: Sequence[str] | None = None,
+) -> BaselineResult:
+    """Fit a baseline (``"prandtl_ishlinskii"`` or ``"bouc_wen"``) on ``records``.
+
+    ``n_ops``: number of play operators of the PI model. ``warmup_s``, ``chain`` and ``scored``
+    as in :func:`~labrig.analysis.fit.fit_model` (a run's entries back to back, each followed by
+    ``meta["rest_after_s"]`` at 0 V; both baselines have memory too).
+    """
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+    if not records:
+        raise ValueError("no records to fit")
+    names = [r.name for r in records]
+    if len(set(names)) != len(names):
+        raise ValueError(f"entry names must be unique, got {names}")
+    scored = names if scored is None else [n for n in names if n in set(scored)]
+    if not scored:
+        raise ValueError("no scored entries among the records")
+    seqs = _sequences(records, scored, warmup_s, chain)
+    everything: Items = [(q, list(q.segs)) for q in seqs]
+
+    def fit(items: Items, warm: PrandtlIshlinskii | BoucWen | None = None):
+        if kind == "prandtl_ishlinskii":
+            return _fit_pi(items, n_ops)
+        return _fit_bw(items, None if warm is None else (warm.beta, warm.gamma))
+
+    def predictions(model) -> dict[str, NDArray]:
+        out = {}
+        for q in seqs:
+            s = model.predict(q.v)
+            for g in q.segs:
+                out[g.name] = s[q.starts[g.name] : g.hi]
+        return out
+
+    segs = {g.name: g for q in seqs for g in q.segs}
+    with single_thread_blas():
+        model = fit(everything)
+        preds = predictions(model)
+        per_entry = {n: nrmse_pct(segs[n].meas, preds[n][segs[n].i0 :]) for n in scored}
+        held, held_per = None, None
+        if heldout and len(scored) >= 2:
+            held_per = {}
+            for name in scored:
+                items = [(q, [g for g in q.segs if g.name != name]) for q in seqs]
+                m_k = fit([(q, gs) for q, gs in items if gs], warm=model)
+                q = next(q for q in seqs if any(g.name == name for g in q.segs))
+                p_k = m_k.predict(q.v)[q.starts[name] : segs[name].hi]
+                held_per[name] = nrmse_pct(segs[name].meas, p_k[segs[name].i0 :])
+            held = float(np.mean(list(held_per.values())))
+    return BaselineResult(
+        kind=kind,
+        model=model,
+        nrmse_pct=float(np.mean(list(per_entry.values()))),
+        per_entry=per_entry,
+        heldout_nrmse_pct=held,
+        entries=list(scored),
+        heldout_per_entry=held_per,
+        warmup_s=warmup_s,
+        chain=chain,
+        predictions=preds,
+    )

@@ -1,0 +1,112 @@
+"""One measured (or simulated) entry of a run, as the analysis sees it.
+
+The run-file reader and ``labrig import`` produce :class:`Record` objects; fitting, metrics and
+reports consume them. Units: s, V, ue (microstrain), Hz.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+HOLDS = ("zoh", "linear")
+
+#: keys of ``Record.meta`` read as the drive frequency (Hz), first match wins
+FREQUENCY_KEYS = ("frequency_hz", "freq_hz", "f_hz", "frequency")
+
+
+@dataclass
+class Record:
+    """One entry: a voltage record and the strain it produced, sampled at ``rate_hz``.
+
+    ``hold`` says how the voltage behaves between samples, which the model needs:
+    ``"zoh"`` for a voltage a DAQ drove (held on each sample interval, the default) and
+    ``"linear"`` for a measured smooth voltage (e.g. imported data). ``aux`` holds other
+    channels by name (same length); ``meta`` holds whatever the source knows, e.g.
+    ``frequency_hz`` and ``amplitude_V`` of a sine entry (see :data:`FREQUENCY_KEYS`).
+    """
+
+    name: str
+    rate_hz: float
+    time_s: NDArray[np.float64]
+    voltage_V: NDArray[np.float64]
+    strain_ue: NDArray[np.float64]
+    aux: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    hold: str = "zoh"
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.rate_hz = float(self.rate_hz)
+        if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise ValueError(f"record {self.name!r}: rate_hz must be positive, got {self.rate_hz}")
+        if self.hold not in HOLDS:
+            raise ValueError(
+                f"record {self.name!r}: hold must be one of {HOLDS}, got {self.hold!r}"
+            )
+        self.voltage_V = np.asarray(self.voltage_V, dtype=np.float64).ravel()
+        self.strain_ue = np.asarray(self.strain_ue, dtype=np.float64).ravel()
+        n = self.voltage_V.size
+        if self.time_s is None:
+            self.time_s = np.arange(n) / self.rate_hz
+        self.time_s = np.asarray(self.time_s, dtype=np.float64).ravel()
+        if self.strain_ue.size != n or self.time_s.size != n:
+            raise ValueError(
+                f"record {self.name!r}: time ({self.time_s.size}), voltage ({n}) and strain "
+                f"({self.strain_ue.size}) must have the same length"
+            )
+        self.aux = {k: np.asarray(v, dtype=np.float64).ravel() for k, v in self.aux.items()}
+        for k, v in self.aux.items():
+            if v.size != n:
+                raise ValueError(f"record {self.name!r}: aux channel {k!r} has {v.size} != {n}")
+
+    @classmethod
+    def from_arrays(
+        cls,
+        name: str,
+        rate_hz: float,
+        voltage_V: ArrayLike,
+        strain_ue: ArrayLike,
+        hold: str = "zoh",
+        **meta: Any,
+    ) -> Record:
+        """A record with time ``n / rate_hz`` and no auxiliary channels."""
+        v = np.asarray(voltage_V, dtype=np.float64)
+        return cls(name, rate_hz, np.arange(v.size) / float(rate_hz), v, strain_ue, {}, hold, meta)
+
+    @property
+    def n(self) -> int:
+        return int(self.voltage_V.size)
+
+    @property
+    def duration_s(self) -> float:
+        return self.n / self.rate_hz
+
+    @property
+    def frequency_hz(self) -> float | None:
+        """The drive frequency stated in ``meta`` (Hz), or ``None``."""
+        for k in FREQUENCY_KEYS:
+            f = self.meta.get(k)
+            if f is not None:
+                try:
+                    f = float(f)
+                except (TypeError, ValueError):
+                    continue
+                if np.isfinite(f) and f > 0:
+                    return f
+        return None
+
+    def with_strain(self, strain_ue: ArrayLike, name: str | None = None) -> Record:
+        """A copy with another strain (e.g. a prediction), same voltage, time, hold and meta."""
+        return Record(
+            self.name if name is None else name,
+            self.rate_hz,
+            self.time_s,
+            self.voltage_V,
+            np.asarray(strain_ue, dtype=np.float64),
+            dict(self.aux),
+            self.hold,
+            dict(self.meta),
+        )
