@@ -95,13 +95,9 @@ for new parameters (~40 %, mostly the quadrature of the modal tails) and the hys
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
-import glob
-import os
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -111,6 +107,7 @@ from scipy import optimize
 
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic, last_period, nrmse_pct
 from labrig.analysis.records import Record
+from labrig.blas import single_thread_blas
 from labrig.model import DynamicHysteresisModel, ModelParams, QuasiStaticHysteresis, Relaxor
 from labrig.model.modal import run_bank
 
@@ -154,52 +151,6 @@ _FD_VC = 1e-5  # central step in log vc (operator only)
 _TIGHT = {"ftol": 1e-10, "xtol": 1e-10, "gtol": 1e-10}
 
 Progress = Callable[[str, int, int], Any]
-
-
-# -- BLAS threads ------------------------------------------------------------------------------
-
-
-def _openblas_libs() -> list[tuple[Any, Any, Any]]:
-    """(lib, set, get) for the OpenBLAS copies numpy and scipy have loaded (none if unknown)."""
-    out = []
-    import numpy
-    import scipy
-
-    names = (
-        ("scipy_openblas_set_num_threads64_", "scipy_openblas_get_num_threads64_"),
-        ("scipy_openblas_set_num_threads", "scipy_openblas_get_num_threads"),
-        ("openblas_set_num_threads64_", "openblas_get_num_threads64_"),
-        ("openblas_set_num_threads", "openblas_get_num_threads"),
-    )
-    for pkg in (numpy, scipy):
-        libdir = os.path.join(os.path.dirname(pkg.__file__), os.pardir, pkg.__name__ + ".libs")
-        for path in glob.glob(os.path.join(libdir, "*openblas*.so*")):
-            try:
-                lib = ctypes.CDLL(path, mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
-            except OSError:
-                continue  # not loaded in this process
-            for s, g in names:
-                if hasattr(lib, s) and hasattr(lib, g):
-                    out.append((lib, getattr(lib, s), getattr(lib, g)))
-                    break
-    return out
-
-
-@contextlib.contextmanager
-def single_thread_blas() -> Iterator[None]:
-    """Run the block with one OpenBLAS thread (restored afterwards); a no-op if not found."""
-    libs = []
-    try:
-        libs = [(s, g()) for _, s, g in _openblas_libs()]
-        for s, _ in libs:
-            s(1)
-    except Exception:  # pragma: no cover - BLAS without the symbols: leave it alone
-        libs = []
-    try:
-        yield
-    finally:
-        for s, n in libs:
-            s(int(n))
 
 
 # -- the campaign: cached simulation and structured Jacobian -----------------------------------
@@ -685,6 +636,22 @@ def _relaxor_gain(tau: float, lam: float, f_hz: float) -> float:
     return float(abs(Relaxor(tau, lam).frequency_response(f_hz)))
 
 
+def _stage_entries(
+    records: Sequence[Record],
+    entries: Sequence[_Entry],
+    chosen: Sequence[int],
+    run: Sequence[Record] | None,
+    warmup_s: float,
+) -> list[_Entry]:
+    """The simulated sequences of a stage: the chosen records on their own, or (``run``) the
+    run up to the last chosen record with only the chosen ones scored."""
+    if run is None:
+        return [entries[i] for i in chosen]
+    names = {records[i].name for i in chosen}
+    last = max(k for k, r in enumerate(run) if r.name in names)
+    return [_chain_entry(run[: last + 1], names, warmup_s)]
+
+
 def _staged(
     records: Sequence[Record],
     entries: Sequence[_Entry],
@@ -692,8 +659,13 @@ def _staged(
     offset: bool,
     bounds: dict[str, tuple[float, float]],
     messages: list[str],
+    run: Sequence[Record] | None = None,
+    warmup_s: float = 0.0,
 ) -> tuple[dict[str, float], int]:
-    """The seed's three stages (module docstring); returns the parameters and evaluations."""
+    """The seed's three stages (module docstring); returns the parameters and evaluations.
+
+    ``run``: the whole run (``chain``): stages 2 and 3 then simulate it up to their last record,
+    the other records as history (a later entry of a run does not start at rest)."""
     info = _classify(records)
     periodic = [i for i in info if i.periodic and i.f_hz is not None]
     if not periodic:
@@ -717,7 +689,11 @@ def _staged(
 
     # 2. transient: lam_t, tau_t and the refined static part from the whole low records
     w_low = 2 * np.pi * f_low
-    camp2 = _Campaign([entries[i] for i in low], shape, offset, with_gd=False)
+    # in a run, G_d (left out here) shapes the history's reversals: the operator then carries a
+    # constant strain error into later entries (16 ue on the seed's campaign), so take each
+    # entry's residual about its mean in this stage
+    off2 = offset or run is not None
+    camp2 = _Campaign(_stage_entries(records, entries, low, run, warmup_s), shape, off2, False)
     starts = []
     for lam in (0.1, 0.25, 0.5):
         tau = float(np.clip(0.35 ** (1 / lam) / w_low, *bounds["tau_t_s"]))
@@ -746,7 +722,7 @@ def _staged(
         return th, nfev
     f_high = max(info[i].f_hz for i in high)
     w_high = 2 * np.pi * f_high
-    camp3 = _Campaign([entries[i] for i in high], shape, offset)
+    camp3 = _Campaign(_stage_entries(records, entries, high, run, warmup_s), shape, offset)
     starts = []
     for lam in (0.7, 1.0, 1.35):
         for ratio in (0.1, 0.3, 0.6):
@@ -865,7 +841,16 @@ def _fit_once(
         singles = [_make_entry(r, warmup_s) for r in srecs]
         starts = []
         try:
-            th_staged, n_st = _staged(srecs, singles, shape, offset, bounds, messages)
+            th_staged, n_st = _staged(
+                srecs,
+                singles,
+                shape,
+                offset,
+                bounds,
+                messages,
+                records if chain else None,
+                warmup_s,
+            )
             nfev += n_st
             starts.append(th_staged)
         except ValueError as exc:

@@ -29,6 +29,8 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
+from labrig.blas import single_thread_blas
+
 HOLDS = ("zoh", "linear")
 
 _SERIES_RADIUS = 0.1
@@ -160,62 +162,33 @@ class DiscreteBank:
         return [np.zeros(g.size, dtype=g.a.dtype) for g in self.groups]
 
 
-def _block_matrices(g: _Group, B: int) -> tuple[NDArray, ...]:
-    k = np.arange(B + 1)
-    pw = g.a[None, :] ** k[:, None]  # (B+1, M): a^k
-    pw[0, :] = 1.0  # 0**0
-    # y[k] = Q[k] . x_prev + sum_{l<=k} (T0[k-l] u[l-1] + T1[k-l] u[l])
-    Q = pw[1:, :] * g.c[None, :]  # (B, M): c a^{k+1}
-    T0 = pw[:B, :] @ (g.c * g.b0)  # T[m] = sum c a^m b
-    T1 = pw[:B, :] @ (g.c * g.b1)
+def _folded(g: _Group) -> tuple[NDArray, NDArray]:
+    """Fold the linear-hold term into ZOH form: with ``z = x - b1 u[n]``,
+    ``z[n] = a z[n-1] + (a b1 + b0) u[n-1]`` and ``y[n] = Re(c z[n]) + Re(sum c b1) u[n]``."""
+    return g.a, g.a * g.b1 + g.b0
+
+
+def _block_matrices(bank: DiscreteBank, B: int) -> tuple:
+    """Per-group ``(Q, P, a^B)`` and the Toeplitz matrix summed over groups, for blocks of B."""
     idx = np.arange(B)
     lag = idx[None, :] - idx[:, None]  # [l, k] -> k - l
-    T0m = np.where(lag >= 0, T0[np.clip(lag, 0, B - 1)], 0.0)
-    T1m = np.where(lag >= 0, T1[np.clip(lag, 0, B - 1)], 0.0)
-    # x_end = a^B x_prev + sum_l a^{B-1-l} (b0 u[l-1] + b1 u[l])
-    P0 = pw[B - 1 - idx, :] * g.b0[None, :]  # (B, M)
-    P1 = pw[B - 1 - idx, :] * g.b1[None, :]
-    aB = pw[B, :]
-    return Q, T0m, T1m, P0, P1, aB
+    T = np.zeros(B)
+    per_group = []
+    for g in bank.groups:
+        a, b = _folded(g)
+        k = np.arange(B + 1)
+        pw = a[None, :] ** k[:, None]  # (B+1, M): a^k
+        pw[0, :] = 1.0  # 0**0
+        # y[k] = Re(Q[k] . z_prev) + sum_{l<=k} T[k-l] u[l-1];  z_end = a^B z_prev + u_prev_blk @ P
+        Q = pw[1:, :] * g.c[None, :]
+        T += (pw[:B, :] @ (g.c * b)).real
+        P = pw[B - 1 - idx, :] * b[None, :]
+        per_group.append((Q, P, pw[B, :]))
+    Tm = np.where(lag >= 0, T[np.clip(lag, 0, B - 1)], 0.0)
+    return per_group, Tm
 
 
-def _run_group(
-    g: _Group, u: NDArray, u_prev: float, x0: NDArray, B: int, cache: dict
-) -> tuple[NDArray, NDArray]:
-    n = u.size
-    y = np.zeros(n)
-    x = x0.astype(g.a.dtype, copy=True)
-    up = np.concatenate(([u_prev], u[:-1])) if n else u
-    has_b0 = bool(np.any(g.b0 != 0))
-    has_b1 = bool(np.any(g.b1 != 0))
-    pos = 0
-    for size in (B, n % B):
-        nb = (n - pos) // size if size else 0
-        if nb == 0:
-            continue
-        key = (id(g), size)
-        if key not in cache:
-            cache[key] = _block_matrices(g, size)
-        Q, T0m, T1m, P0, P1, aB = cache[key]
-        U = u[pos : pos + nb * size].reshape(nb, size)
-        Up = up[pos : pos + nb * size].reshape(nb, size)
-        inj = np.zeros((nb, g.size), dtype=np.result_type(g.a, float))
-        yb = np.zeros((nb, size))
-        if has_b0:
-            inj = inj + Up @ P0
-            yb += Up @ T0m.real if np.iscomplexobj(T0m) else Up @ T0m
-        if has_b1:
-            inj = inj + U @ P1
-            yb += U @ T1m.real if np.iscomplexobj(T1m) else U @ T1m
-        # states at block starts: X[j] = x before block j
-        X = np.empty((nb, g.size), dtype=inj.dtype)
-        for j in range(nb):
-            X[j] = x
-            x = aB * x + inj[j]
-        yb += (X @ Q.T).real
-        y[pos : pos + nb * size] = yb.ravel()
-        pos += nb * size
-    return y, x
+_CHUNK = 1 << 16  # samples per pass: keeps the working arrays in cache
 
 
 def run_bank(
@@ -228,16 +201,56 @@ def run_bank(
     """Run the bank over a record ``u``; returns ``(y, final_state)``.
 
     ``state`` and ``u_prev`` carry the recursion across calls (streaming); ``None`` and 0 mean
-    the system is at rest with zero input before the first sample.
+    the system is at rest with zero input before the first sample. The record is processed in
+    blocks of ``block`` samples with matrix products (the same recursion, reordered).
     """
-    u = np.ascontiguousarray(u, dtype=np.float64)
+    with single_thread_blas():
+        return _run_bank(bank, np.ascontiguousarray(u, dtype=np.float64), state, u_prev, block)
+
+
+def _run_bank(bank, u, state, u_prev, block):
+    n = u.size
     state = bank.initial_state() if state is None else state
-    y = np.zeros(u.size)
-    out_state = []
-    for g, x0 in zip(bank.groups, state, strict=True):
-        yg, xg = _run_group(g, u, u_prev, x0, block, bank._cache)
-        y += yg
-        out_state.append(xg)
+    feed = bank.feedthrough
+    up = np.empty(n)
+    if n:
+        up[0] = u_prev
+        up[1:] = u[:-1]
+    # folded states z = x - b1 u_prev
+    z = [
+        x.astype(g.a.dtype, copy=True) - g.b1 * u_prev
+        for g, x in zip(bank.groups, state, strict=True)
+    ]
+    y = feed * u
+    pos = 0
+    while pos < n:
+        stop = min(n, pos + _CHUNK)
+        for size in (block, (stop - pos) % block):
+            nb = (stop - pos) // size if size else 0
+            if nb == 0:
+                continue
+            key = ("blocks", size)
+            if key not in bank._cache:
+                bank._cache[key] = _block_matrices(bank, size)
+            per_group, Tm = bank._cache[key]
+            Up = up[pos : pos + nb * size].reshape(nb, size)
+            yb = Up @ Tm
+            for gi, (Q, P, aB) in enumerate(per_group):
+                inj = Up @ P.real + 1j * (Up @ P.imag) if np.iscomplexobj(P) else Up @ P
+                X = np.empty_like(inj)
+                x = z[gi]
+                for j in range(nb):
+                    X[j] = x
+                    x = aB * x + inj[j]
+                z[gi] = x
+                if np.iscomplexobj(X):
+                    yb += X.real @ Q.real.T - X.imag @ Q.imag.T
+                else:
+                    yb += X @ Q.T
+            y[pos : pos + nb * size] += yb.ravel()
+            pos += nb * size
+    u_last = float(u[-1]) if n else u_prev
+    out_state = [zz + g.b1 * u_last for g, zz in zip(bank.groups, z, strict=True)]
     return y, out_state
 
 

@@ -1,0 +1,1 @@
+"""Reproducible performance measurements of labrig (not tests); see benchmarks/RESULTS.md."""

@@ -1,0 +1,61 @@
+"""One BLAS thread for small matrix products.
+
+The block realisation of the relaxors and the fits multiply small matrices many times; on this
+class of machine OpenBLAS's threads make that 2-5x slower when another process holds a core
+(measured in benchmarks/RESULTS.md). :func:`single_thread_blas` sets the OpenBLAS copies that
+numpy and scipy loaded to one thread for the duration of a block and restores them after.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import functools
+import glob
+import os
+from collections.abc import Iterator
+from typing import Any
+
+
+@functools.cache
+def _openblas_libs() -> list[tuple[Any, Any, Any]]:
+    """(lib, set, get) for the OpenBLAS copies numpy and scipy have loaded (none if unknown)."""
+    out = []
+    import numpy
+    import scipy
+
+    names = (
+        ("scipy_openblas_set_num_threads64_", "scipy_openblas_get_num_threads64_"),
+        ("scipy_openblas_set_num_threads", "scipy_openblas_get_num_threads"),
+        ("openblas_set_num_threads64_", "openblas_get_num_threads64_"),
+        ("openblas_set_num_threads", "openblas_get_num_threads"),
+    )
+    for pkg in (numpy, scipy):
+        libdir = os.path.join(os.path.dirname(pkg.__file__), os.pardir, pkg.__name__ + ".libs")
+        for path in glob.glob(os.path.join(libdir, "*openblas*.so*")):
+            try:
+                lib = ctypes.CDLL(path, mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
+            except OSError:
+                continue  # not loaded in this process
+            for s, g in names:
+                if hasattr(lib, s) and hasattr(lib, g):
+                    out.append((lib, getattr(lib, s), getattr(lib, g)))
+                    break
+    return out
+
+
+@contextlib.contextmanager
+def single_thread_blas() -> Iterator[None]:
+    """Run the block with one OpenBLAS thread (restored afterwards); a no-op if not found."""
+    libs = []
+    try:
+        libs = [(s, g()) for _, s, g in _openblas_libs()]
+        for s, _ in libs:
+            s(1)
+    except Exception:  # pragma: no cover - BLAS without the symbols: leave it alone
+        libs = []
+    try:
+        yield
+    finally:
+        for s, n in libs:
+            s(int(n))
