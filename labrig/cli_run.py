@@ -2,18 +2,14 @@
 
 from __future__ import annotations
 
-import signal
 from pathlib import Path
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from labrig.runner import execute, preflight
-
-
-def _sigterm_as_interrupt(signum, frame):  # pragma: no cover - exercised by subprocess tests
-    raise KeyboardInterrupt
+from labrig.runner import execute, interrupt_once, preflight
 
 
 def run_with_progress(
@@ -26,14 +22,33 @@ def run_with_progress(
 ) -> int:
     console = Console(stderr=True)
     plan, rig_path = preflight(protocol, rig)
+    if out is not None and out.is_dir():
+        example = out / "run.h5"
+        typer.echo(
+            f"error: --out {out} is a directory; give a file name such as {example}", err=True
+        )
+        return 2
     if out is not None and out.exists() and not overwrite:
         typer.echo(f"error: {out} exists; choose another --out or pass --overwrite", err=True)
         return 2
+    where = escape(f"rig {rig_path}") if rig_path else "the simulated rig"
     console.print(
-        f"[bold]{plan.name}[/]: {len(plan.steps)} entries, {plan.total_duration_s:.1f} s of "
-        f"protocol time on {'rig ' + str(rig_path) if rig_path else 'the simulated rig'}"
+        f"[bold]{escape(plan.name)}[/]: {len(plan.steps)} entries, "
+        f"{plan.total_duration_s:.1f} s of protocol time on {where}"
     )
-    signal.signal(signal.SIGTERM, _sigterm_as_interrupt)
+    # Ctrl-C and SIGTERM stop the run once (0 V, file closed); repeats are ignored until the
+    # outcome is printed
+    with interrupt_once():
+        outcome = _execute_with_bar(console, plan, rig_path, out, seed, realtime, overwrite)
+        if outcome.status == "complete":
+            console.print(f"run complete: {len(outcome.entries)} entries (seed {outcome.seed})")
+        else:
+            console.print(f"[red]run {outcome.status}[/]: {escape(outcome.reason)}")
+        typer.echo(str(outcome.path))
+    return outcome.exit_code
+
+
+def _execute_with_bar(console, plan, rig_path, out, seed, realtime, overwrite):
     with Progress(
         TextColumn("[bold]{task.fields[step]}[/] {task.description}"),
         BarColumn(),
@@ -49,13 +64,7 @@ def run_with_progress(
                 task,
                 completed=plan.total_duration_s - left,
                 step=f"step {k + 1}/{n}",
-                description=name,
+                description=escape(name),
             )
 
-        outcome = execute(plan, rig_path, out, seed, realtime, progress, overwrite)
-    if outcome.status == "complete":
-        console.print(f"run complete: {len(outcome.entries)} entries (seed {outcome.seed})")
-    else:
-        console.print(f"[red]run {outcome.status}[/]: {outcome.reason}")
-    typer.echo(str(outcome.path))
-    return outcome.exit_code
+        return execute(plan, rig_path, out, seed, realtime, progress, overwrite)

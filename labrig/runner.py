@@ -15,6 +15,8 @@ voltage after zeroing is stored as ``/run/final_amplifier_voltage_V``.
 from __future__ import annotations
 
 import contextlib
+import signal
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -120,6 +122,9 @@ def _channels(rig: Rig) -> tuple[list[str], list[Channel]]:
 def _run_step(rig, writer, step: PlannedStep, ai: list[str], chans, progress, k, n_steps, left):
     # the rest that follows matters to analysis: the actuator's long memory spans it
     meta = {**step.definition, "rest_after_s": step.rest_after_s}
+    # channels the plan adds to this entry (strain-command steps: command_strain, ue)
+    aux = getattr(step, "aux", None) or {}
+    chans = [*chans, *(Channel(k, u, ln) for k, (u, ln, _) in aux.items())]
     entry = writer.begin_entry(
         step.name, meta, step.rate_hz, chans, title=getattr(step, "title", None)
     )
@@ -139,6 +144,7 @@ def _run_step(rig, writer, step: PlannedStep, ai: list[str], chans, progress, k,
                 "command_voltage": command[sl],
                 "gauge_raw": blk.channels["gauge"],
             }
+            data.update({k: vals[sl] for k, (_, _, vals) in aux.items()})
             for c in ai:
                 values, _ = rig.convert(c, blk.channels[c])
                 data[_CHANNEL_MAP[c][0]] = values
@@ -216,7 +222,49 @@ def execute(
     overwrite: bool = False,
 ) -> RunOutcome:
     """Run a preflighted plan on the rig and log it; returns the outcome (never raises for
-    device faults or Ctrl-C: those are recorded in the file and in the outcome)."""
+    device faults or Ctrl-C: those are recorded in the file and in the outcome).
+
+    Called from the main thread, Ctrl-C (SIGINT) and SIGTERM stop the run once: repeats are
+    ignored until the output is at 0 V and the file is closed (see :func:`interrupt_once`).
+    """
+    with interrupt_once():
+        return _execute(plan, rig_path, out, seed, realtime, progress, overwrite)
+
+
+@contextlib.contextmanager
+def interrupt_once():
+    """SIGINT and SIGTERM raise :class:`KeyboardInterrupt` the first time only; later ones are
+    ignored until the block ends (a second, impatient Ctrl-C must not interrupt the ramp to
+    0 V or the closing of the run file). The previous handlers come back afterwards. Does
+    nothing outside the main thread (Python delivers signals there only)."""
+    if threading.current_thread() is not threading.main_thread() or getattr(
+        signal.getsignal(signal.SIGINT), "labrig_interrupt_once", False
+    ):  # not the main thread, or inside an outer interrupt_once (the CLI's)
+        yield
+        return
+    seen: list[int] = []
+
+    def handler(signum, frame):
+        # decide before recording: a repeat can run this handler again at any bytecode of this
+        # one, and the first call must still raise
+        first = not seen
+        seen.append(signum)
+        if first:
+            raise KeyboardInterrupt
+
+    handler.labrig_interrupt_once = True
+    old = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    for sig in old:
+        signal.signal(sig, handler)
+    try:
+        yield
+    finally:
+        for sig, h in old.items():
+            if h is not None:
+                signal.signal(sig, h)
+
+
+def _execute(plan, rig_path, out, seed, realtime, progress, overwrite) -> RunOutcome:
     out = out or default_out_path(plan)
     rig = open_rig(rig_path, seed)
     outcome = RunOutcome(path=out, status="running", seed=rig.seed)

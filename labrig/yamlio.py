@@ -51,6 +51,34 @@ def _expanded_size_issue(root: yaml.Node, name: str) -> InputIssue | None:
     return None
 
 
+def _field(path: tuple) -> str:
+    return ".".join(str(x) if isinstance(x, str) else f"[{x}]" for x in path).replace(".[", "[")
+
+
+def duplicate_key_issues(root: yaml.Node, name: str) -> list[InputIssue]:
+    """Every key repeated within one mapping (YAML loaders silently keep the last one)."""
+    out: list[InputIssue] = []
+    stack: list[tuple[yaml.Node | None, tuple]] = [(root, ())]
+    seen: set[int] = set()
+    while stack:
+        node, path = stack.pop()
+        if node is None or id(node) in seen:
+            continue
+        seen.add(id(node))
+        if isinstance(node, yaml.MappingNode):
+            keys = set()
+            for k, v in node.value:
+                key = k.value if isinstance(k, yaml.ScalarNode) else None
+                if key is not None and key in keys:
+                    msg = "this key is given twice in the same mapping"
+                    out.append(InputIssue(name, k.start_mark.line + 1, _field((*path, key)), msg))
+                keys.add(key)
+                stack.append((v, (*path, key)))
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend((v, (*path, i)) for i, v in enumerate(node.value))
+    return sorted(out, key=lambda i: i.line or 0)
+
+
 def _line_index(node: yaml.Node, path: tuple = (), out: dict | None = None) -> dict:
     """Map every key path in the YAML document to its 1-based line number."""
     out = {} if out is None else out
@@ -100,6 +128,9 @@ def read_yaml(path: Path | str) -> tuple[object, dict, str]:
         bomb = _expanded_size_issue(node, name) if node is not None else None
         if bomb is not None:
             raise InputFileError([bomb])
+        dups = duplicate_key_issues(node, name) if node is not None else []
+        if dups:
+            raise InputFileError(dups)
         data = yaml.safe_load(text)
     except yaml.MarkedYAMLError as e:
         mark = e.problem_mark or e.context_mark

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
 from pydantic import ValidationError
 from rich.table import Table
 
@@ -78,45 +77,10 @@ def validation_issues(file: str, err: ValidationError, lines: dict) -> list[Inpu
     return sorted(issues, key=lambda i: i.line or 0)
 
 
-def duplicate_keys(text: str) -> list[tuple[int, str]]:
-    """``(line, field)`` of every key repeated within one mapping (YAML loaders keep the last)."""
-    try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-    except yaml.YAMLError:
-        return []
-    out: list[tuple[int, str]] = []
-    stack: list[tuple[yaml.Node | None, tuple]] = [(root, ())]
-    seen_nodes: set[int] = set()
-    while stack:
-        node, path = stack.pop()
-        if node is None or id(node) in seen_nodes:
-            continue
-        seen_nodes.add(id(node))
-        if isinstance(node, yaml.MappingNode):
-            keys = set()
-            for k, v in node.value:
-                key = k.value if isinstance(k, yaml.ScalarNode) else None
-                if key is not None and key in keys:
-                    out.append((k.start_mark.line + 1, field_name((*path, key))))
-                keys.add(key)
-                stack.append((v, (*path, key)))
-        elif isinstance(node, yaml.SequenceNode):
-            stack.extend((v, (*path, i)) for i, v in enumerate(node.value))
-    return sorted(out)
-
-
 def load_protocol(path: Path | str) -> tuple[Protocol, dict, str]:
     """Read and validate a protocol file: ``(protocol, line index, text)``."""
     file = str(path)
-    data, lines, text = read_yaml(path)
-    dups = duplicate_keys(text)
-    if dups:
-        raise InputFileError(
-            [
-                InputIssue(file, line, fld, "this key is given twice in the same mapping")
-                for line, fld in dups
-            ]
-        )
+    data, lines, text = read_yaml(path)  # also refuses keys given twice
     if data is None:
         raise InputFileError(
             [InputIssue(file, 1, "", "file is empty; expected a protocol (name, rate_hz, steps)")]
