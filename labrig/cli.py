@@ -190,6 +190,70 @@ def import_(
     typer.echo(str(out))
 
 
+@app.command("fit")
+@friendly
+def fit(
+    run_file: Path = typer.Argument(..., help="Run file (HDF5), recorded or imported."),
+    entries: str | None = typer.Option(
+        None, "--entries", help="Entries to fit, comma-separated (default: every complete one)."
+    ),
+    out: Path | None = typer.Option(None, "--out", help="Write the result as JSON to this file."),
+    as_json: bool = typer.Option(False, "--json", help="Print only the JSON result on stdout."),
+    method: str = typer.Option("global", "--method", help="global (default) or staged (seed 3.1)."),
+    model: str = typer.Option(
+        "dynamic", "--model", help="dynamic (ours), prandtl_ishlinskii or bouc_wen."
+    ),
+    warmup_s: float | None = typer.Option(
+        None, "--warmup-s", help="Seconds of each record simulated but not scored (default: auto)."
+    ),
+    heldout: bool = typer.Option(
+        True, "--heldout/--no-heldout", help="Leave-one-entry-out NRMSE (the slow part)."
+    ),
+    offset: bool | None = typer.Option(
+        None,
+        "--offset/--no-offset",
+        help="Fit one strain offset per entry (default: on for imported data).",
+    ),
+) -> None:
+    """Identify the model (or a baseline) from a run file; print parameters and NRMSE."""
+    from labrig.cli_analysis import run_fit
+
+    run_fit(run_file, entries, out, as_json, method, model, warmup_s, heldout, offset)
+
+
+@app.command("report")
+@friendly
+def report(
+    run_file: Path = typer.Argument(..., help="Run file (HDF5), recorded or imported."),
+    out: Path = typer.Option(..., "--out", help="HTML file to write (self-contained)."),
+    params: Path | None = typer.Option(
+        None, "--params", help="Parameters from `labrig fit --out` (default: fit now)."
+    ),
+    as_json: bool = typer.Option(False, "--json", help="Print the metrics table as JSON."),
+    entries: str | None = typer.Option(
+        None, "--entries", help="Entries to report, comma-separated (default: every complete one)."
+    ),
+    method: str = typer.Option(
+        "global", "--method", help="Fit method when fitting: global|staged."
+    ),
+    warmup_s: float | None = typer.Option(
+        None, "--warmup-s", help="Seconds of each record simulated but not scored (default: auto)."
+    ),
+    heldout: bool = typer.Option(
+        True, "--heldout/--no-heldout", help="Leave-one-entry-out NRMSE (the slow part)."
+    ),
+    offset: bool | None = typer.Option(
+        None,
+        "--offset/--no-offset",
+        help="Fit one strain offset per entry (default: on for imported data).",
+    ),
+) -> None:
+    """Model versus measurement as one HTML file; baselines fitted on the same data."""
+    from labrig.cli_analysis import run_report
+
+    run_report(run_file, params, out, as_json, entries, warmup_s, heldout, offset, method)
+
+
 @sim_app.command("serve")
 @friendly
 def sim_serve(

@@ -337,30 +337,38 @@ def _sequences(
 Items = list[tuple[_Seq, list[_Seg]]]
 
 
-def _fit_pi(items: Items, n_ops: int) -> PrandtlIshlinskii:
+def _centred(x: NDArray, offset: bool) -> NDArray:
+    """``x`` about its mean (along the samples) when fitting one offset per entry."""
+    return x - x.mean(axis=0) if offset else x
+
+
+def _fit_pi(items: Items, n_ops: int, offset: bool = False) -> PrandtlIshlinskii:
     r_max = max(float(np.max(np.abs(q.v))) for q, _ in items) or 1.0
     r = tuple(float(x) for x in r_max * np.arange(n_ops) / n_ops)
     rows, rhs = [], []
     for q, segs in items:
         B = q.play_basis(r)
         for g in segs:
-            rows.append(B[g.lo : g.hi] * g.w)
-            rhs.append(g.meas * g.w)
+            rows.append(_centred(B[g.lo : g.hi], offset) * g.w)
+            rhs.append(_centred(g.meas, offset) * g.w)
     # same minimiser on the small triangular system: |Mw - b|^2 = |Rw - Q^T b|^2 + const
     qq, rr = np.linalg.qr(np.vstack(rows), mode="reduced")
     w, _ = optimize.nnls(rr, qq.T @ np.concatenate(rhs), maxiter=50 * n_ops)
     return PrandtlIshlinskii(r, tuple(float(x) for x in w))
 
 
-def _bw_linear(items: Items, beta: float, gamma: float) -> tuple[NDArray, NDArray]:
-    """Best ``(d, A)`` for ``(beta, gamma)`` and the weighted residual."""
+def _bw_linear(
+    items: Items, beta: float, gamma: float, offset: bool = False
+) -> tuple[NDArray, NDArray]:
+    """Best ``(d, A)`` for ``(beta, gamma)`` and the weighted residual (``offset``: each
+    entry's columns and measurement about their means, i.e. one free offset per entry)."""
     c0s, c1s, rhs = [], [], []
     for q, segs in items:
         h1 = _bw_exact(q.vp, 1.0, beta, gamma, q.runs)[1:]
         for g in segs:
-            c0s.append(g.w * q.v[g.lo : g.hi])
-            c1s.append(-g.w * h1[g.lo : g.hi])
-            rhs.append(g.meas * g.w)
+            c0s.append(g.w * _centred(q.v[g.lo : g.hi], offset))
+            c1s.append(-g.w * _centred(h1[g.lo : g.hi], offset))
+            rhs.append(_centred(g.meas, offset) * g.w)
     c0, c1, b = np.concatenate(c0s), np.concatenate(c1s), np.concatenate(rhs)
     # two columns: the normal equations of the column-scaled problem
     n0, n1 = np.linalg.norm(c0) or 1.0, np.linalg.norm(c1) or 1.0
@@ -375,7 +383,9 @@ def _bw_linear(items: Items, beta: float, gamma: float) -> tuple[NDArray, NDArra
     return x, x[0] * c0 + x[1] * c1 - b
 
 
-def _fit_bw(items: Items, start: tuple[float, float] | None = None) -> BoucWen:
+def _fit_bw(
+    items: Items, start: tuple[float, float] | None = None, offset: bool = False
+) -> BoucWen:
     vr = max(float(np.ptp(q.vp)) for q, _ in items) or 1.0
 
     # z = (log((beta + gamma) * vr), (beta - gamma) / (beta + gamma))
@@ -385,7 +395,7 @@ def _fit_bw(items: Items, start: tuple[float, float] | None = None) -> BoucWen:
         return 0.5 * (ks + ko), 0.5 * (ks - ko)
 
     def fun(z: NDArray) -> NDArray:
-        return _bw_linear(items, *unpack(z))[1]
+        return _bw_linear(items, *unpack(z), offset)[1]
 
     lo, hi = np.array([np.log(1e-3), -0.95]), np.array([np.log(1e3), 20.0])
     if start is not None:
@@ -398,7 +408,7 @@ def _fit_bw(items: Items, start: tuple[float, float] | None = None) -> BoucWen:
         fun, z0, bounds=(lo, hi), x_scale="jac", ftol=1e-10, xtol=1e-10, gtol=1e-10
     )
     beta, gamma = unpack(res.x)
-    (d, A), _ = _bw_linear(items, beta, gamma)
+    (d, A), _ = _bw_linear(items, beta, gamma, offset)
     return BoucWen(float(d), float(A), beta, gamma)
 
 
@@ -419,8 +429,10 @@ class BaselineResult:
     heldout_per_entry: dict[str, float] | None = None
     warmup_s: float = 0.0
     chain: bool = False
-    #: the fitted baseline's strain for each scored entry (whole record; with ``chain`` the
-    #: run's history included)
+    #: the fitted constant strain offset of each entry (``offset=True``), else ``None``
+    offsets_ue: dict[str, float] | None = None
+    #: the fitted baseline's strain for each scored entry (whole record, offset included; with
+    #: ``chain`` the run's history included)
     predictions: dict[str, NDArray[np.float64]] = field(default_factory=dict, repr=False)
 
     @property
@@ -428,8 +440,12 @@ class BaselineResult:
         return self.model.params()
 
     def predict(self, record: Record) -> NDArray[np.float64]:
-        """Strain (ue) for the record's voltage, from rest (see ``predictions`` for a chain)."""
-        return self.model.predict(record.voltage_V)
+        """Strain (ue) for the record's voltage, from rest (see ``predictions`` for a chain),
+        plus its fitted offset if any."""
+        s = self.model.predict(record.voltage_V)
+        if self.offsets_ue and record.name in self.offsets_ue:
+            s = s + self.offsets_ue[record.name]
+        return s
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -455,12 +471,15 @@ def fit_baseline(
     *,
     chain: bool = False,
     scored: Sequence[str] | None = None,
+    offset: bool = False,
 ) -> BaselineResult:
     """Fit a baseline (``"prandtl_ishlinskii"`` or ``"bouc_wen"``) on ``records``.
 
     ``n_ops``: number of play operators of the PI model. ``warmup_s``, ``chain`` and ``scored``
     as in :func:`~labrig.analysis.fit.fit_model` (a run's entries back to back, each followed by
-    ``meta["rest_after_s"]`` at 0 V; both baselines have memory too).
+    ``meta["rest_after_s"]`` at 0 V; both baselines have memory too). ``offset`` fits one
+    constant strain offset per entry, as in :func:`~labrig.analysis.fit.fit_model` (held out:
+    fitted on the first half of the entry's scored samples, scored on the second half).
     """
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
@@ -477,8 +496,8 @@ def fit_baseline(
 
     def fit(items: Items, warm: PrandtlIshlinskii | BoucWen | None = None):
         if kind == "prandtl_ishlinskii":
-            return _fit_pi(items, n_ops)
-        return _fit_bw(items, None if warm is None else (warm.beta, warm.gamma))
+            return _fit_pi(items, n_ops, offset)
+        return _fit_bw(items, None if warm is None else (warm.beta, warm.gamma), offset)
 
     def predictions(model) -> dict[str, NDArray]:
         out = {}
@@ -492,6 +511,10 @@ def fit_baseline(
     with single_thread_blas():
         model = fit(everything)
         preds = predictions(model)
+        offsets = None
+        if offset:
+            offsets = {n: float(np.mean(segs[n].meas - preds[n][segs[n].i0 :])) for n in scored}
+            preds = {n: p + offsets.get(n, 0.0) for n, p in preds.items()}
         per_entry = {n: nrmse_pct(segs[n].meas, preds[n][segs[n].i0 :]) for n in scored}
         held, held_per = None, None
         if heldout and len(scored) >= 2:
@@ -500,8 +523,13 @@ def fit_baseline(
                 items = [(q, [g for g in q.segs if g.name != name]) for q in seqs]
                 m_k = fit([(q, gs) for q, gs in items if gs], warm=model)
                 q = next(q for q in seqs if any(g.name == name for g in q.segs))
-                p_k = m_k.predict(q.v)[q.starts[name] : segs[name].hi]
-                held_per[name] = nrmse_pct(segs[name].meas, p_k[segs[name].i0 :])
+                p_k = m_k.predict(q.v)[q.starts[name] : segs[name].hi][segs[name].i0 :]
+                m = segs[name].meas
+                if offset:  # offset from the first half, scored on the second
+                    half = m.size // 2
+                    c = float(np.mean(m[:half] - p_k[:half]))
+                    m, p_k = m[half:], p_k[half:] + c
+                held_per[name] = nrmse_pct(m, p_k)
             held = float(np.mean(list(held_per.values())))
     return BaselineResult(
         kind=kind,
@@ -513,5 +541,6 @@ def fit_baseline(
         heldout_per_entry=held_per,
         warmup_s=warmup_s,
         chain=chain,
+        offsets_ue=offsets,
         predictions=preds,
     )

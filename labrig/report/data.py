@@ -1,0 +1,338 @@
+"""What a model-versus-measurement report shows, computed from records and fitted models.
+
+No files and no drawing here: :func:`build_report` turns the scored records, the predictions of
+our model and of the baselines, and the run's provenance into a :class:`ReportData`;
+:mod:`labrig.report.html` renders it and :func:`metrics_json` gives its metrics table to scripts.
+
+Metrics (one definition each, :mod:`labrig.analysis.metrics`), per entry and per model:
+
+- ``nrmse_pct``: NRMSE over the scored samples (after the warm-up), in-sample;
+- ``heldout_nrmse_pct``: the same for a fit that did not use the entry (leave-one-entry-out);
+- ``max_error_ue``: ``max |measured - predicted|`` over the scored samples;
+- ``loop_area_error_pct``: predicted minus measured loop area over the last full period,
+  relative to the measured one (periodic entries only);
+- ``strain_shift_error_ue``: predicted minus measured strain at zero voltage over the last full
+  period (periodic entries only).
+
+The noise floor is the NRMSE a perfect model would reach: the gauge noise RMS over each entry's
+strain span, averaged like the NRMSE. Its noise RMS comes from the simulated bench's configured
+gauge noise (plus the ADC's quantisation) when the run file describes one, else from stretches
+of constant voltage at least 0.5 s long (first differences of the strain, robust to slow creep).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from labrig.analysis.metrics import compare, drive_frequency_hz, is_periodic, last_period
+from labrig.analysis.records import Record
+
+#: models of a report, in display order: ours first, then the baselines
+MODEL_KEYS: tuple[str, ...] = ("dynamic", "prandtl_ishlinskii", "bouc_wen")
+MODEL_LABELS: dict[str, str] = {
+    "dynamic": "fractional-order model",
+    "prandtl_ishlinskii": "Prandtl-Ishlinskii",
+    "bouc_wen": "Bouc-Wen",
+}
+MODEL_SHORT: dict[str, str] = {"dynamic": "ours", "prandtl_ishlinskii": "PI", "bouc_wen": "BW"}
+
+#: the metrics table: key, heading, unit
+METRICS: tuple[tuple[str, str, str], ...] = (
+    ("nrmse_pct", "NRMSE in-sample", "%"),
+    ("heldout_nrmse_pct", "NRMSE held-out", "%"),
+    ("max_error_ue", "max error", "ue"),
+    ("loop_area_error_pct", "loop-area error", "%"),
+    ("strain_shift_error_ue", "strain-shift error", "ue"),
+)
+
+#: parameters of our model: field, symbol, unit
+PARAM_ROWS: tuple[tuple[str, str, str], ...] = (
+    ("alpha0_ue_per_V", "α0", "ue/V"),
+    ("gamma_ue_per_V", "γ", "ue/V"),
+    ("vc_V", "Vc", "V"),
+    ("lam_t", "λt", ""),
+    ("tau_t_s", "τt", "s"),
+    ("lam_d", "λd", ""),
+    ("tau_d_s", "τd", "s"),
+)
+
+
+#: signed metrics, summarised by the mean of their absolute values
+_SIGNED = frozenset({"loop_area_error_pct", "strain_shift_error_ue"})
+
+
+@dataclass
+class Fitted:
+    """One model as the report sees it: its predictions of the scored entries and its scores.
+
+    ``predictions`` is ``None`` when the model could not be fitted (``note`` says why).
+    """
+
+    key: str
+    predictions: dict[str, NDArray[np.float64]] | None
+    heldout_per_entry: dict[str, float] | None = None
+    heldout_mean_pct: float | None = None  # when only the mean is known (a params file)
+    params: dict[str, Any] = field(default_factory=dict)
+    uncertainty: dict[str, float | None] = field(default_factory=dict)
+    correlation: dict[str, dict[str, float]] = field(default_factory=dict)
+    method: str = ""
+    note: str | None = None
+
+    @property
+    def label(self) -> str:
+        return MODEL_LABELS.get(self.key, self.key)
+
+
+@dataclass
+class EntryView:
+    """One scored entry: its record and every model's metrics on it."""
+
+    record: Record
+    frequency_hz: float | None
+    amplitude_V: float
+    periodic: bool
+    kind: str
+    #: model key -> metrics of :func:`labrig.analysis.metrics.compare` plus ``heldout_nrmse_pct``
+    metrics: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return self.record.name
+
+
+@dataclass
+class Provenance:
+    """Where the data came from (the run file's own record of it)."""
+
+    run_file: str
+    status: str = ""
+    reason: str = ""
+    start_time: str = ""
+    end_time: str = ""
+    protocol_name: str = ""
+    protocol_file: str = ""
+    protocol_text: str = ""
+    rig_file: str = ""
+    rig_text: str = ""
+    software_version: str = ""
+    seed: int | None = None
+    instrument: dict[str, Any] = field(default_factory=dict)
+    n_entries: int = 0
+
+
+@dataclass
+class NoiseFloor:
+    """The NRMSE of a perfect model (percent) and where the noise RMS came from."""
+
+    nrmse_pct: float
+    noise_ue: float
+    source: str
+
+
+@dataclass
+class ReportData:
+    title: str
+    provenance: Provenance
+    settings: dict[str, Any]
+    entries: list[EntryView]
+    models: dict[str, Fitted]
+    warmup_s: float
+    noise_floor: NoiseFloor | None
+    notes: list[str]
+    generated: str
+    labrig_version: str
+
+    def mean(self, model: str, metric: str) -> float | None:
+        """Mean of a metric over the entries where it is defined (of ``|value|`` for the signed
+        errors, loop area and strain shift)."""
+        if metric == "heldout_nrmse_pct":
+            fm = self.models.get(model)
+            if fm is not None and fm.heldout_per_entry is None and fm.heldout_mean_pct is not None:
+                return fm.heldout_mean_pct
+        vals = []
+        for e in self.entries:
+            v = e.metrics.get(model, {}).get(metric)
+            if v is not None and math.isfinite(v):
+                vals.append(abs(v) if metric in _SIGNED else v)
+        return float(np.mean(vals)) if vals else None
+
+
+def amplitude_of(record: Record) -> float:
+    """The drive's peak-to-peak voltage: ``meta["amplitude_V"]`` if stated, else the span of
+    the last period (or of the record), rounded to 3 significant digits."""
+    a = record.meta.get("amplitude_V")
+    try:
+        if a is not None and float(a) > 0:
+            return float(a)
+    except (TypeError, ValueError):
+        pass
+    sl = last_period(record.n, record.rate_hz, drive_frequency_hz(record))
+    span = float(np.ptp(record.voltage_V[sl] if sl is not None else record.voltage_V))
+    return float(f"{span:.3g}") if span > 0 else 0.0
+
+
+def _finite(x: Any) -> Any:
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def build_report(
+    title: str,
+    records: Sequence[Record],
+    models: Mapping[str, Fitted],
+    warmup_s: float,
+    provenance: Provenance,
+    settings: Mapping[str, Any],
+    notes: Sequence[str] = (),
+    noise_floor: NoiseFloor | None = None,
+    generated: str = "",
+    labrig_version: str = "",
+) -> ReportData:
+    """The report's content for the scored ``records`` and the fitted ``models``."""
+    notes = list(notes)
+    entries = []
+    for r in records:
+        f = drive_frequency_hz(r)
+        per = is_periodic(r.voltage_V, r.rate_hz, f)
+        ev = EntryView(r, f, amplitude_of(r), per, str(r.meta.get("kind", "")))
+        for key, fm in models.items():
+            if fm.predictions is None or r.name not in fm.predictions:
+                continue
+            m = compare(r, fm.predictions[r.name], warmup_s)
+            held = None
+            if fm.heldout_per_entry is not None:
+                held = fm.heldout_per_entry.get(r.name)
+            m["heldout_nrmse_pct"] = held
+            ev.metrics[key] = {k: _finite(v) for k, v in m.items()}
+        entries.append(ev)
+    not_periodic = [e.name for e in entries if not e.periodic]
+    if not_periodic:
+        notes.append(
+            "loop area and strain shift need a periodic drive (two repeating periods at the end "
+            f"of the record); not computed for {', '.join(not_periodic)}"
+        )
+    for fm in models.values():
+        if fm.predictions is None:
+            notes.append(f"{fm.label}: not fitted ({fm.note})")
+    return ReportData(
+        title=title,
+        provenance=provenance,
+        settings=dict(settings),
+        entries=entries,
+        models=dict(models),
+        warmup_s=warmup_s,
+        noise_floor=noise_floor,
+        notes=notes,
+        generated=generated,
+        labrig_version=labrig_version,
+    )
+
+
+def metrics_json(data: ReportData) -> dict[str, dict[str, float | None]]:
+    """The metrics table for scripts: entry name -> ``"<model>.<metric>"`` -> value.
+
+    ``<model>`` is ``dynamic`` (ours), ``prandtl_ishlinskii`` or ``bouc_wen``; ``<metric>`` one
+    of :data:`METRICS`; ``measured.loop_area_Vue`` and ``measured.strain_shift_ue`` give the
+    measured values the errors refer to, and ``frequency_hz`` / ``amplitude_V`` the drive.
+    ``null`` where a metric is undefined (non-periodic entry, no held-out fit, model not fitted).
+    """
+    out: dict[str, dict[str, float | None]] = {}
+    for e in data.entries:
+        row: dict[str, float | None] = {
+            "frequency_hz": e.frequency_hz,
+            "amplitude_V": e.amplitude_V,
+        }
+        meas = next(iter(e.metrics.values()), {})
+        row["measured.loop_area_Vue"] = meas.get("loop_area_Vue")
+        row["measured.strain_shift_ue"] = meas.get("strain_shift_ue")
+        for key in data.models:
+            m = e.metrics.get(key, {})
+            for metric, _, _ in METRICS:
+                v = m.get(metric)
+                row[f"{key}.{metric}"] = None if v is None else float(v)
+        out[e.name] = row
+    return out
+
+
+# -- noise floor ---------------------------------------------------------------------------------
+
+
+def _quantisation_ue(instrument: Mapping[str, Any]) -> float:
+    """RMS quantisation of the strain channel (ue) from the DAQ's AI range and bits."""
+    try:
+        daq = instrument.get("daq", {})
+        lo, hi = daq.get("ai_range_V", [-10.0, 10.0])
+        bits = daq.get("ai_bits")
+        cal = instrument.get("calibration", {})
+        sens = float(cal["sensitivity_mV_per_ue"]) * float(cal.get("conditioner_gain", 1.0))
+        if not bits or sens <= 0:
+            return 0.0
+        lsb_ue = (float(hi) - float(lo)) / 2 ** int(bits) / (sens * 1e-3)
+        return lsb_ue / math.sqrt(12.0)
+    except (KeyError, TypeError, ValueError):
+        return 0.0
+
+
+def configured_noise_ue(instrument: Mapping[str, Any]) -> float | None:
+    """The simulated bench's gauge noise (ue rms, with the ADC quantisation), or ``None`` when
+    the run file does not describe a simulated bench with one (real hardware)."""
+    try:
+        gauge = instrument["bench"]["config"]["gauge"]
+        noise = float(gauge["noise_ue"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    effects = instrument["bench"]["config"].get("effects") or []
+    if effects:  # other disturbances (pickup, drift...) add to it: not a floor then
+        return None
+    return math.sqrt(noise**2 + _quantisation_ue(instrument) ** 2)
+
+
+def hold_noise_ue(records: Sequence[Record], min_s: float = 0.5) -> float | None:
+    """Noise RMS (ue) from stretches where the voltage stays constant for ``min_s`` or longer:
+    ``std(diff(strain)) / sqrt(2)`` (first differences remove the slow creep at constant
+    voltage), pooled over the stretches. ``None`` without such a stretch."""
+    diffs = []
+    for r in records:
+        v = r.voltage_V
+        tol = 1e-6 * max(float(np.ptp(v)), 1e-12)
+        same = np.abs(np.diff(v)) <= tol
+        n_min = max(round(min_s * r.rate_hz), 8)
+        # runs of constant voltage (boundaries of True runs in `same`)
+        edges = np.flatnonzero(np.diff(np.r_[0, same.astype(np.int8), 0]))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            if b - a + 1 >= n_min:
+                d = np.diff(r.strain_ue[a : b + 1])
+                diffs.append(d - d.mean())
+    if not diffs:
+        return None
+    d = np.concatenate(diffs)
+    return float(np.sqrt(np.mean(d**2) / 2.0))
+
+
+def noise_floor(
+    records: Sequence[Record], instrument: Mapping[str, Any], warmup_s: float = 0.0
+) -> NoiseFloor | None:
+    """The NRMSE of a perfect model on these records (module docstring), or ``None``."""
+    sigma = configured_noise_ue(instrument)
+    source = "the simulated bench's configured gauge noise and ADC quantisation"
+    if sigma is None:
+        sigma = hold_noise_ue(records)
+        source = "the strain's sample-to-sample scatter where the voltage is held constant"
+    if sigma is None:
+        return None
+    pct = []
+    for r in records:
+        i0 = min(round(warmup_s * r.rate_hz), r.n - 1)
+        span = float(np.ptp(r.strain_ue[i0:]))
+        if span > 0:
+            pct.append(100.0 * sigma / span)
+    if not pct:
+        return None
+    return NoiseFloor(float(np.mean(pct)), sigma, source)
