@@ -4,8 +4,14 @@ Sweeps become one sine step per amplitude x frequency pair, ``repeat`` copies a 
 sweep is repeated as a block), rests become ``rest_after_s`` on the step before them. Every
 concrete step gets a unique entry name (the run file's NXentry name): the derived base name
 (``sine_100V_40Hz``, ``vanishing_100V_1Hz``, ``hold_50V_2s``, ``ramp_0V_to_100V``,
-``csv_<file stem>``; a step's ``name`` replaces it, or prefixes a sweep's names), then ``_2``,
-``_3``, ... for later occurrences of the same name (repeats).
+``csv_<file stem>``, ``strain_sine_500ue_10Hz_compensated``; a step's ``name`` replaces it, or
+prefixes a sweep's names), then ``_2``, ``_3``, ... for later occurrences of the same name
+(repeats).
+
+Strain-command steps (``strain_sine``, ``strain_vanishing``, ``strain_csv``) compose their
+command in ue (edge ramps at ``edge_slew_V_per_s * alpha0``), compute the drive with
+:func:`labrig.control.compute_drive` and the step's model parameters, and play one 0 V sample
+then the drive; :attr:`PlannedStep.aux` carries the ``command_strain`` channel (docs/control.md).
 
 Nothing here touches hardware or checks the rig's limits: see :mod:`.preflight`.
 """
@@ -30,6 +36,9 @@ from labrig.protocol.schema import (
     Protocol,
     RampStep,
     SineStep,
+    StrainCsvStep,
+    StrainSineStep,
+    StrainVanishingStep,
     SweepStep,
     VanishingStep,
 )
@@ -43,6 +52,8 @@ MAX_STEP_SAMPLES = 50_000_000
 MAX_ENTRIES = 10_000
 #: refuse plans lasting longer than this (s), rests included
 MAX_TOTAL_S = 7 * 86400.0
+#: refuse strain commands longer than this many samples (the drive is computed when planning)
+MAX_STRAIN_SAMPLES = 2_000_000
 
 
 def field_name(path: tuple) -> str:
@@ -93,6 +104,9 @@ class PlannedStep:
     amplitude_V: float | None = None
     frequency_hz: float | None = None
     where: dict[str, Where] = field(default_factory=dict)
+    #: extra channels the runner records with the entry: name -> (units, long name, samples
+    #: over the whole entry); strain-command steps record ``command_strain`` (ue)
+    aux: dict[str, tuple[str, str, np.ndarray]] = field(default_factory=dict)
 
     @property
     def n_samples(self) -> int:
@@ -125,6 +139,19 @@ class PlannedStep:
             what = f"hold {d['voltage_V']:g} V"
         elif self.kind == "ramp":
             what = f"ramp {d['from_V']:g} V to {d['to_V']:g} V"
+        elif self.kind == "strain_sine":
+            what = (
+                f"strain sine {d['amplitude_ue']:g} ue, {d['frequency_hz']:g} Hz, "
+                f"{d['cycles']:g} cycles, {d['control']} control"
+            )
+        elif self.kind == "strain_vanishing":
+            what = (
+                f"vanishing strain {d['amplitude_ue']:g} ue, {d['frequency_hz']:g} Hz carrier, "
+                f"{d['shape']} decay over {d['decay_s']:g} s, {d['hold_s']:g} s hold, "
+                f"{d['control']} control"
+            )
+        elif self.kind == "strain_csv":
+            what = f"strain from {d.get('file', 'CSV')}, {d['control']} control"
         else:
             what = f"samples from {d.get('file', 'CSV')}"
         return f"{what} ({self.duration_s:.4g} s)"
@@ -235,6 +262,8 @@ class _Concrete:
     where: dict[str, Where]
     amplitude_V: float | None = None
     frequency_hz: float | None = None
+    #: strain command (ue, one value per command sample) for strain-command steps
+    strain: np.ndarray | None = None
 
 
 class _Builder:
@@ -245,6 +274,7 @@ class _Builder:
         self.base_dir = base_dir
         self.rate = protocol.rate_hz
         self.issues: list[InputIssue] = []
+        self._params: dict[Path, object] = {}
 
     def where(self, path: tuple) -> Where:
         return Where(field_name(path), line_of(path, self.lines))
@@ -424,6 +454,177 @@ class _Builder:
         seg = wf.table_segment(v, self.rate, "path")
         return [_Concrete("csv", name, [seg], definition, where, float(np.max(np.abs(v))))]
 
+    # --- strain-command steps: the command is a strain, the controller makes the voltage ---
+
+    def _load_params(self, s, base: tuple):
+        """The step's model parameters (or the protocol's), or None with an issue recorded."""
+        from labrig.control import load_params
+
+        if s.params is not None:
+            ref, w = s.params, self.where((*base, "params"))
+        elif self.p.params is not None:
+            ref, w = self.p.params, self.where(("params",))
+        else:
+            self.issue(
+                self.where(base),
+                f"a {s.kind} step needs model parameters: params: FILE (a JSON file from "
+                "`labrig fit --out`), on the step or at the top of the protocol",
+            )
+            return None, None
+        path = Path(ref).expanduser()
+        if not path.is_absolute():
+            path = self.base_dir / path
+        if path not in self._params:
+            try:
+                self._params[path] = load_params(path)
+            except FileNotFoundError:
+                self._params[path] = f"parameter file not found: {path}"
+            except (OSError, ValueError) as e:
+                self._params[path] = f"cannot use {path}: {e}"
+        got = self._params[path]
+        if isinstance(got, str):
+            self.issue(w, got)
+            return None, None
+        return got, path
+
+    def _strain(
+        self, s, base: tuple, kind: str, name: str, pieces, definition, where, freq
+    ) -> list[_Concrete]:
+        """Compose the strain command, compute the drive, return the concrete step."""
+        from labrig.control import compute_drive
+
+        params, _ = self._load_params(s, base)
+        if params is None:
+            return []
+        where = {
+            **where,
+            "params": self.where((*base, "params") if s.params else ("params",)),
+        }
+        slew_ue = self.p.edge_slew_V_per_s * params.alpha0_ue_per_V
+        try:
+            command = wf.compose(pieces, self.rate, slew_ue, "", MAX_STRAIN_SAMPLES)
+        except wf.TooLongError as e:
+            self.issue(
+                where["length"],
+                f"the strain command would have {e.n} samples; a {kind} step may have at most "
+                f"{MAX_STRAIN_SAMPLES} (its drive is computed in advance): shorten it or lower "
+                "rate_hz",
+            )
+            return []
+        strain = command.samples()
+        try:
+            drive = compute_drive(strain, params, self.rate, s.control)
+        except ValueError as e:
+            self.issue(where["step"], f"cannot compute the {s.control} drive: {e}")
+            return []
+        if not np.all(np.isfinite(drive)):
+            self.issue(where["step"], f"the {s.control} drive is not finite (check params)")
+            return []
+        key = "path" if kind == "strain_csv" else "amplitude_ue"
+        # a 0 V sample first: the controller assumes the actuator at rest before t_0, and the
+        # waveform starts at exactly 0 V; drive[n] is then sample n + 1 of the entry
+        table = np.concatenate(([0.0], drive))
+        seg = wf.table_segment(table, self.rate, key)
+        seg = wf.Segment(kind, seg.n, seg.func, key)
+        definition = {
+            "kind": kind,
+            **definition,
+            "control": s.control,
+            "params_file": str(s.params if s.params is not None else self.p.params),
+            "model_params": params.model_dump(),
+            "strain_edge_ramps": sum(1 for g in command.segments if g.role == "edge"),
+            "command_start_index": 1,
+            "command_stop_index": int(strain.size + 1),
+            "drive_min_V": float(np.min(drive)),
+            "drive_max_V": float(np.max(drive)),
+        }
+        amp = round(float(np.max(np.abs(drive))), 2) if drive.size else 0.0
+        c = _Concrete(kind, f"{name}_{s.control}", [seg], definition, where, amp, freq)
+        if s.name:
+            c.base_name = s.name
+        c.strain = strain
+        return [c]
+
+    def strain_sine(self, s: StrainSineStep, base: tuple) -> list[_Concrete]:
+        lw = self.where((*base, "cycles" if s.cycles is not None else "duration_s"))
+        where = {
+            "step": self.where(base),
+            "amplitude_ue": self.where((*base, "amplitude_ue")),
+            "frequency_hz": self.where((*base, "frequency_hz")),
+            "length": lw,
+        }
+        a, f = s.amplitude_ue, s.frequency_hz
+        seconds = s.cycles / f if s.cycles is not None else s.duration_s
+        n = self.n_of(seconds, lw, f"the {num_tag(a)} ue, {f:g} Hz strain sine")
+        if n is None:
+            return []
+        definition = {
+            "amplitude_ue": a,
+            "frequency_hz": f,
+            "cycles": s.cycles if s.cycles is not None else s.duration_s * f,
+            "duration_s": n / self.rate,
+        }
+        pieces = [wf.sine_segment(a, f, n, "frequency_hz")]
+        name = f"strain_sine_{num_tag(a)}ue_{num_tag(f)}Hz"
+        return self._strain(s, base, "strain_sine", name, pieces, definition, where, f)
+
+    def strain_vanishing(self, s: StrainVanishingStep, base: tuple) -> list[_Concrete]:
+        where = {
+            "step": self.where(base),
+            "amplitude_ue": self.where((*base, "amplitude_ue")),
+            "frequency_hz": self.where((*base, "frequency_hz")),
+            "length": self.where((*base, "decay_s")),
+            "hold_s": self.where((*base, "hold_s")),
+        }
+        n = self.n_of(0.5 / s.frequency_hz + s.decay_s, where["length"], "the envelope")
+        nh = _intervals(s.hold_s, self.rate)
+        if nh > MAX_STEP_SAMPLES:
+            self.n_of(s.hold_s, where["hold_s"], "the hold")
+            return []
+        if n is None:
+            return []
+        tau = (
+            (s.decay_s / 2.0 if s.tau_s is None else s.tau_s) if s.shape == "exponential" else None
+        )
+        a, f = s.amplitude_ue, s.frequency_hz
+        pieces = [
+            wf.vanishing_segment(a, f, s.decay_s, s.shape, tau, n, "frequency_hz"),
+            wf.const_segment(0.0, nh, "hold_s"),
+        ]
+        definition = {
+            "amplitude_ue": a,
+            "frequency_hz": f,
+            "first_peak_s": 0.5 / f,
+            "decay_s": s.decay_s,
+            "envelope_end_s": n / self.rate,
+            "shape": s.shape,
+            "tau_s": tau,
+            "hold_s": nh / self.rate,
+        }
+        name = f"strain_vanishing_{num_tag(a)}ue_{num_tag(f)}Hz"
+        return self._strain(s, base, "strain_vanishing", name, pieces, definition, where, f)
+
+    def strain_csv(self, s: StrainCsvStep, base: tuple) -> list[_Concrete]:
+        where = {k: self.where((*base, k)) for k in ("path", "column", "time_column", "scale")}
+        where["step"] = self.where(base)
+        where["length"] = where["path"]
+        try:
+            v, info = load_csv(s, self.base_dir, self.rate)  # type: ignore[arg-type]
+        except CsvError as e:
+            self.issue(where.get(e.key, where["path"]), e.message)
+            return []
+        if v.size - 1 > MAX_STRAIN_SAMPLES:
+            self.issue(
+                where["path"],
+                f"{v.size} samples; a strain command may have at most {MAX_STRAIN_SAMPLES}",
+            )
+            return []
+        definition = {**info, "duration_s": (v.size - 1) / self.rate}
+        stem = _sanitize(resolve_csv_path(s, self.base_dir).stem)  # type: ignore[arg-type]
+        name = f"strain_csv_{stem}"[:48]
+        pieces = [wf.table_segment(v, self.rate, "path")]
+        return self._strain(s, base, "strain_csv", name, pieces, definition, where, None)
+
     def count(self) -> int:
         total = 0
         for s in self.p.steps:
@@ -471,6 +672,16 @@ class _Builder:
                             + (" (the edge ramps are too slow)" if e.edge else ""),
                         )
                         continue
+                    aux = {}
+                    if c.strain is not None:
+                        # expected strain at each entry sample: rest, the command, then its
+                        # last value during the closing 0 V edge ramp (control is lost there)
+                        tail = waveform.n_samples - 1 - c.strain.size
+                        aux["command_strain"] = (
+                            "ue",
+                            "strain command (expected strain at each sample)",
+                            np.concatenate(([0.0], c.strain, np.full(tail, c.strain[-1]))),
+                        )
                     definition = {
                         **c.definition,
                         "rate_hz": self.rate,
@@ -494,6 +705,7 @@ class _Builder:
                             amplitude_V=c.amplitude_V,
                             frequency_hz=c.frequency_hz,
                             where=where,
+                            aux=aux,
                         )
                     )
         if steps:

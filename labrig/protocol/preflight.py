@@ -32,6 +32,7 @@ import numpy as np
 from labrig.errors import InputFileError, InputIssue
 from labrig.limits import RigLimits
 from labrig.protocol.plan import Plan, PlannedStep, Where
+from labrig.protocol.schema import STRAIN_KINDS
 
 OVERSAMPLE = 4
 MIN_SAMPLES_PER_CYCLE = 20
@@ -151,7 +152,77 @@ def _blame_segment(step: PlannedStep, t_s: float) -> tuple[Where, str]:
     return step.blame(seg.field or "step"), seg.kind
 
 
+def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tuple[Where, str]]:
+    """Limits of a strain-command entry: its computed drive is checked like any waveform;
+    the messages say which command and control need it and what to change."""
+    out: list[tuple[Where, str]] = []
+    d = step.definition
+    c = lim.effective_capacitance_F
+    key = "path" if step.kind == "strain_csv" else "amplitude_ue"
+    if step.kind == "strain_csv":
+        what = f"the {d['control']} drive of {step.name}"
+    else:
+        what = f"the {d['control']} drive for {d['amplitude_ue']:g} ue at {d['frequency_hz']:g} Hz"
+    lower = "lower amplitude_ue or frequency_hz" if key == "amplitude_ue" else "check the file"
+    if chk.v_max_V > lim.v_max_V + _TOL or chk.v_min_V < lim.v_min_V - _TOL:
+        hi = chk.v_max_V > lim.v_max_V + _TOL
+        bad = chk.v_max_V if hi else chk.v_min_V
+        why = (
+            ""
+            if hi
+            else " (compensation goes below 0 V to cancel the drift; the amplifier's negative "
+            "range limits how much)"
+        )
+        out.append(
+            (
+                step.blame(key),
+                f"{what} reaches {bad:.4g} V; the rig allows {lim.v_min_V:g} to "
+                f"{lim.v_max_V:g} V{why}; "
+                + ("lower amplitude_ue" if key == "amplitude_ue" else "check the file"),
+            )
+        )
+    f = step.frequency_hz
+    if f and step.rate_hz / f < MIN_SAMPLES_PER_CYCLE - _TOL:
+        out.append(
+            (
+                step.blame("frequency_hz"),
+                f"{f:g} Hz sampled at rate_hz {step.rate_hz:g} gives "
+                f"{step.rate_hz / f:.3g} samples per cycle; at least {MIN_SAMPLES_PER_CYCLE} "
+                f"are needed: raise rate_hz to >= {MIN_SAMPLES_PER_CYCLE * f:g} or lower the "
+                "frequency",
+            )
+        )
+    if not chk.peak_current_A <= lim.i_peak_A * (1 + 1e-6):
+        where, seg = _blame_segment(step, chk.peak_time_s)
+        need = _amps(chk.peak_current_A, lim.i_peak_A)
+        if seg == "edge":
+            msg = (
+                f"the 0 V edge ramp at the end of {step.name} needs {need} peak; the amplifier "
+                f"gives {_amps(lim.i_peak_A)}; use edge_slew_V_per_s <= {lim.i_peak_A / c:.0f}"
+            )
+        else:
+            msg = (
+                f"{what} needs {need} peak at t = {chk.peak_time_s:.4g} s; the amplifier "
+                f"gives {_amps(lim.i_peak_A)}; {lower}"
+            )
+        out.append((where, msg))
+    if not chk.mean_current_A <= lim.i_avg_A * (1 + 1e-6):
+        where = step.blame(key)
+        window = "a cycle" if f else f"{chk.window_s:g} s"
+        out.append(
+            (
+                where,
+                f"{what} draws {_amps(chk.mean_current_A, lim.i_avg_A)} on average over "
+                f"{window} (around t = {chk.mean_time_s:.4g} s); the amplifier's average limit "
+                f"is {_amps(lim.i_avg_A)}; {lower}",
+            )
+        )
+    return out
+
+
 def _step_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tuple[Where, str]]:
+    if step.kind in STRAIN_KINDS:
+        return _strain_issues(step, chk, lim)
     out: list[tuple[Where, str]] = []
     c = lim.effective_capacitance_F
     a, f = step.amplitude_V, step.frequency_hz

@@ -22,7 +22,20 @@ ColumnRef = (
     | Annotated[int, Field(ge=0, le=10_000)]
 )
 
-STEP_KINDS = ("sine", "vanishing", "hold", "ramp", "csv", "sweep")
+STEP_KINDS = (
+    "sine",
+    "vanishing",
+    "hold",
+    "ramp",
+    "csv",
+    "sweep",
+    "strain_sine",
+    "strain_vanishing",
+    "strain_csv",
+)
+#: step kinds that command a strain (ue) through a controller instead of a voltage
+STRAIN_KINDS = ("strain_sine", "strain_vanishing", "strain_csv")
+FilePath = Annotated[str, StringConstraints(min_length=1, max_length=4096)]
 #: entry names that would collide with the run file's own groups
 RESERVED_NAMES = frozenset({"run"})
 
@@ -167,8 +180,88 @@ class SweepStep(_StepBase):
         return self
 
 
+class _StrainStepBase(_StepBase):
+    """Keys of the strain-command steps: the command is a strain (ue); the voltage played is
+    computed from it by a controller (:mod:`labrig.control`) with fitted model parameters."""
+
+    control: Literal["direct", "compensated"] = Field(
+        description="direct: V = S/alpha0; compensated: the inverse model (seed Eq. 13)"
+    )
+    params: FilePath | None = Field(
+        None,
+        description="model parameters, a JSON file from `labrig fit --out`, relative to this "
+        "file (default: the protocol's params)",
+    )
+
+
+class StrainSineStep(_StrainStepBase):
+    """Unipolar strain sine ``S = A/2 (1 - cos 2 pi f t)``: 0 ue at t = 0, ``amplitude_ue`` at
+    its peaks."""
+
+    kind: Literal["strain_sine"]
+    amplitude_ue: Positive = Field(description="peak strain A (the command swings 0..A)")
+    frequency_hz: Positive
+    cycles: Positive | None = Field(None, description="number of cycles (or give duration_s)")
+    duration_s: Positive | None = Field(None, description="length in seconds (or give cycles)")
+
+    @model_validator(mode="after")
+    def _length(self):
+        _one_of_cycles_duration(self)
+        return self
+
+
+class StrainVanishingStep(_StrainStepBase):
+    """Strain sine whose magnitude vanishes (the ``vanishing`` step's envelope, in ue), then
+    ``hold_s`` of 0 ue commanded (the controller keeps working: the strain must stay at 0)."""
+
+    kind: Literal["strain_vanishing"]
+    amplitude_ue: Positive = Field(description="peak strain at the start of the envelope")
+    frequency_hz: Positive = Field(description="carrier frequency")
+    decay_s: Positive = Field(description="time from the first peak until the envelope is zero")
+    shape: Literal["exponential", "linear"] = "exponential"
+    tau_s: Positive | None = Field(
+        None, description="exponential time constant (default decay_s/2)"
+    )
+    hold_s: NonNegative = Field(0.0, description="0 ue commanded after the envelope")
+
+    @model_validator(mode="after")
+    def _tau_only_exponential(self):
+        if self.tau_s is not None and self.shape != "exponential":
+            raise ValueError("tau_s applies only to shape: exponential")
+        return self
+
+
+class StrainCsvStep(_StrainStepBase):
+    """A strain command (ue) read from a CSV file; same file rules as the ``csv`` step."""
+
+    kind: Literal["strain_csv"]
+    path: FilePath
+    column: ColumnRef | None = Field(
+        None, description="strain column: header name or 0-based index (default: first)"
+    )
+    time_column: ColumnRef | None = Field(None, description="column of sample times (s)")
+    rate_hz: Positive | None = Field(None, description="sample rate of the file's rows")
+    scale: Finite = Field(1.0, description="multiply the values by this (e.g. 1e6 for strain)")
+
+    @model_validator(mode="after")
+    def _timebase(self):
+        if self.time_column is not None and self.rate_hz is not None:
+            raise ValueError("give time_column or rate_hz for a strain_csv step, not both")
+        if self.scale == 0:
+            raise ValueError("scale must not be 0")
+        return self
+
+
 Step = Annotated[
-    SineStep | VanishingStep | HoldStep | RampStep | CsvStep | SweepStep,
+    SineStep
+    | VanishingStep
+    | HoldStep
+    | RampStep
+    | CsvStep
+    | SweepStep
+    | StrainSineStep
+    | StrainVanishingStep
+    | StrainCsvStep,
     Field(discriminator="kind"),
 ]
 
@@ -183,6 +276,11 @@ class Protocol(_Base):
     )
     rate_hz: Positive = Field(description="sample rate for output and acquisition")
     rest_s: NonNegative = Field(0.0, description="default 0 V rest between entries")
+    params: FilePath | None = Field(
+        None,
+        description="default model parameters of the strain-command steps (JSON from "
+        "`labrig fit --out`), relative to this file",
+    )
     edge_slew_V_per_s: Positive = Field(
         1000.0, description="slope of the ramps inserted to start and end every entry at 0 V"
     )
