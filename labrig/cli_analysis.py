@@ -492,8 +492,9 @@ def run_report(
     method: str,
 ) -> None:
     """``labrig report``."""
+    from labrig.report.control_section import control_html, control_metrics
     from labrig.report.data import Fitted, Provenance, build_report, metrics_json, noise_floor
-    from labrig.report.html import render
+    from labrig.report.html import _img, render
     from labrig.report.plots import entry_figure, frequency_figure
 
     err = Console(stderr=True)
@@ -624,12 +625,17 @@ def run_report(
             }
             pngs[e.name] = entry_figure(e, dyn[e.name], setup.warmup_s, noise, unit, others)
         freq = frequency_figure(data.entries, list(models), unit)
-    page = render(data, freq, pngs)
+        all_records = setup.records
+        ctrl_html = control_html(list(all_records), _img)
+    page = render(data, freq, pngs, ctrl_html)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(page, encoding="utf-8")
     err.print(f"wrote {escape(str(out))} ({len(page) / 1e6:.1f} MB)")
     if as_json:
-        typer.echo(json.dumps(finite(metrics_json(data)), indent=2, allow_nan=False))
+        table = metrics_json(data)
+        for name, m in control_metrics(list(all_records)).items():
+            table.setdefault(name, {}).update(m)
+        typer.echo(json.dumps(finite(table), indent=2, allow_nan=False))
     else:
         typer.echo(str(out))
 

@@ -363,6 +363,7 @@ def render(
     data: ReportData,
     frequency_png: bytes | None,
     entry_pngs: Mapping[str, bytes | None],
+    extra_html: str = "",
 ) -> str:
     """The whole page."""
     p = data.provenance
@@ -414,6 +415,7 @@ def render(
 <h2 id="parameters">Identified parameters</h2>
 {_params_section(data)}
 {_settings(data)}
+{extra_html}
 <h2 id="entries">Entries: model versus measurement</h2>
 <p class="small">Left: voltage-strain loop, measured (dark) and our model (red) over the scored
 samples (cf. seed Fig. 9). Right: strain in time and the residual (measured − model) underneath

@@ -1,0 +1,118 @@
+"""The compensation-control part of ``labrig report`` (seed Figs. 15-17).
+
+For every strain-command entry (a ``command_strain`` channel and a ``control`` key in its step
+definition): the metrics of :func:`labrig.control.entry_metrics` (tracking NRMSE and hysteresis
+width in % of the command span, strain at zero command), and one figure per command pairing the
+direct and compensated entries: measured strain versus command (Figs. 15-16) and the computed
+drive voltage in time (Fig. 17).
+"""
+
+from __future__ import annotations
+
+from html import escape
+from typing import Any
+
+from matplotlib.figure import Figure
+
+from labrig.analysis.records import Record
+from labrig.control import entry_metrics
+from labrig.report.plots import _style, png
+
+#: the keys ``labrig report --json`` gives for each strain-command entry
+JSON_KEYS = (
+    "control",
+    "frequency_hz",
+    "tracking_nrmse_pct",
+    "hysteresis_width_pct",
+    "zero_command_strain_ue",
+)
+COLORS = {"direct": "tab:blue", "compensated": "tab:red"}
+
+
+def is_control_entry(r: Record) -> bool:
+    return "command_strain" in r.aux and "control" in r.meta
+
+
+def control_metrics(records: list[Record]) -> dict[str, dict[str, Any]]:
+    """Entry name -> the :data:`JSON_KEYS` for every strain-command entry."""
+    out = {}
+    for r in records:
+        if is_control_entry(r):
+            m = entry_metrics(r)
+            out[r.name] = {k: m.get(k) for k in JSON_KEYS}
+    return out
+
+
+def _pair_key(r: Record) -> tuple:
+    m = r.meta
+    return (m.get("kind"), m.get("amplitude_ue"), m.get("frequency_hz"))
+
+
+def _figure(group: list[Record]) -> bytes:
+    fig = Figure(figsize=(11, 3.6))
+    ax_l, ax_t, ax_v = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1, 1.3, 1.3]})
+    for r in sorted(group, key=lambda r: r.meta["control"]):
+        i0 = int(r.meta.get("command_start_index", 0))
+        i1 = int(r.meta.get("command_stop_index", r.strain_ue.size))
+        c, s = r.aux["command_strain"][i0:i1], r.strain_ue[i0:i1]
+        t = r.time_s[i0:i1] - r.time_s[i0]
+        col = COLORS.get(r.meta["control"], "k")
+        ax_l.plot(c, s, color=col, lw=0.8, label=r.meta["control"])
+        ax_t.plot(t, s, color=col, lw=0.8, label=f"measured, {r.meta['control']}")
+        ax_v.plot(t, r.voltage_V[i0:i1], color=col, lw=0.8, label=r.meta["control"])
+    r0 = group[0]
+    i0 = int(r0.meta.get("command_start_index", 0))
+    i1 = int(r0.meta.get("command_stop_index", r0.strain_ue.size))
+    c0 = r0.aux["command_strain"][i0:i1]
+    ax_l.plot([c0.min(), c0.max()], [c0.min(), c0.max()], "k:", lw=0.8, label="ideal")
+    ax_t.plot(r0.time_s[i0:i1] - r0.time_s[i0], c0, "k:", lw=0.8, label="command")
+    ax_l.set(xlabel="command strain (ue)", ylabel="measured strain (ue)", title="Figs. 15-16")
+    ax_t.set(xlabel="time (s)", ylabel="strain (ue)", title="tracking")
+    ax_v.set(xlabel="time (s)", ylabel="drive voltage (V)", title="computed voltage (Fig. 17)")
+    for ax in (ax_l, ax_t, ax_v):
+        _style(ax)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    return png(fig)
+
+
+def control_html(records: list[Record], img) -> str:
+    """The HTML section ("" when the run has no strain-command entry); ``img(png, alt)``."""
+    entries = [r for r in records if is_control_entry(r)]
+    if not entries:
+        return ""
+    metrics = control_metrics(entries)
+    rows = []
+    for r in entries:
+        m = metrics[r.name]
+
+        def f(x, fmt=".2f"):
+            return "—" if x is None else format(x, fmt)
+
+        rows.append(
+            f"<tr><td>{escape(r.name)}</td><td>{escape(str(m['control']))}</td>"
+            f"<td>{f(m['frequency_hz'], 'g')}</td><td>{f(m['tracking_nrmse_pct'])}</td>"
+            f"<td>{f(m['hysteresis_width_pct'])}</td><td>{f(m['zero_command_strain_ue'], '.1f')}"
+            "</td></tr>"
+        )
+    groups: dict[tuple, list[Record]] = {}
+    for r in entries:
+        groups.setdefault(_pair_key(r), []).append(r)
+    figs = []
+    for key, grp in groups.items():
+        kind, amp, freq = key
+        cap = f"{kind} {amp:g} ue" if amp is not None else str(kind)
+        cap += f" at {freq:g} Hz" if freq else ""
+        figs.append(
+            f"<figure>{img(_figure(grp), escape(cap))}<figcaption>{escape(cap)}: direct "
+            "(blue) and compensated (red) control; dotted: the command.</figcaption></figure>"
+        )
+    return (
+        '<h2 id="control">Compensation control</h2>'
+        "<p class='small'>Strain-command entries, over the command samples. Tracking NRMSE and "
+        "hysteresis width (largest strain difference between rising and falling branches at the "
+        "same command) are in % of the command span; strain at zero command in ue.</p>"
+        "<table><thead><tr><th>entry</th><th>control</th><th>f (Hz)</th>"
+        "<th>tracking NRMSE (%)</th><th>hysteresis width (%)</th><th>strain at zero command "
+        "(ue)</th></tr></thead><tbody>" + "".join(rows) + "</tbody></table>" + "".join(figs)
+    )
