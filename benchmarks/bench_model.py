@@ -931,6 +931,10 @@ def render(
     return "\n".join(L)
 
 
+#: RESULTS.md below this line holds the runner, fit and control benchmarks; kept on rewrite
+OTHER_MARKER = "<!-- other benchmarks: kept by bench_model.py -->"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="small sizes; print, do not write")
@@ -986,6 +990,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         print(text)
     else:
+        # keep the hand-recorded sections of the other benchmarks (below the marker)
+        old = args.out.read_text() if args.out.exists() else ""
+        if OTHER_MARKER in old:
+            text = text.rstrip("\n") + "\n\n" + old[old.index(OTHER_MARKER) :]
         args.out.write_text(text)
         print(f"wrote {args.out}")
     return 0
