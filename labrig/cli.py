@@ -254,6 +254,24 @@ def report(
     run_report(run_file, params, out, as_json, entries, warmup_s, heldout, offset, method)
 
 
+@app.command("diagnose")
+@friendly
+def diagnose(
+    run_file: Path = typer.Argument(..., help="Run file (HDF5)."),
+    params: Path | None = typer.Option(
+        None, "--params", help="Start parameters (ModelParams JSON or `labrig fit` output)."
+    ),
+    out: Path | None = typer.Option(
+        None, "--out", help="Directory for diagnosis.json and diagnosis.html."
+    ),
+    as_json: bool = typer.Option(False, "--json", help="Print only the JSON on stdout."),
+) -> None:
+    """Find what the model misses: residual evidence, candidate effects, held-out before/after."""
+    from labrig.cli_diagnose import diagnose_command
+
+    raise typer.Exit(diagnose_command(run_file, params, out, as_json))
+
+
 @sim_app.command("serve")
 @friendly
 def sim_serve(

@@ -1,0 +1,203 @@
+"""Synthetic campaigns on the virtual bench, for testing and measuring ``labrig diagnose``.
+
+:func:`bench_campaign` plays a list of unipolar sines (``V = A/2 (1 - cos 2 pi f t)``, whole
+cycles, each followed by a rest at 0 V) through :class:`labrig.drivers.sim.bench.VirtualBench`
+in-process, with the bench's optional effects switched on by name (``drivers/sim/effects.py``),
+and returns the entries as :class:`Record` objects the way ``records_from_run`` would: the
+commanded voltage as ``voltage_V`` (hold ``"zoh"``), the strain from the gauge channel, the
+amplifier monitor as ``aux["amplifier_voltage"]`` and, with ``self_heating``, the temperature
+channel as ``aux["temperature"]``; ``meta`` holds ``frequency_hz``, ``amplitude_V`` and
+``rest_after_s``.
+
+The bench is driven directly rather than through :func:`labrig.runner.execute` because the
+runner (correctly) aborts a run when the amplifier reports current limiting, which is exactly the
+``amplifier_current_limit`` effect; the physics is the same object the simulated rig uses.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from labrig.analysis.records import Record
+from labrig.limits import RigLimits
+
+#: a short campaign (about 14 s recorded, 20 s with rests): both amplitudes at 1, 10, 40 Hz
+SHORT_ENTRIES: tuple[tuple[float, float, float], ...] = (
+    (100.0, 1.0, 3.0),
+    (100.0, 10.0, 2.0),
+    (100.0, 40.0, 2.0),
+    (50.0, 1.0, 3.0),
+    (50.0, 10.0, 2.0),
+    (50.0, 40.0, 2.0),
+)
+
+__all__ = ["SHORT_ENTRIES", "bench_campaign", "sine"]
+
+
+def sine(amplitude_V: float, frequency_hz: float, duration_s: float, rate_hz: float):
+    """Unipolar sine from 0 V over whole cycles (at least ``duration_s``)."""
+    cycles = max(1, int(np.ceil(duration_s * frequency_hz - 1e-9)))
+    n = round(cycles / frequency_hz * rate_hz)
+    t = np.arange(n) / rate_hz
+    return 0.5 * amplitude_V * (1.0 - np.cos(2.0 * np.pi * frequency_hz * t))
+
+
+def _name(a: float, f: float) -> str:
+    def fmt(x: float) -> str:
+        return f"{x:g}".replace(".", "p").replace("-", "m")
+
+    return f"sine_{fmt(a)}V_{fmt(f)}Hz"
+
+
+def bench_campaign(
+    effects: Sequence[dict[str, Any]] = (),
+    *,
+    truth: str = "paper",
+    seed: int = 0,
+    entries: Sequence[tuple[float, float, float]] = SHORT_ENTRIES,
+    rate_hz: float = 1000.0,
+    rest_s: float = 1.0,
+    noise_ue: float = 2.0,
+    paper_overrides: dict[str, float] | None = None,
+    extra: dict[str, Any] | None = None,
+) -> list[Record]:
+    """Run ``entries`` ((amplitude V, frequency Hz, duration s), in order) on a virtual bench.
+
+    ``effects``: the bench's effects as rig-file dicts, e.g. ``[{"name": "mains_pickup",
+    "amplitude_mV": 20}]``. ``truth``: ``"paper"`` (the model family) or ``"hybrid"``.
+    ``extra``: further ``bench:`` keys (``amplifier``, ``gauge``...) merged into the config.
+    """
+    from labrig.drivers.sim.bench import BenchConfig, VirtualBench
+
+    cfg: dict[str, Any] = {
+        "truth": {"preset": truth, "paper_overrides": dict(paper_overrides or {})},
+        "gauge": {"noise_ue": noise_ue},
+        "effects": [dict(e) for e in effects],
+    }
+    for k, v in (extra or {}).items():
+        cfg[k] = {**cfg.get(k, {}), **v} if isinstance(v, dict) else v
+    config = BenchConfig.model_validate(cfg)
+    bench = VirtualBench(config, RigLimits(), seed=seed, rate_hz=rate_hz)
+    gain = config.amplifier.gain_V_per_V
+    bench.settle(0.1)
+    bench.balance()  # the runner zeroes the conditioner at the start of a run
+    names: dict[str, int] = {}
+    out = []
+    for a, f, d in entries:
+        v = sine(a, f, d, rate_hz)
+        ch = bench.step(v / gain)
+        sens = bench.sensitivity_V_per_ue() * bench.cond.gain
+        name = _name(a, f)
+        names[name] = names.get(name, 0) + 1
+        if names[name] > 1:
+            name = f"{name}_{names[name]}"
+        aux = {"amplifier_voltage": ch["amp_monitor"] / config.amplifier.monitor_V_per_V}
+        if "temperature" in ch:
+            from labrig.instruments import TEMPERATURE_V_PER_DEGC
+
+            aux["temperature"] = ch["temperature"] / TEMPERATURE_V_PER_DEGC
+        out.append(
+            Record(
+                name,
+                rate_hz,
+                np.arange(v.size) / rate_hz,
+                v,
+                ch["gauge"] / sens,
+                aux,
+                "zoh",
+                {
+                    "kind": "sine",
+                    "frequency_hz": f,
+                    "amplitude_V": a,
+                    "rest_after_s": rest_s,
+                },
+            )
+        )
+        n_rest = round(rest_s * rate_hz)
+        if n_rest:
+            bench.step(np.zeros(n_rest))
+    return out
+
+
+# -- attribution study (python -m labrig.analysis.diagnose_campaign) --------------------------
+
+#: bench effect (rig-file form) for each library effect, at clear strengths
+STUDY_CASES: dict[str, list[dict[str, Any]]] = {
+    "none": [],
+    "sensor_lowpass": [{"name": "conditioner_lowpass", "cutoff_hz": 150.0, "order": 2}],
+    "mains_pickup": [{"name": "mains_pickup", "amplitude_mV": 20.0}],
+    "amplifier_current_limit": [{"name": "amplifier_current_limit"}],
+    "thermal_drift": [
+        {
+            "name": "self_heating",
+            "heat_capacity_J_per_K": 0.2,
+            "tan_delta": 0.1,
+            "strain_coeff_per_K": 0.01,
+        }
+    ],
+    "offset_drift": [
+        {"name": "offset_drift", "rate_ue_per_s": 1.5, "random_walk_ue_per_sqrt_s": 0.5}
+    ],
+    "creep": [{"name": "log_creep", "per_decade": 0.04}],
+}
+
+
+def attribution_study(
+    seeds: Sequence[int] = (1, 2), truths: Sequence[str] = ("paper",), out=print
+) -> list[dict[str, Any]]:
+    """Run :func:`labrig.analysis.diagnose.diagnose` on every case, seed and truth; print one
+    line per run and return the rows (truth effect, first added effect, all added, verdict
+    class, held-out before/after, seconds)."""
+    import time
+
+    from labrig.analysis.diagnose import diagnose
+
+    rows = []
+    for truth in truths:
+        for case, effects in STUDY_CASES.items():
+            for seed in seeds:
+                recs = bench_campaign(effects, seed=seed, truth=truth)
+                t0 = time.perf_counter()
+                d = diagnose(recs)
+                dt = time.perf_counter() - t0
+                added = [e["effect"] for e in d.effects_added]
+                row = {
+                    "truth": truth,
+                    "case": case,
+                    "seed": seed,
+                    "first": added[0] if added else "none",
+                    "added": added,
+                    "class": d.classification,
+                    "before": d.before["heldout_nrmse_pct"],
+                    "after": d.after["heldout_nrmse_pct"],
+                    "seconds": dt,
+                }
+                rows.append(row)
+                out(
+                    f"{truth:6s} {case:24s} seed {seed:3d} -> {','.join(added) or 'none':40s} "
+                    f"{d.classification:22s} held-out {row['before']:.3g} -> {row['after']:.3g} % "
+                    f"({dt:.0f} s)"
+                )
+    return rows
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import sys
+
+    truths = sys.argv[1].split(",") if len(sys.argv) > 1 else ["paper"]
+    seeds = [int(s) for s in sys.argv[2].split(",")] if len(sys.argv) > 2 else [1, 2]
+    rows = attribution_study(seeds, truths)
+    cases = list(STUDY_CASES)
+    cols = sorted({r["first"] for r in rows} | set(cases))
+    print("\nconfusion (rows: truth, columns: first effect added)")
+    print(" " * 26 + " ".join(f"{c[:10]:>10s}" for c in cols))
+    for t in truths:
+        for c in cases:
+            sel = [r for r in rows if r["case"] == c and r["truth"] == t]
+            print(
+                f"{t[:6]:6s} {c:19s}"
+                + " ".join(f"{sum(r['first'] == k for r in sel):10d}" for k in cols)
+            )

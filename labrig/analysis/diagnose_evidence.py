@@ -1,0 +1,284 @@
+"""Residual evidence for ``labrig diagnose``: noise floor, harmonics, features, sentences.
+
+Everything here *describes* residuals (``measured - predicted``, ue) for the report and for the
+candidates' evidence; nothing here decides (spec ``residuals.md``: with 1e4-1e5 samples almost
+any structure is "significant"; the decision is made by held-out prediction error).
+
+- **Noise floor** of an entry: for a periodic entry, the RMS of the residual's period-to-period
+  difference over its second half divided by sqrt 2 (model errors locked to the drive cancel,
+  noise does not); otherwise the RMS of the residual's second difference divided by sqrt 6.
+  In percent of the measured span, like the NRMSE.
+- **Harmonic table** of a periodic entry: the residual's Fourier coefficients at ``k f0``
+  (``k = 1..5``) over its whole periods, in percent of the measured strain's fundamental, with
+  the phase relative to that fundamental (-90 deg: the residual *lags*... see ``quadrature``).
+- **Features** (campaign level): how the per-entry residual scales with frequency and amplitude,
+  its correlation with ``|dV/dt|``, with ``V^2 - mean`` (Billings-Voon, even nonlinearity),
+  with the input at lags (residual-input cross-correlation), its lag-1 autocorrelation
+  (whiteness), trends within entries, spectral lines that are not drive harmonics, and the aux
+  channels (temperature, the amplifier's measured voltage versus the command).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from labrig.analysis.metrics import drive_frequency_hz, is_periodic
+from labrig.analysis.records import Record
+
+__all__ = ["EntryEvidence", "Evidence", "collect_evidence"]
+
+
+@dataclass
+class EntryEvidence:
+    name: str
+    nrmse_pct: float
+    floor_pct: float
+    span_ue: float
+    rms_ue: float
+    frequency_hz: float | None
+    amplitude_V: float
+    periodic: bool
+    harmonics: list[dict[str, float]] = field(default_factory=list)
+    quadrature: float | None = None  # fraction of the residual fundamental in quadrature
+    lag_deg: float | None = None  # phase of the residual fundamental vs the strain's
+    trend_share: float = 0.0  # share of the residual variance a linear trend explains
+    lines: list[dict[str, float]] = field(default_factory=list)  # non-synchronous lines
+    temperature_rise_K: float | None = None
+    amp_departure_V: float | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return {k: v for k, v in self.__dict__.items()}
+
+
+@dataclass
+class Evidence:
+    entries: dict[str, EntryEvidence]
+    floor_pct: float
+    nrmse_pct: float
+    ratio: float  # NRMSE / floor
+    features: dict[str, float | None]
+    sentences: list[str]
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "floor_pct": self.floor_pct,
+            "nrmse_pct": self.nrmse_pct,
+            "ratio_to_floor": self.ratio,
+            "features": dict(self.features),
+            "entries": {k: e.to_json() for k, e in self.entries.items()},
+            "sentences": list(self.sentences),
+        }
+
+
+def _corr(a: NDArray, b: NDArray) -> float:
+    a = a - a.mean()
+    b = b - b.mean()
+    den = float(np.sqrt((a @ a) * (b @ b)))
+    return float(a @ b / den) if den > 0 else 0.0
+
+
+def _floor(res: NDArray, period: int | None) -> float:
+    if period and res.size >= 2 * period:
+        # the second half, or the last two periods if that is longer
+        x = res[-max(res.size // 2, 2 * period) :]
+        d = x[period:] - x[:-period]
+        return float(np.sqrt(np.mean(d * d)) / np.sqrt(2.0))
+    d = np.diff(res, 2)
+    return float(np.sqrt(np.mean(d * d)) / np.sqrt(6.0)) if d.size else 0.0
+
+
+def _fourier(x: NDArray, rate: float, f: float) -> complex:
+    t = np.arange(x.size) / rate
+    return complex(2.0 / x.size * np.sum(x * np.exp(-2j * np.pi * f * t)))
+
+
+def _lines(res: NDArray, rate: float, f0: float | None) -> list[dict[str, float]]:
+    """Strongest spectral lines of the residual that are not harmonics of the drive."""
+    n = res.size
+    if n < 256:
+        return []
+    w = np.hanning(n)
+    spec = np.abs(np.fft.rfft((res - res.mean()) * w)) * 2 / w.sum()
+    freqs = np.fft.rfftfreq(n, 1 / rate)
+    med = float(np.median(spec[1:])) + 1e-12
+    out = []
+    order = np.argsort(spec)[::-1]
+    for i in order[:40]:
+        f = float(freqs[i])
+        if f < 2.0 or spec[i] < 6 * med:
+            continue
+        if f0 and abs(f / f0 - round(f / f0)) * f0 < 3 * rate / n:
+            continue
+        if any(abs(f - o["frequency_hz"]) < 3 * rate / n for o in out):
+            continue
+        out.append({"frequency_hz": f, "amplitude_ue": float(spec[i]), "snr": float(spec[i] / med)})
+        if len(out) >= 3:
+            break
+    return out
+
+
+def collect_evidence(
+    records: list[Record], predictions: dict[str, NDArray], warmup_s: float = 0.0
+) -> Evidence:
+    """Evidence from the residuals of ``predictions`` (entry name -> strain over the record)."""
+    ents: dict[str, EntryEvidence] = {}
+    all_res, all_dv, all_v2, all_v = [], [], [], []
+    temps = []
+    for r in records:
+        if r.name not in predictions:
+            continue
+        i0 = round(max(warmup_s, 0.0) * r.rate_hz)
+        m = r.strain_ue[i0:]
+        p = predictions[r.name][i0:]
+        res = m - p
+        span = float(np.ptp(m))
+        f0 = drive_frequency_hz(r)
+        per = is_periodic(r.voltage_V, r.rate_hz, f0)
+        period = round(r.rate_hz / f0) if per and f0 else None
+        fl = _floor(res, period)
+        rms = float(np.sqrt(np.mean(res * res)))
+        e = EntryEvidence(
+            r.name,
+            100 * rms / span,
+            100 * fl / span,
+            span,
+            rms,
+            f0,
+            float(np.ptp(r.voltage_V)),
+            per,
+        )
+        if per and period:
+            nper = (res.size // period) * period
+            x = res[res.size - nper :]
+            s = m[m.size - nper :]
+            fund = _fourier(s, r.rate_hz, f0)
+            for k in range(1, 6):
+                if k * f0 >= 0.5 * r.rate_hz:
+                    break
+                c = _fourier(x, r.rate_hz, k * f0)
+                e.harmonics.append(
+                    {
+                        "k": k,
+                        "amplitude_pct": 100 * abs(c) / max(abs(fund), 1e-12),
+                        "phase_deg": float(np.degrees(np.angle(c / fund))) if fund else 0.0,
+                    }
+                )
+            c1 = _fourier(x, r.rate_hz, f0)
+            if abs(c1) > 0 and fund:
+                rel = c1 / fund
+                e.quadrature = float(abs(rel.imag) / abs(rel))
+                e.lag_deg = float(np.degrees(np.angle(rel)))
+        t = np.arange(res.size)
+        cc = _corr(res, t.astype(float))
+        e.trend_share = cc * cc
+        e.lines = _lines(res, r.rate_hz, f0 if per else None)
+        if "temperature" in r.aux:
+            T = r.aux["temperature"]
+            e.temperature_rise_K = float(np.median(T[-50:]) - np.median(T[:50]))
+            temps.append((res, p, T[i0:]))
+        if "amplifier_voltage" in r.aux:
+            e.amp_departure_V = float(np.max(np.abs(r.aux["amplifier_voltage"] - r.voltage_V)))
+        ents[r.name] = e
+        v = r.voltage_V[i0:]
+        all_res.append(res / span)
+        all_dv.append(np.abs(np.diff(v, prepend=v[0])) * r.rate_hz)
+        all_v2.append((v - v.mean()) ** 2)
+        all_v.append(v)
+    res = np.concatenate(all_res)
+    feats: dict[str, float | None] = {}
+    feats["abs_residual_vs_abs_dVdt"] = _corr(np.abs(res), np.concatenate(all_dv))
+    feats["residual_vs_V2"] = _corr(res, np.concatenate([x - x.mean() for x in all_v2]))
+    feats["lag1_autocorrelation"] = _corr(res[1:], res[:-1])
+    vv = np.concatenate(all_v)
+    xc = [abs(_corr(res[k:], vv[: vv.size - k])) for k in (0, 1, 2, 5, 10, 20)]
+    feats["max_residual_input_xcorr"] = max(xc)
+    lst = list(ents.values())
+    fs = np.array([e.frequency_hz or np.nan for e in lst])
+    amps = np.array([e.amplitude_V for e in lst])
+    ratio_e = np.array([e.nrmse_pct / max(e.floor_pct, 1e-12) for e in lst])
+    ok = np.isfinite(fs) & (fs > 0)
+    feats["excess_vs_log_frequency"] = (
+        _corr(np.log(fs[ok]), ratio_e[ok]) if ok.sum() >= 3 and np.ptp(fs[ok]) > 0 else None
+    )
+    feats["excess_vs_amplitude"] = (
+        _corr(amps, ratio_e) if len(lst) >= 3 and np.ptp(amps) > 0 else None
+    )
+    q = [e.quadrature for e in lst if e.quadrature is not None]
+    feats["mean_quadrature_fraction"] = float(np.mean(q)) if q else None
+    feats["mean_trend_share"] = float(np.mean([e.trend_share for e in lst]))
+    if temps:
+        rr = np.concatenate([a for a, _, _ in temps])
+        pt = np.concatenate([p * (T - T[0]) for _, p, T in temps])
+        feats["residual_vs_strain_x_temperature"] = _corr(rr, pt)
+    floor = float(np.mean([e.floor_pct for e in lst]))
+    nr = float(np.mean([e.nrmse_pct for e in lst]))
+    ev = Evidence(ents, floor, nr, nr / floor if floor > 0 else float("inf"), feats, [])
+    ev.sentences = _sentences(ev)
+    return ev
+
+
+def _sentences(ev: Evidence) -> list[str]:
+    f = ev.features
+    out = [
+        f"mean NRMSE {ev.nrmse_pct:.3g} % against a noise floor of {ev.floor_pct:.3g} % "
+        f"(period-to-period residual differences): {ev.ratio:.2g} times the floor"
+    ]
+    lst = list(ev.entries.values())
+    worst = max(lst, key=lambda e: e.nrmse_pct / max(e.floor_pct, 1e-12))
+    out.append(
+        f"worst entry {worst.name}: {worst.nrmse_pct:.3g} % "
+        f"({worst.nrmse_pct / max(worst.floor_pct, 1e-12):.2g} x its floor)"
+    )
+    cf = f.get("excess_vs_log_frequency")
+    if cf is not None and abs(cf) > 0.6:
+        out.append(f"the residual {'grows' if cf > 0 else 'shrinks'} with frequency (r = {cf:.2f})")
+    ca = f.get("excess_vs_amplitude")
+    if ca is not None and abs(ca) > 0.6:
+        out.append(f"the residual {'grows' if ca > 0 else 'shrinks'} with amplitude (r = {ca:.2f})")
+    q = f.get("mean_quadrature_fraction")
+    if q is not None and q > 0.7:
+        hf = [e for e in lst if e.lag_deg is not None]
+        lag = np.median([e.lag_deg for e in hf]) if hf else 0.0
+        out.append(
+            f"its fundamental is mostly in quadrature with the strain ({100 * q:.0f} %, "
+            f"phase {lag:+.0f} deg)"
+        )
+    c = f.get("abs_residual_vs_abs_dVdt")
+    if c is not None and c > 0.3:
+        out.append(f"|residual| rises with |dV/dt| (r = {c:.2f})")
+    c = f.get("residual_vs_V2")
+    if c is not None and abs(c) > 0.3:
+        out.append(
+            f"the residual correlates with V^2 (Billings-Voon r = {c:.2f}): even nonlinearity"
+        )
+    ts = f.get("mean_trend_share")
+    if ts is not None and ts > 0.2:
+        out.append(f"linear trends within entries carry {100 * ts:.0f} % of the residual variance")
+    ct = f.get("residual_vs_strain_x_temperature")
+    if ct is not None and abs(ct) > 0.3:
+        rise = max((e.temperature_rise_K or 0.0) for e in lst)
+        out.append(
+            f"the residual follows strain x temperature (r = {ct:.2f}; the stack warmed by up to "
+            f"{rise:.2g} K within an entry)"
+        )
+    dep = [e.amp_departure_V for e in lst if e.amp_departure_V is not None]
+    if dep:
+        out.append(
+            f"the measured amplifier voltage departs from the command by up to {max(dep):.3g} V"
+        )
+    lines = [ln for e in lst for ln in e.lines]
+    if lines:
+        top = max(lines, key=lambda x: x["amplitude_ue"])
+        out.append(
+            f"spectral line at {top['frequency_hz']:.1f} Hz ({top['amplitude_ue']:.2g} ue) that "
+            "is not a drive harmonic"
+        )
+    out.append(
+        f"residual lag-1 autocorrelation {f['lag1_autocorrelation']:.2f}, largest residual-input "
+        f"cross-correlation {f['max_residual_input_xcorr']:.2f} (descriptive only)"
+    )
+    return out

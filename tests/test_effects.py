@@ -1,0 +1,166 @@
+"""The effect library (labrig.model.effects): null values, forms, bounds; the frozen-reversal
+tangent of the diagnosis engine."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from labrig.analysis.diagnose_fit import _tangent
+from labrig.model import QuasiStaticHysteresis
+from labrig.model.effects import (
+    EFFECT_NAMES,
+    AmplifierCurrentLimit,
+    Context,
+    Creep,
+    MainsPickup,
+    OffsetDrift,
+    SensorLowpass,
+    ThermalDrift,
+    TimeDelay,
+    library,
+    measured_voltage,
+    slew_limit,
+)
+
+FS = 1000.0
+
+
+def _ctx(v, **kw):
+    return Context(FS, np.asarray(v, float), {"e": slice(0, len(v))}, **kw)
+
+
+def _sine(f=10.0, a=100.0, n=3000):
+    t = np.arange(n) / FS
+    return 0.5 * a * (1 - np.cos(2 * np.pi * f * t))
+
+
+def test_required_names_and_metadata():
+    for name in (
+        "thermal_drift",
+        "amplifier_current_limit",
+        "sensor_lowpass",
+        "mains_pickup",
+        "offset_drift",
+        "creep",
+    ):
+        assert name in EFFECT_NAMES
+    lib = library(temperature=True, amplifier_voltage=True)
+    for e in lib.values():
+        assert e.where in ("voltage", "output", "nuisance")
+        assert e.physics and e.signature and e.__doc__
+        for q in e.params:
+            assert q.lo <= q.null <= q.hi or q.log
+            assert q.lo <= q.init <= q.hi
+
+
+@pytest.mark.parametrize("temperature", [True, False])
+def test_output_and_voltage_effects_vanish_at_null(temperature):
+    v = _sine()
+    T = 23 + np.linspace(0, 5, v.size)
+    ctx = _ctx(v, amplifier_voltage=v.copy(), temperature=T)
+    x = 9.0 * v + 3.0
+    for e in library(temperature=temperature, amplifier_voltage=False).values():
+        if e.where == "nuisance" or not e.params:
+            continue
+        y = e.apply(v if e.where == "voltage" else x, ctx, e.null)
+        np.testing.assert_allclose(y, v if e.where == "voltage" else x, atol=1e-12)
+
+
+def test_sensor_lowpass_gain_and_phase():
+    e = SensorLowpass()
+    fc = 100.0
+    tau = 1 / (2 * np.pi * fc)
+    for f, zeta in ((fc, 1 / np.sqrt(2)), (20.0, 0.7)):
+        t = np.arange(20000) / FS
+        x = np.sin(2 * np.pi * f * t)
+        y = e.apply(x, _ctx(x), {"tau_s": tau, "zeta": zeta})[-5000:]
+        c = 2 / y.size * np.sum(y * np.exp(-2j * np.pi * f * t[-5000:]))
+        c0 = 2 / y.size * np.sum(x[-5000:] * np.exp(-2j * np.pi * f * t[-5000:]))
+        h = 1 / (1 - (f / fc) ** 2 + 2j * zeta * f / fc)
+        # exact for the input linear between samples: the sampled sine's interpolation has
+        # the first-order-hold gain sinc^2(f / fs) at f
+        foh = np.sinc(f / FS) ** 2
+        assert c / c0 == pytest.approx(h * foh, rel=2e-3)
+    # DC gain 1, starts in steady state
+    np.testing.assert_allclose(
+        e.apply(np.full(100, 5.0), _ctx(np.ones(100)), {"tau_s": tau, "zeta": 0.7}), 5.0
+    )
+    assert e.physical({"tau_s": tau, "zeta": 0.7})["fc_hz"] == pytest.approx(fc)
+
+
+def test_time_delay_integer_and_fractional():
+    e = TimeDelay()
+    x = np.arange(10.0)
+    np.testing.assert_allclose(
+        e.apply(x, _ctx(x), {"delay_s": 2e-3}), [0, 0, 0, 1, 2, 3, 4, 5, 6, 7]
+    )
+    np.testing.assert_allclose(e.apply(x, _ctx(x), {"delay_s": 0.5e-3})[1:], x[1:] - 0.5)
+
+
+def test_slew_limit():
+    v = _sine(40.0, 100.0, 500)
+    top = 3e3  # V/s
+    y = slew_limit(v, top, FS)
+    assert np.max(np.abs(np.diff(y, prepend=0.0))) <= top / FS + 1e-12
+    assert np.ptp(y) < np.ptp(v)
+    assert slew_limit(v, 1e9, FS) is v
+    e = AmplifierCurrentLimit(measured=False)
+    assert e.physical({"inv_slew_ms_per_V": 0.5})["slew_V_per_ms"] == pytest.approx(2.0)
+
+
+def test_measured_voltage_ignores_monitor_noise():
+    rng = np.random.default_rng(0)
+    v = _sine(10.0, 100.0, 2000)
+    noisy = v + 0.01 * rng.standard_normal(v.size)
+    np.testing.assert_array_equal(measured_voltage(_ctx(v, amplifier_voltage=noisy)), v)
+    limited = slew_limit(v, 2e3, FS) + 0.01 * rng.standard_normal(v.size)
+    m = measured_voltage(_ctx(v, amplifier_voltage=limited))
+    big = np.abs(limited - v) > 1.0
+    np.testing.assert_array_equal(m[big], limited[big])
+
+
+def test_creep_is_logarithmic_after_a_step():
+    e = Creep()
+    n = 20000
+    x = np.ones(n)
+    y = e.apply(x, _ctx(np.zeros(n)), {"c_per_decade": 0.02})
+    t = np.arange(n) / FS
+    # one decade later the strain has grown by c (for t >> t0)
+    i1, i2 = round(1.0 * FS), round(10.0 * FS)
+    assert y[i2] - y[i1] == pytest.approx(
+        0.02 * np.log10((1 + t[i2] / e.t0_s) / (1 + t[i1] / e.t0_s))
+    )
+    assert y[i2] - y[i1] == pytest.approx(0.02, rel=0.03)
+
+
+def test_thermal_drift_with_and_without_temperature():
+    v = _sine(40.0, 100.0, 4000)
+    T = 23 + np.linspace(0, 4, v.size)
+    x = np.full(v.size, 100.0)
+    e = ThermalDrift(temperature=True)
+    y = e.apply(x, _ctx(v, temperature=T), {"k_per_K": 0.002})
+    assert y[-1] == pytest.approx(100 * (1 + 0.002 * 4))
+    e2 = ThermalDrift(temperature=False)
+    y2 = e2.apply(x, _ctx(v), {"k_rel": 0.05, "tau_th_s": 1.0})
+    assert y2[0] == pytest.approx(100.0)
+    assert y2[-1] == pytest.approx(105.0, rel=2e-3)  # steady state of the hottest entry
+    assert np.all(np.diff(y2) >= -1e-12)
+
+
+def test_nuisance_columns():
+    t = np.arange(1000) / FS
+    C = MainsPickup(50.0).columns(t, FS)
+    assert C.shape == (1000, 6)
+    assert OffsetDrift().columns(t, FS).shape == (1000, 2)
+    assert MainsPickup(60.0).columns(t, 100.0).shape[1] == 0  # above Nyquist: nothing
+
+
+def test_tangent_matches_differences_of_the_operator():
+    op = QuasiStaticHysteresis(8.9, 7.8, 65.0)
+    t = np.arange(3000) / FS
+    x = 50 * (1 - np.cos(2 * np.pi * t)) * (1 + 0.3 * np.sin(7 * t))
+    dx = np.sin(3 * t) + 0.5
+    h = 1e-6
+    fd = (op.apply(x + h * dx) - op.apply(x)) / h
+    np.testing.assert_allclose(_tangent(op, x, dx), fd, atol=1e-5)
