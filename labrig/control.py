@@ -348,15 +348,7 @@ def _deconvolve(h: Array, y: Array, zeros: list[complex]) -> Array:
 def _series_reciprocal_complex(h: NDArray[np.complex128]) -> NDArray[np.complex128]:
     if np.all(h.imag == 0):
         return series_reciprocal(h.real).astype(complex)
-    n = h.size
-    r = np.array([1.0 / h[0]])
-    m = 1
-    while m < n:
-        m = min(2 * m, n)
-        e = -signal.fftconvolve(h[:m], r)[:m]
-        e[0] += 2.0
-        r = signal.fftconvolve(r, e)[:m]
-    return r
+    return series_reciprocal(h)  # the same Newton iteration works in complex arithmetic
 
 
 def _tail(zeros: list[complex]) -> int:

@@ -290,9 +290,9 @@ def sampled_kernel(tau_s: float, lam: float, dt: float, n: int, hold: str) -> ND
     raise ValueError(f"hold must be one of {HOLDS}, got {hold!r}")
 
 
-def series_reciprocal(h: NDArray[np.float64]) -> NDArray[np.float64]:
+def series_reciprocal(h: NDArray) -> NDArray:
     """Causal inverse ``r`` of the sequence ``h`` (``h * r = delta``), by Newton's iteration on
-    power series with FFT products: O(N log N); requires ``h[0] != 0``."""
+    power series with FFT products: O(N log N); requires ``h[0] != 0``; real or complex."""
     n = h.size
     r = np.array([1.0 / h[0]])
     m = 1
