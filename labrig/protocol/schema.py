@@ -84,7 +84,25 @@ class SineStep(_StepBase):
         return self
 
 
-class VanishingStep(_StepBase):
+class _Envelope(_Base):
+    """The vanishing envelope's keys, shared by ``vanishing`` (volts) and ``strain_vanishing``
+    (ue): carrier frequency, decay time and shape."""
+
+    frequency_hz: Positive = Field(description="carrier frequency")
+    decay_s: Positive = Field(description="time from the first peak until the envelope is zero")
+    shape: Literal["exponential", "linear"] = "exponential"
+    tau_s: Positive | None = Field(
+        None, description="exponential time constant (default decay_s/2)"
+    )
+
+    @model_validator(mode="after")
+    def _tau_only_exponential(self):
+        if self.tau_s is not None and self.shape != "exponential":
+            raise ValueError("tau_s applies only to shape: exponential")
+        return self
+
+
+class VanishingStep(_StepBase, _Envelope):
     """Unipolar sine whose amplitude decays to zero over ``decay_s``, then 0 V for ``hold_s``.
 
     The first half cycle rises to the full ``amplitude_V`` (at ``t0 = 1/(2f)``); from there the
@@ -95,19 +113,7 @@ class VanishingStep(_StepBase):
 
     kind: Literal["vanishing"]
     amplitude_V: Positive = Field(description="peak voltage at the start of the envelope")
-    frequency_hz: Positive = Field(description="carrier frequency")
-    decay_s: Positive = Field(description="time from the first peak until the envelope is zero")
-    shape: Literal["exponential", "linear"] = "exponential"
-    tau_s: Positive | None = Field(
-        None, description="exponential time constant (default decay_s/2)"
-    )
     hold_s: NonNegative = Field(0.0, description="0 V hold recorded after the envelope")
-
-    @model_validator(mode="after")
-    def _tau_only_exponential(self):
-        if self.tau_s is not None and self.shape != "exponential":
-            raise ValueError("tau_s applies only to shape: exponential")
-        return self
 
 
 class HoldStep(_StepBase):
@@ -210,25 +216,13 @@ class StrainSineStep(_StrainStepBase):
         return self
 
 
-class StrainVanishingStep(_StrainStepBase):
+class StrainVanishingStep(_StrainStepBase, _Envelope):
     """Strain sine whose magnitude vanishes (the ``vanishing`` step's envelope, in ue), then
     ``hold_s`` of 0 ue commanded (the controller keeps working: the strain must stay at 0)."""
 
     kind: Literal["strain_vanishing"]
     amplitude_ue: Positive = Field(description="peak strain at the start of the envelope")
-    frequency_hz: Positive = Field(description="carrier frequency")
-    decay_s: Positive = Field(description="time from the first peak until the envelope is zero")
-    shape: Literal["exponential", "linear"] = "exponential"
-    tau_s: Positive | None = Field(
-        None, description="exponential time constant (default decay_s/2)"
-    )
     hold_s: NonNegative = Field(0.0, description="0 ue commanded after the envelope")
-
-    @model_validator(mode="after")
-    def _tau_only_exponential(self):
-        if self.tau_s is not None and self.shape != "exponential":
-            raise ValueError("tau_s applies only to shape: exponential")
-        return self
 
 
 class StrainCsvStep(_StrainStepBase):
