@@ -362,10 +362,11 @@ class _Builder:
             out.append(c)
         return out
 
-    def vanishing(self, s: VanishingStep, base: tuple) -> list[_Concrete]:
+    def _envelope(self, s, base: tuple, amplitude_key: str, amplitude: float):
+        """Pieces, definition and places of a vanishing envelope (volts or ue), or None."""
         where = {
             "step": self.where(base),
-            "amplitude_V": self.where((*base, "amplitude_V")),
+            amplitude_key: self.where((*base, amplitude_key)),
             "frequency_hz": self.where((*base, "frequency_hz")),
             "length": self.where((*base, "decay_s")),
             "hold_s": self.where((*base, "hold_s")),
@@ -374,29 +375,35 @@ class _Builder:
         nh = _intervals(s.hold_s, self.rate)
         if nh > MAX_STEP_SAMPLES:
             self.n_of(s.hold_s, where["hold_s"], "the hold")
-            return []
+            return None
         if n is None:
-            return []
+            return None
         tau = (
             (s.decay_s / 2.0 if s.tau_s is None else s.tau_s) if s.shape == "exponential" else None
         )
+        f = s.frequency_hz
         pieces = [
-            wf.vanishing_segment(
-                s.amplitude_V, s.frequency_hz, s.decay_s, s.shape, tau, n, "frequency_hz"
-            ),
+            wf.vanishing_segment(amplitude, f, s.decay_s, s.shape, tau, n, "frequency_hz"),
             wf.const_segment(0.0, nh, "hold_s"),
         ]
         definition = {
-            "kind": "vanishing",
-            "amplitude_V": s.amplitude_V,
-            "frequency_hz": s.frequency_hz,
-            "first_peak_s": 0.5 / s.frequency_hz,
+            amplitude_key: amplitude,
+            "frequency_hz": f,
+            "first_peak_s": 0.5 / f,
             "decay_s": s.decay_s,
             "envelope_end_s": n / self.rate,
             "shape": s.shape,
             "tau_s": tau,
             "hold_s": nh / self.rate,
         }
+        return pieces, definition, where
+
+    def vanishing(self, s: VanishingStep, base: tuple) -> list[_Concrete]:
+        env = self._envelope(s, base, "amplitude_V", s.amplitude_V)
+        if env is None:
+            return []
+        pieces, definition, where = env
+        definition = {"kind": "vanishing", **definition}
         name = s.name or f"vanishing_{num_tag(s.amplitude_V)}V_{num_tag(s.frequency_hz)}Hz"
         return [
             _Concrete("vanishing", name, pieces, definition, where, s.amplitude_V, s.frequency_hz)
@@ -569,38 +576,11 @@ class _Builder:
         return self._strain(s, base, "strain_sine", name, pieces, definition, where, f)
 
     def strain_vanishing(self, s: StrainVanishingStep, base: tuple) -> list[_Concrete]:
-        where = {
-            "step": self.where(base),
-            "amplitude_ue": self.where((*base, "amplitude_ue")),
-            "frequency_hz": self.where((*base, "frequency_hz")),
-            "length": self.where((*base, "decay_s")),
-            "hold_s": self.where((*base, "hold_s")),
-        }
-        n = self.n_of(0.5 / s.frequency_hz + s.decay_s, where["length"], "the envelope")
-        nh = _intervals(s.hold_s, self.rate)
-        if nh > MAX_STEP_SAMPLES:
-            self.n_of(s.hold_s, where["hold_s"], "the hold")
+        env = self._envelope(s, base, "amplitude_ue", s.amplitude_ue)
+        if env is None:
             return []
-        if n is None:
-            return []
-        tau = (
-            (s.decay_s / 2.0 if s.tau_s is None else s.tau_s) if s.shape == "exponential" else None
-        )
+        pieces, definition, where = env
         a, f = s.amplitude_ue, s.frequency_hz
-        pieces = [
-            wf.vanishing_segment(a, f, s.decay_s, s.shape, tau, n, "frequency_hz"),
-            wf.const_segment(0.0, nh, "hold_s"),
-        ]
-        definition = {
-            "amplitude_ue": a,
-            "frequency_hz": f,
-            "first_peak_s": 0.5 / f,
-            "decay_s": s.decay_s,
-            "envelope_end_s": n / self.rate,
-            "shape": s.shape,
-            "tau_s": tau,
-            "hold_s": nh / self.rate,
-        }
         name = f"strain_vanishing_{num_tag(a)}ue_{num_tag(f)}Hz"
         return self._strain(s, base, "strain_vanishing", name, pieces, definition, where, f)
 
