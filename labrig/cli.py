@@ -24,6 +24,20 @@ sim_app = typer.Typer(help="The simulated bench: run its instrument simulators s
 app.add_typer(sim_app, name="sim")
 
 
+# options shared by `fit` and `report`
+WARMUP_OPTION = typer.Option(
+    None, "--warmup-s", help="Seconds of each record simulated but not scored (default: auto)."
+)
+HELDOUT_OPTION = typer.Option(
+    True, "--heldout/--no-heldout", help="Leave-one-entry-out NRMSE (the slow part)."
+)
+OFFSET_OPTION = typer.Option(
+    None,
+    "--offset/--no-offset",
+    help="Fit one strain offset per entry (default: on for imported data).",
+)
+
+
 def friendly(fn: Callable) -> Callable:
     """Expected failures print one clear message (no traceback) and exit with their code."""
 
@@ -203,17 +217,9 @@ def fit(
     model: str = typer.Option(
         "dynamic", "--model", help="dynamic (ours), prandtl_ishlinskii or bouc_wen."
     ),
-    warmup_s: float | None = typer.Option(
-        None, "--warmup-s", help="Seconds of each record simulated but not scored (default: auto)."
-    ),
-    heldout: bool = typer.Option(
-        True, "--heldout/--no-heldout", help="Leave-one-entry-out NRMSE (the slow part)."
-    ),
-    offset: bool | None = typer.Option(
-        None,
-        "--offset/--no-offset",
-        help="Fit one strain offset per entry (default: on for imported data).",
-    ),
+    warmup_s: float | None = WARMUP_OPTION,
+    heldout: bool = HELDOUT_OPTION,
+    offset: bool | None = OFFSET_OPTION,
 ) -> None:
     """Identify the model (or a baseline) from a run file; print parameters and NRMSE."""
     from labrig.cli_analysis import run_fit
@@ -236,17 +242,9 @@ def report(
     method: str = typer.Option(
         "global", "--method", help="Fit method when fitting: global|staged."
     ),
-    warmup_s: float | None = typer.Option(
-        None, "--warmup-s", help="Seconds of each record simulated but not scored (default: auto)."
-    ),
-    heldout: bool = typer.Option(
-        True, "--heldout/--no-heldout", help="Leave-one-entry-out NRMSE (the slow part)."
-    ),
-    offset: bool | None = typer.Option(
-        None,
-        "--offset/--no-offset",
-        help="Fit one strain offset per entry (default: on for imported data).",
-    ),
+    warmup_s: float | None = WARMUP_OPTION,
+    heldout: bool = HELDOUT_OPTION,
+    offset: bool | None = OFFSET_OPTION,
 ) -> None:
     """Model versus measurement as one HTML file; baselines fitted on the same data."""
     from labrig.cli_analysis import run_report
