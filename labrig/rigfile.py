@@ -244,7 +244,8 @@ def load_rig(path: Path | str | None = None) -> RigSpec:
         data, lines, text = read_yaml(path)
     if not isinstance(data, dict):
         what = "empty" if data is None else f"a {type(data).__name__}"
-        raise InputFileError([InputIssue(name, 1, "", f"expected a YAML mapping, got {what}")])
+        line = lines.get((), 1)
+        raise InputFileError([InputIssue(name, line, "", f"expected a YAML mapping, got {what}")])
     outline_model = _outline()
     try:
         outline = outline_model.model_validate(data)

@@ -738,7 +738,12 @@ def export_csv(path: Path | str, out_dir: Path | str) -> list[Path]:
     """
     run = read_run(path)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputFileError(
+            [InputIssue(str(out), None, "--csv", f"cannot create directory: {e.strerror}")]
+        ) from None
     written = []
     for e in run:
         p = out / f"{e.name}.csv"

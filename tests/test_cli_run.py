@@ -298,11 +298,6 @@ def test_bad_out_paths_are_refused_without_traceback(tmp_path):
     assert list(d.iterdir()) == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="an unwritable --csv directory escapes `friendly` as an OSError traceback "
-    "(export_csv / cli.py do not turn OSError into a message)",
-)
 def test_export_to_an_unwritable_place_is_a_message(paper_run):
     out, _ = paper_run
     res = CliRunner().invoke(app, ["export", str(out), "--csv", "/proc/no/such/dir"])
@@ -325,11 +320,6 @@ def test_protocol_name_with_brackets_runs(tmp_path):
     assert read_run(out).status == "complete"
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="protocol/check.py format_plan puts the protocol name in a rich Table title, which "
-    "rich parses as markup: MarkupError and a traceback",
-)
 def test_check_protocol_name_with_brackets(tmp_path):
     proto = tmp_path / "p.yaml"
     proto.write_text(

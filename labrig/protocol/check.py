@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pydantic import ValidationError
+from rich.markup import escape
 from rich.table import Table
 
 from labrig.errors import InputFileError, InputIssue
@@ -129,7 +130,7 @@ def format_plan(plan: Plan) -> Table:
     lim = plan.limits
     n = len(plan.steps)
     table = Table(
-        title=f"{plan.name}: {n} {'entry' if n == 1 else 'entries'} at {plan.rate_hz:g} Hz",
+        title=f"{escape(plan.name)}: {n} {'entry' if n == 1 else 'entries'} at {plan.rate_hz:g} Hz",
         caption=(
             "V: amplitude; Hz: frequency; s: duration; peak A: peak current into the stack; "
             "rest s: 0 V after the entry\n"
