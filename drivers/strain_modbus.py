@@ -16,7 +16,7 @@ import contextlib
 import logging
 
 from labrig.drivers import strain_registers as R
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 from pymodbus import FramerType
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ModbusException
@@ -56,6 +56,15 @@ class StrainModbusSettings(BaseModel):
         1.085, gt=0, description="calibration at gain 1 and this excitation; null: ask the device"
     )
     zero_on_open: bool = Field(True, description="auto-balance when the rig opens")
+
+    @field_validator("address")
+    @classmethod
+    def _tcp_address(cls, v: str, info: ValidationInfo) -> str:
+        if info.data.get("transport", "tcp") == "tcp" and v != "sim":
+            host, sep, port = v.rpartition(":")
+            if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+                raise ValueError(f"a tcp address is host:port with a port 1-65535, got {v!r}")
+        return v
 
     @field_validator("gain")
     @classmethod
