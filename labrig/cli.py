@@ -220,11 +220,17 @@ def fit(
     warmup_s: float | None = WARMUP_OPTION,
     heldout: bool = HELDOUT_OPTION,
     offset: bool | None = OFFSET_OPTION,
+    effect: list[str] = typer.Option(
+        [],
+        "--effect",
+        help="Also fit this library effect with the model (repeatable), e.g. "
+        "viscoelastic_creep (which compensation control inverts); see docs/diagnose.md.",
+    ),
 ) -> None:
     """Identify the model (or a baseline) from a run file; print parameters and NRMSE."""
     from labrig.cli_analysis import run_fit
 
-    run_fit(run_file, entries, out, as_json, method, model, warmup_s, heldout, offset)
+    run_fit(run_file, entries, out, as_json, method, model, warmup_s, heldout, offset, effect)
 
 
 @app.command("report")

@@ -371,20 +371,35 @@ def run_fit(
     warmup_s: float | None,
     heldout: bool,
     offset: bool | None,
+    effects: Sequence[str] = (),
 ) -> None:
     """``labrig fit``."""
+    from labrig.analysis.fit_effects import EffectsFit, known_effects
+
     err = Console(stderr=True)
     if method not in ("global", "staged"):
         raise AnalysisError(f"--method must be global or staged, got {method!r}")
     if model not in MODELS:
         raise AnalysisError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
+    if effects and model != "dynamic":
+        raise AnalysisError(f"--effect applies to the dynamic model, not to --model {model}")
+    bad = [e for e in effects if e not in known_effects()]
+    if bad:
+        raise AnalysisError(
+            f"--effect {bad[0]!r} is not a library effect; choose from: "
+            f"{', '.join(known_effects())}"
+        )
     if out is not None and out.is_dir():
         raise AnalysisError(f"--out {out} is a directory; give a file name such as params.json")
     setup = prepare(run_file, parse_entries(entries), warmup_s, offset)
     _print_setup(err, setup)
     with FitProgress(err) as progress:
         if model == "dynamic":
-            res: FitResult | BaselineResult = fit_dynamic(setup, method, heldout, progress)
+            res: FitResult | BaselineResult | EffectsFit = fit_dynamic(
+                setup, method, heldout and not effects, progress
+            )
+            if effects:
+                res = fit_with_effects(setup, res, effects, heldout, progress)
         else:
             res = fit_base(setup, model, heldout, progress)
     j = finite(res.to_json())
@@ -400,6 +415,8 @@ def run_fit(
         con = Console()
         for t in summary_tables(res, model):
             con.print(t)
+        if isinstance(res, EffectsFit):
+            con.print(effects_table(res))
         from labrig.report.data import noise_floor
 
         floor = noise_floor(setup.scored_records, setup.run.instrument, setup.warmup_s)
@@ -413,6 +430,57 @@ def run_fit(
             con.print(f"fit {res.elapsed_s:.1f} s{held}")
     if out is not None:
         err.print(f"wrote {escape(str(out))}")
+
+
+def fit_with_effects(
+    setup: Setup,
+    base: FitResult,
+    effects: Sequence[str],
+    heldout: bool,
+    progress: FitProgress | None,
+):
+    """``--effect``: the base fit refitted with the named effects (labrig.analysis.fit_effects)."""
+    from labrig.analysis.fit_effects import fit_effects
+
+    def cb(stage: str, done: int, total: int) -> None:
+        if progress is None:
+            return
+        label = {"effects": "model + effects: fit from each start", "heldout": "leave-one-out"}
+        progress.task(f"eff:{stage}", label.get(stage, stage), total)(done)
+
+    try:
+        return fit_effects(
+            setup.records,
+            base,
+            effects,
+            chain=setup.chain,
+            scored=setup.scored,
+            warmup_s=setup.warmup_s,
+            offset=setup.offset,
+            heldout=heldout,
+            progress=cb,
+        )
+    except (ValueError, RuntimeError) as e:
+        raise AnalysisError(f"{setup.path}: cannot fit the model with effects: {e}") from None
+
+
+def effects_table(res) -> Table:
+    """The fitted effects and the NRMSE with and without them (same held-out scoring)."""
+    t = Table(title="effects fitted with the model")
+    t.add_column("effect")
+    t.add_column("parameters")
+    for e in res.effects:
+        t.add_row(e["effect"], escape(e["description"]))
+    held = (
+        f"{_num(res.base_heldout_nrmse_pct, 3)} % -> {_num(res.heldout_nrmse_pct, 3)} %"
+        if res.heldout_nrmse_pct is not None
+        else "not computed"
+    )
+    t.caption = (
+        f"NRMSE without -> with the effects: in-sample {_num(res.base_nrmse_pct, 3)} % -> "
+        f"{_num(res.nrmse_pct, 3)} %; held-out (second half of each left-out entry) {held}"
+    )
+    return t
 
 
 def _print_setup(err: Console, setup: Setup) -> None:

@@ -95,12 +95,14 @@ from scipy import linalg, signal
 
 from labrig.limits import RigLimits
 from labrig.model import DynamicHysteresisModel, ModelParams, QuasiStaticHysteresis, Relaxor
+from labrig.model.effects import kelvin_voigt_filter
 from labrig.model.modal import DiscreteBank
 from labrig.model.relaxor import sampled_kernel, series_reciprocal
 
 __all__ = [
     "CONTROLS",
     "CompensationController",
+    "ControlModel",
     "DirectController",
     "DriveCheck",
     "InfeasibleCommandError",
@@ -112,6 +114,7 @@ __all__ = [
     "entry_metrics",
     "final_strain_ue",
     "hysteresis_width_pct",
+    "load_control_model",
     "load_params",
     "model_tracking_error",
     "outside_zeros",
@@ -151,6 +154,64 @@ class InfeasibleCommandError(ValueError):
 # -- parameters --------------------------------------------------------------------------------
 
 
+#: actuator effects (labrig.model.effects) the controller inverts along with the model
+INVERTIBLE_EFFECTS = ("viscoelastic_creep",)
+
+
+@dataclass(frozen=True)
+class ControlModel:
+    """What the compensation inverts: the dynamic model and, optionally, the viscoelastic creep
+    fitted with it (``labrig fit --effect viscoelastic_creep``):
+    ``S = KV[alpha0 V* + H[V*]]``, ``KV`` = :func:`labrig.model.effects.kelvin_voigt_filter`
+    with ``creep = (c, tau_s)``."""
+
+    params: ModelParams
+    creep: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if self.creep is not None:
+            c, tau = self.creep
+            if not (math.isfinite(c) and -1.0 < c < 1.0 and math.isfinite(tau) and tau > 0):
+                raise ValueError(
+                    f"viscoelastic_creep needs -1 < c < 1 and tau_s > 0, got c={c}, tau_s={tau}"
+                )
+
+    def creep_filter(self, rate_hz: float) -> tuple[Array, Array] | None:
+        """``(b, a)`` of the creep filter at ``rate_hz`` (None without creep)."""
+        if self.creep is None:
+            return None
+        return kelvin_voigt_filter(self.creep[0], self.creep[1], rate_hz)
+
+
+def as_control_model(model: ModelParams | ControlModel) -> ControlModel:
+    """A :class:`ControlModel` for either argument form (``ModelParams``: no creep)."""
+    return model if isinstance(model, ControlModel) else ControlModel(model)
+
+
+def _read_json(p: Path) -> Any:
+    try:
+        return json.loads(p.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{p.name} is not valid JSON (line {e.lineno}: {e.msg})") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{p.name} is not a text file") from None
+
+
+def _validated_params(data: Any, name: str) -> ModelParams:
+    if isinstance(data, dict) and isinstance(data.get("params"), dict):
+        data = data["params"]
+    if not isinstance(data, dict):
+        raise ValueError(f"{name}: expected a JSON object with a 'params' mapping")
+    try:
+        return ModelParams.model_validate(data)
+    except Exception as e:  # pydantic ValidationError: say which fields
+        errs = getattr(e, "errors", None)
+        if callable(errs):
+            parts = [f"{'.'.join(map(str, x['loc'])) or 'params'}: {x['msg']}" for x in errs()]
+            raise ValueError(f"{name}: invalid model parameters ({'; '.join(parts)})") from None
+        raise ValueError(f"{name}: invalid model parameters ({e})") from None
+
+
 def load_params(path: str | Path) -> ModelParams:
     """:class:`ModelParams` from a JSON file written by ``labrig fit --out``.
 
@@ -159,24 +220,36 @@ def load_params(path: str | Path) -> ModelParams:
     (``OSError`` for an unreadable file) with a message naming the problem.
     """
     p = Path(path)
+    return _validated_params(_read_json(p), p.name)
+
+
+def load_control_model(path: str | Path) -> ControlModel:
+    """:class:`ControlModel` from ``labrig fit --out`` JSON: its ``params`` and, when the fit
+    had ``--effect viscoelastic_creep``, the creep in its ``effects`` list. Any other fitted
+    effect is refused with a ``ValueError`` naming it (the controller cannot invert it)."""
+    p = Path(path)
+    data = _read_json(p)
+    params = _validated_params(data, p.name)
+    effects = data.get("effects", []) if isinstance(data, dict) else []
+    if not isinstance(effects, list):
+        raise ValueError(f"{p.name}: 'effects' must be a list of {{effect, params}} objects")
+    creep = None
+    for e in effects:
+        name = e.get("effect") if isinstance(e, dict) else None
+        if name not in INVERTIBLE_EFFECTS:
+            raise ValueError(
+                f"{p.name}: the controller cannot invert the effect {name!r} (it inverts "
+                f"{', '.join(INVERTIBLE_EFFECTS)}); refit without --effect {name}"
+            )
+        q = e.get("params", {})
+        try:
+            creep = (float(q["c"]), float(q["tau_s"]))
+        except (KeyError, TypeError, ValueError):
+            raise ValueError(f"{p.name}: {name} needs numeric params c and tau_s") from None
     try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{p.name} is not valid JSON (line {e.lineno}: {e.msg})") from None
-    except UnicodeDecodeError:
-        raise ValueError(f"{p.name} is not a text file") from None
-    if isinstance(data, dict) and isinstance(data.get("params"), dict):
-        data = data["params"]
-    if not isinstance(data, dict):
-        raise ValueError(f"{p.name}: expected a JSON object with a 'params' mapping")
-    try:
-        return ModelParams.model_validate(data)
-    except Exception as e:  # pydantic ValidationError: say which fields
-        errs = getattr(e, "errors", None)
-        if callable(errs):
-            parts = [f"{'.'.join(map(str, x['loc'])) or 'params'}: {x['msg']}" for x in errs()]
-            raise ValueError(f"{p.name}: invalid model parameters ({'; '.join(parts)})") from None
-        raise ValueError(f"{p.name}: invalid model parameters ({e})") from None
+        return ControlModel(params, creep)
+    except ValueError as e:
+        raise ValueError(f"{p.name}: {e}") from None
 
 
 # -- offline (whole-waveform) drives -------------------------------------------------------------
@@ -191,7 +264,7 @@ def _command(strain_ue: ArrayLike) -> Array:
     return s
 
 
-def direct_drive(strain_ue: ArrayLike, params: ModelParams) -> Array:
+def direct_drive(strain_ue: ArrayLike, params: ModelParams | ControlModel) -> Array:
     """``V = S_com / alpha0`` held on each sample interval: ``V[n]`` is the interval mean
     ``(S[n] + S[n+1]) / (2 alpha0)`` (the last sample repeats ``S[-1]``), the same timing as
     :func:`compensated_drive` so the two controls are compared on equal terms."""
@@ -199,7 +272,7 @@ def direct_drive(strain_ue: ArrayLike, params: ModelParams) -> Array:
     if s.size == 0:
         return s.copy()
     nxt = np.append(s[1:], s[-1])
-    return 0.5 * (s + nxt) / params.alpha0_ue_per_V
+    return 0.5 * (s + nxt) / as_control_model(params).params.alpha0_ue_per_V
 
 
 def _real_layout(bank: DiscreteBank, zoh: bool):
@@ -378,12 +451,16 @@ def _relaxor_inverse(
     return _deconvolve(h, target, zeros), zeros
 
 
-def compensated_drive(strain_ue: ArrayLike, params: ModelParams, rate_hz: float) -> Array:
+def compensated_drive(
+    strain_ue: ArrayLike, params: ModelParams | ControlModel, rate_hz: float
+) -> Array:
     """The drive ``V`` (V) whose model response follows ``strain_ue`` (offline, exact).
 
     ``V[n]`` is held on ``[t_n, t_{n+1})``; ``predict(V)[n] = strain_ue[n]`` (module docstring;
     ``strain_ue[0]`` should be 0, the actuator at rest). Uses the command's future (the
-    anti-causal zero of ``G_d``) and continues it at its last value.
+    anti-causal zero of ``G_d``) and continues it at its last value. With a
+    :class:`ControlModel` holding creep, the command is first passed through the creep's
+    inverse (causal and stable, :func:`labrig.model.effects.kelvin_voigt_filter`).
     """
     s = _command(strain_ue)
     rate_hz = float(rate_hz)
@@ -391,17 +468,30 @@ def compensated_drive(strain_ue: ArrayLike, params: ModelParams, rate_hz: float)
         raise ValueError(f"rate_hz must be a positive sample rate, got {rate_hz!r}")
     if s.size == 0:
         return s.copy()
-    p = params
+    cm = as_control_model(params)
+    p = cm.params
+    n = s.size
+    ba = cm.creep_filter(rate_hz)
+    if ba is None:
+        s = np.append(s, s[-1])  # one extra sample: V[N-1] reaches vt[N]
+    else:
+        # the *strain* command continues at its last value, so the uncrept one keeps moving:
+        # uncreep it over the look-ahead the relaxor inverses use (as the per-sample form does)
+        ahead = 1 + sum(
+            _tail(outside_zeros(tau, lam, rate_hz, hold))
+            for tau, lam, hold in ((p.tau_d_s, p.lam_d, "linear"), (p.tau_t_s, p.lam_t, "zoh"))
+        )
+        s = signal.lfilter(ba[1], ba[0], np.append(s, np.full(ahead, s[-1])))
     op = QuasiStaticHysteresis(p.alpha0_ue_per_V, p.gamma_ue_per_V, p.vc_V, p.shape)
-    u = op.invert(np.append(s, s[-1]))  # one extra sample: V[N-1] reaches vt[N]
+    u = op.invert(s)
     vt, _ = _relaxor_inverse(u, p.tau_d_s, p.lam_d, rate_hz, "linear")
     v, _ = _relaxor_inverse(vt, p.tau_t_s, p.lam_t, rate_hz, "zoh")
-    return v
+    return v[:n]
 
 
 def compute_drive(
     strain_ue: ArrayLike,
-    params: ModelParams,
+    params: ModelParams | ControlModel,
     rate_hz: float,
     control: str = "compensated",
     limits: RigLimits | None = None,
@@ -432,12 +522,18 @@ def compute_drive(
 
 
 def model_tracking_error(
-    strain_ue: ArrayLike, params: ModelParams, rate_hz: float, method: str = "fast"
+    strain_ue: ArrayLike, params: ModelParams | ControlModel, rate_hz: float, method: str = "fast"
 ) -> Array:
-    """``predict(compensated_drive(S)) - S`` (ue): how exactly the drive inverts the model."""
+    """``predict(compensated_drive(S)) - S`` (ue): how exactly the drive inverts the model
+    (with a :class:`ControlModel`'s creep applied to the prediction)."""
     s = _command(strain_ue)
-    v = compensated_drive(s, params, rate_hz)
-    return DynamicHysteresisModel(params).predict(v, rate_hz, method=method) - s
+    cm = as_control_model(params)
+    v = compensated_drive(s, cm, rate_hz)
+    y = DynamicHysteresisModel(cm.params).predict(v, rate_hz, method=method)
+    ba = cm.creep_filter(rate_hz)
+    if ba is not None:
+        y = signal.lfilter(ba[0], ba[1], y)
+    return y - s
 
 
 # -- limits ------------------------------------------------------------------------------------
@@ -775,13 +871,17 @@ class CompensationController:
 
     def __init__(
         self,
-        params: ModelParams,
+        params: ModelParams | ControlModel,
         rate_hz: float,
         limits: RigLimits | None = None,
         tol: float = PREVIEW_TOL,
     ):
-        p = params
+        cm = as_control_model(params)
+        p = cm.params
         self.params, self.rate_hz, self.limits = p, float(rate_hz), limits
+        ba = cm.creep_filter(self.rate_hz)
+        # inverse creep filter a(z)/b(z): one state (the previous input and output)
+        self._creep = None if ba is None else (ba[1], ba[0])
         op = QuasiStaticHysteresis(p.alpha0_ue_per_V, p.gamma_ue_per_V, p.vc_V, p.shape)
         self._static = _StaticInverseStepper(op)
         self._gd = _BankInverse(p.tau_d_s, p.lam_d, self.rate_hz, "linear", tol)
@@ -794,6 +894,7 @@ class CompensationController:
         self._static.reset()
         self._gd.reset()
         self._gt.reset()
+        self._creep_x = self._creep_y = 0.0
         self._vt_seen = 0
         self._pushed = 0
         self.n_clipped = 0
@@ -804,9 +905,17 @@ class CompensationController:
             if self._push(float(s)) is not None:  # pragma: no cover - guarded by preview
                 raise RuntimeError("prime() got more than preview samples")
 
+    def _uncreep(self, s: float) -> float:
+        if self._creep is None:
+            return s
+        (n0, n1), (d0, d1) = self._creep
+        y = (n0 * s + n1 * self._creep_x - d1 * self._creep_y) / d0
+        self._creep_x, self._creep_y = s, y
+        return y
+
     def _push(self, s: float) -> float | None:
         self._pushed += 1
-        vt = self._gd.push(self._static.step(s))
+        vt = self._gd.push(self._static.step(self._uncreep(s)))
         if vt is None:
             return None
         self._vt_seen += 1
@@ -845,8 +954,10 @@ class DirectController:
 
     preview = 1
 
-    def __init__(self, params: ModelParams, rate_hz: float, limits: RigLimits | None = None):
-        self.alpha0 = params.alpha0_ue_per_V
+    def __init__(
+        self, params: ModelParams | ControlModel, rate_hz: float, limits: RigLimits | None = None
+    ):
+        self.alpha0 = as_control_model(params).params.alpha0_ue_per_V
         self.rate_hz, self.limits = float(rate_hz), limits
         self.reset()
 

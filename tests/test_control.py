@@ -62,7 +62,8 @@ def test_compensated_drive_inverts_the_model(params, f_hz):
         # a start-up transient of a few samples (the anti-causal zero of G_d), then exact
         assert np.max(np.abs(err[100:])) < tol * 1000.0
         assert np.max(np.abs(err)) < 3e-3 * 1000.0
-        assert np.argmax(np.abs(err)) <= 3
+        # (where there is a visible transient at all: below 1e-9 of the span it is rounding)
+        assert np.argmax(np.abs(err)) <= 3 or np.max(np.abs(err)) < 1e-9 * 1000.0
 
 
 def test_model_tracking_error_and_minor_loops():
@@ -117,7 +118,8 @@ def test_per_sample_controller_agrees_with_offline(params):
     for s in (strain_sine(1000.0, 40.0, 40), vanishing()):
         v_off = compensated_drive(s, params, RATE)
         ctl = CompensationController(params, RATE)
-        assert ctl.preview >= 2
+        # PAPER_CONTROL's G_d (lam_d 1.35) has an outside zero at 1 kHz: look-ahead needed
+        assert ctl.preview >= (2 if params is PAPER_CONTROL else 1)
         v_ps = ctl.run(s)
         assert np.max(np.abs(v_ps - v_off)) < 1e-5  # V (drives of ~90 V)
 
@@ -238,3 +240,55 @@ def test_relaxor_inverse_is_exact_up_to_the_last_sample():
     v_off = compensated_drive(s, FITTED, RATE)
     v_ps = CompensationController(FITTED, RATE).run(s)
     assert np.max(np.abs(v_ps - v_off)) < 1e-5
+
+
+# -- the creep fitted with the model (labrig fit --effect viscoelastic_creep) ------------------
+
+
+def test_control_model_with_creep_inverts_model_and_creep():
+    """The drive of a ControlModel makes ``KV[model(V)]`` follow the command; the creep stage is
+    checked against its continuous-time step response, not against its own inverse."""
+    from scipy import signal
+
+    from labrig.control import ControlModel
+
+    c, tau = 0.1, 0.27
+    cm = ControlModel(FITTED, (c, tau))
+    s = strain_sine(1000.0, 5.0, 10)
+    v = compensated_drive(s, cm, RATE)
+    y = DynamicHysteresisModel(FITTED).predict(v, RATE)
+    a_lag = math.exp(-1.0 / (RATE * tau))  # the sampled lag 1/(1 + tau s), step-invariant
+    lag = signal.lfilter([1 - a_lag], [1.0, -a_lag], y)
+    y_kv = (1 - c) * y + c * lag
+    assert np.max(np.abs(y_kv - s)[100:]) < 1e-4  # ue, on a 1000 ue command
+    # without the creep stage the same model misses the command by about c of its changes
+    y_plain = DynamicHysteresisModel(FITTED).predict(compensated_drive(s, FITTED, RATE), RATE)
+    assert np.max(np.abs((1 - c) * y_plain + c * signal.lfilter([1 - a_lag], [1, -a_lag],
+                                                                y_plain) - s)) > 10  # fmt: skip
+    # per sample = offline, for sines and a vanishing command
+    for cmd in (s, vanishing()):
+        assert np.max(np.abs(CompensationController(cm, RATE).run(cmd)
+                             - compensated_drive(cmd, cm, RATE))) < 1e-5  # fmt: skip
+    # direct control ignores the creep: V = S / alpha0
+    assert np.array_equal(direct_drive(s, cm), direct_drive(s, FITTED))
+
+
+def test_load_control_model(tmp_path):
+    from labrig.control import load_control_model
+
+    doc = json.loads((ROOT / "experiments" / "hybrid-params.json").read_text())
+    cm = load_control_model(ROOT / "experiments" / "hybrid-params.json")
+    assert cm.params == load_params(ROOT / "experiments" / "hybrid-params.json")
+    (e,) = doc["effects"]
+    assert e["effect"] == "viscoelastic_creep"
+    assert cm.creep == (e["params"]["c"], e["params"]["tau_s"])
+    f = tmp_path / "p.json"
+    f.write_text(json.dumps({**doc, "effects": []}))
+    assert load_control_model(f).creep is None
+    f.write_text(json.dumps({**doc, "effects": [{"effect": "sensor_lowpass", "params": {}}]}))
+    with pytest.raises(ValueError, match="cannot invert the effect 'sensor_lowpass'"):
+        load_control_model(f)
+    bad = {"effect": "viscoelastic_creep", "params": {"c": 1.5, "tau_s": 0.2}}
+    f.write_text(json.dumps({**doc, "effects": [bad]}))
+    with pytest.raises(ValueError, match="-1 < c < 1"):
+        load_control_model(f)

@@ -164,3 +164,36 @@ def test_tangent_matches_differences_of_the_operator():
     h = 1e-6
     fd = (op.apply(x + h * dx) - op.apply(x)) / h
     np.testing.assert_allclose(_tangent(op, x, dx), fd, atol=1e-5)
+
+
+def test_viscoelastic_creep_step_response_is_one_kelvin_voigt_element():
+    """Independent reference: a unit step through ``(1 - c) + c / (1 + tau s)`` relaxes as
+    ``1 - c exp(-t / tau)`` (continuous time); the sampled lag reaches sample ``n`` at
+    ``t = (n + 1) / rate`` (its state is updated with ``x[n]`` before it is read)."""
+    from labrig.model.effects import ViscoelasticCreep
+
+    eff = library()["viscoelastic_creep"]
+    assert isinstance(eff, ViscoelasticCreep) and eff.where == "output"
+    c, tau = 0.08, 0.25
+    x = np.ones(3000)
+    y = eff.apply(x, _ctx(x), {"c": c, "tau_s": tau})
+    t = (np.arange(x.size) + 1) / FS
+    assert np.max(np.abs(y - (1 - c * np.exp(-t / tau)))) < 1e-12
+    # DC gain 1 and linearity; the null leaves the strain alone
+    s = _sine(2.0, 100.0, 5000)
+    assert np.allclose(eff.apply(3 * s, _ctx(s), {"c": c, "tau_s": tau}),
+                       3 * eff.apply(s, _ctx(s), {"c": c, "tau_s": tau}))  # fmt: skip
+    assert np.array_equal(eff.apply(s, _ctx(s), {"c": 0.0, "tau_s": tau}), s)
+
+
+def test_kelvin_voigt_filter_inverse_is_stable_and_exact():
+    from scipy import signal
+
+    from labrig.model.effects import kelvin_voigt_filter
+
+    for c in (-0.2, 0.05, 0.3, 0.9):
+        b, a = kelvin_voigt_filter(c, 0.1, FS)
+        assert np.all(np.abs(np.roots(b)) < 1.0)  # the inverse's pole
+        x = np.random.default_rng(1).standard_normal(2000).cumsum()
+        back = signal.lfilter(a, b, signal.lfilter(b, a, x))
+        assert np.max(np.abs(back - x)) < 1e-9 * np.max(np.abs(x))

@@ -465,7 +465,7 @@ class _Builder:
 
     def _load_params(self, s, base: tuple):
         """The step's model parameters (or the protocol's), or None with an issue recorded."""
-        from labrig.control import load_params
+        from labrig.control import load_control_model
 
         if s.params is not None:
             ref, w = s.params, self.where((*base, "params"))
@@ -483,7 +483,7 @@ class _Builder:
             path = self.base_dir / path
         if path not in self._params:
             try:
-                self._params[path] = load_params(path)
+                self._params[path] = load_control_model(path)
             except FileNotFoundError:
                 self._params[path] = f"parameter file not found: {path}"
             except (OSError, ValueError) as e:
@@ -500,9 +500,10 @@ class _Builder:
         """Compose the strain command, compute the drive, return the concrete step."""
         from labrig.control import compute_drive
 
-        params, _ = self._load_params(s, base)
-        if params is None:
+        model, _ = self._load_params(s, base)
+        if model is None:
             return []
+        params = model.params
         where = {
             **where,
             "params": self.where((*base, "params") if s.params else ("params",)),
@@ -520,7 +521,7 @@ class _Builder:
             return []
         strain = command.samples()
         try:
-            drive = compute_drive(strain, params, self.rate, s.control)
+            drive = compute_drive(strain, model, self.rate, s.control)
         except ValueError as e:
             self.issue(where["step"], f"cannot compute the {s.control} drive: {e}")
             return []
@@ -539,6 +540,9 @@ class _Builder:
             "control": s.control,
             "params_file": str(s.params if s.params is not None else self.p.params),
             "model_params": params.model_dump(),
+            "model_creep": (
+                None if model.creep is None else {"c": model.creep[0], "tau_s": model.creep[1]}
+            ),
             "strain_edge_ramps": sum(1 for g in command.segments if g.role == "edge"),
             "command_start_index": 1,
             "command_stop_index": int(strain.size + 1),
