@@ -11,9 +11,10 @@ What is measured (nothing is typed by hand; RESULTS.md is not touched):
 1. The per-sample controller (:class:`CompensationController`, what a real-time loop would run):
    wall time of ``step()`` per sample, mean over a whole command and the median / 99th
    percentile / maximum of individually timed steps, at 1 kHz and 10 kHz, against the 100 us
-   budget of a 10 kHz loop; the split into the static inverse and the two relaxor stages; the
-   direct controller for comparison. Parameters: experiments/hybrid-params.json (the fit the
-   control example uses, with its viscoelastic creep). Command: a 0-1000 ue unipolar sine at 10 Hz.
+   budget of a 10 kHz loop; the split into the creep inverse, the static inverse and the two
+   relaxor stages; the direct controller for comparison. Parameters:
+   experiments/hybrid-params.json (the fit the control example uses, with its viscoelastic
+   creep). Command: a 0-1000 ue unipolar sine at 10 Hz.
 2. Its agreement with the offline drive (:func:`compensated_drive`): max |V_step - V_offline|.
 3. The offline drive's time for 1e4, 1e5 and 1e6 samples, and how exactly it inverts the model:
    ``predict(compensated_drive(S)) - S`` for 0-1000 ue sines at 1-40 Hz (max over the record,

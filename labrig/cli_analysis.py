@@ -374,7 +374,7 @@ def run_fit(
     effects: Sequence[str] = (),
 ) -> None:
     """``labrig fit``."""
-    from labrig.analysis.fit_effects import EffectsFit, known_effects
+    from labrig.analysis.fit_effects import EffectsFit, resolve_effects
 
     err = Console(stderr=True)
     if method not in ("global", "staged"):
@@ -383,12 +383,10 @@ def run_fit(
         raise AnalysisError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
     if effects and model != "dynamic":
         raise AnalysisError(f"--effect applies to the dynamic model, not to --model {model}")
-    bad = [e for e in effects if e not in known_effects()]
-    if bad:
-        raise AnalysisError(
-            f"--effect {bad[0]!r} is not a library effect; choose from: "
-            f"{', '.join(known_effects())}"
-        )
+    try:
+        resolve_effects(effects)  # before any fitting
+    except ValueError as e:
+        raise AnalysisError(f"--effect {e}") from None
     if out is not None and out.is_dir():
         raise AnalysisError(f"--out {out} is a directory; give a file name such as params.json")
     setup = prepare(run_file, parse_entries(entries), warmup_s, offset)

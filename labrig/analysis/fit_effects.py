@@ -31,7 +31,7 @@ from labrig.analysis.records import Record
 from labrig.model import ModelParams
 from labrig.model.effects import Effect, library
 
-__all__ = ["EffectsFit", "fit_effects", "known_effects"]
+__all__ = ["EffectsFit", "fit_effects", "known_effects", "resolve_effects"]
 
 
 def known_effects() -> list[str]:
@@ -54,7 +54,6 @@ class EffectsFit:
     base_nrmse_pct: float
     base_heldout_nrmse_pct: float | None
     entries: list[str]
-    at_bound: dict[str, list[str]]
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -74,12 +73,13 @@ class EffectsFit:
         }
 
 
-def _resolve(names: Sequence[str]) -> list[Effect]:
+def resolve_effects(names: Sequence[str]) -> list[Effect]:
+    """The library effects named (``ValueError`` naming an unknown or repeated one)."""
     lib, ok = library(), known_effects()
     out = []
     for n in names:
         if n not in ok:
-            raise ValueError(f"unknown effect {n!r}; --effect takes one of: {', '.join(ok)}")
+            raise ValueError(f"{n!r} is not a library effect; choose from: {', '.join(ok)}")
         if any(e.name == n for e in out):
             raise ValueError(f"effect {n!r} given twice")
         out.append(lib[n])
@@ -122,7 +122,7 @@ def fit_effects(
 
     ``progress(stage, done, total)``: stage ``"effects"`` (the starts) then ``"heldout"``.
     Raises ``ValueError`` for an unknown effect name."""
-    effects = _resolve(names)
+    effects = resolve_effects(names)
     common = dict(
         chain=chain, shape=base.params.shape, scored=scored, warmup_s=warmup_s, offset=offset
     )
@@ -171,5 +171,4 @@ def fit_effects(
         base_nrmse_pct=float(np.mean(list(base_per_entry.values()))),
         base_heldout_nrmse_pct=_mean(base_held),
         entries=list(prob.scored),
-        at_bound=dict(best.at_bound),
     )
