@@ -95,6 +95,7 @@ from scipy import linalg, signal
 
 from labrig.limits import RigLimits
 from labrig.model import DynamicHysteresisModel, ModelParams, QuasiStaticHysteresis, Relaxor
+from labrig.model.bouc_wen import bouc_wen_exact, bouc_wen_step
 from labrig.model.effects import kelvin_voigt_filter
 from labrig.model.modal import DiscreteBank
 from labrig.model.relaxor import sampled_kernel, series_reciprocal
@@ -135,6 +136,8 @@ _OVERSAMPLE = 4
 _AVG_WINDOW_S = 1.0
 #: zero-command strain: samples whose command is within this fraction of the span of its minimum
 _ZERO_BAND = 0.01
+#: most secant iterations of the remanence inverse per sample (3-5 reach 1e-12 in practice)
+_FIXED_POINT_ITER = 60
 
 Array = NDArray[np.float64]
 
@@ -155,18 +158,21 @@ class InfeasibleCommandError(ValueError):
 
 
 #: actuator effects (labrig.model.effects) the controller inverts along with the model
-INVERTIBLE_EFFECTS = ("viscoelastic_creep",)
+INVERTIBLE_EFFECTS = ("viscoelastic_creep", "remanence")
 
 
 @dataclass(frozen=True)
 class ControlModel:
-    """What the compensation inverts: the dynamic model and, optionally, the viscoelastic creep
-    fitted with it (``labrig fit --effect viscoelastic_creep``):
-    ``S = KV[alpha0 V* + H[V*]]``, ``KV`` = :func:`labrig.model.effects.kelvin_voigt_filter`
-    with ``creep = (c, tau_s)``."""
+    """What the compensation inverts: the dynamic model and, optionally, the actuator effects
+    fitted with it (``labrig fit --effect viscoelastic_creep --effect remanence``):
+    ``S = KV[alpha0 V* + H[V*] - h[V*]]``, ``KV`` = :func:`labrig.model.effects.
+    kelvin_voigt_filter` with ``creep = (c, tau_s)``, ``h`` the Bouc-Wen state of
+    :class:`labrig.model.effects.Remanence` with ``remanence = (A, beta, gamma)`` (ue/V, 1/V,
+    1/V)."""
 
     params: ModelParams
     creep: tuple[float, float] | None = None
+    remanence: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         if self.creep is not None:
@@ -175,6 +181,29 @@ class ControlModel:
                 raise ValueError(
                     f"viscoelastic_creep needs -1 < c < 1 and tau_s > 0, got c={c}, tau_s={tau}"
                 )
+        if self.remanence is not None:
+            A, beta, gam = self.remanence
+            # the inverse needs S increasing along every branch: |dh/dV*| < 2|A| < alpha0
+            if not (
+                all(map(math.isfinite, self.remanence))
+                and beta > 0
+                and abs(gam) <= beta
+                and 2 * abs(A) < self.params.alpha0_ue_per_V
+            ):
+                raise ValueError(
+                    "remanence needs beta > 0, |gamma| <= beta and 2|A| < alpha0 (an invertible "
+                    f"strain), got A={A}, beta={beta}, gamma={gam}"
+                )
+
+    def predict(self, v: ArrayLike, rate_hz: float, method: str = "fast") -> Array:
+        """The strain (ue) this model gives for the drive ``v`` (V), at rest before it."""
+        model = DynamicHysteresisModel(self.params)
+        x = model.equivalent_static_voltage(v, rate_hz, method)
+        y = model.operator.apply(x)
+        if self.remanence is not None:
+            y = y - bouc_wen_exact(np.concatenate(([0.0], x)), *self.remanence)[1:]
+        ba = self.creep_filter(rate_hz)
+        return y if ba is None else signal.lfilter(ba[0], ba[1], y)
 
     def creep_filter(self, rate_hz: float) -> tuple[Array, Array] | None:
         """``(b, a)`` of the creep filter at ``rate_hz`` (None without creep)."""
@@ -224,16 +253,16 @@ def load_params(path: str | Path) -> ModelParams:
 
 
 def load_control_model(path: str | Path) -> ControlModel:
-    """:class:`ControlModel` from ``labrig fit --out`` JSON: its ``params`` and, when the fit
-    had ``--effect viscoelastic_creep``, the creep in its ``effects`` list. Any other fitted
-    effect is refused with a ``ValueError`` naming it (the controller cannot invert it)."""
+    """:class:`ControlModel` from ``labrig fit --out`` JSON: its ``params`` and the invertible
+    effects (:data:`INVERTIBLE_EFFECTS`) in its ``effects`` list. Any other fitted effect is
+    refused with a ``ValueError`` naming it (the controller cannot invert it)."""
     p = Path(path)
     data = _read_json(p)
     params = _validated_params(data, p.name)
     effects = data.get("effects", []) if isinstance(data, dict) else []
     if not isinstance(effects, list):
         raise ValueError(f"{p.name}: 'effects' must be a list of {{effect, params}} objects")
-    creep = None
+    found: dict[str, tuple[float, ...]] = {}
     for e in effects:
         name = e.get("effect") if isinstance(e, dict) else None
         if name not in INVERTIBLE_EFFECTS:
@@ -241,18 +270,31 @@ def load_control_model(path: str | Path) -> ControlModel:
                 f"{p.name}: the controller cannot invert the effect {name!r} (it inverts "
                 f"{', '.join(INVERTIBLE_EFFECTS)}); refit without --effect {name}"
             )
+        keys = _EFFECT_KEYS[name]
         q = e.get("params", {})
         try:
-            creep = (float(q["c"]), float(q["tau_s"]))
+            found[name] = tuple(float(q[k]) for k in keys)
         except (KeyError, TypeError, ValueError):
-            raise ValueError(f"{p.name}: {name} needs numeric params c and tau_s") from None
+            raise ValueError(f"{p.name}: {name} needs numeric params {', '.join(keys)}") from None
+    creep, rem = found.get("viscoelastic_creep"), found.get("remanence")
     try:
-        return ControlModel(params, creep)
+        return ControlModel(
+            params,
+            None if creep is None else (creep[0], creep[1]),
+            None if rem is None else (rem[0], rem[1], rem[2] * rem[1]),  # gamma = ratio * beta
+        )
     except ValueError as e:
         raise ValueError(f"{p.name}: {e}") from None
 
 
 # -- offline (whole-waveform) drives -------------------------------------------------------------
+
+
+#: the parameters each invertible effect needs from a fit file, in ControlModel's order
+_EFFECT_KEYS = {
+    "viscoelastic_creep": ("c", "tau_s"),
+    "remanence": ("A_ue_per_V", "beta_per_V", "gamma_ratio"),
+}
 
 
 def _command(strain_ue: ArrayLike) -> Array:
@@ -482,8 +524,11 @@ def compensated_drive(
             for tau, lam, hold in ((p.tau_d_s, p.lam_d, "linear"), (p.tau_t_s, p.lam_t, "zoh"))
         )
         s = signal.lfilter(ba[1], ba[0], np.append(s, np.full(ahead, s[-1])))
-    op = QuasiStaticHysteresis(p.alpha0_ue_per_V, p.gamma_ue_per_V, p.vc_V, p.shape)
-    u = op.invert(s)
+    if cm.remanence is None:
+        u = p.operator().invert(s)
+    else:
+        stepper = _static_stepper(cm)
+        u = np.array([stepper.step(float(x)) for x in s])
     vt, _ = _relaxor_inverse(u, p.tau_d_s, p.lam_d, rate_hz, "linear")
     v, _ = _relaxor_inverse(vt, p.tau_t_s, p.lam_t, rate_hz, "zoh")
     return v[:n]
@@ -525,15 +570,10 @@ def model_tracking_error(
     strain_ue: ArrayLike, params: ModelParams | ControlModel, rate_hz: float, method: str = "fast"
 ) -> Array:
     """``predict(compensated_drive(S)) - S`` (ue): how exactly the drive inverts the model
-    (with a :class:`ControlModel`'s creep applied to the prediction)."""
+    (with a :class:`ControlModel`'s effects in the prediction, :meth:`ControlModel.predict`)."""
     s = _command(strain_ue)
     cm = as_control_model(params)
-    v = compensated_drive(s, cm, rate_hz)
-    y = DynamicHysteresisModel(cm.params).predict(v, rate_hz, method=method)
-    ba = cm.creep_filter(rate_hz)
-    if ba is not None:
-        y = signal.lfilter(ba[0], ba[1], y)
-    return y - s
+    return cm.predict(compensated_drive(s, cm, rate_hz), rate_hz, method) - s
 
 
 # -- limits ------------------------------------------------------------------------------------
@@ -629,20 +669,36 @@ def check_drive(
 
 
 class _StaticInverseStepper:
-    """:meth:`QuasiStaticHysteresis.invert` one sample at a time (same reversal rule)."""
+    """:meth:`QuasiStaticHysteresis.invert` one sample at a time (same memory rule: the
+    remembered turning points ``(strain, voltage)`` as a stack, the current branch's on top)."""
 
     def __init__(self, op: QuasiStaticHysteresis):
         self.op = op
         self._exp = op._shape.name == "exponential" and op._shape.H is not None
         self._a0, self._g, self._vc = op.alpha0, op.gamma, op.vc
+        self._wipe = op.memory == "return_point"
         self.reset()
 
     def reset(self) -> None:
-        self.s_s = 0.0  # strain at the last reversal
-        self.u_s = 0.0  # voltage there
+        self.stack: list[tuple[float, float]] = [(0.0, 0.0)]  # at rest
         self.s_last = 0.0
         self.u_last = 0.0
         self.direction = 0.0
+
+    def _advance(self, s: float) -> tuple[list[tuple[float, float]], float]:
+        """The stack and direction after the strain moves to ``s`` (copied when they change,
+        so that :meth:`peek` leaves the state alone)."""
+        st, sgn = self.stack, self.direction
+        d = s - self.s_last
+        if d == 0.0:
+            return st, sgn
+        sgn = 1.0 if d > 0 else -1.0
+        if self.direction != 0.0 and sgn != self.direction:  # reversal at the last sample
+            turn = (self.s_last, self.u_last)
+            st = [*st, turn] if self._wipe else [turn]
+        while self._wipe and len(st) >= 2 and sgn * (s - st[-2][0]) > 0:
+            st = st[:-2] if len(st) >= 3 else st[:-1]  # a minor loop closed: forget it
+        return st, sgn
 
     def _finv(self, y: float) -> float:
         if y <= 0.0:
@@ -662,17 +718,62 @@ class _StaticInverseStepper:
             x = x_new
         return x
 
+    def _voltage(self, s: float, anchor: tuple[float, float]) -> float:
+        dd = s - anchor[0]
+        return anchor[1] + math.copysign(self._finv(abs(dd)), dd)
+
+    def peek(self, s: float) -> float:
+        """The voltage :meth:`step` would return for ``s``, without advancing."""
+        return self._voltage(s, self._advance(s)[0][-1])
+
     def step(self, s: float) -> float:
-        d = s - self.s_last
-        sgn = 1.0 if d > 0 else (-1.0 if d < 0 else 0.0)
-        if sgn != 0.0:
-            if self.direction != 0.0 and sgn != self.direction:
-                self.s_s, self.u_s = self.s_last, self.u_last  # reversal at the last sample
-            self.direction = sgn
-        dd = s - self.s_s
-        u = self.u_s + math.copysign(self._finv(abs(dd)), dd)
+        self.stack, self.direction = self._advance(s)
+        u = self._voltage(s, self.stack[-1])
         self.s_last, self.u_last = s, u
         return u
+
+
+class _RemanentInverseStepper:
+    """Per-sample inverse of ``H[u] - h[u] = s`` (operator and Bouc-Wen remanence, both with
+    memory): ``u = H^-1(s + h(u))``, solved for the sample's ``h`` (a contraction: ``|dh/du| <
+    2|A| < alpha0 <= dH/du``, :class:`ControlModel` checks it) by secant steps."""
+
+    def __init__(self, static: _StaticInverseStepper, A: float, beta: float, gamma: float):
+        self.static, self.bw = static, (A, beta, gamma)
+        self.reset()
+
+    def reset(self) -> None:
+        self.static.reset()
+        self.h = 0.0
+        self.u_last = 0.0
+
+    def _g(self, s: float, h: float) -> float:
+        """The sample's ``h`` if the operator were inverted at ``s + h``."""
+        return bouc_wen_step(self.h, self.static.peek(s + h) - self.u_last, *self.bw)
+
+    def step(self, s: float) -> float:
+        # secant on r(h) = g(h) - h from the fixed-point step (r is smooth with slope in
+        # (-1, 0) where the sample's direction holds: a few evaluations reach 1e-12)
+        h0 = self.h
+        r0 = self._g(s, h0) - h0
+        h = h0 + r0
+        for _ in range(_FIXED_POINT_ITER):
+            r = self._g(s, h) - h
+            if abs(r) <= 1e-12 * (1.0 + abs(h)):
+                break
+            d = r - r0
+            h_next = h - r * (h - h0) / d if d != 0.0 else h + r
+            h0, r0, h = h, r, h_next
+        u = self.static.step(s + h)
+        self.h = bouc_wen_step(self.h, u - self.u_last, *self.bw)
+        self.u_last = u
+        return u
+
+
+def _static_stepper(cm: ControlModel) -> _StaticInverseStepper | _RemanentInverseStepper:
+    """The per-sample inverse of the quasi-static part of ``cm`` (with its remanence)."""
+    static = _StaticInverseStepper(cm.params.operator())
+    return static if cm.remanence is None else _RemanentInverseStepper(static, *cm.remanence)
 
 
 class _BankInverse:
@@ -882,8 +983,7 @@ class CompensationController:
         ba = cm.creep_filter(self.rate_hz)
         # inverse creep filter a(z)/b(z): one state (the previous input and output)
         self._creep = None if ba is None else (ba[1], ba[0])
-        op = QuasiStaticHysteresis(p.alpha0_ue_per_V, p.gamma_ue_per_V, p.vc_V, p.shape)
-        self._static = _StaticInverseStepper(op)
+        self._static = _static_stepper(cm)
         self._gd = _BankInverse(p.tau_d_s, p.lam_d, self.rate_hz, "linear", tol)
         self._gt = _BankInverse(p.tau_t_s, p.lam_t, self.rate_hz, "zoh", tol)
         self.preview = self._gd.preview + 1 + self._gt.preview

@@ -175,7 +175,7 @@ def test_infeasible_commands_raise_clear_value_errors():
     assert v.max() == 100.0
     # the drift-cancelling negative voltages are within the range and allowed
     ok = compute_drive(strain_sine(1000.0, 40.0, 40), FITTED, RATE, limits=lim, frequency_hz=40)
-    assert -20.0 < ok.min() < -1.0
+    assert -20.0 < ok.min() < -0.1
     chk = check_drive(ok, RATE, lim, 40.0)
     assert 0 < chk.peak_current_A < lim.i_peak_A and chk.window_s == pytest.approx(1 / 40)
 
@@ -279,12 +279,16 @@ def test_load_control_model(tmp_path):
     doc = json.loads((ROOT / "experiments" / "hybrid-params.json").read_text())
     cm = load_control_model(ROOT / "experiments" / "hybrid-params.json")
     assert cm.params == load_params(ROOT / "experiments" / "hybrid-params.json")
-    (e,) = doc["effects"]
-    assert e["effect"] == "viscoelastic_creep"
-    assert cm.creep == (e["params"]["c"], e["params"]["tau_s"])
+    fx = {e["effect"]: e["params"] for e in doc["effects"]}
+    assert set(fx) == {"viscoelastic_creep", "remanence"}
+    assert cm.creep == (fx["viscoelastic_creep"]["c"], fx["viscoelastic_creep"]["tau_s"])
+    r = fx["remanence"]
+    assert cm.remanence == pytest.approx(
+        (r["A_ue_per_V"], r["beta_per_V"], r["gamma_ratio"] * r["beta_per_V"]), rel=1e-15
+    )
     f = tmp_path / "p.json"
     f.write_text(json.dumps({**doc, "effects": []}))
-    assert load_control_model(f).creep is None
+    assert load_control_model(f).creep is None and load_control_model(f).remanence is None
     f.write_text(json.dumps({**doc, "effects": [{"effect": "sensor_lowpass", "params": {}}]}))
     with pytest.raises(ValueError, match="cannot invert the effect 'sensor_lowpass'"):
         load_control_model(f)

@@ -141,7 +141,7 @@ def test_nrmse_at_the_noise_floor(fitted: tuple[FitResult, list], reduced) -> No
 def test_fit_is_converged(fitted: tuple[FitResult, list], reduced) -> None:
     """At an optimum: no lower than the truth's cost, and no gradient left."""
     res, _ = fitted
-    camp = fitmod._Campaign([fitmod._make_entry(r, 0.0) for r in reduced], "exponential")
+    camp = fitmod._Campaign([fitmod._make_entry(r, 0.0) for r in reduced], fitmod._Family())
     r_truth = camp.residuals(TRUTH.model_dump())
     assert res.cost <= 0.5 * float(r_truth @ r_truth)
     # the gradient relative to the cost scale: |J^T r| / (|J| |r|) per parameter
@@ -179,7 +179,7 @@ def test_uncertainty_and_json(fitted: tuple[FitResult, list]) -> None:
 
 def test_structured_jacobian_matches_finite_differences() -> None:
     recs = campaign(TRUTH, (1.0, 40.0), (100.0,), {1.0: 1.0, 40.0: 0.5}, 0.5, seed=3)
-    camp = fitmod._Campaign([fitmod._make_entry(r, 0.0) for r in recs], "exponential")
+    camp = fitmod._Campaign([fitmod._make_entry(r, 0.0) for r in recs], fitmod._Family())
     th = START.model_dump()
     space = fitmod._Space(PARAM_NAMES, th, DEFAULT_BOUNDS)
     z = space.z(th)

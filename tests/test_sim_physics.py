@@ -10,7 +10,7 @@ import pytest
 import yaml
 from labrig.drivers.sim.bench import BenchConfig, VirtualBench
 from labrig.drivers.sim.effects import ButterLowpass, Creep, LogCreep, SelfHeating, Thermal
-from labrig.drivers.sim.hybrid import EQ11_DEN, EQ11_NUM, HybridParams, HybridPlant, bouc_wen
+from labrig.drivers.sim.hybrid import EQ11_DEN, EQ11_NUM, HybridParams, HybridPlant
 
 from labrig.model import PAPER_TABLE1, DynamicHysteresisModel
 from labrig.rigfile import DEFAULT_RIG_YAML, open_rig
@@ -94,19 +94,6 @@ def test_hybrid_eq11_discretisation_matches_the_continuous_response():
     assert np.max(np.abs(y - yc)) < 2e-3
     h = np.polyval(EQ11_NUM, 2j * np.pi * 40) / np.polyval(EQ11_DEN, 2j * np.pi * 40)
     assert abs(h) == pytest.approx(0.919, abs=2e-3)  # spec model.md section 5
-
-
-def test_bouc_wen_closed_form_matches_fine_integration():
-    v = np.concatenate([np.linspace(0, 100, 201), np.linspace(100, 20, 161)])
-    h, _ = bouc_wen(v, 0.0, 0.0, 1.5, 0.04, 0.013)
-    # reference: explicit Euler on a 1000x finer grid
-    vf = np.interp(np.linspace(0, v.size - 1, (v.size - 1) * 1000 + 1), np.arange(v.size), v)
-    hf, x = np.empty(vf.size), 0.0
-    for k in range(1, vf.size):
-        dv = vf[k] - vf[k - 1]
-        x += 1.5 * dv - 0.04 * abs(dv) * x - 0.013 * dv * abs(x)
-        hf[k] = x
-    assert np.max(np.abs(h[1:] - hf[::1000][1:])) < 2e-3 * np.max(np.abs(hf))
 
 
 def test_fast_large_sine_is_slew_limited_as_the_current_limit_predicts(tmp_path):

@@ -26,13 +26,12 @@ fixed) it is a linear ODE in ``V`` and is integrated in closed form, splitting t
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field
 from scipy import signal
 
+from labrig.model.bouc_wen import bouc_wen_stream
 from labrig.model.hysteresis import HysteresisState, QuasiStaticHysteresis
 
 #: seed Eq. 11, numerator and denominator in descending powers of s (DC gain 1)
@@ -64,43 +63,6 @@ def eq11_discrete(rate_hz: float) -> tuple[NDArray[np.float64], NDArray[np.float
     return b / a[0], np.asarray(a, dtype=float) / a[0]
 
 
-def bouc_wen(v: NDArray, h0: float, v0: float, A: float, beta: float, gam: float):
-    """Bouc-Wen state ``h`` after each sample of ``v`` (closed form per step); ``(h, h_last)``."""
-    out = np.empty(v.size)
-    h, vp = float(h0), float(v0)
-    exp = math.exp
-    for n in range(v.size):
-        vn = float(v[n])
-        dv = vn - vp
-        if dv != 0.0:
-            s = 1.0 if dv > 0 else -1.0
-            rem = dv
-            for _ in range(2):  # at most one sign change of h per step
-                sig = 1.0 if h > 0 else (-1.0 if h < 0 else s)
-                k = beta * s + gam * sig
-                if k == 0.0:
-                    hn = h + A * rem
-                    if hn * h < 0:
-                        rem -= -h / A
-                        h = 0.0
-                        continue
-                    h = hn
-                    break
-                hs = A / k
-                hn = hs + (h - hs) * exp(-k * rem)
-                if h != 0.0 and hn * h < 0 and hs * h < 0:
-                    # split where h crosses zero: exp(-k x) = -hs / (h - hs)
-                    x = -math.log(-hs / (h - hs)) / k
-                    rem -= x
-                    h = 0.0
-                    continue
-                h = hn
-                break
-        out[n] = h
-        vp = vn
-    return out, h
-
-
 class HybridPlant:
     """Block-by-block evaluation of the hybrid plant: voltage (V) to strain (ue), at rest at 0 V."""
 
@@ -124,7 +86,7 @@ class HybridPlant:
         v = np.asarray(v_block, dtype=float)
         p = self.params
         lin = self.operator.apply(v, self._hyst)
-        h, self._h = bouc_wen(
+        h, self._h = bouc_wen_stream(
             v, self._h, self._v_prev, p.bw_A_ue_per_V, p.bw_beta_per_V, p.bw_gamma_per_V
         )
         self._v_prev = float(v[-1]) if v.size else self._v_prev

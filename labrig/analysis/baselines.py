@@ -54,6 +54,7 @@ from scipy import optimize
 from labrig.analysis.fit import single_thread_blas
 from labrig.analysis.metrics import nrmse_pct
 from labrig.analysis.records import Record
+from labrig.model.bouc_wen import bouc_wen_exact, monotone_runs
 
 __all__ = [
     "KINDS",
@@ -67,31 +68,6 @@ __all__ = [
 ]
 
 KINDS = ("prandtl_ishlinskii", "bouc_wen")
-
-
-# -- monotone runs -----------------------------------------------------------------------------
-
-
-def _runs(v: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-    """Split ``v`` (prefixed with the rest value 0) into monotone runs.
-
-    Returns ``starts, stops, dirs``: run ``j`` goes from sample ``starts[j]`` (its start value)
-    to ``stops[j]`` (inclusive) of the prefixed record, in direction ``dirs[j]`` (+1 or -1);
-    flat stretches join the current run.
-    """
-    d = np.sign(np.diff(v))
-    nz = np.flatnonzero(d)
-    if nz.size == 0:
-        return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
-    # fill zero steps with the previous direction (or the next one at the start)
-    idx = np.where(d != 0, np.arange(d.size), 0)
-    np.maximum.accumulate(idx, out=idx)
-    filled = d[idx]
-    filled[: nz[0]] = d[nz[0]]
-    change = np.flatnonzero(np.diff(filled) != 0) + 1  # first step index of each new run
-    starts = np.concatenate(([0], change))
-    stops = np.concatenate((change, [d.size]))
-    return starts, stops, filled[starts]
 
 
 def _with_rest(v: ArrayLike) -> NDArray:
@@ -110,7 +86,7 @@ def play_operators(v: ArrayLike, thresholds: ArrayLike) -> NDArray[np.float64]:
     vp = _with_rest(v)
     out = np.zeros((vp.size, r.size))
     y = np.zeros(r.size)
-    for a, b, s in zip(*_runs(vp), strict=True):
+    for a, b, s in zip(*monotone_runs(vp), strict=True):
         seg = vp[a + 1 : b + 1, None]
         blk = np.maximum(seg - r, y) if s > 0 else np.minimum(seg + r, y)
         out[a + 1 : b + 1] = blk
@@ -140,65 +116,6 @@ class PrandtlIshlinskii:
 # -- Bouc-Wen ----------------------------------------------------------------------------------
 
 
-def _phi(k: NDArray, u: NDArray) -> NDArray:
-    """``(1 - exp(-k u)) / k`` (``u`` when ``k = 0``)."""
-    ku = k * u
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(np.abs(ku) > 1e-12, -np.expm1(-ku) / np.where(k == 0, 1.0, k), u)
-
-
-def _bw_exact(
-    vp: NDArray, A: float, beta: float, gamma: float, runs: tuple | None = None
-) -> NDArray:
-    """``h`` for ``n = 1`` at the samples of the rest-prefixed record ``vp`` (closed form)."""
-    starts, stops, dirs = _runs(vp) if runs is None else runs
-    h = np.zeros(vp.size)
-    if starts.size == 0:
-        return h
-    k_same, k_opp = beta + gamma, beta - gamma
-    nrun = starts.size
-    h0 = np.empty(nrun)  # state at each run's start
-    u_star = np.zeros(nrun)  # distance at which h crosses zero (runs that start opposite)
-    travel = dirs * (vp[stops] - vp[starts])
-    hc = 0.0
-    for j in range(nrun):  # scalar recursion over runs only
-        s, U = float(dirs[j]), float(travel[j])
-        h0[j] = hc
-        us = 0.0
-        if hc * s < 0:
-            x = k_opp * abs(hc) / A if A != 0 else np.inf
-            if abs(x) < 1e-12:
-                us = abs(hc) / A
-            elif 1.0 + x > 0:
-                us = float(np.log1p(x) / k_opp)
-            else:
-                us = np.inf
-            if us >= U:
-                e = np.exp(-k_opp * U)
-                hc = hc * e + s * A * (U if k_opp == 0 else -np.expm1(-k_opp * U) / k_opp)
-                u_star[j] = np.inf
-                continue
-            hc, U = 0.0, U - us
-        u_star[j] = us
-        hc = hc * np.exp(-k_same * U) + s * A * (
-            U if k_same == 0 else -np.expm1(-k_same * U) / k_same
-        )
-    run = np.repeat(np.arange(nrun), stops - starts)
-    s = dirs[run]
-    u = s * (vp[1:] - vp[starts][run])
-    us = u_star[run]
-    hs = h0[run]
-    phase1 = u <= us  # still relaxing towards zero with k_opp (opposite-sign start)
-    ko = np.full(u.size, k_opp)
-    kq = np.full(u.size, k_same)
-    h1 = hs * np.exp(-ko * u) + s * A * _phi(ko, u)
-    u2 = np.where(phase1, 0.0, u - np.where(np.isfinite(us), us, 0.0))
-    start2 = np.where(hs * s < 0, 0.0, hs)
-    h2 = start2 * np.exp(-kq * u2) + s * A * _phi(kq, u2)
-    h[1:] = np.where(phase1, h1, h2)
-    return h
-
-
 def _bw_rhs(h: float, s: float, A: float, beta: float, gamma: float, n: float) -> float:
     ah = abs(h)
     return s * A - beta * ah ** (n - 1.0) * h - gamma * s * ah**n if ah > 0 else s * A
@@ -219,7 +136,7 @@ def bouc_wen_response(
     vp = _with_rest(v)
     h = np.zeros(vp.size)
     if n == 1.0 and substeps is None:
-        return _bw_exact(vp, A, beta, gamma)[1:]
+        return bouc_wen_exact(vp, A, beta, gamma)[1:]
     m = 8 if substeps is None else int(substeps)
     if m < 1:
         raise ValueError("substeps must be >= 1")
@@ -294,7 +211,7 @@ class _Seq:
 
     def __post_init__(self) -> None:
         self.vp = _with_rest(self.v)
-        self.runs = _runs(self.vp)
+        self.runs = monotone_runs(self.vp)
 
     def play_basis(self, thresholds: tuple[float, ...]) -> NDArray:
         if thresholds not in self._basis:
@@ -364,7 +281,7 @@ def _bw_linear(
     entry's columns and measurement about their means, i.e. one free offset per entry)."""
     c0s, c1s, rhs = [], [], []
     for q, segs in items:
-        h1 = _bw_exact(q.vp, 1.0, beta, gamma, q.runs)[1:]
+        h1 = bouc_wen_exact(q.vp, 1.0, beta, gamma, q.runs)[1:]
         for g in segs:
             c0s.append(g.w * _centred(q.v[g.lo : g.hi], offset))
             c1s.append(-g.w * _centred(h1[g.lo : g.hi], offset))

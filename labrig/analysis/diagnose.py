@@ -409,10 +409,12 @@ def diagnose(
         raise ValueError("diagnose needs at least 3 entries (leave-one-entry-out)")
     chain = _default_chain(records) if chain is None else chain
     shape = params.shape if params is not None else "exponential"
+    memory = params.memory if params is not None else "return_point"
     messages: list[str] = []
     say("fitting the base model")
     fr_kwargs = {
         "shape": shape,
+        "memory": memory,
         "initial": params,
         "heldout": False,
         "warmup_s": warmup_s,
@@ -421,7 +423,7 @@ def diagnose(
     }
     fr = fit_model(records, **fr_kwargs)
     messages += fr.messages
-    base0 = {k: v for k, v in fr.params.model_dump().items() if k != "shape"}
+    base0 = {k: v for k, v in fr.params.model_dump().items() if k not in ("shape", "memory")}
     contexts = _build_sequences(records, chain)
     has_t = all("temperature" in r.aux for r in records)
     has_a = all("amplifier_voltage" in r.aux for r in records)
@@ -431,6 +433,7 @@ def diagnose(
     common = {
         "chain": chain,
         "shape": shape,
+        "memory": memory,
         "warmup_s": warmup_s,
         "offset": offset,
         "base_free": fr.free,
@@ -618,7 +621,7 @@ def _voltage_start(
         fr = fit_model(new, **fr_kwargs)
     except (ValueError, RuntimeError):
         return None
-    b = {k: v for k, v in fr.params.model_dump().items() if k != "shape"}
+    b = {k: v for k, v in fr.params.model_dump().items() if k not in ("shape", "memory")}
     if abs(b["lam_d"] - 1.0) < LAM_GAP:
         b["lam_d"] = 1.0 + LAM_GAP
     return b

@@ -4,7 +4,8 @@ The numerics behind :mod:`labrig.analysis.diagnose`. :class:`ExtendedProblem` si
 dynamic model (the same realisation as :mod:`labrig.analysis.fit`: relaxor banks with the
 record's hold, padded to whole blocks, then the quasi-static operator) with a list of effects
 from :mod:`labrig.model.effects`: voltage effects transform the driving voltage of each simulated
-sequence, output effects the strain, and nuisance effects add per-entry regressors that are
+sequence, operator effects add a strain term computed from the operator's input ``V*``,
+output effects transform the strain, and nuisance effects add per-entry regressors that are
 eliminated by least squares (variable projection) from every scored entry's residual.
 
 Weighting and chaining follow :func:`labrig.analysis.fit.fit_model`: each entry's residual is
@@ -56,32 +57,6 @@ def _lam_to_z(lam: float) -> float:
 
 def _z_to_lam(z: float) -> float:
     return float(z) if z <= 1.0 - LAM_GAP else float(z) + 2 * LAM_GAP
-
-
-def _tangent(op: QuasiStaticHysteresis, x: NDArray, dx: NDArray) -> NDArray:
-    """Derivative of ``op.apply(x)`` along ``dx`` with the reversal points of ``x`` frozen.
-
-    ``S[n] = S_s[k] + sign F(|x[n] - x_s[k]|)`` on segment ``k``, and ``S_s[k] = S_s[k-1] +
-    sign F(|x_s[k] - x_s[k-1]|)`` (from rest, ``x_s[0] = 0``), so
-    ``dS[n] = dS_s[k] + alpha(|x[n] - x_s[k]|) (dx[n] - dx_s[k])`` with ``alpha = F'``.
-    """
-    d = np.sign(np.diff(x, prepend=0.0))
-    if d[0] == 0:
-        d[0] = 1.0
-    nz = d != 0
-    idx = np.where(nz, np.arange(d.size), 0)
-    np.maximum.accumulate(idx, out=idx)
-    d = np.where(nz[idx], d[idx], 0.0)
-    before = np.concatenate(([1.0], d[:-1]))
-    reversal = (d != 0) & (before != 0) & (d != before)
-    rev = np.flatnonzero(reversal)
-    ext_i = np.maximum(rev - 1, 0)
-    xs = np.concatenate(([0.0], x[ext_i]))
-    dxs = np.concatenate(([0.0], dx[ext_i]))
-    step = op.slope(np.abs(np.diff(xs))) * np.diff(dxs)
-    dss = np.concatenate(([0.0], np.cumsum(step)))
-    seg = np.cumsum(reversal)
-    return dss[seg] + op.slope(np.abs(x - xs[seg])) * (dx - dxs[seg])
 
 
 _LOG = frozenset({"vc_V", "tau_t_s", "tau_d_s"})
@@ -204,8 +179,10 @@ class FitOutcome:
     def nrmse_pct(self) -> float:
         return float(np.mean(list(self.per_entry.values())))
 
-    def params(self, shape: str) -> ModelParams:
-        return ModelParams(shape=shape, **{n: float(self.base[n]) for n in PARAM_NAMES})
+    def params(self, shape: str, memory: str = "return_point") -> ModelParams:
+        return ModelParams(
+            shape=shape, memory=memory, **{n: float(self.base[n]) for n in PARAM_NAMES}
+        )
 
 
 class ExtendedProblem:
@@ -222,6 +199,7 @@ class ExtendedProblem:
         *,
         chain: bool,
         shape: str = "exponential",
+        memory: str = "return_point",
         scored: Sequence[str] | None = None,
         warmup_s: float = 0.0,
         offset: bool = False,
@@ -233,6 +211,7 @@ class ExtendedProblem:
         self.effects = list(effects)
         self.chain = chain
         self.shape = shape
+        self.memory = memory
         self.offset = offset
         self.warmup_s = warmup_s
         self.base_free = tuple(base_free)
@@ -242,6 +221,8 @@ class ExtendedProblem:
         self.scored = list(names if scored is None else [n for n in names if n in set(scored)])
         self.vol = [e for e in self.effects if e.where == "voltage"]
         self.out = [e for e in self.effects if e.where == "output"]
+        self.opr = [e for e in self.effects if e.where == "operator"]
+        self.glob = self.vol + self.opr + self.out  # fitted as global parameters
         self.nui = [e for e in self.effects if e.where == "nuisance"]
         self.groups = contexts if contexts is not None else _build_sequences(self.records, chain)
         self.seqs: list[_Seq] = []
@@ -281,7 +262,7 @@ class ExtendedProblem:
             lo.append(a)
             hi.append(b)
             step.append(None)
-        for e in self.vol + self.out:
+        for e in self.glob:
             for q in e.params:
                 self.names.append((e.name, q.name))
                 a, b = (np.log(q.lo), np.log(q.hi)) if q.log else (q.lo, q.hi)
@@ -317,7 +298,7 @@ class ExtendedProblem:
 
     def unpack(self, z: NDArray, base0: Mapping[str, float]) -> tuple[dict, dict]:
         base = {n: float(base0[n]) for n in PARAM_NAMES}
-        eff: dict[str, dict[str, float]] = {e.name: {} for e in self.vol + self.out}
+        eff: dict[str, dict[str, float]] = {e.name: {} for e in self.glob}
         for (who, n), x in zip(self.names, z, strict=True):
             if who == "base":
                 base[n] = (
@@ -370,7 +351,7 @@ class ExtendedProblem:
 
     def _op(self, base: Mapping[str, float]) -> QuasiStaticHysteresis:
         return QuasiStaticHysteresis(
-            base["alpha0_ue_per_V"], base["gamma_ue_per_V"], base["vc_V"], self.shape
+            base["alpha0_ue_per_V"], base["gamma_ue_per_V"], base["vc_V"], self.shape, self.memory
         )
 
     def _post(self, ys: list[NDArray], eff) -> list[NDArray]:
@@ -381,10 +362,21 @@ class ExtendedProblem:
             out.append(y)
         return out
 
+    def _beside(self, x: NDArray, ctx: Context, eff) -> NDArray | float:
+        """The operator effects' strain terms for the operator input ``x`` (0 without any)."""
+        out: NDArray | float = 0.0
+        for e in self.opr:
+            out = out + e.apply(x, ctx, eff.get(e.name, {}))
+        return out
+
     def strains(self, base: Mapping[str, float], eff: Mapping[str, Mapping[str, float]]):
         """Modelled strain over each simulated sequence (before nuisance terms)."""
         op = self._op(base)
-        return self._post([op.apply(x) for x in self._vd(base, eff)], eff)
+        xs = self._vd(base, eff)
+        return self._post(
+            [op.apply(x) + self._beside(x, s.ctx, eff) for x, s in zip(xs, self.seqs, strict=True)],
+            eff,
+        )
 
     def _resid(self, ys: list[NDArray], subtract: bool = True) -> NDArray:
         parts = []
@@ -403,9 +395,11 @@ class ExtendedProblem:
 
     def jacobian(self, z: NDArray, base0: Mapping[str, float], r0: NDArray | None = None):
         """Forward differences; for the parameters that move ``V*`` (relaxors, voltage effects)
-        the operator is differentiated with its reversal points frozen (:func:`_tangent`): the
-        single-memory operator jumps when a tiny wiggle of ``V*`` (relaxor overshoot during a
-        rest) appears or disappears, which makes plain differences of it meaningless."""
+        the operator is differentiated with its branch structure frozen
+        (:meth:`~labrig.model.QuasiStaticHysteresis.tangent`): with the ``"last_reversal"``
+        memory the operator jumps when a tiny wiggle of ``V*`` (relaxor overshoot during a
+        rest) appears or disappears, which makes plain differences of it meaningless; with
+        return-point memory it is continuous but has kinks where loops close."""
         if r0 is None:
             r0 = self.residual(z, base0)
         base, eff = self.unpack(z, base0)
@@ -427,7 +421,11 @@ class ExtendedProblem:
                 continue
             bp, ep = self.unpack(zp, base0)
             vdp = self._vd(bp, ep)
-            ds = [_tangent(op, x, (xp - x) / h) for x, xp in zip(vd0, vdp, strict=True)]
+            ds = [
+                op.tangent(x, (xp - x) / h)
+                + (self._beside(xp, s.ctx, eff) - self._beside(x, s.ctx, eff)) / h
+                for x, xp, s in zip(vd0, vdp, self.seqs, strict=True)
+            ]
             J[:, j] = self._resid(self._post(ds, eff), subtract=False)
         return J
 
@@ -487,7 +485,7 @@ class ExtendedProblem:
             base, eff = self.unpack(z, base0)
             sd_z = self._sd(z, base0, r) if tight and z.size else np.full(z.size, np.nan)
             per = self.per_entry(base, eff)
-        sd: dict[str, dict[str, float | None]] = {e.name: {} for e in self.vol + self.out}
+        sd: dict[str, dict[str, float | None]] = {e.name: {} for e in self.glob}
         base_sd: dict[str, float | None] = dict.fromkeys(PARAM_NAMES)
         at_bound: dict[str, list[str]] = {}
         span = self.hi - self.lo
@@ -533,6 +531,7 @@ class ExtendedProblem:
                 self.effects,
                 chain=self.chain,
                 shape=self.shape,
+                memory=self.memory,
                 scored=rest,
                 warmup_s=self.warmup_s,
                 offset=self.offset,

@@ -279,12 +279,12 @@ class _Campaign:
     def __init__(
         self,
         entries: Sequence[_Entry],
-        shape: str,
+        family: _Family,
         offset: bool = False,
         with_gd: bool = True,
     ):
         self.entries = list(entries)
-        self.shape = shape
+        self.family = family
         self.offset = offset
         self.with_gd = with_gd
         self._vt: _LRU = _LRU(6)
@@ -325,9 +325,7 @@ class _Campaign:
         return hit
 
     def _op(self, th: dict[str, float]) -> QuasiStaticHysteresis:
-        return QuasiStaticHysteresis(
-            th["alpha0_ue_per_V"], th["gamma_ue_per_V"], th["vc_V"], self.shape
-        )
+        return self.family.operator(th["alpha0_ue_per_V"], th["gamma_ue_per_V"], th["vc_V"])
 
     def strains(self, th: dict[str, float]) -> list[NDArray]:
         """Predicted strain of each simulated sequence (full length)."""
@@ -362,7 +360,7 @@ class _Campaign:
 
     def _hyst_part(self, vd: NDArray, vc: float) -> NDArray:
         """``G_vc(V*)``: the operator's output per unit gamma (alpha0 part removed)."""
-        return QuasiStaticHysteresis(1.0, 1.0, vc, self.shape).apply(vd) - vd
+        return self.family.operator(1.0, 1.0, vc).apply(vd) - vd
 
     def jacobian(self, space: _Space, z: NDArray, central: bool = False) -> NDArray:
         """d(weighted residual)/dz, structured (module docstring)."""
@@ -595,7 +593,7 @@ def _classify(records: Sequence[Record]) -> list[_Info]:
 def _fit_static(
     records: Sequence[Record],
     entries: Sequence[_Entry],
-    shape: str,
+    family: _Family,
     windows: Sequence[slice],
     bounds: dict[str, tuple[float, float]],
 ) -> dict[str, float]:
@@ -610,7 +608,7 @@ def _fit_static(
         rows, rhs = [], []
         for i, (r, e, w) in enumerate(zip(records, entries, windows, strict=True)):
             v = r.voltage_V
-            g = QuasiStaticHysteresis(1.0, 1.0, vc, shape).apply(v) - v
+            g = family.operator(1.0, 1.0, vc).apply(v) - v
             a = np.zeros((w.stop - w.start, 2 + k))
             a[:, 0], a[:, 1], a[:, 2 + i] = v[w], g[w], 1.0
             rows.append(a * e.segs[0].w)
@@ -621,7 +619,7 @@ def _fit_static(
         sol = optimize.lsq_linear(A, b, bounds=(lo, np.inf), method="bvls")
         return float(np.sum((A @ sol.x - b) ** 2)), sol.x
 
-    if shape == "linear":
+    if family.shape == "linear":
         x = solve(np.log(vmax))[1]
         return {"alpha0_ue_per_V": x[0], "gamma_ue_per_V": x[1], "vc_V": vmax}
     grid = np.log(vmax) + np.linspace(np.log(0.05), np.log(20.0), 25)
@@ -662,7 +660,7 @@ def _stage_entries(
 def _staged(
     records: Sequence[Record],
     entries: Sequence[_Entry],
-    shape: str,
+    family: _Family,
     offset: bool,
     bounds: dict[str, tuple[float, float]],
     messages: list[str],
@@ -683,7 +681,8 @@ def _staged(
     f_low = min(i.f_hz for i in periodic)
     low = [i.index for i in periodic if i.f_hz <= 1.1 * f_low]
     high = [i.index for i in periodic if i.f_hz > 1.1 * f_low]
-    free_static = ["alpha0_ue_per_V", "gamma_ue_per_V"] + ([] if shape == "linear" else ["vc_V"])
+    free_static = ["alpha0_ue_per_V", "gamma_ue_per_V"]
+    free_static += [] if family.shape == "linear" else ["vc_V"]
 
     # 1. static part from the steady state (last full period) of the lowest-frequency entries
     wins = []
@@ -692,7 +691,7 @@ def _staged(
         sl = last_period(r.n, r.rate_hz, info[i].f_hz)
         assert sl is not None
         wins.append(slice(max(sl.start, entries[i].segs[0].i0), sl.stop))
-    static = _fit_static([records[i] for i in low], [entries[i] for i in low], shape, wins, bounds)
+    static = _fit_static([records[i] for i in low], [entries[i] for i in low], family, wins, bounds)
 
     # 2. transient: lam_t, tau_t and the refined static part from the whole low records
     w_low = 2 * np.pi * f_low
@@ -700,7 +699,7 @@ def _staged(
     # constant strain error into later entries (16 ue on the seed's campaign), so take each
     # entry's residual about its mean in this stage
     off2 = offset or run is not None
-    camp2 = _Campaign(_stage_entries(records, entries, low, run, warmup_s), shape, off2, False)
+    camp2 = _Campaign(_stage_entries(records, entries, low, run, warmup_s), family, off2, False)
     starts = []
     for lam in (0.1, 0.25, 0.5):
         tau = float(np.clip(0.35 ** (1 / lam) / w_low, *bounds["tau_t_s"]))
@@ -729,7 +728,7 @@ def _staged(
         return th, nfev
     f_high = max(info[i].f_hz for i in high)
     w_high = 2 * np.pi * f_high
-    camp3 = _Campaign(_stage_entries(records, entries, high, run, warmup_s), shape, offset)
+    camp3 = _Campaign(_stage_entries(records, entries, high, run, warmup_s), family, offset)
     starts = []
     for lam in (0.7, 1.0, 1.35):
         for ratio in (0.1, 0.3, 0.6):
@@ -741,11 +740,11 @@ def _staged(
 
 
 def _generic_start(
-    records: Sequence[Record], entries: Sequence[_Entry], shape: str, bounds
+    records: Sequence[Record], entries: Sequence[_Entry], family: _Family, bounds
 ) -> list[dict[str, float]]:
     """Starts when the staged procedure cannot run (no periodic entries)."""
     wins = [slice(e.segs[0].i0, e.n) for e in entries]
-    static = _fit_static(records, entries, shape, wins, bounds)
+    static = _fit_static(records, entries, family, wins, bounds)
     fs = [f for f in (drive_frequency_hz(r) for r in records) if f is not None]
     f_lo = min(fs) if fs else 1.0
     f_hi = max(fs) if fs else 1.0
@@ -771,8 +770,20 @@ def _generic_start(
 # -- public entry point ------------------------------------------------------------------------
 
 
-def _params(th: dict[str, float], shape: str) -> ModelParams:
-    return ModelParams(shape=shape, **{n: float(th[n]) for n in PARAM_NAMES})
+@dataclass(frozen=True)
+class _Family:
+    """The operator family being fitted: hysteresis shape and memory rule (fixed, not fitted)."""
+
+    shape: str = "exponential"
+    memory: str = "return_point"
+
+    def operator(self, alpha0: float, gamma: float, vc: float) -> QuasiStaticHysteresis:
+        return QuasiStaticHysteresis(alpha0, gamma, vc, self.shape, self.memory)
+
+    def params(self, th: dict[str, float]) -> ModelParams:
+        return ModelParams(
+            shape=self.shape, memory=self.memory, **{n: float(th[n]) for n in PARAM_NAMES}
+        )
 
 
 def _uncertainty(
@@ -835,7 +846,7 @@ def _fit_once(
     scored: Sequence[str],
     chain: bool,
     method: str,
-    shape: str,
+    family: _Family,
     initial: ModelParams | None,
     warmup_s: float,
     offset: bool,
@@ -846,8 +857,8 @@ def _fit_once(
 ) -> tuple[dict[str, float], _Campaign, _Space, optimize.OptimizeResult | None, int]:
     """One identification on the ``scored`` records; returns the parameters, the campaign, the
     space, the final least-squares result (global) and the evaluations used."""
-    camp = _Campaign(_entries(records, scored, warmup_s, chain), shape, offset)
-    free = [n for n in PARAM_NAMES if not (shape == "linear" and n == "vc_V")]
+    camp = _Campaign(_entries(records, scored, warmup_s, chain), family, offset)
+    free = [n for n in PARAM_NAMES if not (family.shape == "linear" and n == "vc_V")]
     keep = set(scored)
     f_one = _one_frequency([r for r in records if r.name in keep])
     if f_one is not None and method == "global":
@@ -873,7 +884,7 @@ def _fit_once(
             th_staged, n_st = _staged(
                 srecs,
                 singles,
-                shape,
+                family,
                 offset,
                 bounds,
                 [] if f_one is not None and method == "global" else messages,
@@ -892,7 +903,7 @@ def _fit_once(
         if initial is not None:
             starts.append(initial.model_dump())
         if not starts:
-            starts = _generic_start(srecs, singles, shape, bounds)
+            starts = _generic_start(srecs, singles, family, bounds)
     space = _Space(free, starts[0], bounds)
     th, res = _best_of(camp, space, starts, short_nfev=8, polish_nfev=300, tight=tight)
     if res.status == 0:
@@ -909,6 +920,7 @@ def fit_model(
     warmup_s: float = 0.0,
     progress: Progress | None = None,
     *,
+    memory: str = "return_point",
     chain: bool = False,
     scored: Sequence[str] | None = None,
     offset: bool = False,
@@ -919,6 +931,8 @@ def fit_model(
     - ``method``: ``"global"`` (least squares over all entries, default) or ``"staged"``
       (seed section 3.1).
     - ``shape``: the hysteretic slope (``"exponential"``, ``"linear"``, ``"gaussian"``).
+    - ``memory``: the operator's memory rule (``"return_point"`` or ``"last_reversal"``,
+      :mod:`labrig.model.hysteresis`).
     - ``initial``: an extra start for the global fit (the staged result is always one).
     - ``heldout``: also compute the leave-one-entry-out NRMSE (needs 2 scored entries or more).
     - ``warmup_s``: seconds at the start of each record simulated but not scored.
@@ -953,9 +967,10 @@ def fit_model(
     with single_thread_blas(), np.errstate(over="ignore"):
         if progress:
             progress("fit", 0, 1)
-        common = (chain, method, shape, initial, warmup_s, offset, bnd)
+        family = _Family(shape, memory)
+        common = (chain, method, family, initial, warmup_s, offset, bnd)
         th, camp, space, res, nfev = _fit_once(records, scored, *common, messages)
-        params = _params(th, shape)
+        params = family.params(th)
         J = camp.jacobian(space, space.z(th), central=True)
         r = camp.residuals(th)
         sizes = [g.meas.size for g in camp.segs]
@@ -984,7 +999,7 @@ def fit_model(
                 th_k, *_ = _fit_once(records, rest, *common, [], warm=th, tight=True)
                 rec = records[names.index(name)]
                 held_per[name] = _score_heldout(
-                    _params(th_k, shape), rec, records, chain, warmup_s, offset
+                    family.params(th_k), rec, records, chain, warmup_s, offset
                 )
             if progress:
                 progress("heldout", len(scored), len(scored))
@@ -1037,7 +1052,9 @@ def _score_heldout(
     offset: bool,
 ) -> float:
     if chain:
-        camp = _Campaign(_entries(records, [rec.name], warmup_s, True), params.shape)
+        camp = _Campaign(
+            _entries(records, [rec.name], warmup_s, True), _Family(params.shape, params.memory)
+        )
         p = camp.predictions(params.model_dump())[rec.name]
     else:
         p = predict_record(params, rec)

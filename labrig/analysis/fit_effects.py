@@ -36,8 +36,8 @@ __all__ = ["EffectsFit", "fit_effects", "known_effects", "resolve_effects"]
 
 def known_effects() -> list[str]:
     """Names of the library's effects that ``--effect`` accepts (fitted as global parameters:
-    voltage and output effects; nuisance terms are per-entry and need no flag)."""
-    return [n for n, e in library().items() if e.where in ("voltage", "output")]
+    voltage, operator and output effects; nuisance terms are per-entry and need no flag)."""
+    return [n for n, e in library().items() if e.where in ("voltage", "operator", "output")]
 
 
 @dataclass
@@ -124,7 +124,12 @@ def fit_effects(
     Raises ``ValueError`` for an unknown effect name."""
     effects = resolve_effects(names)
     common = dict(
-        chain=chain, shape=base.params.shape, scored=scored, warmup_s=warmup_s, offset=offset
+        chain=chain,
+        shape=base.params.shape,
+        memory=base.params.memory,
+        scored=scored,
+        warmup_s=warmup_s,
+        offset=offset,
     )
     prob = ExtendedProblem(records, effects, **common)
     base0 = {n: float(getattr(base.params, n)) for n in PARAM_NAMES}
@@ -161,7 +166,7 @@ def fit_effects(
             }
         )
     return EffectsFit(
-        params=best.params(base.params.shape),
+        params=best.params(base.params.shape, base.params.memory),
         uncertainty=dict(best.base_sd),
         effects=listed,
         nrmse_pct=best.nrmse_pct,

@@ -34,11 +34,7 @@ class DynamicHysteresisModel:
         p = self.params
         object.__setattr__(self, "g_t", Relaxor(p.tau_t_s, p.lam_t))
         object.__setattr__(self, "g_d", Relaxor(p.tau_d_s, p.lam_d))
-        object.__setattr__(
-            self,
-            "operator",
-            QuasiStaticHysteresis(p.alpha0_ue_per_V, p.gamma_ue_per_V, p.vc_V, p.shape),
-        )
+        object.__setattr__(self, "operator", p.operator())
 
     def equivalent_static_voltage(
         self, v: ArrayLike, rate_hz: float, method: str = "fast", hold: str = "zoh"

@@ -9,6 +9,9 @@ places:
 - ``"output"``: on the modelled strain of a whole simulated sequence (operator gain and creep:
   ``thermal_drift``, ``creep``; the measuring chain: ``sensor_lowpass``, ``time_delay``); every
   output effect is *linear* in the strain it receives;
+- ``"operator"``: an additive strain term computed from the operator's input ``V*`` (hysteresis
+  the seed's operator cannot hold: ``remanence``); fitted like the output effects, and the
+  compensation controller inverts it with the operator;
 - ``"nuisance"``: additive per-entry terms that are linear in per-entry nuisance parameters
   (``mains_pickup``, ``offset_drift``). These are not fitted as global parameters: they are
   eliminated per entry by least squares (variable projection), and on a held-out entry they are
@@ -41,6 +44,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
+from labrig.model.bouc_wen import bouc_wen_exact
+
 __all__ = [
     "EFFECT_NAMES",
     "AmplifierCurrentLimit",
@@ -51,6 +56,7 @@ __all__ = [
     "OffsetDrift",
     "Param",
     "QuadraticTerm",
+    "Remanence",
     "SensorLowpass",
     "ThermalDrift",
     "TimeDelay",
@@ -106,7 +112,7 @@ class Effect:
     :meth:`apply` (voltage/output effects) or :meth:`columns` (nuisance effects)."""
 
     name: str = ""
-    where: str = ""  # "voltage" | "output" | "nuisance"
+    where: str = ""  # "voltage" | "operator" | "output" | "nuisance"
     physics: str = ""
     signature: str = ""
     confusable: tuple[str, ...] = ()
@@ -114,7 +120,8 @@ class Effect:
     params: tuple[Param, ...] = ()
 
     def apply(self, x: NDArray, ctx: Context, p: Mapping[str, float]) -> NDArray:
-        """The voltage (``where == "voltage"``) or the strain (``"output"``) with the effect."""
+        """The voltage (``where == "voltage"``) or the strain (``"output"``) with the effect;
+        for ``"operator"``, the strain term (ue) it adds, ``x`` being the operator's input."""
         raise NotImplementedError
 
     def columns(self, t: NDArray, rate_hz: float) -> NDArray:
@@ -347,6 +354,46 @@ class ViscoelasticCreep(Effect):
         return _pm("c", 100 * p["c"], None if sd.get("c") is None else 100 * sd["c"], "%") + (
             _pm(", tau", p["tau_s"], sd.get("tau_s"), "s")
         )
+
+
+class Remanence(Effect):
+    """Remanent strain: a Bouc-Wen element beside the seed's operator,
+    ``S = H[V*] - h[V*]`` with ``dh = A dV* - beta |dV*| h - gamma dV* |h|`` (``n = 1``,
+    :mod:`labrig.model.bouc_wen`; ``gamma = gamma_ratio * beta``, ``|gamma_ratio| <= 1`` keeps it
+    bounded).
+
+    Physics: part of the ceramic's domain switching is not undone when the voltage returns, so a
+    loop need not close where it started; the strain left at 0 V after an excursion depends on
+    the last swings and stays (it does not relax). The seed's single-memory operator closes every
+    loop at its start (``S_s + F(x) - F(x)``) and cannot hold it. Acts beside the operator, on the
+    relaxed voltage (an actuator effect: the compensation controller inverts it). Signature: a
+    constant residual at 0 V after each excursion, its size set by the last swing, and minor
+    loops whose ends drift. Null: ``A = 0``. Confusable with ``offset_drift`` (which drifts with
+    time, not with the excursions) and ``creep`` (which relaxes).
+    """
+
+    name = "remanence"
+    where = "operator"
+    physics = "remanent strain (Bouc-Wen element beside the operator: loops that do not close)"
+    signature = "constant residual at 0 V after excursions, set by the last swing"
+    confusable = ("offset_drift", "creep")
+    tell_apart = (
+        "hold 0 V after excursions of different sizes: remanence stays put and scales with the "
+        "last swing; offset drift follows the clock, creep relaxes"
+    )
+    params = (
+        Param("A_ue_per_V", "ue/V", 0.0, -2.0, 8.0, 0.5, sign=+1),
+        Param("beta_per_V", "1/V", 0.03, 2e-3, 0.5, 0.03, log=True, check_bounds=False),
+        Param("gamma_ratio", "", 0.3, -1.0, 1.0, 0.3, check_bounds=False),
+    )
+
+    def apply(self, x, ctx, p):
+        A = p["A_ue_per_V"]
+        if A == 0.0:
+            return np.zeros(x.size)
+        beta = p["beta_per_V"]
+        h = bouc_wen_exact(np.concatenate(([0.0], x)), A, beta, p["gamma_ratio"] * beta)
+        return -h[1:]
 
 
 # -- driving voltage ---------------------------------------------------------------------------
@@ -661,6 +708,7 @@ def library(
         OffsetDrift(),
         Creep(),
         ViscoelasticCreep(),
+        Remanence(),
         TimeDelay(),
         QuadraticTerm(v_ref),
     ]

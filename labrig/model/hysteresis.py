@@ -3,13 +3,28 @@
     dS = alpha(u, u_s) du,     alpha = alpha0 + h(|u - u_s|),     h(0) = 0
 
 ``u`` is the (equivalent static) voltage in V, ``S`` the strain in ue, ``alpha0`` and ``h`` in
-ue/V. The memory ``u_s`` is the voltage at the last reversal (local extremum of ``u``); the
-strain there is ``S_s``. Between reversals the branch has the closed form
+ue/V. The memory ``u_s`` is the voltage at a reversal (local extremum of ``u``); the strain there
+is ``S_s``. Between reversals the branch has the closed form
 
     S = S_s + sign(u - u_s) F(|u - u_s|),     F(x) = alpha0 x + int_0^x h(y) dy,
 
 so no integration error is made. Initial state: the actuator rests at 0 V with zero strain
 (``u_s = 0``, ``S_s = 0``), which is the spec's ``u_s = u(0)`` for records that start at 0 V.
+
+Which reversal is the memory (``memory``):
+
+- ``"return_point"`` (default): return-point memory (Madelung's rules, the wiping-out property of
+  ferroelectric and Preisach hysteresis). The turning points form a stack; a new reversal pushes
+  one, and when the input travels past the turning point where the current minor loop began, that
+  loop is closed and forgotten (its two turning points are popped) and the branch that was
+  interrupted continues. Because a branch from ``(u_s, S_s)`` and back closes exactly at
+  ``(u_s, S_s)`` (``S_s + F(x) - F(x)``), the strain is continuous there and the operator is
+  continuous in its input: a tiny wiggle of ``u`` makes a tiny minor loop and nothing else.
+- ``"last_reversal"``: the spec's literal single memory, ``u_s`` = the last extremum. It agrees
+  with ``"return_point"`` whenever no extremum passes an earlier turning point (steady sines,
+  vanishing envelopes), but a reversal of any size, even 1e-7 V, forgets the whole history: a
+  relaxor's 0.3 mV overshoot in ``V*`` during a rest then moves the strain by up to 30 ue, which
+  makes identification from campaigns with rests ill-posed (docs/analysis.md, "memory").
 
 Shapes of ``h`` (``gamma`` in ue/V, ``vc`` in V):
 
@@ -34,6 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
 SHAPES = ("exponential", "linear", "gaussian")
+MEMORY_RULES = ("return_point", "last_reversal")
 _GL48_X, _GL48_W = np.polynomial.legendre.leggauss(48)
 
 
@@ -70,13 +86,16 @@ BUILTIN_SHAPES: dict[str, Shape] = {
 
 @dataclass
 class HysteresisState:
-    """Memory of the operator between calls (streaming): last reversal and last input."""
+    """Memory of the operator between calls (streaming): the current branch's turning point, the
+    older turning points still remembered (``"return_point"`` memory) and the last input."""
 
-    u_s: float = 0.0  # input at the last reversal (V)
-    s_s: float = 0.0  # output at the last reversal (ue)
+    u_s: float = 0.0  # input at the current branch's turning point (V)
+    s_s: float = 0.0  # output there (ue)
     u_last: float = 0.0  # last input seen (V); 0 V at rest
     s_last: float = 0.0  # last output (ue)
     direction: float = 0.0  # +1 rising, -1 falling, 0 not yet moved
+    #: older turning points ``(u, S)`` still remembered, oldest first (return-point memory)
+    older: list[tuple[float, float]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -87,6 +106,7 @@ class QuasiStaticHysteresis:
     gamma: float
     vc: float = 1.0
     shape: str | Shape = "exponential"
+    memory: str = "return_point"
     _shape: Shape = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -100,6 +120,8 @@ class QuasiStaticHysteresis:
             raise ValueError(f"alpha0 must be positive (ue/V), got {self.alpha0!r}")
         if not self.vc > 0:
             raise ValueError(f"vc must be positive (V), got {self.vc!r}")
+        if self.memory not in MEMORY_RULES:
+            raise ValueError(f"memory must be one of {MEMORY_RULES}, got {self.memory!r}")
         object.__setattr__(self, "_shape", shp)
 
     # -- branch function ----------------------------------------------------------------------
@@ -159,19 +181,57 @@ class QuasiStaticHysteresis:
         st = HysteresisState() if state is None else state
         if u.size == 0:
             return np.zeros(0)
-        seg, u0, s0, (u_s, s_s, d) = _segments(
-            u, st.u_s, st.s_s, st.u_last, st.direction, lambda a, b: self._odd_branch(b - a)
+        br, stack, d = _branches(
+            u,
+            [*st.older, (st.u_s, st.s_s)],
+            st.u_last,
+            st.direction,
+            lambda a, b: self._odd_branch(b - a),
+            self.memory == "return_point",
         )
-        out = s0[seg] + self._odd_branch(u - u0[seg])
-        st.u_s, st.s_s, st.direction = u_s, s_s, d
+        out = br.y0[br.anchor] + self._odd_branch(u - br.x0[br.anchor])
+        st.older, (st.u_s, st.s_s), st.direction = stack[:-1], stack[-1], d
         st.u_last, st.s_last = float(u[-1]), float(out[-1])
         return out
+
+    def tangent(self, u: ArrayLike, du: ArrayLike) -> NDArray[np.float64]:
+        """Derivative of ``apply(u)`` (from rest) along ``du``, with the branch structure (which
+        samples are turning points, which minor loops close where) held fixed (ue per unit of
+        ``du``'s scale).
+
+        On the branch from turning point ``k``: ``S[n] = S_k + sign F(|u[n] - u_k|)``, and
+        ``S_k = S_p + sign F(|u_k - u_p|)`` with ``p`` the turning point whose branch led to
+        ``k``, so ``dS[n] = dS_k + alpha(|u[n] - u_k|) (du[n] - du_k)`` and ``dS_k = dS_p +
+        alpha(|u_k - u_p|) (du_k - du_p)``, ``alpha = F'``; the rest point does not move. For
+        the ``"last_reversal"`` memory the structure changes when a tiny wiggle appears, which
+        is why differences of ``apply`` itself are no derivative there.
+        """
+        u = np.asarray(u, dtype=float)
+        du = np.asarray(du, dtype=float)
+        if u.size == 0:
+            return np.zeros(0)
+        br, _, _ = _branches(
+            u, [(0.0, 0.0)], 0.0, 0.0, lambda a, b: self._odd_branch(b - a),
+            self.memory == "return_point",
+        )  # fmt: skip
+        dx0 = np.where(br.at >= 0, du[np.maximum(br.at, 0)], 0.0)
+        dy0 = np.zeros(br.x0.size)
+        new = np.flatnonzero(br.parent >= 0)
+        par = br.parent[new]
+        step = (self.slope(np.abs(br.x0[new] - br.x0[par])) * (dx0[new] - dx0[par])).tolist()
+        acc = dy0.tolist()
+        for k, p, dk in zip(new.tolist(), par.tolist(), step, strict=True):
+            acc[k] = acc[p] + dk
+        dy0 = np.asarray(acc)
+        a = br.anchor
+        return dy0[a] + self.slope(np.abs(u - br.x0[a])) * (du - dx0[a])
 
     def invert(self, strain: ArrayLike, state: HysteresisState | None = None) -> NDArray:
         """Voltage (V) whose :meth:`apply` gives ``strain`` (ue), branch by branch.
 
-        Reversals of the strain coincide with those of the voltage (``F`` is increasing), so the
-        record is split at strain reversals and each branch is inverted in closed form.
+        ``F`` is increasing, so reversals and closed loops of the strain coincide with those of
+        the voltage: the same branch structure is built on the strain record and each branch is
+        inverted in closed form.
         """
         s = np.asarray(strain, dtype=float)
         st = HysteresisState() if state is None else state
@@ -181,42 +241,104 @@ class QuasiStaticHysteresis:
         def inv(d: NDArray) -> NDArray:
             return np.sign(d) * self.branch_inverse(np.abs(d))
 
-        seg, s0, u0, (s_s, u_s, d) = _segments(
-            s, st.s_s, st.u_s, st.s_last, st.direction, lambda a, b: inv(b - a)
+        br, stack, d = _branches(
+            s,
+            [(b, a) for a, b in st.older] + [(st.s_s, st.u_s)],
+            st.s_last,
+            st.direction,
+            lambda a, b: inv(b - a),
+            self.memory == "return_point",
         )
-        u = u0[seg] + inv(s - s0[seg])
-        st.u_s, st.s_s, st.direction = u_s, s_s, d
+        u = br.y0[br.anchor] + inv(s - br.x0[br.anchor])
+        st.older = [(b, a) for a, b in stack[:-1]]
+        st.s_s, st.u_s = stack[-1]
+        st.direction = d
         st.u_last, st.s_last = float(u[-1]), float(s[-1])
         return u
 
 
-def _segments(x: NDArray, x_s: float, y_s: float, x_last: float, direction: float, delta):
-    """Split the record ``x`` at its reversals (local extrema).
+@dataclass(frozen=True)
+class _Branches:
+    """Branch structure of a record: sample ``n`` lies on the branch that starts at turning
+    point ``anchor[n]``, whose input and output are ``x0``, ``y0``; ``at`` is each turning
+    point's sample (-1: carried in from before the record), ``parent`` the turning point whose
+    branch reached it (-1: carried in)."""
 
-    Returns the segment index of each sample, the input and output at each segment's start
-    (the reversal point; output continuous there), and the new ``(x_s, y_s, direction)``.
-    ``delta(x_a, x_b)`` is the output change along a branch from ``x_a`` to ``x_b``.
+    anchor: NDArray[np.intp]
+    x0: NDArray[np.float64]
+    y0: NDArray[np.float64]
+    at: NDArray[np.intp]
+    parent: NDArray[np.intp]
+
+
+def _branches(
+    x: NDArray,
+    stack: list[tuple[float, float]],
+    x_last: float,
+    direction: float,
+    delta: Callable[[NDArray, NDArray], NDArray],
+    wipe: bool,
+) -> tuple[_Branches, list[tuple[float, float]], float]:
+    """Find the branch structure of ``x`` (module docstring, memory rules).
+
+    ``stack``: the remembered turning points ``(x, y)``, oldest first, the last one the current
+    branch's; ``delta(x_a, x_b)``: the output change along a branch from ``x_a`` to ``x_b``;
+    ``wipe``: return-point memory (close and forget minor loops), else the last reversal only.
+    Returns the structure, the new stack and the new direction. A reversal detected at sample
+    ``n`` has its extremum at ``n - 1`` (or at ``x_last``); flat stretches are not reversals.
+    One Python step per monotone run: the branches themselves are evaluated vectorised.
     """
-    dx = np.diff(x, prepend=x_last)
-    d = np.sign(dx)
+    n = x.size
+    d = np.sign(np.diff(x, prepend=x_last))
     if d[0] == 0:
         d[0] = direction
-    # flat stretches keep the previous direction (they are not reversals)
     nz = d != 0
-    idx = np.where(nz, np.arange(d.size), 0)
+    idx = np.where(nz, np.arange(n), 0)
     np.maximum.accumulate(idx, out=idx)
     d = np.where(nz[idx], d[idx], 0.0)
     before = np.concatenate(([direction], d[:-1]))
     reversal = (d != 0) & (before != 0) & (d != before)
-    rev = np.flatnonzero(reversal)
-    # a reversal detected at sample n has its extremum at sample n-1 (or the previous call's end)
-    ext = np.where(rev > 0, x[np.maximum(rev - 1, 0)], x_last)
-    x0 = np.concatenate(([x_s], ext))
-    y0 = (
-        y_s + np.concatenate(([0.0], np.cumsum(delta(x0[:-1], x0[1:]))))
-        if rev.size
-        else (np.array([y_s]))
-    )
-    seg = np.cumsum(reversal)
-    new_dir = float(d[-1]) if d[-1] != 0 else direction
-    return seg, x0, y0, (float(x0[-1]), float(y0[-1]), new_dir)
+    rev = np.flatnonzero(reversal).tolist()
+    run_starts = rev if rev and rev[0] == 0 else [0, *rev]
+    run_ends = [*run_starts[1:], n]
+
+    xs = [p[0] for p in stack]
+    ys = [p[1] for p in stack]
+    at = [-1] * len(stack)
+    parent = [-1] * len(stack)
+    live = list(range(len(stack)))  # ids of the remembered turning points, oldest first
+    seg_start, seg_anchor = [0], [live[-1]]
+    dl = d.tolist()
+    for a, b in zip(run_starts, run_ends, strict=True):
+        if reversal[a]:
+            xs.append(float(x[a - 1]) if a > 0 else float(x_last))
+            ys.append(np.nan)
+            at.append(a - 1)
+            parent.append(live[-1])
+            live.append(len(xs) - 1)
+            seg_start.append(a)
+            seg_anchor.append(live[-1])
+        dj = dl[b - 1]
+        if not wipe or dj == 0.0:
+            continue
+        far = dj * float(x[b - 1])  # a run is monotone: its last sample is its farthest
+        while len(live) >= 2 and far > dj * xs[live[-2]]:
+            # the run passes the turning point where the current minor loop began: close it
+            i = a + int(np.searchsorted(dj * x[a:b], dj * xs[live[-2]], side="right"))
+            del live[-2 if len(live) >= 3 else -1 :]
+            seg_start.append(i)
+            seg_anchor.append(live[-1])
+    new = [k for k in range(len(stack), len(xs))]
+    if new:
+        px = np.array([xs[parent[k]] for k in new])
+        steps = delta(px, np.array([xs[k] for k in new])).tolist()
+        for k, dk in zip(new, steps, strict=True):
+            ys[k] = ys[parent[k]] + dk
+    seg = np.searchsorted(np.asarray(seg_start), np.arange(n), side="right") - 1
+    anchor = np.asarray(seg_anchor, dtype=np.intp)[seg]
+    new_dir = dl[-1] if dl[-1] != 0 else direction
+    out = _Branches(
+        anchor, np.asarray(xs), np.asarray(ys), np.asarray(at, dtype=np.intp),
+        np.asarray(parent, dtype=np.intp),
+    )  # fmt: skip
+    return out, [(xs[k], ys[k]) for k in live], float(new_dir)

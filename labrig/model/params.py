@@ -6,7 +6,10 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from labrig.model.hysteresis import QuasiStaticHysteresis
+
 Shape = Literal["exponential", "linear", "gaussian"]
+Memory = Literal["return_point", "last_reversal"]
 
 
 class ModelParams(BaseModel):
@@ -21,10 +24,20 @@ class ModelParams(BaseModel):
     gamma_ue_per_V: float = Field(description="maximal variation of the slope (seed Eq. 10)")
     vc_V: float = Field(gt=0, description="saturation voltage of the hysteretic slope")
     shape: Shape = "exponential"
+    memory: Memory = Field(
+        "return_point",
+        description="which turning points the operator remembers (labrig.model.hysteresis)",
+    )
     lam_t: float = Field(gt=0, lt=2, description="order of the transient relaxor G_t")
     tau_t_s: float = Field(gt=0, description="time constant of G_t")
     lam_d: float = Field(gt=0, lt=2, description="order of the harmonic relaxor G_d")
     tau_d_s: float = Field(gt=0, description="time constant of G_d")
+
+    def operator(self) -> QuasiStaticHysteresis:
+        """The quasi-static operator of these parameters (seed Eq. 1, 2, 10)."""
+        return QuasiStaticHysteresis(
+            self.alpha0_ue_per_V, self.gamma_ue_per_V, self.vc_V, self.shape, self.memory
+        )
 
 
 #: seed Table 1 (tau_t = 15.5e-5 s as printed in the table)

@@ -543,6 +543,13 @@ class _Builder:
             "model_creep": (
                 None if model.creep is None else {"c": model.creep[0], "tau_s": model.creep[1]}
             ),
+            "model_remanence": (
+                None
+                if model.remanence is None
+                else dict(
+                    zip(("A_ue_per_V", "beta_per_V", "gamma_per_V"), model.remanence, strict=True)
+                )
+            ),
             "strain_edge_ramps": sum(1 for g in command.segments if g.role == "edge"),
             "command_start_index": 1,
             "command_stop_index": int(strain.size + 1),

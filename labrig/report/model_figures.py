@@ -29,7 +29,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from labrig.model import PAPER_TABLE1, DynamicHysteresisModel, QuasiStaticHysteresis, Relaxor
+from labrig.model import PAPER_TABLE1, DynamicHysteresisModel, Relaxor
 
 #: fractional orders of the unit-relaxor figures (seed Figs. 3 and 5)
 ORDERS: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75)
@@ -177,7 +177,7 @@ def figure_hysteresis_loop(path: Path, cycles: int = 8, rate_hz: float = 1000.0)
     v = 50.0 * (1.0 - np.cos(2 * np.pi * 1.0 * t))
     vstar = model.equivalent_static_voltage(v, rate_hz, method="exact")
     s = model.operator.apply(vstar)
-    op = QuasiStaticHysteresis(p.alpha0_ue_per_V, p.gamma_ue_per_V, p.vc_V, p.shape)
+    op = p.operator()
     s_static = op.apply(v)
     per = round(rate_hz)
     mins = np.arange(per, n, per)  # the 0 V minima, t = 1, 2, ... s

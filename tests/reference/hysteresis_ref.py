@@ -9,6 +9,11 @@ tolerances); the closed-form branch of the code under test is never used. Revers
 by an explicit sample-by-sample scan: a sample is a reversal point when the input's direction of
 travel changes sign after it (flat stretches keep the previous direction). The actuator starts
 at rest at 0 V with zero strain and ``u_s = 0``.
+
+Memory rules: ``"last_reversal"`` (``u_s`` is the last extremum) or ``"return_point"`` (Madelung:
+a stack of turning points; when the input passes the turning point below the current one, that
+minor loop is forgotten and ``u_s`` goes back to the turning point before it). For the latter a
+step that passes a turning point is integrated in pieces, each with its own ``u_s``.
 """
 
 from __future__ import annotations
@@ -19,11 +24,23 @@ import numpy as np
 from scipy import integrate
 
 
-def hysteresis_ref(u: Sequence[float], alpha0: float, h: Callable[[float], float]) -> np.ndarray:
+def hysteresis_ref(
+    u: Sequence[float],
+    alpha0: float,
+    h: Callable[[float], float],
+    memory: str = "last_reversal",
+) -> np.ndarray:
     """Strain for the voltage samples ``u`` (the operator is rate-independent: only the order
     of the values matters). ``h`` maps ``x >= 0`` to the hysteretic slope, ``h(0) = 0``."""
+
+    def integral(a: float, b: float, u_s: float) -> float:
+        val, _ = integrate.quad(
+            lambda v: alpha0 + h(abs(v - u_s)), a, b, epsabs=1e-12, epsrel=1e-12, limit=200
+        )
+        return val
+
     s = 0.0
-    u_s = 0.0
+    turning = [0.0]  # turning points, oldest first; the last one is u_s
     u_prev = 0.0
     direction = 0.0
     out = np.empty(len(u))
@@ -32,18 +49,21 @@ def hysteresis_ref(u: Sequence[float], alpha0: float, h: Callable[[float], float
         step = np.sign(x - u_prev)
         if step != 0:
             if direction != 0 and step != direction:
-                u_s = u_prev  # the previous sample was a local extremum
+                # the previous sample was a local extremum
+                if memory == "return_point":
+                    turning.append(u_prev)
+                else:
+                    turning = [u_prev]
             direction = step
-            u_s_now = u_s
-            val, _ = integrate.quad(
-                lambda v, u_s_now=u_s_now: alpha0 + h(abs(v - u_s_now)),
-                u_prev,
-                x,
-                epsabs=1e-12,
-                epsrel=1e-12,
-                limit=200,
-            )
-            s += val
+            a = u_prev
+            while len(turning) >= 2 and step * (x - turning[-2]) > 0:
+                # passes the turning point where the current minor loop began: integrate up to
+                # it, forget the loop (the bottom turning point, the rest state, stays)
+                c = turning[-2]
+                s += integral(a, c, turning[-1])
+                a = c
+                del turning[-2 if len(turning) >= 3 else -1 :]
+            s += integral(a, x, turning[-1])
         out[n] = s
         u_prev = x
     return out
