@@ -226,11 +226,19 @@ def fit(
         help="Also fit this library effect with the model (repeatable), e.g. "
         "viscoelastic_creep (which compensation control inverts); see docs/diagnose.md.",
     ),
+    memory: str = typer.Option(
+        "return_point",
+        "--memory",
+        help="The hysteresis operator's memory: return_point (default; minor loops close and "
+        "are forgotten) or last_reversal (the seed's single memory); docs/analysis.md.",
+    ),
 ) -> None:
     """Identify the model (or a baseline) from a run file; print parameters and NRMSE."""
     from labrig.cli_analysis import run_fit
 
-    run_fit(run_file, entries, out, as_json, method, model, warmup_s, heldout, offset, effect)
+    run_fit(
+        run_file, entries, out, as_json, method, model, warmup_s, heldout, offset, effect, memory
+    )
 
 
 @app.command("report")

@@ -50,6 +50,8 @@ from labrig.analysis.metrics import drive_frequency_hz
 from labrig.analysis.records import Record
 from labrig.errors import InputFileError, InputIssue, LabrigError
 from labrig.model import DynamicHysteresisModel, ModelParams
+from labrig.model.effects import Effect
+from labrig.model.hysteresis import MEMORY_RULES
 from labrig.store import RunFile, read_run
 
 MODELS = ("dynamic", *KINDS)
@@ -262,13 +264,18 @@ class FitProgress:
 
 
 def fit_dynamic(
-    setup: Setup, method: str, heldout: bool, progress: FitProgress | None
+    setup: Setup,
+    method: str,
+    heldout: bool,
+    progress: FitProgress | None,
+    memory: str = "return_point",
 ) -> FitResult:
     cb = progress.model_callback("model", len(setup.scored)) if progress else None
     try:
         return fit_model(
             setup.records,
             method=method,
+            memory=memory,
             heldout=heldout,
             warmup_s=setup.warmup_s,
             progress=cb,
@@ -336,6 +343,7 @@ def summary_tables(res: FitResult | BaselineResult, model: str) -> list[Table]:
             rel = "fixed" if u is None else (f"{100 * u / abs(v):.2g} %" if v else "—")
             t.add_row(name, _num(v, 5), _num(u, 2), rel, UNITS.get(name, ""))
         t.add_row("shape", str(j["params"]["shape"]), "", "", "")
+        t.add_row("memory", str(j["params"]["memory"]), "", "", "")
     else:
         for name, v in j["params"].items():
             if isinstance(v, list):
@@ -372,6 +380,7 @@ def run_fit(
     heldout: bool,
     offset: bool | None,
     effects: Sequence[str] = (),
+    memory: str = "return_point",
 ) -> None:
     """``labrig fit``."""
     from labrig.analysis.fit_effects import EffectsFit, resolve_effects
@@ -381,6 +390,8 @@ def run_fit(
         raise AnalysisError(f"--method must be global or staged, got {method!r}")
     if model not in MODELS:
         raise AnalysisError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
+    if memory not in MEMORY_RULES:
+        raise AnalysisError(f"--memory must be one of {', '.join(MEMORY_RULES)}, got {memory!r}")
     if effects and model != "dynamic":
         raise AnalysisError(f"--effect applies to the dynamic model, not to --model {model}")
     try:
@@ -394,7 +405,7 @@ def run_fit(
     with FitProgress(err) as progress:
         if model == "dynamic":
             res: FitResult | BaselineResult | EffectsFit = fit_dynamic(
-                setup, method, heldout and not effects, progress
+                setup, method, heldout and not effects, progress, memory
             )
             if effects:
                 res = fit_with_effects(setup, res, effects, heldout, progress)
@@ -516,12 +527,56 @@ def read_params(path: Path) -> dict[str, Any]:
     except (TypeError, ValueError) as e:
         msg = str(e).splitlines()
         raise _issue(path, f"invalid model parameters: {' '.join(msg[:3])}", "params") from None
+    _fitted_effects(doc, path)
     return doc
 
 
-def predict_entries(params: ModelParams, setup: Setup) -> dict[str, np.ndarray]:
+def _fitted_effects(doc: dict[str, Any], path: Path) -> tuple[list[Effect], dict]:
+    """The library effects of a ``labrig fit --effect`` file and their parameters (checked)."""
+    from labrig.analysis.fit_effects import resolve_effects
+
+    listed = doc.get("effects") or []
+    if not isinstance(listed, list) or not all(
+        isinstance(e, dict) and isinstance(e.get("params"), dict) for e in listed
+    ):
+        raise _issue(path, "'effects' must be a list of {effect, params} objects", "effects")
+    try:
+        effects = resolve_effects([str(e.get("effect")) for e in listed])
+    except ValueError as e:
+        raise _issue(path, str(e), "effects") from None
+    values = {}
+    for eff, e in zip(effects, listed, strict=True):
+        want = [q.name for q in eff.params]
+        p = e["params"]
+        if sorted(p) != sorted(want) or not all(
+            isinstance(p[k], int | float) and math.isfinite(p[k]) for k in want
+        ):
+            raise _issue(path, f"{eff.name} needs numeric params {', '.join(want)}", "effects")
+        values[eff.name] = {k: float(p[k]) for k in want}
+    return effects, values
+
+
+def predict_entries(
+    params: ModelParams, setup: Setup, effects: tuple[list[Effect], dict] | None = None
+) -> dict[str, np.ndarray]:
     """The model's strain for each scored entry (chained as the run when ``setup.chain``),
-    with one offset per entry fitted over the scored samples when ``setup.offset``."""
+    with one offset per entry fitted over the scored samples when ``setup.offset``; with the
+    fitted ``effects`` (:func:`_fitted_effects`) when given, simulated as ``labrig fit
+    --effect`` fitted them."""
+    if effects and effects[0]:
+        from labrig.analysis.diagnose_fit import ExtendedProblem
+
+        prob = ExtendedProblem(
+            setup.records,
+            effects[0],
+            chain=setup.chain,
+            shape=params.shape,
+            memory=params.memory,
+            scored=setup.scored,
+            warmup_s=setup.warmup_s,
+            offset=setup.offset,
+        )
+        return prob.predictions(params.model_dump(), effects[1])
     keep = set(setup.scored)
     out: dict[str, np.ndarray] = {}
     if setup.chain:
@@ -590,9 +645,10 @@ def run_report(
             source = f"fitted now ({res.method}, {res.elapsed_s:.1f} s)"
         else:
             params = ModelParams(**doc["params"])
+            effects = _fitted_effects(doc, params_file)
             models["dynamic"] = Fitted(
                 "dynamic",
-                predict_entries(params, setup),
+                predict_entries(params, setup, effects),
                 None,
                 doc.get("heldout_nrmse_pct"),
                 doc["params"],
@@ -601,6 +657,10 @@ def run_report(
                 str(doc.get("method", "")),
             )
             source = f"from {params_file}"
+            if effects[0]:
+                source += " with the effects fitted with it: " + ", ".join(
+                    e.name for e in effects[0]
+                )
             fitted_on = doc.get("entries")
             if isinstance(fitted_on, list) and fitted_on != setup.scored:
                 notes.append(

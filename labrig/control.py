@@ -95,7 +95,7 @@ from scipy import linalg, signal
 
 from labrig.limits import RigLimits
 from labrig.model import DynamicHysteresisModel, ModelParams, QuasiStaticHysteresis, Relaxor
-from labrig.model.bouc_wen import bouc_wen_exact, bouc_wen_step
+from labrig.model.bouc_wen import bouc_wen_exact, bouc_wen_step, max_slope
 from labrig.model.effects import kelvin_voigt_filter
 from labrig.model.modal import DiscreteBank
 from labrig.model.relaxor import sampled_kernel, series_reciprocal
@@ -183,16 +183,21 @@ class ControlModel:
                 )
         if self.remanence is not None:
             A, beta, gam = self.remanence
-            # the inverse needs S increasing along every branch: |dh/dV*| < 2|A| < alpha0
-            if not (
-                all(map(math.isfinite, self.remanence))
-                and beta > 0
-                and abs(gam) <= beta
-                and 2 * abs(A) < self.params.alpha0_ue_per_V
-            ):
+            if not (all(map(math.isfinite, self.remanence)) and beta > 0 and -beta < gam <= beta):
                 raise ValueError(
-                    "remanence needs beta > 0, |gamma| <= beta and 2|A| < alpha0 (an invertible "
-                    f"strain), got A={A}, beta={beta}, gamma={gam}"
+                    f"remanence needs beta > 0 and -beta < gamma <= beta, got A={A}, beta={beta}, "
+                    f"gamma={gam}"
+                )
+            # the inverse needs S = H - h increasing along every branch: the element's steepest
+            # slope below the operator's shallowest
+            p = self.params
+            g = p.gamma_ue_per_V
+            op_min = p.alpha0_ue_per_V + min(0.0, g) if p.shape != "linear" or g >= 0 else -1.0
+            if not max_slope(A, beta, gam) < op_min:
+                raise ValueError(
+                    f"remanence needs to be less steep than the operator for an invertible "
+                    f"strain: A={A:.4g} ue/V, beta={beta:.4g}, gamma={gam:.4g} /V reaches "
+                    f"{max_slope(A, beta, gam):.4g} ue/V, the operator only {op_min:.4g} ue/V"
                 )
 
     def predict(self, v: ArrayLike, rate_hz: float, method: str = "fast") -> Array:
@@ -735,8 +740,9 @@ class _StaticInverseStepper:
 
 class _RemanentInverseStepper:
     """Per-sample inverse of ``H[u] - h[u] = s`` (operator and Bouc-Wen remanence, both with
-    memory): ``u = H^-1(s + h(u))``, solved for the sample's ``h`` (a contraction: ``|dh/du| <
-    2|A| < alpha0 <= dH/du``, :class:`ControlModel` checks it) by secant steps."""
+    memory): ``u = H^-1(s + h(u))``, solved for the sample's ``h`` (a contraction: the element's
+    steepest slope is below the operator's shallowest, :class:`ControlModel` checks it) by secant
+    steps."""
 
     def __init__(self, static: _StaticInverseStepper, A: float, beta: float, gamma: float):
         self.static, self.bw = static, (A, beta, gamma)
@@ -961,8 +967,9 @@ class CompensationController:
             v[n] = ctl.step(s_com[min(n + ctl.preview, N - 1)])
 
     ``preview = P_d + 1 + P_t``: one sample for the zero-order hold of ``G_t`` plus the
-    anti-causal windows of the relaxors' outside zeros (``P_d`` for ``G_d`` with ``lam_d > 1``,
-    about 70 samples at 1 kHz for the hybrid fit; 0 otherwise), cut where the weights fall below
+    anti-causal windows of the relaxors' outside zeros (``P_d`` for a sampled ``G_d`` with a zero
+    outside the unit circle: some ``lam_d > 1`` at some rates, e.g. 209 samples at 10 kHz for
+    experiments/hybrid-params.json, none at 1 kHz; 0 otherwise), cut where the weights fall below
     ``tol``. :meth:`run` does the whole loop and agrees with :func:`compensated_drive` to the
     modal banks' quadrature error plus ``tol`` (measured: 3e-7 V on drives of 90 V). With
     ``limits`` the

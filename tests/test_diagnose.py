@@ -3,8 +3,8 @@ optional effects switched on; the fitted model is never told which.
 
 Fast tests: the JSON contract, a null campaign (2 seeds), mains pickup and the conditioner
 low-pass, the CLI function. The many-seed and every-effect studies are ``@pytest.mark.slow``
-(``pytest -m slow tests/test_diagnose.py``); ``benchmarks/diagnose_attribution.py`` prints the
-confusion table.
+(``pytest -m slow tests/test_diagnose.py``); ``python -m labrig.analysis.diagnose_campaign``
+prints the confusion table.
 """
 
 from __future__ import annotations
@@ -15,29 +15,13 @@ import numpy as np
 import pytest
 
 from labrig.analysis.diagnose import diagnose
-from labrig.analysis.diagnose_campaign import bench_campaign
+from labrig.analysis.diagnose_campaign import STUDY_CASES, bench_campaign, truth_campaign
 
 #: bench effect (as in a rig file) -> the library effect diagnose should name; strengths are
 #: clear (the effect dominates the residual), forms differ from the library's (2nd-order
 #: Butterworth vs a fitted section, peak/average fold-back vs a slew limit, mode bank vs log
 #: kernel, instantaneous loss power vs a measured temperature)
-CASES = {
-    "sensor_lowpass": [{"name": "conditioner_lowpass", "cutoff_hz": 150.0, "order": 2}],
-    "mains_pickup": [{"name": "mains_pickup", "amplitude_mV": 20.0}],
-    "amplifier_current_limit": [{"name": "amplifier_current_limit"}],
-    "thermal_drift": [
-        {
-            "name": "self_heating",
-            "heat_capacity_J_per_K": 0.2,
-            "tan_delta": 0.1,
-            "strain_coeff_per_K": 0.01,
-        }
-    ],
-    "offset_drift": [
-        {"name": "offset_drift", "rate_ue_per_s": 1.5, "random_walk_ue_per_sqrt_s": 0.5}
-    ],
-    "creep": [{"name": "log_creep", "per_decade": 0.04}],
-}
+CASES = {k: v for k, v in STUDY_CASES.items() if k != "none"}
 
 KEYS = {"before", "after", "effects_added", "candidates", "verdict"}
 
@@ -57,7 +41,7 @@ def _check_contract(doc: dict) -> None:
 
 
 def _found(expected: str, seed: int = 11, truth: str = "paper"):
-    recs = bench_campaign(CASES[expected], seed=seed, truth=truth)
+    recs = truth_campaign(truth, CASES[expected], seed)
     d = diagnose(recs)
     doc = d.to_json()
     _check_contract(doc)
@@ -117,24 +101,43 @@ def test_params_file_is_validated(tmp_path, monkeypatch):
 # -- slow studies ------------------------------------------------------------------------------
 
 
-_THERMAL_XFAIL = pytest.mark.xfail(
-    reason="known: the refit of base + thermal_drift stalls in a local optimum (k about half "
-    "the truth) because the single-memory operator makes the cost jump at tiny V* reversals; "
-    "held-out gain 41 % but only 3 of 6 folds better (docs/diagnose.md, known limits)",
-    strict=False,
-)
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    "expected",
-    [pytest.param(n, marks=_THERMAL_XFAIL) if n == "thermal_drift" else n for n in sorted(CASES)],
-)
+@pytest.mark.parametrize("expected", sorted(n for n in CASES if n != "creep"))
 def test_every_effect_is_named_first(expected):
-    _, doc = _found(expected, seed=21)
+    _d, doc = _found(expected, seed=21)
     assert doc["effects_added"], doc["verdict"]
     assert doc["effects_added"][0]["effect"] == expected, doc["verdict"]
     assert doc["after"]["heldout_nrmse_pct"] <= 0.5 * doc["before"]["heldout_nrmse_pct"]
+    if expected == "thermal_drift":  # with a temperature channel: k within 10 % of the bench's
+        k = doc["effects_added"][0]["params"]["k_per_K"]
+        assert k == pytest.approx(CASES[expected][0]["strain_coeff_per_K"], rel=0.1)
+
+
+@pytest.mark.slow
+def test_log_creep_is_absorbed_by_the_models_transient_relaxor():
+    """Logarithmic creep (4 %/decade, the bench's mode bank) is within the model family's reach:
+    the seed's ``G_t`` with a small order creeps almost logarithmically, and the converged base
+    fit shifts lam_t, tau_t and alpha0 to follow it (measured: in-sample NRMSE at the noise floor
+    for 2-8 %/decade, also with a 60 s step-and-hold entry). Nothing is attributed and the
+    verdict says so; the model still predicts held-out entries at the floor. (With the
+    last-reversal memory the base fit stalled and ``creep`` was "found": an artefact.)"""
+    d, doc = _found("creep", seed=21)
+    assert doc["effects_added"] == [], doc["verdict"]
+    assert d.classification == "consistent_with_noise", doc["verdict"]
+    floor = d.evidence_before.floor_pct
+    assert doc["before"]["heldout_nrmse_pct"] < 1.3 * floor
+    assert d.base_params["alpha0_ue_per_V"] > 1.1 * 8.9  # the creep went into the base
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("expected", ["mains_pickup", "sensor_lowpass", "thermal_drift"])
+def test_slightly_imperfect_base_effect_found_nothing_spurious(expected):
+    """The bench's truth is the seed's model with the Gaussian hysteresis shape, fitted with the
+    exponential one (base residual 1.6x the floor with no effect): the effect is found first and
+    nothing is added beside it."""
+    _d, doc = _found(expected, seed=51, truth="paper_gaussian")
+    names = [e["effect"] for e in doc["effects_added"]]
+    assert names == [expected], doc["verdict"]
 
 
 @pytest.mark.slow
@@ -154,24 +157,26 @@ def test_null_campaigns_over_ten_seeds():
     "expected",
     [
         "mains_pickup",
+        "sensor_lowpass",
         pytest.param(
-            "sensor_lowpass",
+            "thermal_drift",
             marks=pytest.mark.xfail(
-                reason="known: with the hybrid truth, creep (which describes the hybrid plant's "
-                "slow Eq. 11 pole) is added first",
-                strict=False,
+                reason="known: thermal_drift is found first (k 0.55 %/K against the bench's "
+                "1 %/K: the hybrid base takes part of the heating), then creep is added for "
+                "the rest (held-out gain 18 %; on the same plant without heating creep gains "
+                "9 % and is rejected); the verdict says partially explained",
+                strict=True,
             ),
         ),
-        pytest.param("thermal_drift", marks=_THERMAL_XFAIL),
     ],
 )
 def test_hybrid_truth_effect_found_nothing_spurious(expected):
-    d, doc = _found(expected, seed=31, truth="hybrid")
+    """The seed's section-4 plant (further from the family: base residual 2x the floor)."""
+    _d, doc = _found(expected, seed=31, truth="hybrid")
     names = [e["effect"] for e in doc["effects_added"]]
     assert names and names[0] == expected, doc["verdict"]
-    # measured: a second effect (creep, describing the hybrid plant's slow Eq. 11 pole that the
-    # paper model lacks) is often added; then the verdict must not claim a full explanation
-    assert len(names) == 1 or d.classification == "partially_explained", doc["verdict"]
+    assert names == [expected], doc["verdict"]
+    assert not doc["verdict"].startswith("Explained")  # the base's own mismatch stays
 
 
 @pytest.mark.slow

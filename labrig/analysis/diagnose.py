@@ -496,12 +496,17 @@ def diagnose(
                         rb = prob.residual(prob.z_of(b, e0), b)
                         costs.append(float(rb @ rb))
                     start = alt if costs[1] < costs[0] else cur.base
-            # stage 1: the effect with the operator's gains (smooth: V* does not move), then
-            # everything free; the single-memory operator makes the full problem rough
+            # stage 1: the effect with the operator's gains (V* does not move), then everything
+            # free; from each of the effect's starts (a filter's time constant traded against
+            # G_d has local optima), the lowest cost wins
             lin = [n for n in ("alpha0_ue_per_V", "gamma_ue_per_V") if n in common["base_free"]]
             pre = ExtendedProblem(records, [*current, eff], **{**common, "base_free": lin})
-            f1 = pre.fit(start, {**cur.effects, eff.name: probe}, tight=False, max_nfev=30)
-            fo = prob.fit(f1.base, f1.effects, max_nfev=MAX_NFEV)
+            fo = None
+            for e0 in eff.refit_starts(probe):
+                f1 = pre.fit(start, {**cur.effects, eff.name: e0}, tight=False, max_nfev=30)
+                f2 = prob.fit(f1.base, f1.effects, max_nfev=MAX_NFEV)
+                fo = f2 if fo is None or f2.cost < fo.cost else fo
+            assert fo is not None
             c.tried, c.fit = True, fo
             c.insample_gain = 1.0 - fo.nrmse_pct / cur.nrmse_pct
             clause = _signature_clause(eff, ev_cur)

@@ -4,8 +4,8 @@ After the base fit (:func:`labrig.analysis.fit.fit_model`), the base parameters 
 parameters (:mod:`labrig.model.effects`) are refitted jointly by least squares on the same
 entries, weighting, chaining, warm-up and offsets (:class:`~labrig.analysis.diagnose_fit.
 ExtendedProblem`, the numerics ``labrig diagnose`` uses), from the base fit and the effects'
-starts (each log-scaled parameter also from a tenth and ten times its start; the best cost
-wins).
+starts (:meth:`~labrig.model.effects.Effect.refit_starts`, every combination; each start fitted
+loosely, the best cost then fitted to convergence).
 
 Held-out scoring is ``labrig diagnose``'s (leave-one-entry-out; the left-out entry scored on the
 second half of its samples, its nuisance terms fitted on the first half), computed for the model
@@ -86,16 +86,12 @@ def resolve_effects(names: Sequence[str]) -> list[Effect]:
     return out
 
 
+#: evaluations of each start's loose fit (the best is then fitted to convergence)
+_START_NFEV = 30
+
+
 def _starts(effects: Sequence[Effect]) -> list[dict[str, dict[str, float]]]:
-    per_effect = []
-    for e in effects:
-        opts = [dict(e.init)]
-        for q in e.params:
-            if q.log:
-                for k in (0.1, 10.0):
-                    v = min(max(q.init * k, q.lo), q.hi)
-                    opts.append({**e.init, q.name: v})
-        per_effect.append(opts)
+    per_effect = [e.refit_starts(e.init) for e in effects]
     return [
         {e.name: p for e, p in zip(effects, combo, strict=True)}
         for combo in itertools.product(*per_effect)
@@ -136,12 +132,15 @@ def fit_effects(
     starts = _starts(effects)
     best: FitOutcome | None = None
     for k, e0 in enumerate(starts):
-        out = prob.fit(base0, e0)
+        out = prob.fit(base0, e0, tight=False, max_nfev=_START_NFEV)
         if best is None or out.cost < best.cost:
             best = out
         if progress:
-            progress("effects", k + 1, len(starts))
+            progress("effects", k + 1, len(starts) + 1)
     assert best is not None
+    best = prob.fit(best.base, best.effects)  # the best start, to convergence
+    if progress:
+        progress("effects", len(starts) + 1, len(starts) + 1)
     plain = ExtendedProblem(records, [], **common)
     base_per_entry = plain.per_entry(base0, {})
     held = base_held = None

@@ -24,7 +24,20 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["bouc_wen_exact", "bouc_wen_step", "bouc_wen_stream", "monotone_runs"]
+__all__ = ["bouc_wen_exact", "bouc_wen_step", "bouc_wen_stream", "max_slope", "monotone_runs"]
+
+
+def max_slope(A: float, beta: float, gamma: float) -> float:
+    """The largest ``dh/dx`` (ue/V) the element can show, for ``beta > 0``, ``|gamma| <= beta``.
+
+    Rising (falling is the mirror image), ``dh/dx = A - (beta + gamma sign h) h`` is linear in
+    ``h`` on each side of 0, and ``|h|`` stays below ``M = |A| / (beta + gamma)``, so the
+    supremum is the largest of the values at ``h = 0`` (``A``), ``h = M sign A`` (``A - |A|``)
+    and ``h = -M sign A`` (``A + (beta - gamma) |A| / (beta + gamma)``): ``2 A beta / (beta +
+    gamma)`` for ``A > 0``, ``-2 gamma |A| / (beta + gamma)`` for ``A < 0``.
+    """
+    m = abs(A) / (beta + gamma)
+    return max(A, A - abs(A), A + (beta - gamma) * m)
 
 
 def monotone_runs(v: NDArray) -> tuple[NDArray, NDArray, NDArray]:

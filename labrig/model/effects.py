@@ -80,6 +80,7 @@ class Param:
     log: bool = False  # fit in log coordinates (then ``null`` is never reached)
     expect: int = 0  # +1: values below ``null`` are possible but suspicious (reported)
     check_bounds: bool = True  # a fit ending on a bound makes the effect unphysical
+    starts: tuple[float, ...] = ()  # further starts of a refit (other orders of magnitude)
 
 
 @dataclass
@@ -135,6 +136,17 @@ class Effect:
     @property
     def init(self) -> dict[str, float]:
         return {q.name: q.init for q in self.params}
+
+    def refit_starts(self, start: Mapping[str, float]) -> list[dict[str, float]]:
+        """Starts of a refit: ``start``, then ``start`` with one parameter moved to each of its
+        :attr:`Param.starts` (orders of magnitude where a local optimum may hide)."""
+        out = [dict(start)]
+        for q in self.params:
+            for v in q.starts:
+                alt = {**start, q.name: min(max(v, q.lo), q.hi)}
+                if alt not in out:
+                    out.append(alt)
+        return out
 
     def probes(self, contexts: list[Context]) -> list[dict[str, float]]:
         """Parameter values where the effect's direction is probed for ranking (the score
@@ -199,7 +211,7 @@ class ThermalDrift(Effect):
         else:
             self.params = (
                 Param("k_rel", "", 0.0, -0.5, 1.0, 0.01, sign=+1),
-                Param("tau_th_s", "s", 30.0, 1.0, 5000.0, 30.0, log=True),
+                Param("tau_th_s", "s", 30.0, 1.0, 5000.0, 30.0, log=True, starts=(3.0, 300.0)),
             )
 
     def probes(self, contexts):
@@ -340,7 +352,7 @@ class ViscoelasticCreep(Effect):
     tell_apart = "a step-and-hold entry: the strain settles within a few tau, log creep does not"
     params = (
         Param("c", "", 0.0, -0.3, 0.5, 0.02, sign=+1),
-        Param("tau_s", "s", 0.3, 1e-3, 30.0, 0.3, log=True, check_bounds=False),
+        Param("tau_s", "s", 0.3, 1e-3, 30.0, 0.3, log=True, check_bounds=False, starts=(0.03, 3.0)),
     )
 
     def apply(self, x, ctx, p):
@@ -383,7 +395,17 @@ class Remanence(Effect):
     )
     params = (
         Param("A_ue_per_V", "ue/V", 0.0, -2.0, 8.0, 0.5, sign=+1),
-        Param("beta_per_V", "1/V", 0.03, 2e-3, 0.5, 0.03, log=True, check_bounds=False),
+        Param(
+            "beta_per_V",
+            "1/V",
+            0.03,
+            2e-3,
+            0.5,
+            0.03,
+            log=True,
+            check_bounds=False,
+            starts=(0.003, 0.3),
+        ),
         Param("gamma_ratio", "", 0.3, -1.0, 1.0, 0.3, check_bounds=False),
     )
 
@@ -546,7 +568,8 @@ class SensorLowpass(Effect):
     confusable = ("time_delay", "amplifier_current_limit")
     tell_apart = "calibrate the gauge chain with a known step or a multisine"
     params = (
-        Param("tau_s", "s", 0.0, 0.0, 0.02, 5e-4, sign=+1),
+        # cutoffs 16 Hz to 1.6 kHz: the cutoff trades against G_d's order (local optima)
+        Param("tau_s", "s", 0.0, 0.0, 0.02, 5e-4, sign=+1, starts=(1e-4, 3e-4, 1e-3, 3e-3, 1e-2)),
         Param("zeta", "", 0.7, 0.2, 5.0, 0.7, check_bounds=False),
     )
 

@@ -225,10 +225,12 @@ def _params_section(data: ReportData) -> str:
             f'<td class="num">{rel}</td><td class="name">{escape(unit)}</td></tr>'
         )
     shape = escape(str(fm.params.get("shape", "")))
+    memory = escape(str(fm.params.get("memory", "")))
     out = [
         "<table><tr><th>symbol</th><th>field</th><th>value</th><th>± 1σ</th><th>relative</th>"
         f"<th>unit</th></tr>{''.join(rows)}</table>",
-        f'<p class="small">Hysteretic shape: {shape}. Method: {escape(fm.method or "—")}. '
+        f'<p class="small">Hysteretic shape: {shape}; memory: {memory}. '
+        f"Method: {escape(fm.method or '—')}. "
         "Uncertainties: one standard deviation from the Jacobian at the optimum (per-entry "
         "sandwich estimate); residuals of a free-run model are correlated in time, so treat them "
         "as lower bounds. “fixed”: not identified from these data.</p>",
