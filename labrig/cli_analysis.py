@@ -531,8 +531,13 @@ def read_params(path: Path) -> dict[str, Any]:
     return doc
 
 
-def _fitted_effects(doc: dict[str, Any], path: Path) -> tuple[list[Effect], dict]:
-    """The library effects of a ``labrig fit --effect`` file and their parameters (checked)."""
+def _fitted_effects(
+    doc: dict[str, Any], path: Path, records: Sequence[Record] = ()
+) -> tuple[list[Effect], dict]:
+    """The library effects of a ``labrig fit --effect`` file and their parameters (checked),
+    configured as when they were fitted (the file's ``effects_context``; else from
+    ``records``)."""
+    from labrig.analysis.diagnose_fit import effect_context
     from labrig.analysis.fit_effects import resolve_effects
 
     listed = doc.get("effects") or []
@@ -540,8 +545,24 @@ def _fitted_effects(doc: dict[str, Any], path: Path) -> tuple[list[Effect], dict
         isinstance(e, dict) and isinstance(e.get("params"), dict) for e in listed
     ):
         raise _issue(path, "'effects' must be a list of {effect, params} objects", "effects")
+    context = doc.get("effects_context")
+    if context is None and records:
+        context = effect_context(records)
+    kinds = {"temperature": bool, "amplifier_voltage": bool, "mains_hz": float, "v_ref": float}
+    if context is not None and not (
+        isinstance(context, dict)
+        and set(context) == set(kinds)
+        and all(
+            isinstance(context[k], t) or (t is float and isinstance(context[k], int))
+            for k, t in kinds.items()
+        )
+    ):
+        raise _issue(
+            path, f"'effects_context' must have {', '.join(kinds)} (as labrig fit writes it)",
+            "effects_context",
+        )  # fmt: skip
     try:
-        effects = resolve_effects([str(e.get("effect")) for e in listed])
+        effects = resolve_effects([str(e.get("effect")) for e in listed], context)
     except ValueError as e:
         raise _issue(path, str(e), "effects") from None
     values = {}
@@ -645,7 +666,7 @@ def run_report(
             source = f"fitted now ({res.method}, {res.elapsed_s:.1f} s)"
         else:
             params = ModelParams(**doc["params"])
-            effects = _fitted_effects(doc, params_file)
+            effects = _fitted_effects(doc, params_file, setup.records)
             models["dynamic"] = Fitted(
                 "dynamic",
                 predict_entries(params, setup, effects),

@@ -16,6 +16,7 @@ import pytest
 
 from labrig.analysis.diagnose import diagnose
 from labrig.analysis.diagnose_campaign import STUDY_CASES, bench_campaign, truth_campaign
+from labrig.model.effects import library
 
 #: bench effect (as in a rig file) -> the library effect diagnose should name; strengths are
 #: clear (the effect dominates the residual), forms differ from the library's (2nd-order
@@ -133,11 +134,16 @@ def test_log_creep_is_absorbed_by_the_models_transient_relaxor():
 @pytest.mark.parametrize("expected", ["mains_pickup", "sensor_lowpass", "thermal_drift"])
 def test_slightly_imperfect_base_effect_found_nothing_spurious(expected):
     """The bench's truth is the seed's model with the Gaussian hysteresis shape, fitted with the
-    exponential one (base residual 1.6x the floor with no effect): the effect is found first and
-    nothing is added beside it."""
+    exponential one (base residual 1.6x the floor with no effect): one effect is added, nothing
+    beside it. It is the bench's, or (measured for the low-pass on seeds 1 and 2, not on this
+    one) its documented confusable twin with the bench's effect named in the verdict as fitting
+    almost as well (the low-pass and a delay differ by 1-2 % in held-out NRMSE here)."""
     _d, doc = _found(expected, seed=51, truth="paper_gaussian")
     names = [e["effect"] for e in doc["effects_added"]]
-    assert names == [expected], doc["verdict"]
+    assert len(names) == 1, doc["verdict"]
+    if names[0] != expected:
+        assert names[0] in library()[expected].confusable, doc["verdict"]
+        assert f"{expected} fits almost as well" in doc["verdict"]
 
 
 @pytest.mark.slow

@@ -46,7 +46,13 @@ from numpy.typing import NDArray
 from scipy import optimize
 
 from labrig.analysis.diagnose_evidence import Evidence, collect_evidence
-from labrig.analysis.diagnose_fit import LAM_GAP, ExtendedProblem, FitOutcome, _build_sequences
+from labrig.analysis.diagnose_fit import (
+    LAM_GAP,
+    ExtendedProblem,
+    FitOutcome,
+    _build_sequences,
+    effect_context,
+)
 from labrig.analysis.fit import fit_model
 from labrig.analysis.metrics import drive_frequency_hz
 from labrig.analysis.records import Record
@@ -258,27 +264,6 @@ def _mean(d: dict[str, float] | None) -> float | None:
     return None if not d else float(np.mean(list(d.values())))
 
 
-def _mains_hz(records: Sequence[Record]) -> float:
-    """50 or 60 Hz: whichever carries more residual-free strain power near it (a guess from the
-    measurement itself; mains lines are rarely drive harmonics at both)."""
-    p50 = p60 = 0.0
-    for r in records:
-        x = r.strain_ue - np.mean(r.strain_ue)
-        if x.size < 512:
-            continue
-        spec = np.abs(np.fft.rfft(x * np.hanning(x.size)))
-        f = np.fft.rfftfreq(x.size, 1 / r.rate_hz)
-        for fm in (50.0, 60.0):
-            band = np.abs(f - fm) < 1.0
-            if band.any():
-                val = float(spec[band].max()) / (float(np.median(spec)) + 1e-12)
-                if fm == 50.0:
-                    p50 += val
-                else:
-                    p60 += val
-    return 60.0 if p60 > 1.5 * p50 else 50.0
-
-
 def split_entries(records: Sequence[Record], parts: int = 4) -> list[Record]:
     """A single long record cut into ``parts`` consecutive entries (at whole drive periods when
     the record is periodic), chained with no rest: leave-one-entry-out then has folds. The
@@ -425,10 +410,7 @@ def diagnose(
     messages += fr.messages
     base0 = {k: v for k, v in fr.params.model_dump().items() if k not in ("shape", "memory")}
     contexts = _build_sequences(records, chain)
-    has_t = all("temperature" in r.aux for r in records)
-    has_a = all("amplifier_voltage" in r.aux for r in records)
-    v_ref = max(float(np.max(np.abs(r.voltage_V))) for r in records)
-    lib = library(has_t, has_a, mains_hz or _mains_hz(records), v_ref)
+    lib = library(**effect_context(records, mains_hz))
     names = [n for n in (effects or EFFECT_NAMES) if n in lib]
     common = {
         "chain": chain,

@@ -39,7 +39,7 @@ from labrig.model import ModelParams, QuasiStaticHysteresis, Relaxor
 from labrig.model.effects import Context, Effect
 from labrig.model.modal import run_bank
 
-__all__ = ["ExtendedProblem", "FitOutcome"]
+__all__ = ["ExtendedProblem", "FitOutcome", "effect_context", "mains_hz_of"]
 
 
 #: the relaxor realisation is discontinuous at lam = 1 (a single pole at 1, a modal bank with
@@ -151,6 +151,40 @@ def _build_sequences(records: Sequence[Record], chain: bool) -> list[tuple[list[
         )
         out.append((grp, ctx))
     return out
+
+
+def mains_hz_of(records: Sequence[Record]) -> float:
+    """50 or 60 Hz: whichever carries more residual-free strain power near it (a guess from the
+    measurement itself; mains lines are rarely drive harmonics at both)."""
+    p50 = p60 = 0.0
+    for r in records:
+        x = r.strain_ue - np.mean(r.strain_ue)
+        if x.size < 512:
+            continue
+        spec = np.abs(np.fft.rfft(x * np.hanning(x.size)))
+        f = np.fft.rfftfreq(x.size, 1 / r.rate_hz)
+        for fm in (50.0, 60.0):
+            band = np.abs(f - fm) < 1.0
+            if band.any():
+                val = float(spec[band].max()) / (float(np.median(spec)) + 1e-12)
+                if fm == 50.0:
+                    p50 += val
+                else:
+                    p60 += val
+    return 60.0 if p60 > 1.5 * p50 else 50.0
+
+
+def effect_context(records: Sequence[Record], mains_hz: float | None = None) -> dict:
+    """How the effect library is configured for ``records`` (the keyword arguments of
+    :func:`labrig.model.effects.library`): whether every record has a temperature channel and
+    the amplifier's measured voltage, the mains frequency (:func:`mains_hz_of` unless given) and
+    the full-scale voltage (the largest ``|V|``, the reference of ``quadratic_term``)."""
+    return {
+        "temperature": all("temperature" in r.aux for r in records),
+        "amplifier_voltage": all("amplifier_voltage" in r.aux for r in records),
+        "mains_hz": float(mains_hz or mains_hz_of(records)),
+        "v_ref": max(float(np.max(np.abs(r.voltage_V))) for r in records),
+    }
 
 
 def _orthonormal(C: NDArray) -> NDArray | None:

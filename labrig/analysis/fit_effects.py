@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from labrig.analysis.diagnose_fit import ExtendedProblem, FitOutcome
+from labrig.analysis.diagnose_fit import ExtendedProblem, FitOutcome, effect_context
 from labrig.analysis.fit import PARAM_NAMES, FitResult
 from labrig.analysis.records import Record
 from labrig.model import ModelParams
@@ -54,6 +54,7 @@ class EffectsFit:
     base_nrmse_pct: float
     base_heldout_nrmse_pct: float | None
     entries: list[str]
+    context: dict  # how the effects were configured (effect_context): saved for predictions
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -70,12 +71,15 @@ class EffectsFit:
             },
             "method": "global+effects",
             "entries": list(self.entries),
+            "effects_context": dict(self.context),
         }
 
 
-def resolve_effects(names: Sequence[str]) -> list[Effect]:
-    """The library effects named (``ValueError`` naming an unknown or repeated one)."""
-    lib, ok = library(), known_effects()
+def resolve_effects(names: Sequence[str], context: dict | None = None) -> list[Effect]:
+    """The library effects named (``ValueError`` naming an unknown or repeated one), configured
+    with ``context`` (:func:`~labrig.analysis.diagnose_fit.effect_context`; default: the
+    library's defaults, enough to check names)."""
+    lib, ok = library(**(context or {})), known_effects()
     out = []
     for n in names:
         if n not in ok:
@@ -118,7 +122,8 @@ def fit_effects(
 
     ``progress(stage, done, total)``: stage ``"effects"`` (the starts) then ``"heldout"``.
     Raises ``ValueError`` for an unknown effect name."""
-    effects = resolve_effects(names)
+    context = effect_context(records)
+    effects = resolve_effects(names, context)
     common = dict(
         chain=chain,
         shape=base.params.shape,
@@ -175,4 +180,5 @@ def fit_effects(
         base_nrmse_pct=float(np.mean(list(base_per_entry.values()))),
         base_heldout_nrmse_pct=_mean(base_held),
         entries=list(prob.scored),
+        context=context,
     )

@@ -189,7 +189,7 @@ class QuasiStaticHysteresis:
             lambda a, b: self._odd_branch(b - a),
             self.memory == "return_point",
         )
-        out = br.y0[br.anchor] + self._odd_branch(u - br.x0[br.anchor])
+        out = br.per_sample(br.y0) + self._odd_branch(u - br.per_sample(br.x0))
         st.older, (st.u_s, st.s_s), st.direction = stack[:-1], stack[-1], d
         st.u_last, st.s_last = float(u[-1]), float(out[-1])
         return out
@@ -223,8 +223,8 @@ class QuasiStaticHysteresis:
         for k, p, dk in zip(new.tolist(), par.tolist(), step, strict=True):
             acc[k] = acc[p] + dk
         dy0 = np.asarray(acc)
-        a = br.anchor
-        return dy0[a] + self.slope(np.abs(u - br.x0[a])) * (du - dx0[a])
+        x0 = br.per_sample(br.x0)
+        return br.per_sample(dy0) + self.slope(np.abs(u - x0)) * (du - br.per_sample(dx0))
 
     def invert(self, strain: ArrayLike, state: HysteresisState | None = None) -> NDArray:
         """Voltage (V) whose :meth:`apply` gives ``strain`` (ue), branch by branch.
@@ -249,7 +249,7 @@ class QuasiStaticHysteresis:
             lambda a, b: inv(b - a),
             self.memory == "return_point",
         )
-        u = br.y0[br.anchor] + inv(s - br.x0[br.anchor])
+        u = br.per_sample(br.y0) + inv(s - br.per_sample(br.x0))
         st.older = [(b, a) for a, b in stack[:-1]]
         st.s_s, st.u_s = stack[-1]
         st.direction = d
@@ -259,16 +259,22 @@ class QuasiStaticHysteresis:
 
 @dataclass(frozen=True)
 class _Branches:
-    """Branch structure of a record: sample ``n`` lies on the branch that starts at turning
-    point ``anchor[n]``, whose input and output are ``x0``, ``y0``; ``at`` is each turning
-    point's sample (-1: carried in from before the record), ``parent`` the turning point whose
-    branch reached it (-1: carried in)."""
+    """Branch structure of a record: the record is cut into consecutive segments of
+    ``counts`` samples, segment ``j`` on the branch that starts at turning point
+    ``seg_anchor[j]``, whose input and output are ``x0``, ``y0``; ``at`` is each turning point's
+    sample (-1: carried in from before the record), ``parent`` the turning point whose branch
+    reached it (-1: carried in)."""
 
-    anchor: NDArray[np.intp]
+    seg_anchor: NDArray[np.intp]
+    counts: NDArray[np.intp]
     x0: NDArray[np.float64]
     y0: NDArray[np.float64]
     at: NDArray[np.intp]
     parent: NDArray[np.intp]
+
+    def per_sample(self, values: NDArray) -> NDArray:
+        """``values`` (one per turning point) at each sample's turning point."""
+        return np.repeat(values[self.seg_anchor], self.counts)
 
 
 def _branches(
@@ -286,59 +292,80 @@ def _branches(
     ``wipe``: return-point memory (close and forget minor loops), else the last reversal only.
     Returns the structure, the new stack and the new direction. A reversal detected at sample
     ``n`` has its extremum at ``n - 1`` (or at ``x_last``); flat stretches are not reversals.
-    One Python step per monotone run: the branches themselves are evaluated vectorised.
+    One Python step per monotone run; where branches start and the branches themselves are
+    found and evaluated vectorised.
     """
     n = x.size
     d = np.sign(np.diff(x, prepend=x_last))
     if d[0] == 0:
         d[0] = direction
     nz = d != 0
-    idx = np.where(nz, np.arange(n), 0)
-    np.maximum.accumulate(idx, out=idx)
-    d = np.where(nz[idx], d[idx], 0.0)
-    before = np.concatenate(([direction], d[:-1]))
-    reversal = (d != 0) & (before != 0) & (d != before)
-    rev = np.flatnonzero(reversal).tolist()
-    run_starts = rev if rev and rev[0] == 0 else [0, *rev]
-    run_ends = [*run_starts[1:], n]
+    if not nz.all():  # flat stretches keep the direction before them
+        idx = np.where(nz, np.arange(n), 0)
+        np.maximum.accumulate(idx, out=idx)
+        d = np.where(nz[idx], d[idx], 0.0)
+    before = np.empty(n)
+    before[0] = direction
+    before[1:] = d[:-1]
+    reversal = (d != before) & (d != 0) & (before != 0)
+    rev = np.flatnonzero(reversal)
+    starts = rev if rev.size and rev[0] == 0 else np.concatenate(([0], rev))
+    ends = np.append(starts[1:], n)
+    dirs = d[ends - 1]  # each run's direction (its samples are monotone that way)
+    x_ext = np.where(starts > 0, x[np.maximum(starts - 1, 0)], x_last)  # the turning point
 
-    xs = [p[0] for p in stack]
-    ys = [p[1] for p in stack]
-    at = [-1] * len(stack)
-    parent = [-1] * len(stack)
-    live = list(range(len(stack)))  # ids of the remembered turning points, oldest first
-    seg_start, seg_anchor = [0], [live[-1]]
-    dl = d.tolist()
-    for a, b in zip(run_starts, run_ends, strict=True):
-        if reversal[a]:
-            xs.append(float(x[a - 1]) if a > 0 else float(x_last))
-            ys.append(np.nan)
-            at.append(a - 1)
+    m = len(stack)
+    is_rev = reversal[starts]
+    rev_runs = np.flatnonzero(is_rev)
+    node_of_run = np.where(is_rev, m + np.cumsum(is_rev) - 1, -1)  # a turning point per reversal
+    xs = [p[0] for p in stack] + x_ext[rev_runs].tolist()
+    at = np.concatenate((np.full(m, -1, dtype=np.intp), starts[rev_runs] - 1))
+    parent = [-1] * m
+    live = list(range(m))  # ids of the remembered turning points, oldest first
+    anchor0 = live[-1]
+    cross_run: list[int] = []  # branches that start where a run passes a turning point
+    cross_thr: list[float] = []
+    cross_anchor: list[int] = []
+    runs = zip(node_of_run.tolist(), dirs.tolist(), x[ends - 1].tolist(), strict=True)
+    for j, (node, dj, x_far) in enumerate(runs):
+        if node >= 0:
             parent.append(live[-1])
-            live.append(len(xs) - 1)
-            seg_start.append(a)
-            seg_anchor.append(live[-1])
-        dj = dl[b - 1]
-        if not wipe or dj == 0.0:
-            continue
-        far = dj * float(x[b - 1])  # a run is monotone: its last sample is its farthest
-        while len(live) >= 2 and far > dj * xs[live[-2]]:
-            # the run passes the turning point where the current minor loop began: close it
-            i = a + int(np.searchsorted(dj * x[a:b], dj * xs[live[-2]], side="right"))
-            del live[-2 if len(live) >= 3 else -1 :]
-            seg_start.append(i)
-            seg_anchor.append(live[-1])
-    new = [k for k in range(len(stack), len(xs))]
-    if new:
-        px = np.array([xs[parent[k]] for k in new])
-        steps = delta(px, np.array([xs[k] for k in new])).tolist()
-        for k, dk in zip(new, steps, strict=True):
-            ys[k] = ys[parent[k]] + dk
-    seg = np.searchsorted(np.asarray(seg_start), np.arange(n), side="right") - 1
-    anchor = np.asarray(seg_anchor, dtype=np.intp)[seg]
-    new_dir = dl[-1] if dl[-1] != 0 else direction
-    out = _Branches(
-        anchor, np.asarray(xs), np.asarray(ys), np.asarray(at, dtype=np.intp),
-        np.asarray(parent, dtype=np.intp),
-    )  # fmt: skip
+            live.append(node)
+        if wipe and dj != 0.0:
+            far = dj * x_far  # a run is monotone: its last sample is its farthest
+            while len(live) >= 2 and far > dj * xs[live[-2]]:
+                # the run passes the turning point where the current minor loop began: close
+                # the loop and forget it (the rest point at the bottom stays)
+                cross_run.append(j)
+                cross_thr.append(xs[live[-2]])
+                del live[-2 if len(live) >= 3 else -1 :]
+                cross_anchor.append(live[-1])
+    # where each branch starts: a reversal run's first sample, or the first sample of a run past
+    # a turning point (vectorised bisection inside the monotone run)
+    cj = np.asarray(cross_run, dtype=np.intp)
+    pos_c = starts[cj].copy()
+    if cj.size:
+        t, dd = np.asarray(cross_thr), dirs[cj]
+        hi = ends[cj] - 1
+        while np.any(pos_c < hi):
+            mid = (pos_c + hi) // 2
+            past = dd * x[mid] > dd * t
+            hi = np.where(past, mid, hi)
+            pos_c = np.where(past, pos_c, np.minimum(mid + 1, hi))
+    pos = np.concatenate(([0], starts[rev_runs], pos_c))
+    anchors = np.concatenate(([anchor0], node_of_run[rev_runs], cross_anchor)).astype(np.intp)
+    # in time order; at one sample a run's reversal comes before the turning points it passes
+    key = 2 * pos + np.concatenate(([0], np.zeros(rev_runs.size), np.ones(cj.size)))
+    order = np.argsort(key, kind="stable")
+    counts = np.diff(np.concatenate((pos[order], [n])))
+    ys = [p[1] for p in stack]
+    if rev_runs.size:
+        par = parent[m:]
+        xa = np.asarray(xs)
+        steps = delta(xa[par], xa[m:]).tolist()
+        for pk, dk in zip(par, steps, strict=True):  # parents come first: ids in order
+            ys.append(ys[pk] + dk)
+    new_dir = float(dirs[-1]) if dirs[-1] != 0 else direction
+    parents = np.asarray(parent, dtype=np.intp)
+    out = _Branches(anchors[order], counts, np.asarray(xs), np.asarray(ys), at, parents)
     return out, [(xs[k], ys[k]) for k in live], float(new_dir)
