@@ -1,23 +1,23 @@
-# Measured figures (full run of this script on the shared 2-core machine, load average 3-5
-# from other people's work, so wall times vary by some tens of per cent):
+# Measured figures (full run of this script on the shared 2-core machine, 2026-11-25, load
+# average about 1 from another process, so wall times vary by some tens of per cent):
 #
 #   experiments/paper.yaml on the simulated rig (paper truth, seed 7; 11 entries, 57.5 s
 #   recorded, 87.5 s simulated as one run at 1 kHz):
-#     fit_model (staged start + global + uncertainties)   3.2 s (42 model evaluations)
-#     + leave-one-entry-out (11 warm-started refits)       11.5 s in all (8.3 s of it LOO)
-#     Prandtl-Ishlinskii / Bouc-Wen, with LOO               1.2 s / 12.1 s
-#     `labrig fit RUN` process / `--no-heldout`             13.1 s / 8.6 s
-#     `labrig report RUN --params P` / `labrig report RUN`  21.0 s / 27.9 s
+#     fit_model (staged start + global + uncertainties)   1.68 s (40 model evaluations)
+#     + leave-one-entry-out (11 warm-started refits)       5.9 s in all (4.3 s of it LOO)
+#     Prandtl-Ishlinskii / Bouc-Wen, with LOO               0.55 s / 3.3 s
+#     `labrig fit RUN` process / `--no-heldout`             8.1 s / 5.7 s
+#     `labrig report RUN --params P` / `labrig report RUN`  15.5 s / 23.4 s
 #     goal (fit under 30 s): met
-#   where the fit's time goes (cProfile, cumulative, overlapping): relaxor filtering 48 %,
-#     hysteresis operator 26 %, relaxor banks for new parameters 12 %; by phase: staged start
-#     45 %, Jacobians 62 % (the staged stages' included), residual evaluations 26 %
-#   recovery (same run): alpha0 -0.04 %, gamma +0.10 %, Vc +0.03 %, lam_t -0.0001,
-#     tau_t -0.48 %, lam_d +0.0000, tau_d -0.00 %; NRMSE 0.332 % (held-out 0.332 %) against a
+#   where the fit's time goes (cProfile, cumulative, overlapping): hysteresis operator 46 %,
+#     relaxor filtering 36 %, relaxor banks for new parameters 8 %; by phase: staged start
+#     50 %, Jacobians 67 % (the staged stages' included), residual evaluations 24 %
+#   recovery (same run): alpha0 -0.10 %, gamma -0.02 %, Vc -0.02 %, lam_t +0.0002,
+#     tau_t -0.66 %, lam_d +0.0002, tau_d -0.00 %; NRMSE 0.331 % (held-out 0.331 %) against a
 #     noise floor of 0.332 % (2.00 ue rms configured): ratio 1.00
-#   hybrid truth (seed 7): NRMSE in-sample / held-out (%): ours 1.32 / 1.62,
+#   hybrid truth (seed 7): NRMSE in-sample / held-out (%): ours 0.927 / 1.05,
 #     Prandtl-Ishlinskii 5.48 / 6.05, Bouc-Wen 5.11 / 5.73 (noise floor 0.252 %)
-#   micromanipulator (real, 2 files): ours 0.656 / 0.749, Prandtl-Ishlinskii 1.07 / 1.64,
+#   micromanipulator (real, 2 files): ours 0.650 / 0.745, Prandtl-Ishlinskii 1.07 / 1.64,
 #     Bouc-Wen 1.10 / 1.32 (noise floor 0.166 %, from the constant-voltage stretches)
 #
 """Identification benchmarks and the "must show" numbers of the fit issue.

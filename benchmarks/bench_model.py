@@ -509,9 +509,12 @@ def bench_gl(sizes: list[int], repeats: int) -> list[dict]:
 class ScalarExpHysteresis:
     """Benchmark-only sketch: the exponential-shape operator one sample at a time in plain Python.
 
-    Same semantics as ``QuasiStaticHysteresis.apply`` (reversal = change of direction, the
-    extremum is the previous sample; rest at 0 V with zero strain); checked against it on the
-    benchmark signal before its cost is reported. It shows what a scalar ``step`` costs.
+    The last-reversal memory rule (reversal = change of direction, the extremum is the previous
+    sample; rest at 0 V with zero strain), which on the benchmark's periodic signal (no extremum
+    passes an earlier turning point) gives what ``QuasiStaticHysteresis.apply`` gives with its
+    default return-point memory; checked against it before its cost is reported. It shows what a
+    scalar ``step`` costs (the controller's ``_StaticInverseStepper`` is the full, stack-based
+    per-sample form).
     """
 
     def __init__(self, alpha0: float, gamma: float, vc: float):

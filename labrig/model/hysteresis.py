@@ -175,6 +175,14 @@ class QuasiStaticHysteresis:
         return x
 
     # -- operator -----------------------------------------------------------------------------
+    @property
+    def _wipe(self) -> bool:
+        return self.memory == "return_point"
+
+    def _along(self, a: NDArray, b: NDArray) -> NDArray:
+        """Strain change (ue) along a branch from input ``a`` to ``b`` (V)."""
+        return self._odd_branch(b - a)
+
     def apply(self, u: ArrayLike, state: HysteresisState | None = None) -> NDArray[np.float64]:
         """Strain (ue) for the voltage record ``u`` (V). ``state`` is updated in place if given."""
         u = np.asarray(u, dtype=float)
@@ -182,12 +190,7 @@ class QuasiStaticHysteresis:
         if u.size == 0:
             return np.zeros(0)
         br, stack, d = _branches(
-            u,
-            [*st.older, (st.u_s, st.s_s)],
-            st.u_last,
-            st.direction,
-            lambda a, b: self._odd_branch(b - a),
-            self.memory == "return_point",
+            u, [*st.older, (st.u_s, st.s_s)], st.u_last, st.direction, self._along, self._wipe
         )
         out = br.per_sample(br.y0) + self._odd_branch(u - br.per_sample(br.x0))
         st.older, (st.u_s, st.s_s), st.direction = stack[:-1], stack[-1], d
@@ -210,10 +213,7 @@ class QuasiStaticHysteresis:
         du = np.asarray(du, dtype=float)
         if u.size == 0:
             return np.zeros(0)
-        br, _, _ = _branches(
-            u, [(0.0, 0.0)], 0.0, 0.0, lambda a, b: self._odd_branch(b - a),
-            self.memory == "return_point",
-        )  # fmt: skip
+        br, _, _ = _branches(u, [(0.0, 0.0)], 0.0, 0.0, self._along, self._wipe)
         dx0 = np.where(br.at >= 0, du[np.maximum(br.at, 0)], 0.0)
         dy0 = np.zeros(br.x0.size)
         new = np.flatnonzero(br.parent >= 0)
@@ -247,7 +247,7 @@ class QuasiStaticHysteresis:
             st.s_last,
             st.direction,
             lambda a, b: inv(b - a),
-            self.memory == "return_point",
+            self._wipe,
         )
         u = br.per_sample(br.y0) + inv(s - br.per_sample(br.x0))
         st.older = [(b, a) for a, b in stack[:-1]]
