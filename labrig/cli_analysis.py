@@ -527,16 +527,16 @@ def read_params(path: Path) -> dict[str, Any]:
     except (TypeError, ValueError) as e:
         msg = str(e).splitlines()
         raise _issue(path, f"invalid model parameters: {' '.join(msg[:3])}", "params") from None
-    _fitted_effects(doc, path)
+    _fitted_effects(doc, path, check_params=False)  # names now; parameters with the records
     return doc
 
 
 def _fitted_effects(
-    doc: dict[str, Any], path: Path, records: Sequence[Record] = ()
+    doc: dict[str, Any], path: Path, records: Sequence[Record] = (), check_params: bool = True
 ) -> tuple[list[Effect], dict]:
     """The library effects of a ``labrig fit --effect`` file and their parameters (checked),
-    configured as when they were fitted (the file's ``effects_context``; else from
-    ``records``)."""
+    configured as when they were fitted (the file's ``effects_context``; else from ``records``;
+    a file without either can only have its names checked: ``check_params=False``)."""
     from labrig.analysis.diagnose_fit import effect_context
     from labrig.analysis.fit_effects import resolve_effects
 
@@ -565,7 +565,9 @@ def _fitted_effects(
         effects = resolve_effects([str(e.get("effect")) for e in listed], context)
     except ValueError as e:
         raise _issue(path, str(e), "effects") from None
-    values = {}
+    values: dict[str, dict[str, float]] = {}
+    if not check_params:
+        return effects, values
     for eff, e in zip(effects, listed, strict=True):
         want = [q.name for q in eff.params]
         p = e["params"]

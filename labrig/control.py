@@ -96,7 +96,7 @@ from scipy import linalg, signal
 from labrig.limits import RigLimits
 from labrig.model import DynamicHysteresisModel, ModelParams, QuasiStaticHysteresis, Relaxor
 from labrig.model.bouc_wen import bouc_wen_exact, bouc_wen_step, max_slope
-from labrig.model.effects import kelvin_voigt_filter
+from labrig.model.effects import kelvin_voigt_filter, library
 from labrig.model.modal import DiscreteBank
 from labrig.model.relaxor import sampled_kernel, series_reciprocal
 
@@ -183,10 +183,11 @@ class ControlModel:
                 )
         if self.remanence is not None:
             A, beta, gam = self.remanence
-            if not (all(map(math.isfinite, self.remanence)) and beta > 0 and -beta < gam <= beta):
+            bounded = beta > 0 and abs(gam) <= beta and beta + (gam if A >= 0 else -gam) > 0
+            if not (all(map(math.isfinite, self.remanence)) and bounded):
                 raise ValueError(
-                    f"remanence needs beta > 0 and -beta < gamma <= beta, got A={A}, beta={beta}, "
-                    f"gamma={gam}"
+                    "remanence needs beta > 0, |gamma| <= beta and beta + sign(A) gamma > 0 (a "
+                    f"bounded element), got A={A}, beta={beta}, gamma={gam}"
                 )
             # the inverse needs S = H - h increasing along every branch: the element's steepest
             # slope below the operator's shallowest
@@ -275,7 +276,7 @@ def load_control_model(path: str | Path) -> ControlModel:
                 f"{p.name}: the controller cannot invert the effect {name!r} (it inverts "
                 f"{', '.join(INVERTIBLE_EFFECTS)}); refit without --effect {name}"
             )
-        keys = _EFFECT_KEYS[name]
+        keys = [q.name for q in library()[name].params]  # ControlModel's order
         q = e.get("params", {})
         try:
             found[name] = tuple(float(q[k]) for k in keys)
@@ -293,13 +294,6 @@ def load_control_model(path: str | Path) -> ControlModel:
 
 
 # -- offline (whole-waveform) drives -------------------------------------------------------------
-
-
-#: the parameters each invertible effect needs from a fit file, in ControlModel's order
-_EFFECT_KEYS = {
-    "viscoelastic_creep": ("c", "tau_s"),
-    "remanence": ("A_ue_per_V", "beta_per_V", "gamma_ratio"),
-}
 
 
 def _command(strain_ue: ArrayLike) -> Array:
@@ -702,7 +696,7 @@ class _StaticInverseStepper:
         if self.direction != 0.0 and sgn != self.direction:  # reversal at the last sample
             turn = (self.s_last, self.u_last)
             st = [*st, turn] if self._wipe else [turn]
-        while self._wipe and len(st) >= 2 and sgn * (s - st[-2][0]) > 0:
+        while self._wipe and len(st) >= 2 and sgn * (s - st[-2][0]) >= 0:
             st = st[:-2] if len(st) >= 3 else st[:-1]  # a minor loop closed: forget it
         return st, sgn
 

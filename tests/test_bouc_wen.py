@@ -3,21 +3,45 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from labrig.model.bouc_wen import bouc_wen_exact, bouc_wen_step, bouc_wen_stream
+from labrig.model.bouc_wen import bouc_wen_exact, bouc_wen_step, bouc_wen_stream, max_slope
 
 
-def test_bouc_wen_closed_form_matches_fine_integration():
-    v = np.concatenate([np.linspace(0, 100, 201), np.linspace(100, 20, 161)])
-    h, _ = bouc_wen_stream(v, 0.0, 0.0, 1.5, 0.04, 0.013)
+@pytest.mark.parametrize(
+    ("A", "beta", "gamma"),
+    [
+        (1.5, 0.04, 0.013),
+        (1.5, 0.04, -0.02),
+        (-1.0, 0.04, 0.02),  # h moves against the input: saturates at A / (beta - gamma)
+        (-1.0, 0.04, -0.03),
+    ],
+)
+def test_bouc_wen_closed_form_matches_fine_integration(A, beta, gamma):
+    v = np.concatenate(
+        [np.linspace(0, 100, 201), np.linspace(100, 20, 161), np.linspace(20, 60, 81)]
+    )
     # reference: explicit Euler on a 1000x finer grid
     vf = np.interp(np.linspace(0, v.size - 1, (v.size - 1) * 1000 + 1), np.arange(v.size), v)
     hf, x = np.empty(vf.size), 0.0
+    hf[0] = 0.0
     for k in range(1, vf.size):
         dv = vf[k] - vf[k - 1]
-        x += 1.5 * dv - 0.04 * abs(dv) * x - 0.013 * dv * abs(x)
+        x += A * dv - beta * abs(dv) * x - gamma * dv * abs(x)
         hf[k] = x
-    assert np.max(np.abs(h[1:] - hf[::1000][1:])) < 2e-3 * np.max(np.abs(hf))
+    ref = hf[::1000]
+    tol = 2e-3 * np.max(np.abs(ref))
+    h, _ = bouc_wen_stream(v, 0.0, 0.0, A, beta, gamma)
+    assert np.max(np.abs(h - ref)) < tol
+    exact = bouc_wen_exact(np.concatenate(([0.0], v)), A, beta, gamma)[1:]
+    assert np.max(np.abs(exact - ref)) < tol
+    if A < 0:  # against the input: falls on the way up
+        assert ref[200] < -0.5 * abs(A) / (beta - gamma)
+    # the steepest slope seen stays below max_slope
+    dv = np.diff(vf)
+    moving = dv != 0
+    dh = np.diff(hf)[moving] / dv[moving]
+    assert np.max(dh) <= max_slope(A, beta, gamma) + 1e-6
 
 
 def test_three_forms_agree_and_a_unipolar_excursion_leaves_a_remanence():

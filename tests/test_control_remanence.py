@@ -287,10 +287,11 @@ def test_compensated_drive_with_remanence_inverts_the_model(which, f_hz):
 @pytest.mark.parametrize(
     "rem",
     [
-        # the element's steepest slope (2 A beta / (beta + gamma) for A > 0, -2 gamma |A| /
-        # (beta + gamma) for A < 0) not below alpha0
+        # the element's steepest slope (2 A beta / (beta + gamma) for A > 0; for A < 0 h never
+        # rises with V*) not below alpha0
         (FITTED_LIKE.alpha0_ue_per_V / 2, 0.037, 0.0),  # 2 A = alpha0
-        (-0.6 * FITTED_LIKE.alpha0_ue_per_V, 0.037, -0.9 * 0.037),  # 10.8 alpha0
+        (0.3 * FITTED_LIKE.alpha0_ue_per_V, 0.037, -0.9 * 0.037),  # 6 alpha0
+        (-1.5, 0.037, 0.037),  # A < 0 with gamma = beta: unbounded
         (1.5, 0.0, 0.0),  # beta = 0
         (1.5, -0.01, 0.0),  # beta < 0
         (1.5, 0.037, 1.01 * 0.037),  # gamma > beta
@@ -300,7 +301,8 @@ def test_compensated_drive_with_remanence_inverts_the_model(which, f_hz):
     ],
     ids=[
         "2A_eq_alpha0",
-        "negative_A_and_gamma_steep",
+        "negative_gamma_steep",
+        "negative_A_unbounded",
         "beta_0",
         "beta_neg",
         "gamma_gt_beta",
@@ -316,14 +318,15 @@ def test_control_model_refuses_a_non_invertible_remanence(rem):
 
 def test_control_model_accepts_the_edges_and_load_refuses_a_bad_ratio(tmp_path):
     a0 = FITTED_LIKE.alpha0_ue_per_V
-    # gamma = beta: steepest slope A; A < 0 with gamma >= 0: h never rises with V*, always
-    # invertible (the former check, 2|A| < alpha0, refused it)
+    # gamma = beta: steepest slope A; A < 0: h never rises with V*, always invertible (the
+    # former check, 2|A| < alpha0, refused it)
     for rem in (
         (0.499 * a0, 0.037, 0.037),
         (0.99 * a0, 0.037, 0.037),
         (1.5, 0.037, 0.0),
         (0.0, 0.037, 0.0),
         (-0.6 * a0, 0.037, 0.0),
+        (-0.6 * a0, 0.037, -0.8 * 0.037),
     ):
         assert ControlModel(FITTED_LIKE, None, rem).remanence == rem
     data = json.loads(HYBRID.read_text(encoding="utf-8"))

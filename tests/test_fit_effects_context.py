@@ -104,3 +104,33 @@ def test_report_with_a_fit_effect_file_predicts_with_the_effect(tmp_path: Path):
     for name, nrmse in doc["per_entry"].items():
         assert table[name]["dynamic.nrmse_pct"] == pytest.approx(nrmse, rel=1e-6)
     assert doc["nrmse_pct"] < 0.8 * doc["without_effects"]["nrmse_pct"]
+
+
+def test_a_fit_file_without_its_effects_context_is_read_and_configured_from_the_run(tmp_path):
+    """Files written before ``effects_context`` existed: the names are checked when the file is
+    read, the parameters once the run's records say how the effects are configured (a
+    temperature channel gives thermal_drift its ``k_per_K`` form)."""
+    from labrig.cli_analysis import read_params
+    from labrig.errors import InputFileError
+
+    doc = {
+        "params": PAPER_TABLE1.model_dump(),
+        "effects": [{"effect": "thermal_drift", "params": {"k_per_K": 0.004}}],
+    }
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps(doc))
+    assert read_params(path)["effects"] == doc["effects"]
+    t = np.arange(100) / RATE
+    rec = Record("e", RATE, t, np.zeros(100), np.zeros(100), {"temperature": 23 + t})
+    effects, values = _fitted_effects(doc, path, [rec])
+    assert [e.name for e in effects] == ["thermal_drift"] and values == {
+        "thermal_drift": {"k_per_K": 0.004}
+    }
+    # without a temperature channel the same file does not fit the run: a clear error
+    bare = Record("e", RATE, t, np.zeros(100), np.zeros(100))
+    with pytest.raises(InputFileError, match="thermal_drift needs numeric params"):
+        _fitted_effects(doc, path, [bare])
+    # an unknown effect is refused when the file is read
+    path.write_text(json.dumps({**doc, "effects": [{"effect": "gremlins", "params": {}}]}))
+    with pytest.raises(InputFileError, match="gremlins"):
+        read_params(path)

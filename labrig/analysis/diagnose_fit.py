@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from labrig.analysis.fit import DEFAULT_BOUNDS, PARAM_NAMES
+from labrig.analysis.fit import DEFAULT_BOUNDS, PARAM_NAMES, _Family
 from labrig.analysis.metrics import nrmse_pct
 from labrig.analysis.records import Record
 from labrig.blas import single_thread_blas
@@ -214,9 +214,7 @@ class FitOutcome:
         return float(np.mean(list(self.per_entry.values())))
 
     def params(self, shape: str, memory: str = "return_point") -> ModelParams:
-        return ModelParams(
-            shape=shape, memory=memory, **{n: float(self.base[n]) for n in PARAM_NAMES}
-        )
+        return _Family(shape, memory).params(self.base)
 
 
 class ExtendedProblem:
@@ -246,6 +244,7 @@ class ExtendedProblem:
         self.chain = chain
         self.shape = shape
         self.memory = memory
+        self.family = _Family(shape, memory)
         self.offset = offset
         self.warmup_s = warmup_s
         self.base_free = tuple(base_free)
@@ -384,9 +383,7 @@ class ExtendedProblem:
         return out
 
     def _op(self, base: Mapping[str, float]) -> QuasiStaticHysteresis:
-        return QuasiStaticHysteresis(
-            base["alpha0_ue_per_V"], base["gamma_ue_per_V"], base["vc_V"], self.shape, self.memory
-        )
+        return self.family.operator(base["alpha0_ue_per_V"], base["gamma_ue_per_V"], base["vc_V"])
 
     def _post(self, ys: list[NDArray], eff) -> list[NDArray]:
         out = []
@@ -440,6 +437,7 @@ class ExtendedProblem:
         op = self._op(base)
         vd0 = self._vd(base, eff)
         vol_names = {e.name for e in self.vol}
+        beside0 = [self._beside(x, s.ctx, eff) for x, s in zip(vd0, self.seqs, strict=True)]
         J = np.empty((r0.size, z.size))
         for j, (who, n) in enumerate(self.names):
             h = self._step[j] if self._step[j] is not None else 1e-6 * max(1.0, abs(z[j]))
@@ -456,9 +454,8 @@ class ExtendedProblem:
             bp, ep = self.unpack(zp, base0)
             vdp = self._vd(bp, ep)
             ds = [
-                op.tangent(x, (xp - x) / h)
-                + (self._beside(xp, s.ctx, eff) - self._beside(x, s.ctx, eff)) / h
-                for x, xp, s in zip(vd0, vdp, self.seqs, strict=True)
+                op.tangent(x, (xp - x) / h) + (self._beside(xp, s.ctx, eff) - b0) / h
+                for x, xp, s, b0 in zip(vd0, vdp, self.seqs, beside0, strict=True)
             ]
             J[:, j] = self._resid(self._post(ds, eff), subtract=False)
         return J

@@ -6,8 +6,10 @@ The element is rate independent: along a run of monotone input (direction ``s``,
 ``u = s (x - x_0)``) ``dh/du = s A - (beta + gamma s sign(h)) h`` is linear in ``h`` on each side of
 ``h = 0``, so ``h = sA/k + (h_0 - sA/k) exp(-k u)`` with ``k = beta - gamma`` while ``h`` is
 opposite to the motion and ``k = beta + gamma`` once it has the motion's sign (the crossing of
-zero is found in closed form). Bounded for ``beta > 0``, ``|gamma| <= beta``; its loops saturate at
-``h = +-A / (beta + gamma)``. Unlike the seed's operator, a Bouc-Wen loop need not close where it
+zero is found in closed form), for ``A > 0``: bounded for ``beta > 0``, ``-beta < gamma <= beta``;
+its loops saturate at ``h = +-A / (beta + gamma)``. For ``A < 0`` ``h`` moves against the input;
+substituting ``h -> -h`` shows ``h(A, beta, gamma) = -h(-A, beta, -gamma)``, which is how every
+form below computes it. Unlike the seed's operator, a Bouc-Wen loop need not close where it
 started: after an excursion and back to ``x = 0`` it keeps a remanent ``h`` (what the hybrid
 plant's Bouc-Wen block and the ``remanence`` effect model).
 
@@ -28,16 +30,16 @@ __all__ = ["bouc_wen_exact", "bouc_wen_step", "bouc_wen_stream", "max_slope", "m
 
 
 def max_slope(A: float, beta: float, gamma: float) -> float:
-    """The largest ``dh/dx`` (ue/V) the element can show, for ``beta > 0``, ``|gamma| <= beta``.
+    """The largest ``dh/dx`` (ue/V) the bounded element can show (``beta > 0``,
+    ``|gamma| <= beta``, ``beta + gamma sign(A) > 0``).
 
-    Rising (falling is the mirror image), ``dh/dx = A - (beta + gamma sign h) h`` is linear in
-    ``h`` on each side of 0, and ``|h|`` stays below ``M = |A| / (beta + gamma)``, so the
-    supremum is the largest of the values at ``h = 0`` (``A``), ``h = M sign A`` (``A - |A|``)
-    and ``h = -M sign A`` (``A + (beta - gamma) |A| / (beta + gamma)``): ``2 A beta / (beta +
-    gamma)`` for ``A > 0``, ``-2 gamma |A| / (beta + gamma)`` for ``A < 0``.
+    For ``A > 0``, rising (falling is the mirror image), ``dh/dx = A - (beta + gamma sign h) h``
+    is linear in ``h`` on each side of 0 and ``h`` stays within ``+-M``, ``M = A / (beta +
+    gamma)``: the supremum is at ``h = -M``, ``A + (beta - gamma) M = 2 A beta / (beta +
+    gamma)``. For ``A < 0`` (the mirror image ``-h(-A, beta, -gamma)``) ``h`` never rises with
+    ``x``: the supremum is 0 (approached at saturation); ``A = 0`` keeps ``h = 0``.
     """
-    m = abs(A) / (beta + gamma)
-    return max(A, A - abs(A), A + (beta - gamma) * m)
+    return 2.0 * A * beta / (beta + gamma) if A > 0 else 0.0
 
 
 def monotone_runs(v: NDArray) -> tuple[NDArray, NDArray, NDArray]:
@@ -73,6 +75,8 @@ def bouc_wen_exact(
     vp: NDArray, A: float, beta: float, gamma: float, runs: tuple | None = None
 ) -> NDArray:
     """``h`` for ``n = 1`` at the samples of the rest-prefixed record ``vp`` (closed form)."""
+    if A < 0:  # the mirror image (module docstring)
+        return -bouc_wen_exact(vp, -A, beta, -gamma, runs)
     starts, stops, dirs = monotone_runs(vp) if runs is None else runs
     h = np.zeros(vp.size)
     if starts.size == 0:
@@ -123,6 +127,8 @@ def bouc_wen_exact(
 
 def bouc_wen_step(h: float, dx: float, A: float, beta: float, gamma: float) -> float:
     """``h`` after the input moves by ``dx`` (linearly) from state ``h`` (closed form)."""
+    if A < 0:  # the mirror image (module docstring)
+        return -bouc_wen_step(-h, dx, -A, beta, -gamma)
     if dx == 0.0:
         return h
     s = 1.0 if dx > 0 else -1.0

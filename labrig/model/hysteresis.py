@@ -185,7 +185,7 @@ class QuasiStaticHysteresis:
 
     def apply(self, u: ArrayLike, state: HysteresisState | None = None) -> NDArray[np.float64]:
         """Strain (ue) for the voltage record ``u`` (V). ``state`` is updated in place if given."""
-        u = np.asarray(u, dtype=float)
+        u = _finite(u, "voltage")
         st = HysteresisState() if state is None else state
         if u.size == 0:
             return np.zeros(0)
@@ -233,7 +233,7 @@ class QuasiStaticHysteresis:
         the voltage: the same branch structure is built on the strain record and each branch is
         inverted in closed form.
         """
-        s = np.asarray(strain, dtype=float)
+        s = _finite(strain, "strain")
         st = HysteresisState() if state is None else state
         if s.size == 0:
             return np.zeros(0)
@@ -255,6 +255,14 @@ class QuasiStaticHysteresis:
         st.direction = d
         st.u_last, st.s_last = float(u[-1]), float(s[-1])
         return u
+
+
+def _finite(x: ArrayLike, what: str) -> NDArray[np.float64]:
+    """``x`` as a float array; a NaN or infinity would corrupt the remembered turning points."""
+    a = np.asarray(x, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"the {what} record must be finite (found NaN or infinity)")
+    return a
 
 
 @dataclass(frozen=True)
@@ -330,12 +338,17 @@ def _branches(
     for j, (node, dj, x_far) in enumerate(runs):
         if node >= 0:
             parent.append(live[-1])
-            live.append(node)
+            if wipe:
+                live.append(node)
+            else:  # the last reversal only: nothing older is remembered
+                live[:] = [node]
         if wipe and dj != 0.0:
             far = dj * x_far  # a run is monotone: its last sample is its farthest
-            while len(live) >= 2 and far > dj * xs[live[-2]]:
-                # the run passes the turning point where the current minor loop began: close
-                # the loop and forget it (the rest point at the bottom stays)
+            while len(live) >= 2 and far >= dj * xs[live[-2]]:
+                # the run reaches the turning point where the current minor loop began: close
+                # the loop and forget it (the rest point at the bottom stays). Closing on
+                # reaching, not passing, gives the same strain (the branches meet there) and
+                # keeps the stack from growing under exactly repeated extrema
                 cross_run.append(j)
                 cross_thr.append(xs[live[-2]])
                 del live[-2 if len(live) >= 3 else -1 :]
@@ -349,7 +362,7 @@ def _branches(
         hi = ends[cj] - 1
         while np.any(pos_c < hi):
             mid = (pos_c + hi) // 2
-            past = dd * x[mid] > dd * t
+            past = dd * x[mid] >= dd * t
             hi = np.where(past, mid, hi)
             pos_c = np.where(past, pos_c, np.minimum(mid + 1, hi))
     pos = np.concatenate(([0], starts[rev_runs], pos_c))
