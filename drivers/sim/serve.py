@@ -83,8 +83,14 @@ class Simulators:
         self._clock_stop.set()
         if self._clock is not None:
             self._clock.join(1.0)
-        while self._started:
-            self._started.pop().stop()
+        # the servers stop side by side: each bounds its own waits (a Modbus server's shutdown
+        # can hang for its 2 s + 2 s), so the slowest, not their sum, sets how long Ctrl-C takes
+        stoppers = [threading.Thread(target=srv.stop, daemon=True) for srv in self._started]
+        for t in stoppers:
+            t.start()
+        for t in stoppers:
+            t.join(5.0)
+        self._started.clear()
 
     def describe(self) -> dict:
         d = self.bench.describe()
