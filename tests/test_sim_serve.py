@@ -17,7 +17,14 @@ pytestmark = pytest.mark.timeout(60)
 def test_serve_prints_addresses_and_answers_until_ctrl_c():
     code = "from labrig.drivers.sim.serve import serve; serve(None)"
     proc = subprocess.Popen(
-        [sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [sys.executable, "-c", code],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        # as from a terminal: a shell starts background jobs (a CI script run with `&`) with
+        # SIGINT ignored, and Python then installs no KeyboardInterrupt handler, so Ctrl-C would
+        # never arrive (the test hung in such runs)
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     try:
         lines = []

@@ -17,7 +17,7 @@ still simulated, so the model's memory builds up, but they are left out of the r
 NRMSE and of the strain span used for normalisation.
 
 The model's memory is long (``G_t`` with a small order decays algebraically, and the hysteresis
-operator keeps its last reversal), so the entries of one run are *not* independent: after a few
+operator keeps its turning points), so the entries of one run are *not* independent: after a few
 seconds at 0 V the strain still carries tens of ue of the previous entries (on the seed's campaign
 with 3 s rests: up to 30 times the 2 ue noise floor, and a 2 s warm-up removes almost none of
 it). ``chain=True`` therefore simulates the records as the run they came from: back to back in

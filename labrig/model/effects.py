@@ -376,9 +376,10 @@ class Remanence(Effect):
 
     Physics: part of the ceramic's domain switching is not undone when the voltage returns, so a
     loop need not close where it started; the strain left at 0 V after an excursion depends on
-    the last swings and stays (it does not relax). The seed's single-memory operator closes every
-    loop at its start (``S_s + F(x) - F(x)``) and cannot hold it. Acts beside the operator, on the
-    relaxed voltage (an actuator effect: the compensation controller inverts it). Signature: a
+    the last swings and stays (it does not relax). The seed's operator closes every loop at its
+    start (``S_s + F(x) - F(x)``, with either memory rule) and cannot hold it. Acts beside the
+    operator, on the relaxed voltage (an actuator effect: the compensation controller inverts
+    it). Signature: a
     constant residual at 0 V after each excursion, its size set by the last swing, and minor
     loops whose ends drift. Null: ``A = 0``. Confusable with ``offset_drift`` (which drifts with
     time, not with the excursions) and ``creep`` (which relaxes).
@@ -483,8 +484,9 @@ class AmplifierCurrentLimit(Effect):
 
 def measured_voltage(ctx: Context) -> NDArray:
     """The command where the measured amplifier voltage agrees with it to within its noise
-    (5 robust sigma), the measurement where it departs: monitor noise fed to the single-memory
-    operator would create a reversal at every sample."""
+    (5 robust sigma), the measurement where it departs: monitor noise fed to the operator makes
+    a reversal at every sample (a tiny minor loop each with return-point memory; with the
+    single-memory rule it would forget the whole history every sample)."""
     key = ("measured_v",)
     if key not in ctx.cache:
         m = ctx.amplifier_voltage
