@@ -25,7 +25,7 @@ from labrig.instruments import AcquiredBlock, DriverContext, DriverInfo
 class NIDAQmxSettings(BaseModel):
     """Rig-file section of the ``nidaqmx`` driver."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
 
     driver: str = "nidaqmx"
     device: str = Field("Dev1", description="NI device name")

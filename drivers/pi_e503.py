@@ -48,7 +48,7 @@ _SRG = re.compile(r"^(?P<id>[A-Za-z0-9_]+) 1=(?P<val>0x[0-9A-Fa-f]+)$")
 class E503Settings(BaseModel):
     """Rig-file section of the ``pi_e503`` driver."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
 
     driver: str = "pi_e503"
     url: str = Field("sim", description="pyserial URL or port; 'sim' = the simulated bench")

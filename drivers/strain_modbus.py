@@ -41,7 +41,7 @@ EXCEPTION_CODES = {
 class StrainModbusSettings(BaseModel):
     """Rig-file section of the ``strain_modbus`` driver."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
 
     driver: str = "strain_modbus"
     transport: str = Field("tcp", pattern="^(tcp|rtu)$", description="tcp or rtu")

@@ -15,7 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 class RigLimits(BaseModel):
     """Limits of one rig (E-503-style amplifier into a P-888.51-class stack by default)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True, allow_inf_nan=False)
 
     v_min_V: float = Field(-20.0, description="lowest actuator voltage allowed (V)")
     v_max_V: float = Field(100.0, description="highest actuator voltage allowed (V)")

@@ -129,7 +129,7 @@ class _Role(BaseModel):
 class SimulatorSettings(BaseModel):
     """Seed and ports of the simulators (0 = a free port)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
 
     seed: int | None = Field(None, description="bench RNG seed when open_rig is given none")
     gcs_port: int = Field(0, ge=0, le=65535)
@@ -146,7 +146,7 @@ def _bench_model():
 def _outline() -> type[BaseModel]:
     return create_model(
         "RigFileOutline",
-        __config__=ConfigDict(extra="forbid"),
+        __config__=ConfigDict(extra="forbid", strict=True),
         name=(str, Field(min_length=1)),
         description=(str, ""),
         daq=(_Role, ...),

@@ -14,7 +14,8 @@ from pymodbus.client import ModbusTcpClient
 pytestmark = pytest.mark.timeout(60)
 
 
-def test_serve_prints_addresses_and_answers_until_ctrl_c():
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+def test_serve_prints_addresses_and_answers_until_stopped(stop):
     code = "from labrig.drivers.sim.serve import serve; serve(None)"
     proc = subprocess.Popen(
         [sys.executable, "-c", code],
@@ -48,11 +49,11 @@ def test_serve_prints_addresses_and_answers_until_ctrl_c():
         assert client.read_input_registers(0, count=1, device_id=1).registers == [0x3840]
         client.close()
     finally:
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(stop)
         try:
             out, _ = proc.communicate(timeout=10)
         except subprocess.TimeoutExpired:
             proc.kill()
             raise
-    assert "stopping the simulators" in out
+    assert "stopping the simulators" in out  # stopped cleanly, not killed by the signal
     assert proc.returncode == 0

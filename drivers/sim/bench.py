@@ -64,7 +64,7 @@ from labrig.limits import RigLimits
 
 
 class _Cfg(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
 
 
 class TruthConfig(_Cfg):

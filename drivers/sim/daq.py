@@ -27,7 +27,7 @@ from labrig.instruments import AcquiredBlock, DriverContext, DriverInfo
 class SimDAQSettings(BaseModel):
     """Rig-file section of the ``sim_daq`` driver."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
 
     driver: str = "sim_daq"
     realtime: bool = Field(False, description="pace playback to the wall clock")

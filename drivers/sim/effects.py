@@ -40,7 +40,7 @@ from scipy import signal
 
 
 class _Effect(BaseModel):
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
 
 
 class SelfHeating(_Effect):

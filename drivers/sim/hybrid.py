@@ -42,7 +42,7 @@ EQ11_DEN = (148196.0, 154912e3, 123824e6, 432e9)
 class HybridParams(BaseModel):
     """Parameters of the hybrid reference plant (units in the names; Bouc-Wen ``n = 1``)."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
 
     alpha0_ue_per_V: float = Field(11.5, gt=0, description="linear block (ue/V)")
     gamma_ue_per_V: float = Field(3.0, ge=0, description="system-level hysteretic slope (ue/V)")

@@ -100,8 +100,9 @@ class Simulators:
 
 def serve(rig_path: Path | None) -> None:
     """Start the simulators of a rig file's bench (default rig if None), print their addresses
-    and run until Ctrl-C."""
+    and run until Ctrl-C or SIGTERM (both stop the servers and free their ports)."""
     from labrig.rigfile import load_rig
+    from labrig.runner import interrupt_once
 
     spec = load_rig(rig_path)
     sims = Simulators(
@@ -114,10 +115,11 @@ def serve(rig_path: Path | None) -> None:
     print(f"  conditioner (Modbus RTU framing):  {sims.endpoints['modbus_rtu']}  unit 1")
     print("  try: python -m serial.tools.miniterm --eol LF " + sims.endpoints["gcs"])
     print("Press Ctrl-C to stop.", flush=True)
-    try:
-        while True:
-            time.sleep(0.5)
-    except KeyboardInterrupt:
-        print("stopping the simulators")
-    finally:
-        sims.stop()
+    with interrupt_once():
+        try:
+            while True:
+                time.sleep(0.5)
+        except KeyboardInterrupt:
+            print("stopping the simulators", flush=True)
+        finally:
+            sims.stop()

@@ -18,7 +18,7 @@ class ModelParams(BaseModel):
     Units are in the names: ue/V, V, s; the orders ``lam_*`` are dimensionless (0 < lam < 2).
     """
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
 
     alpha0_ue_per_V: float = Field(gt=0, description="small-signal coefficient (seed Eq. 2)")
     gamma_ue_per_V: float = Field(description="maximal variation of the slope (seed Eq. 10)")
