@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,9 +32,15 @@ def _clean(x: Any) -> Any:
     return x
 
 
-def _load_params(path: Path):
+def _load_params(path: Path, say: Callable[[str], None] = print):
+    """Start parameters from a ModelParams JSON object or a ``labrig fit --json`` file.
+
+    Only the dynamic model's parameters are used: a baseline's file is refused, and effects
+    fitted with ``labrig fit --effect`` are announced as not used (diagnose starts from the base
+    and tests every effect itself, so it can say whether each one pays)."""
     from pydantic import ValidationError
 
+    from labrig.analysis.baselines import KINDS
     from labrig.model import ModelParams
 
     try:
@@ -43,6 +50,25 @@ def _load_params(path: Path):
             [InputIssue(str(path), None, "--params", f"cannot read JSON: {e}")]
         ) from None
     if isinstance(raw, dict) and isinstance(raw.get("params"), dict):
+        if raw.get("method") in KINDS:
+            raise InputFileError(
+                [
+                    InputIssue(
+                        str(path),
+                        None,
+                        "method",
+                        f"holds a {raw['method']} baseline; diagnose starts from the dynamic "
+                        "model's parameters (labrig fit without --model)",
+                    )
+                ]
+            )
+        effects = raw.get("effects") or []
+        if effects:
+            names = [e.get("effect", "?") if isinstance(e, dict) else str(e) for e in effects]
+            say(
+                f"{path}: using the base parameters only; its effects ({', '.join(names)}) "
+                "are tested again, not assumed"
+            )
         raw = raw["params"]  # the output of ``labrig fit --json``
     try:
         return ModelParams.model_validate(raw)
@@ -60,7 +86,7 @@ def diagnose_command(
 
     err = Console(stderr=True)
     records = records_from_run(run_file)
-    p0 = _load_params(params) if params is not None else None
+    p0 = _load_params(params, err.print) if params is not None else None
     if len(records) == 1 and records[0].duration_s > 0:
         records = split_entries(records, 4)
         err.print(f"one entry: cut into {len(records)} consecutive parts for leave-one-entry-out")

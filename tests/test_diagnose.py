@@ -105,6 +105,35 @@ def test_params_file_is_validated(tmp_path, monkeypatch):
         diagnose_command(tmp_path / "run.h5", bad, None, True)
 
 
+def test_params_from_a_baseline_fit_are_refused(tmp_path, monkeypatch):
+    import labrig.analysis.load as load
+    from labrig.cli_diagnose import diagnose_command
+    from labrig.errors import InputFileError
+
+    monkeypatch.setattr(load, "records_from_run", lambda path, entries=None: [])
+    f = tmp_path / "pi.json"
+    f.write_text(json.dumps({"method": "prandtl_ishlinskii", "params": {"n": 10}}))
+    with pytest.raises(InputFileError, match="baseline"):
+        diagnose_command(tmp_path / "run.h5", f, None, True)
+
+
+def test_params_with_fitted_effects_use_the_base_and_say_so(tmp_path):
+    """A ``labrig fit --effect`` file: its base parameters are the start, its effects are named
+    as not assumed (diagnose tests every effect itself)."""
+    from labrig.cli_diagnose import _load_params
+    from labrig.model import PAPER_TABLE1
+
+    doc = {
+        "params": PAPER_TABLE1.model_dump(),
+        "effects": [{"effect": "viscoelastic_creep", "params": {"c": 0.05, "tau_s": 0.3}}],
+    }
+    f = tmp_path / "fit.json"
+    f.write_text(json.dumps(doc))
+    said: list[str] = []
+    assert _load_params(f, said.append) == PAPER_TABLE1
+    assert len(said) == 1 and "viscoelastic_creep" in said[0] and "not assumed" in said[0]
+
+
 # -- slow studies ------------------------------------------------------------------------------
 
 
