@@ -505,6 +505,17 @@ def _print_setup(err: Console, setup: Setup) -> None:
 # -- report --------------------------------------------------------------------------------------
 
 
+def refuse_baseline(doc: dict[str, Any], path: Path, who: str) -> None:
+    """An :class:`InputFileError` when the ``labrig fit`` output ``doc`` is a baseline's."""
+    if doc.get("method") in KINDS:
+        raise _issue(
+            path,
+            f"holds a {doc['method']} baseline; {who} needs the model's parameters "
+            "(labrig fit without --model)",
+            "method",
+        )
+
+
 def read_params(path: Path) -> dict[str, Any]:
     """A ``labrig fit --json`` file for the dynamic model."""
     try:
@@ -515,13 +526,7 @@ def read_params(path: Path) -> dict[str, Any]:
         raise _issue(path, f"not a JSON parameter file ({e})") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("params"), dict):
         raise _issue(path, "no 'params' object (expected the output of labrig fit --json)")
-    if doc.get("method") in KINDS:
-        raise _issue(
-            path,
-            f"holds a {doc['method']} baseline; the report needs the model's parameters "
-            "(labrig fit without --model)",
-            "method",
-        )
+    refuse_baseline(doc, path, "the report")
     try:
         ModelParams(**doc["params"])
     except (TypeError, ValueError) as e:

@@ -40,7 +40,7 @@ def _load_params(path: Path, say: Callable[[str], None] = print):
     and tests every effect itself, so it can say whether each one pays)."""
     from pydantic import ValidationError
 
-    from labrig.analysis.baselines import KINDS
+    from labrig.cli_analysis import refuse_baseline
     from labrig.model import ModelParams
 
     try:
@@ -50,18 +50,7 @@ def _load_params(path: Path, say: Callable[[str], None] = print):
             [InputIssue(str(path), None, "--params", f"cannot read JSON: {e}")]
         ) from None
     if isinstance(raw, dict) and isinstance(raw.get("params"), dict):
-        if raw.get("method") in KINDS:
-            raise InputFileError(
-                [
-                    InputIssue(
-                        str(path),
-                        None,
-                        "method",
-                        f"holds a {raw['method']} baseline; diagnose starts from the dynamic "
-                        "model's parameters (labrig fit without --model)",
-                    )
-                ]
-            )
+        refuse_baseline(raw, path, "diagnose")
         effects = raw.get("effects") or []
         if effects:
             names = [e.get("effect", "?") if isinstance(e, dict) else str(e) for e in effects]

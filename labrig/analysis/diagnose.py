@@ -53,7 +53,7 @@ from labrig.analysis.diagnose_fit import (
     _build_sequences,
     effect_context,
 )
-from labrig.analysis.fit import fit_model
+from labrig.analysis.fit import PARAM_NAMES, fit_model
 from labrig.analysis.metrics import drive_frequency_hz
 from labrig.analysis.records import Record
 from labrig.blas import single_thread_blas
@@ -264,6 +264,11 @@ def _mean(d: dict[str, float] | None) -> float | None:
     return None if not d else float(np.mean(list(d.values())))
 
 
+def _numeric(params: ModelParams) -> dict[str, float]:
+    """The fitted (numeric) parameters, without the operator family's shape and memory."""
+    return {n: float(getattr(params, n)) for n in PARAM_NAMES}
+
+
 def split_entries(records: Sequence[Record], parts: int = 4) -> list[Record]:
     """A single long record cut into ``parts`` consecutive entries (at whole drive periods when
     the record is periodic), chained with no rest: leave-one-entry-out then has folds. The
@@ -408,7 +413,7 @@ def diagnose(
     }
     fr = fit_model(records, **fr_kwargs)
     messages += fr.messages
-    base0 = {k: v for k, v in fr.params.model_dump().items() if k not in ("shape", "memory")}
+    base0 = _numeric(fr.params)
     contexts = _build_sequences(records, chain)
     lib = library(**effect_context(records, mains_hz))
     names = [n for n in (effects or EFFECT_NAMES) if n in lib]
@@ -608,7 +613,7 @@ def _voltage_start(
         fr = fit_model(new, **fr_kwargs)
     except (ValueError, RuntimeError):
         return None
-    b = {k: v for k, v in fr.params.model_dump().items() if k not in ("shape", "memory")}
+    b = _numeric(fr.params)
     if abs(b["lam_d"] - 1.0) < LAM_GAP:
         b["lam_d"] = 1.0 + LAM_GAP
     return b

@@ -379,10 +379,9 @@ class Remanence(Effect):
     the last swings and stays (it does not relax). The seed's operator closes every loop at its
     start (``S_s + F(x) - F(x)``, with either memory rule) and cannot hold it. Acts beside the
     operator, on the relaxed voltage (an actuator effect: the compensation controller inverts
-    it). Signature: a
-    constant residual at 0 V after each excursion, its size set by the last swing, and minor
-    loops whose ends drift. Null: ``A = 0``. Confusable with ``offset_drift`` (which drifts with
-    time, not with the excursions) and ``creep`` (which relaxes).
+    it). Signature: a constant residual at 0 V after each excursion, its size set by the last
+    swing, and minor loops whose ends drift. Null: ``A = 0``. Confusable with ``offset_drift``
+    (which drifts with time, not with the excursions) and ``creep`` (which relaxes).
     """
 
     name = "remanence"
