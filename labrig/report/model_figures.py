@@ -177,8 +177,7 @@ def figure_hysteresis_loop(path: Path, cycles: int = 8, rate_hz: float = 1000.0)
     v = 50.0 * (1.0 - np.cos(2 * np.pi * 1.0 * t))
     vstar = model.equivalent_static_voltage(v, rate_hz, method="exact")
     s = model.operator.apply(vstar)
-    op = p.operator()
-    s_static = op.apply(v)
+    s_static = model.operator.apply(v)
     per = round(rate_hz)
     mins = np.arange(per, n, per)  # the 0 V minima, t = 1, 2, ... s
 
