@@ -31,7 +31,9 @@ Procedure (spec ``residuals.md``, "a procedure that does not fool itself")
    above it; "explained" when the added effects bring the residual to the floor with plausible
    parameters; "partially explained" otherwise. Confusable runner-ups (candidates within
    :data:`CONFUSABLE_MARGIN` of the winner's gain) are named with the experiment that would tell
-   them apart.
+   them apart. Every verdict ends with the creep the base model itself describes
+   (:func:`~labrig.analysis.diagnose_evidence.modelled_creep_per_decade`): the seed's ``G_t``
+   follows a logarithmic creep of the actuator, which is measured there rather than added.
 """
 
 from __future__ import annotations
@@ -45,7 +47,11 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from labrig.analysis.diagnose_evidence import Evidence, collect_evidence
+from labrig.analysis.diagnose_evidence import (
+    Evidence,
+    collect_evidence,
+    modelled_creep_per_decade,
+)
 from labrig.analysis.diagnose_fit import (
     LAM_GAP,
     ExtendedProblem,
@@ -123,6 +129,8 @@ class Diagnosis:
     rounds: list[list[Candidate]] = field(default_factory=list, repr=False)
     base_params: dict[str, float] = field(default_factory=dict)
     after_params: dict[str, float] = field(default_factory=dict)
+    #: creep the base model describes (%/decade, 1-100 s after a full-scale step)
+    base_creep_pct_per_decade: float | None = None
     elapsed_s: float = 0.0
     messages: list[str] = field(default_factory=list)
 
@@ -415,7 +423,8 @@ def diagnose(
     messages += fr.messages
     base0 = _numeric(fr.params)
     contexts = _build_sequences(records, chain)
-    lib = library(**effect_context(records, mains_hz))
+    lib_context = effect_context(records, mains_hz)
+    lib = library(**lib_context)
     names = [n for n in (effects or EFFECT_NAMES) if n in lib]
     common = {
         "chain": chain,
@@ -569,6 +578,9 @@ def diagnose(
         for c in sorted(latest.values(), key=lambda c: (c.round, -c.score))
     ]
     cls, verdict = _verdict(ev_before, ev_after, before, after, added_cands, rounds, lib)
+    creep = modelled_creep_per_decade(before_fit.params(shape, memory), lib_context["v_ref"])
+    creep_added = any(c.effect == "creep" for c in added_cands)
+    verdict += _creep_sentence(creep, lib_context["v_ref"], records, creep_added)
     d = Diagnosis(
         before=before,
         after=after,
@@ -583,6 +595,7 @@ def diagnose(
         rounds=rounds,
         base_params=dict(before_fit.base),
         after_params=dict(cur.base),
+        base_creep_pct_per_decade=100.0 * creep,
         messages=messages,
     )
     for cands in rounds:
@@ -628,6 +641,60 @@ def _json_params(eff: Effect, fo: FitOutcome) -> dict[str, Any]:
         out[f"{k}_sd"] = s
     if eff.where == "nuisance":
         out["description"] = eff.describe({}, {})
+    return out
+
+
+def _creep_sentence(
+    creep: float, step_V: float, records: Sequence[Record], creep_added: bool
+) -> str:
+    """The creep the base model already describes (:func:`modelled_creep_per_decade`): a log
+    creep of the actuator goes into ``G_t`` and is measured here, not added as an effect."""
+    longest = max(float(r.time_s[-1] - r.time_s[0]) for r in records)
+    where = "" if longest >= 100.0 else f", extrapolated beyond the longest entry ({longest:.3g} s)"
+    s = (
+        f" Creep: the base model's slow relaxor G_t makes the strain creep by "
+        f"{100 * creep:.1f} %/decade from 1 s to 100 s after a {step_V:.3g} V step{where}"
+    )
+    if creep_added:
+        return s + "; the added creep effect comes on top of it."
+    return s + (
+        "; any logarithmic creep of the actuator is part of this figure (G_t follows it), so "
+        "it is not added as a separate effect."
+    )
+
+
+def _confusions_sentence(
+    first: Candidate, its_round: list[Candidate], added: list[str], lib: dict[str, Effect]
+) -> str:
+    """What became of the first added effect's usual confusions, as it happened: cross-validated
+    and worse, not refitted (ranked low or no in-sample gain), or added themselves later."""
+    by_name = {c.effect: c for c in its_round}
+    tested, untried, later = [], [], []
+    for name in lib[first.effect].confusable:
+        if name not in lib or name not in by_name:
+            continue
+        if name in added:
+            later.append(name)
+        elif by_name[name].heldout_nrmse_pct is not None:
+            tested.append(name)
+        else:
+            untried.append(name)
+    out = ""
+    if tested:
+        out += (
+            f" Usual confusions ({', '.join(tested)}) were cross-validated and fit clearly worse."
+        )
+    if untried:
+        out += (
+            f" {', '.join(untried)} (usually confused with {first.effect}) explained too little of "
+            "the residual to be cross-validated."
+        )
+    if later:
+        out += (
+            f" {', '.join(later)} (usually confused with {first.effect}) "
+            f"{'was' if len(later) == 1 else 'were'} added after it: "
+            f"{lib[first.effect].tell_apart}."
+        )
     return out
 
 
@@ -702,9 +769,7 @@ def _verdict(
             f"{lib[first.effect].tell_apart}."
         )
     else:
-        listed = [n for n in lib[first.effect].confusable if n in lib]
-        if listed:
-            conf = f" Usual confusions ({', '.join(listed)}) were tested and fit clearly worse."
+        conf = _confusions_sentence(first, rounds[first.round], [c.effect for c in added], lib)
     if at_floor and not susp:
         return "explained", (
             f"Explained: {head}; the remaining residual is {ev_after.ratio:.2g} times the noise "

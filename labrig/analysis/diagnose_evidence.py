@@ -28,8 +28,9 @@ from numpy.typing import NDArray
 
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic
 from labrig.analysis.records import Record
+from labrig.model import ModelParams
 
-__all__ = ["EntryEvidence", "Evidence", "collect_evidence"]
+__all__ = ["EntryEvidence", "Evidence", "collect_evidence", "modelled_creep_per_decade"]
 
 
 @dataclass
@@ -282,3 +283,30 @@ def _sentences(ev: Evidence) -> list[str]:
         f"cross-correlation {f['max_residual_input_xcorr']:.2f} (descriptive only)"
     )
     return out
+
+
+def modelled_creep_per_decade(
+    params: ModelParams, step_V: float, t1_s: float = 1.0, t2_s: float = 100.0
+) -> float:
+    """Creep the dynamic model itself describes: the relative growth of the strain per decade of
+    time between ``t1_s`` and ``t2_s`` after a step to ``step_V`` (V) from rest,
+    ``(S(t2) / S(t1))^(1 / log10(t2 / t1)) - 1`` (a fraction; 0.05 = 5 %/decade).
+
+    The step is :func:`labrig.analysis.diagnose_campaign.step_hold` (raised-cosine ramp of
+    0.2 s; times count from its end), simulated at 100 Hz with the model's ``predict`` (seed
+    Eq. 5-7). The creep comes from the transient relaxor ``G_t`` (seed Eq. 4-9: its step
+    response ``1 - E_lam(-(t/tau)^lam)`` grows almost logarithmically for a small ``lam``)
+    passed through the operator's slope at ``step_V``; the seed's Table 1 stack creeps about
+    6 %/decade this way. A logarithmic creep of the strain shifts ``lam_t``, ``tau_t`` and
+    ``alpha0`` and shows up here rather than as a separate effect (docs/diagnose.md).
+    """
+    from labrig.analysis.diagnose_campaign import step_hold
+    from labrig.model.dynamic import DynamicHysteresisModel
+
+    rate_hz, ramp_s = 100.0, 0.2
+    n = round((ramp_s + t2_s) * rate_hz) + 2
+    v = step_hold(step_V, 4.0 * t2_s, rate_hz, ramp_s=ramp_s)[:n]
+    s = DynamicHysteresisModel(params).predict(v, rate_hz)
+    t = np.arange(n) / rate_hz - ramp_s
+    s1, s2 = np.interp([t1_s, t2_s], t, s)
+    return float((s2 / s1) ** (1.0 / np.log10(t2_s / t1_s)) - 1.0)
