@@ -266,6 +266,23 @@ def test_fast_documented_accuracy(lam: float) -> None:
     assert err < 1e-8 * FULL_SCALE_V
 
 
+@pytest.mark.parametrize("lam", [0.02, 0.04])
+def test_fast_accuracy_at_the_fits_smallest_orders(lam: float) -> None:
+    """The fit's lower bound ``lam_t = 0.02`` with ``tau_t`` on its upper bound (1000 s), where
+    fits of a plant outside the family end (the hybrid bench): the slow tail of ``mu`` reaches
+    50 / lam e-folds, beyond ``exp``'s range; evaluated as ``e^x`` it overflowed (a
+    RuntimeWarning) and lost 7e-7 of full scale at lam = 0.02. Same bound as
+    :func:`test_fast_documented_accuracy`, and no warning."""
+    import warnings
+
+    r = Relaxor(1000.0, lam)
+    v = unipolar_sweep(50_000, 1e3, 0.1, 200.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fast = r.filter(v, 1e3, method="fast")
+    assert np.max(np.abs(fast - r.filter(v, 1e3, method="exact"))) < 1e-8 * FULL_SCALE_V
+
+
 @pytest.mark.parametrize("hold", ["zoh", "linear"])
 @pytest.mark.parametrize("case", PAPER_RELAXORS, ids=_case_id)
 def test_stepper_equals_fast_filter(case: tuple[float, float], hold: str) -> None:

@@ -364,8 +364,11 @@ def _mu_moment(tau_s: float, lam: float, lo: float, hi: float, power: int) -> fl
     mid, half = (edges[1:] + edges[:-1]) / 2, (edges[1:] - edges[:-1]) / 2
     x = (mid[:, None] + half[:, None] * _TAIL_GL_X[None, :]).ravel()
     w = (half[:, None] * _TAIL_GL_W[None, :]).ravel()
-    xi = np.exp(x)
-    return float(np.sum(w * _mu(xi, tau_s, lam) * xi ** (power + 1)))
+    # mu(xi) xi^(power + 1) from x directly: xi = e^x overflows for a small lam (the upper cut
+    # is 50 / lam e-folds above x0), r = (tau xi)^lam = e^(lam (x - x0)) does not
+    r = np.exp(lam * (x - x0))
+    mu = np.sin(np.pi * lam) / (np.pi * (1.0 / r + 2.0 * np.cos(np.pi * lam) + r))
+    return float(np.sum(w * mu * np.exp((power + 1) * x)))
 
 
 @lru_cache(maxsize=64)
