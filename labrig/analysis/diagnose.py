@@ -644,6 +644,16 @@ def _json_params(eff: Effect, fo: FitOutcome) -> dict[str, Any]:
     return out
 
 
+def tell_apart(a: Effect, b: Effect) -> str:
+    """The experiment that separates effects ``a`` and ``b``: the one written for the pair (in
+    ``a``'s or ``b``'s list of confusions), else both effects' own."""
+    if b.name in a.confusable:
+        return a.tell_apart
+    if a.name in b.confusable:
+        return b.tell_apart
+    return f"for {a.name}: {a.tell_apart}; for {b.name}: {b.tell_apart}"
+
+
 def _creep_sentence(
     creep: float, step_V: float, records: Sequence[Record], creep_added: bool
 ) -> str:
@@ -766,7 +776,7 @@ def _verdict(
         conf = (
             f" {r.effect} fits almost as well (held-out {r.heldout_nrmse_pct:.3g} % against "
             f"{first.heldout_nrmse_pct:.3g} %): the data do not fully separate them; "
-            f"{lib[first.effect].tell_apart}."
+            f"{tell_apart(lib[first.effect], lib[r.effect])}."
         )
     else:
         conf = _confusions_sentence(first, rounds[first.round], [c.effect for c in added], lib)
