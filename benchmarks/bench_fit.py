@@ -17,8 +17,8 @@
 #     noise floor of 0.332 % (2.00 ue rms configured): ratio 1.00
 #   hybrid truth (seed 7): NRMSE in-sample / held-out (%): ours 0.927 / 1.05,
 #     Prandtl-Ishlinskii 5.48 / 6.05, Bouc-Wen 5.11 / 5.73 (noise floor 0.252 %)
-#   micromanipulator (real, 2 files): ours 0.650 / 0.745, Prandtl-Ishlinskii 1.07 / 1.64,
-#     Bouc-Wen 1.10 / 1.32 (noise floor 0.166 %, from the constant-voltage stretches)
+#   micromanipulator (real, 2 files): ours 0.650 / 0.742, Prandtl-Ishlinskii 1.07 / 1.63,
+#     Bouc-Wen 1.10 / 1.31 (noise floor 0.166 %, from the constant-voltage stretches)
 #
 """Identification benchmarks and the "must show" numbers of the fit issue.
 

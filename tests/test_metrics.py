@@ -16,6 +16,7 @@ from labrig.analysis.metrics import (
     max_error,
     mean_nrmse_pct,
     nrmse_pct,
+    second_half_nrmse_pct,
     strain_at_zero_voltage,
 )
 from labrig.analysis.records import Record
@@ -43,6 +44,21 @@ def test_nrmse_of_an_offset_and_of_a_scaled_sine() -> None:
         nrmse_pct(np.ones(5), np.zeros(5))
     with pytest.raises(ValueError):
         nrmse_pct(np.ones(5), np.zeros(4))
+
+
+def test_second_half_score_is_in_percent_of_the_whole_entrys_span() -> None:
+    """A vanishing entry: a 0-1000 ue swing, then a quiet tail (a 5 ue span). A constant 2 ue
+    error on the tail is 0.2 % of the entry's span (it was scored 40 %, against the tail's own
+    span); on a steady sine the two normalisers agree."""
+    t = _t(4000)
+    m = np.where(t < 2.0, 500.0 * (1 - np.cos(2 * np.pi * t)), 5.0 * (t - 2.0) / 2.0)
+    assert np.ptp(m) == pytest.approx(1000.0, rel=1e-6) and np.ptp(m[2000:]) < 5.0
+    assert second_half_nrmse_pct(m, m + 2.0) == pytest.approx(100 * 2.0 / np.ptp(m), rel=1e-12)
+    assert nrmse_pct(m[2000:], m[2000:] + 2.0) > 40.0
+    sine = 50.0 * np.sin(2 * np.pi * 2 * t)
+    assert second_half_nrmse_pct(sine, 0.9 * sine) == pytest.approx(
+        nrmse_pct(sine[2000:], 0.9 * sine[2000:]), rel=1e-9
+    )
 
 
 @pytest.mark.parametrize("phi_deg", [5.0, 30.0, 90.0, -20.0])

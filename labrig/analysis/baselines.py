@@ -52,7 +52,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
 from labrig.analysis.fit import single_thread_blas
-from labrig.analysis.metrics import nrmse_pct
+from labrig.analysis.metrics import nrmse_pct, second_half_nrmse_pct
 from labrig.analysis.records import Record
 from labrig.model.bouc_wen import bouc_wen_exact, monotone_runs
 
@@ -443,10 +443,10 @@ def fit_baseline(
                 p_k = m_k.predict(q.v)[q.starts[name] : segs[name].hi][segs[name].i0 :]
                 m = segs[name].meas
                 if offset:  # offset from the first half, scored on the second
-                    half = m.size // 2
-                    c = float(np.mean(m[:half] - p_k[:half]))
-                    m, p_k = m[half:], p_k[half:] + c
-                held_per[name] = nrmse_pct(m, p_k)
+                    c = float(np.mean(m[: m.size // 2] - p_k[: m.size // 2]))
+                    held_per[name] = second_half_nrmse_pct(m, p_k + c)
+                else:
+                    held_per[name] = nrmse_pct(m, p_k)
             held = float(np.mean(list(held_per.values())))
     return BaselineResult(
         kind=kind,

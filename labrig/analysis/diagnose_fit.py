@@ -14,8 +14,9 @@ per-entry NRMSE), and ``chain=True`` simulates the entries back to back with the
 model's long memory and the thermal state carry over from one entry to the next.
 
 Held-out scoring (:meth:`ExtendedProblem.heldout`): for each scored entry, the parameters are
-refitted without it (it stays in the chain as history) from the full fit, and its NRMSE is
-taken on the **second half** of its scored samples; per-entry nuisance parameters (the offset
+refitted without it (it stays in the chain as history) from the full fit, and its error is
+taken on the **second half** of its scored samples, in percent of the whole entry's span
+(:func:`~labrig.analysis.metrics.second_half_nrmse_pct`); per-entry nuisance parameters (the offset
 when ``offset=True``, mains amplitudes, drift slopes) are fitted on the first half only. Every
 model, the base included, is scored on the same second halves, so their held-out NRMSE compare
 like with like.
@@ -32,7 +33,7 @@ from numpy.typing import NDArray
 from scipy import optimize
 
 from labrig.analysis.fit import DEFAULT_BOUNDS, PARAM_NAMES, _Family
-from labrig.analysis.metrics import nrmse_pct
+from labrig.analysis.metrics import nrmse_pct, second_half_nrmse_pct
 from labrig.analysis.records import Record
 from labrig.blas import single_thread_blas
 from labrig.model import ModelParams, QuasiStaticHysteresis, Relaxor
@@ -594,5 +595,5 @@ class ExtendedProblem:
             if C.shape[1]:
                 coef, *_ = np.linalg.lstsq(C[:half], m[:half] - p[:half], rcond=None)
                 p = p + C @ coef
-            return nrmse_pct(m[half:], p[half:])
+            return second_half_nrmse_pct(m, p)
         raise KeyError(name)

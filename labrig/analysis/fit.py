@@ -86,7 +86,8 @@ Held-out NRMSE
 --------------
 Leave-one-entry-out: the same method refitted without each entry (warm-started from the full fit)
 and scored on it; the mean over entries. With ``offset=True`` the held-out entry's offset is fitted
-on the first half of its scored samples and the NRMSE taken on the second half.
+on the first half of its scored samples and the error taken on the second half, in percent of
+the whole entry's span (:func:`~labrig.analysis.metrics.second_half_nrmse_pct`).
 
 Performance
 -----------
@@ -112,7 +113,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from labrig.analysis.metrics import drive_frequency_hz, is_periodic, last_period, nrmse_pct
+from labrig.analysis.metrics import (
+    drive_frequency_hz,
+    is_periodic,
+    last_period,
+    nrmse_pct,
+    second_half_nrmse_pct,
+)
 from labrig.analysis.records import Record
 from labrig.blas import single_thread_blas
 from labrig.model import DynamicHysteresisModel, ModelParams, QuasiStaticHysteresis, Relaxor
@@ -1062,6 +1069,5 @@ def _score_heldout(
     m, p = rec.strain_ue[i0:], p[i0:]
     if not offset:
         return nrmse_pct(m, p)
-    half = m.size // 2
-    c = float(np.mean(m[:half] - p[:half]))
-    return nrmse_pct(m[half:], p[half:] + c)
+    c = float(np.mean(m[: m.size // 2] - p[: m.size // 2]))
+    return second_half_nrmse_pct(m, p + c)
