@@ -277,11 +277,22 @@ def diagnose(
         None, "--out", help="Directory for diagnosis.json and diagnosis.html."
     ),
     as_json: bool = typer.Option(False, "--json", help="Print only the JSON on stdout."),
+    also: list[str] = typer.Option(
+        [],
+        "--also",
+        help="Also try this structural effect (repeatable): remanence, viscoelastic_creep "
+        "(not default candidates; docs/diagnose.md).",
+    ),
+    max_effects: int = typer.Option(
+        2, "--max-effects", min=1, max=4, help="Add at most this many effects (1-4)."
+    ),
 ) -> None:
     """Find what the model misses: residual evidence, candidate effects, held-out before/after."""
-    from labrig.cli_diagnose import diagnose_command
+    from labrig.cli_diagnose import check_also, diagnose_command
 
-    raise typer.Exit(diagnose_command(run_file, params, out, as_json))
+    raise typer.Exit(
+        diagnose_command(run_file, params, out, as_json, check_also(also), max_effects)
+    )
 
 
 @sim_app.command("serve")

@@ -1,4 +1,5 @@
-"""``labrig diagnose RUN.h5 [--params params.json] [--out DIR] [--json]``.
+"""``labrig diagnose RUN.h5 [--params params.json] [--out DIR] [--json] [--also NAME]...
+[--max-effects N]``.
 
 The lead wires :func:`diagnose_command` into ``labrig.cli`` (see ``docs/diagnose.md``). Exit
 codes: 0 done (whatever the verdict), 2 bad input (file, parameters), 1 unexpected failure.
@@ -18,7 +19,7 @@ from rich.table import Table
 
 from labrig.errors import InputFileError, InputIssue
 
-__all__ = ["diagnose_command"]
+__all__ = ["check_also", "diagnose_command"]
 
 
 def _clean(x: Any) -> Any:
@@ -66,12 +67,38 @@ def _load_params(path: Path, say: Callable[[str], None] = print):
         raise InputFileError([InputIssue(str(path), None, "--params", msg)]) from None
 
 
+def check_also(names: list[str]) -> tuple[str, ...]:
+    """The ``--also`` names, checked against the structural effects (``typer.BadParameter``,
+    exit code 2, for any other name)."""
+    import typer
+
+    from labrig.model.effects import STRUCTURAL_EFFECT_NAMES
+
+    bad = [n for n in names if n not in STRUCTURAL_EFFECT_NAMES]
+    if bad:
+        raise typer.BadParameter(
+            f"{', '.join(bad)}: not a structural effect; choose from "
+            f"{', '.join(STRUCTURAL_EFFECT_NAMES)} (the other effects are always tried)",
+            param_hint="--also",
+        )
+    return tuple(dict.fromkeys(names))
+
+
 def diagnose_command(
-    run_file: Path, params: Path | None, out_dir: Path | None, as_json: bool
+    run_file: Path,
+    params: Path | None,
+    out_dir: Path | None,
+    as_json: bool,
+    also: tuple[str, ...] = (),
+    max_effects: int = 2,
 ) -> int:
-    """Run the diagnosis of ``run_file`` and print / write it; returns the exit code."""
+    """Run the diagnosis of ``run_file`` and print / write it; returns the exit code.
+
+    ``also``: structural effects to try beside the defaults; ``max_effects``: at most this
+    many effects are added."""
     from labrig.analysis.diagnose import diagnose, split_entries
     from labrig.analysis.load import records_from_run
+    from labrig.model.effects import EFFECT_NAMES, STRUCTURAL_EFFECT_NAMES
 
     err = Console(stderr=True)
     records = records_from_run(run_file)
@@ -97,8 +124,23 @@ def diagnose_command(
     def progress(msg: str) -> None:
         err.print(f"[dim]{msg}[/dim]")
 
-    d = diagnose(records, p0, offset=offset, progress=progress)
+    d = diagnose(
+        records,
+        p0,
+        offset=offset,
+        effects=EFFECT_NAMES + also,
+        max_effects=max_effects,
+        progress=progress,
+    )
     doc = _clean(d.to_json())
+    untried = [n for n in STRUCTURAL_EFFECT_NAMES if n not in also]
+    if untried and d.classification in ("unexplained", "partially_explained"):
+        err.print(
+            f"hint: the structural effects {', '.join(untried)} were not tried; "
+            f"`labrig diagnose {Path(run_file).name} "
+            + " ".join(f"--also {n}" for n in untried)
+            + " --max-effects 3` tries them (slower)"
+        )
     if out_dir is not None:
         from labrig.report.diagnose_html import render_diagnosis
 

@@ -48,6 +48,7 @@ from labrig.model.bouc_wen import bouc_wen_exact
 
 __all__ = [
     "EFFECT_NAMES",
+    "STRUCTURAL_EFFECT_NAMES",
     "AmplifierCurrentLimit",
     "Context",
     "Creep",
@@ -714,6 +715,11 @@ EFFECT_NAMES: tuple[str, ...] = (
     "time_delay",
     "quadratic_term",
 )
+
+#: in the library but not default ``diagnose`` candidates: structural effects of the actuator
+#: (path-dependent; ``labrig diagnose --also NAME`` or ``labrig fit --effect NAME``). On the
+#: hybrid bench with the seed's campaign they are what the model lacks (docs/diagnose.md).
+STRUCTURAL_EFFECT_NAMES: tuple[str, ...] = ("remanence", "viscoelastic_creep")
 
 
 def library(
