@@ -229,7 +229,7 @@ def clean_heldout_seed21() -> float:
 def test_two_effects_at_once_are_both_found(pair, clean_heldout_seed21):
     """Two of the bench's effects at once (spec residuals.md, "testing the diagnosis"): both are
     added, in either order, nothing else, and together they bring the held-out NRMSE to within
-    1.3x the noise floor of the same campaign without effects (0.34 % on seed 21)."""
+    1.3x the held-out NRMSE of the same campaign without effects (0.35 % on seed 21)."""
     recs = truth_campaign("paper", CASES[pair[0]] + CASES[pair[1]], 21)
     d = diagnose(recs)
     doc = d.to_json()
