@@ -339,6 +339,7 @@ def test_modelled_creep_matches_the_relaxor_step_response_by_superposition():
     expected = (s2 / s1) ** 0.5 - 1.0
     assert modelled_creep_per_decade(p, 80.0) == pytest.approx(expected, abs=1e-6)
     assert 0.03 < expected < 0.1  # the seed's G_t creeps several %/decade by itself
+    assert np.isnan(modelled_creep_per_decade(p, 0.0))  # no strain, no creep figure
 
 
 def test_runner_up_gets_the_experiment_written_for_the_pair():

@@ -580,7 +580,8 @@ def diagnose(
     cls, verdict = _verdict(ev_before, ev_after, before, after, added_cands, rounds, lib)
     creep = modelled_creep_per_decade(before_fit.params(shape, memory), lib_context["v_ref"])
     creep_added = any(c.effect == "creep" for c in added_cands)
-    verdict += _creep_sentence(creep, lib_context["v_ref"], records, creep_added)
+    if np.isfinite(creep):
+        verdict += _creep_sentence(creep, lib_context["v_ref"], records, creep_added)
     d = Diagnosis(
         before=before,
         after=after,
@@ -595,7 +596,7 @@ def diagnose(
         rounds=rounds,
         base_params=dict(before_fit.base),
         after_params=dict(cur.base),
-        base_creep_pct_per_decade=100.0 * creep,
+        base_creep_pct_per_decade=100.0 * creep if np.isfinite(creep) else None,
         messages=messages,
     )
     for cands in rounds:

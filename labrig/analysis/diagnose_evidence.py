@@ -290,7 +290,8 @@ def modelled_creep_per_decade(
 ) -> float:
     """Creep the dynamic model itself describes: the relative growth of the strain per decade of
     time between ``t1_s`` and ``t2_s`` after a step to ``step_V`` (V) from rest,
-    ``(S(t2) / S(t1))^(1 / log10(t2 / t1)) - 1`` (a fraction; 0.05 = 5 %/decade).
+    ``(S(t2) / S(t1))^(1 / log10(t2 / t1)) - 1`` (a fraction; 0.05 = 5 %/decade; NaN when the
+    strain is not positive at both times).
 
     The step is :func:`labrig.analysis.diagnose_campaign.step_hold` (raised-cosine ramp of
     0.2 s; times count from its end), simulated at 100 Hz with the model's ``predict`` (seed
@@ -309,4 +310,6 @@ def modelled_creep_per_decade(
     s = DynamicHysteresisModel(params).predict(v, rate_hz)
     t = np.arange(n) / rate_hz - ramp_s
     s1, s2 = np.interp([t1_s, t2_s], t, s)
+    if not (s1 > 0 and s2 > 0):  # no strain to creep (a 0 V step) or a sign change: undefined
+        return float("nan")
     return float((s2 / s1) ** (1.0 / np.log10(t2_s / t1_s)) - 1.0)
