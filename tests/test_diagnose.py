@@ -174,7 +174,7 @@ def test_log_creep_is_absorbed_by_the_models_transient_relaxor(entries):
     # ... and is measured there: the creep the base model describes after a 100 V step equals
     # the bench's own (noise-free step on the bench, no model involved) within 0.5 %/decade
     # (measured on seed 21: 9.65 against 9.85 %/decade extrapolated from the 3 s entries, 9.86
-    # against 9.87 with the 300 s hold), well apart from the same bench without creep (6.1)
+    # against 9.85 with the 300 s hold), well apart from the same bench without creep (6.1)
     with_creep, without = (
         _bench_creep_pct_per_decade(CASES["creep"]),
         _bench_creep_pct_per_decade([]),

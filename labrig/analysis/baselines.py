@@ -442,11 +442,9 @@ def fit_baseline(
                 q = next(q for q in seqs if any(g.name == name for g in q.segs))
                 p_k = m_k.predict(q.v)[q.starts[name] : segs[name].hi][segs[name].i0 :]
                 m = segs[name].meas
-                if offset:  # offset from the first half, scored on the second
-                    c = float(np.mean(m[: m.size // 2] - p_k[: m.size // 2]))
-                    held_per[name] = second_half_nrmse_pct(m, p_k + c)
-                else:
-                    held_per[name] = nrmse_pct(m, p_k)
+                held_per[name] = (  # with an offset: from the first half, scored on the second
+                    second_half_nrmse_pct(m, p_k, fit_offset=True) if offset else nrmse_pct(m, p_k)
+                )
             held = float(np.mean(list(held_per.values())))
     return BaselineResult(
         kind=kind,

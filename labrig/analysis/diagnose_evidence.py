@@ -26,9 +26,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from labrig.analysis.diagnose_campaign import step_hold
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic
 from labrig.analysis.records import Record
-from labrig.model import ModelParams
+from labrig.model import DynamicHysteresisModel, ModelParams
 
 __all__ = ["EntryEvidence", "Evidence", "collect_evidence", "modelled_creep_per_decade"]
 
@@ -301,12 +302,9 @@ def modelled_creep_per_decade(
     6 %/decade this way. A logarithmic creep of the strain shifts ``lam_t``, ``tau_t`` and
     ``alpha0`` and shows up here rather than as a separate effect (docs/diagnose.md).
     """
-    from labrig.analysis.diagnose_campaign import step_hold
-    from labrig.model.dynamic import DynamicHysteresisModel
-
     rate_hz, ramp_s = 100.0, 0.2
     n = round((ramp_s + t2_s) * rate_hz) + 2
-    v = step_hold(step_V, 4.0 * t2_s, rate_hz, ramp_s=ramp_s)[:n]
+    v = step_hold(step_V, 2.0 * (ramp_s + t2_s), rate_hz, ramp_s=ramp_s)[:n]  # the held part
     s = DynamicHysteresisModel(params).predict(v, rate_hz)
     t = np.arange(n) / rate_hz - ramp_s
     s1, s2 = np.interp([t1_s, t2_s], t, s)

@@ -1069,5 +1069,4 @@ def _score_heldout(
     m, p = rec.strain_ue[i0:], p[i0:]
     if not offset:
         return nrmse_pct(m, p)
-    c = float(np.mean(m[: m.size // 2] - p[: m.size // 2]))
-    return second_half_nrmse_pct(m, p + c)
+    return second_half_nrmse_pct(m, p, fit_offset=True)

@@ -61,14 +61,20 @@ def nrmse_pct(measured: ArrayLike, predicted: ArrayLike, span_ue: float | None =
     return 100.0 * float(np.sqrt(np.mean((m - p) ** 2))) / span
 
 
-def second_half_nrmse_pct(measured: ArrayLike, predicted: ArrayLike) -> float:
+def second_half_nrmse_pct(
+    measured: ArrayLike, predicted: ArrayLike, fit_offset: bool = False
+) -> float:
     """Held-out score of an entry whose nuisance terms (offset, drift, hum) were fitted on its
     first half: the RMS error over the second half, in percent of the **whole entry's** measured
     span, the normaliser of its NRMSE. (Normalised by the second half's own span, the quiet 0 V
-    tail of a vanishing envelope scored 11 % for a perfect model: its span is a few ue.)"""
+    tail of a vanishing envelope scored 11 % for a perfect model: its span is a few ue.)
+    ``fit_offset``: add to ``predicted`` the mean of ``measured - predicted`` over the first half
+    (the only nuisance term of ``labrig fit --offset``)."""
     m = np.asarray(measured, dtype=float)
     p = np.asarray(predicted, dtype=float)
     half = m.size // 2
+    if fit_offset:
+        p = p + float(np.mean(m[:half] - p[:half]))
     return nrmse_pct(m[half:], p[half:], span_ue=float(np.ptp(m)) if m.size else None)
 
 
