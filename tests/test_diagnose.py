@@ -153,11 +153,14 @@ def test_every_effect_is_named_first(expected):
 @pytest.mark.timeout(900)
 @pytest.mark.parametrize("entries", ["short", "hold"])
 def test_log_creep_is_absorbed_by_the_models_transient_relaxor(entries):
-    """Logarithmic creep (4 %/decade, the bench's mode bank) is within the model family's reach:
-    the seed's ``G_t`` with a small order creeps almost logarithmically, and the converged base
-    fit shifts lam_t, tau_t and alpha0 to follow it (measured: in-sample NRMSE at the noise floor
-    for 2-8 %/decade, also with a 100 V step held 300 s and 300 s back at 0 V). Nothing is
-    attributed and the verdict says so; the model still predicts held-out entries at the floor.
+    """Logarithmic creep (4 %/decade, the bench's mode bank) on the default gauge (2 ue) is
+    within the model family's reach: the seed's ``G_t`` with a small order creeps almost
+    logarithmically, and the converged base fit shifts lam_t, tau_t and alpha0 to follow it
+    (measured: in-sample NRMSE at the noise floor for 2-8 %/decade, also with a 100 V step held
+    300 s and 300 s back at 0 V; what G_t misses, 0.083 % of the span, is a quarter of the
+    floor, so no effect could halve the held-out NRMSE). Nothing is attributed and the verdict
+    says so; the model still predicts held-out entries at the floor. On a quiet gauge the
+    remainder shows and creep is found (the test below).
     (With the last-reversal memory the base fit stalled and ``creep`` was "found": an
     artefact.)"""
     recs = truth_campaign(
@@ -182,6 +185,49 @@ def test_log_creep_is_absorbed_by_the_models_transient_relaxor(entries):
     assert with_creep - without > 3.0
     assert d.base_creep_pct_per_decade == pytest.approx(with_creep, abs=0.5), doc["verdict"]
     assert "creep by" in doc["verdict"] and "not added as a separate effect" in doc["verdict"]
+
+
+#: gauge noise (ue rms) at which a 4 %/decade log creep stands clear of the noise: the base's
+#: G_t follows all but 0.083 % of the span of it (noise-free campaign, seed 21), and halving a
+#: held-out NRMSE needs that remainder above sqrt(3) times the floor, i.e. noise below 0.26 ue
+#: (the default gauge's 2 ue gives a floor of 0.33 %)
+QUIET_GAUGE_UE = 0.2
+
+
+def test_log_creep_on_a_quiet_gauge_is_named_first_and_measured():
+    """The bench's log creep (4 %/decade, a mode bank from 10 ms to 1e4 s) on a quiet gauge,
+    seed 61 (not used while the creep effect was developed): creep is added, nothing else,
+    the held-out NRMSE at least halves, the fitted rate is the bench's within 10 %, and the
+    whole model's creep after a 100 V step matches the bench's own noise-free step (no model
+    involved) within 0.5 %/decade."""
+    recs = bench_campaign(CASES["creep"], seed=61, noise_ue=QUIET_GAUGE_UE)
+    d = diagnose(recs)
+    doc = d.to_json()
+    _check_contract(doc)
+    assert [e["effect"] for e in doc["effects_added"]] == ["creep"], doc["verdict"]
+    assert doc["after"]["heldout_nrmse_pct"] <= 0.5 * doc["before"]["heldout_nrmse_pct"]
+    c = doc["effects_added"][0]["params"]["c_per_decade"]
+    assert c == pytest.approx(CASES["creep"][0]["per_decade"], rel=0.1)
+    bench = _bench_creep_pct_per_decade(CASES["creep"])
+    assert d.after_creep_pct_per_decade == pytest.approx(bench, abs=0.5), doc["verdict"]
+    assert "from the added effect" in doc["verdict"]
+
+
+@pytest.mark.slow
+def test_quiet_gauge_null_campaigns_add_nothing():
+    """The acceptance rule on a quiet gauge (floor 0.037 %), where the base's own small
+    mismatches are 10x closer to the floor than at the default noise: nothing added in 10
+    seeds."""
+    added = [
+        [
+            e["effect"]
+            for e in diagnose(bench_campaign([], seed=s, noise_ue=QUIET_GAUGE_UE)).to_json()[
+                "effects_added"
+            ]
+        ]
+        for s in range(100, 110)
+    ]
+    assert added == [[]] * 10
 
 
 def _bench_creep_pct_per_decade(effects) -> float:
@@ -262,8 +308,8 @@ def test_null_campaigns_over_ten_seeds():
             marks=pytest.mark.xfail(
                 reason="known: thermal_drift is found first (k 0.55 %/K against the bench's "
                 "1 %/K: the hybrid base takes part of the heating), then creep is added for "
-                "the rest (held-out gain 18 %; on the same plant without heating creep gains "
-                "9 % and is rejected); the verdict says partially explained",
+                "the rest (held-out gain 17 %, t0 43 ms; on the same plant without heating "
+                "creep gains 10 % and is rejected); the verdict says partially explained",
                 strict=True,
             ),
         ),
@@ -340,6 +386,42 @@ def test_modelled_creep_matches_the_relaxor_step_response_by_superposition():
     assert modelled_creep_per_decade(p, 80.0) == pytest.approx(expected, abs=1e-6)
     assert 0.03 < expected < 0.1  # the seed's G_t creeps several %/decade by itself
     assert np.isnan(modelled_creep_per_decade(p, 0.0))  # no strain, no creep figure
+
+
+def test_modelled_creep_includes_an_added_creep_effect():
+    """With ``gamma = 0`` and both relaxors a fraction of a microsecond fast the base strain
+    is ``alpha0 V`` one sample late (a relaxor's zoh step response is 0 at the step and 1 a
+    sample later) with no creep of its own; with the library's creep effect the strain is the
+    direct sum ``S[n] = sum_k alpha0 dV_k (1 + c log10(1 + (n - k - 1) dt / t0))`` over the
+    ramp's increments (no convolution code involved). Tolerance 1e-6."""
+    from labrig.analysis.diagnose_campaign import step_hold
+    from labrig.analysis.diagnose_evidence import modelled_creep_per_decade
+    from labrig.model import ModelParams
+
+    p = ModelParams(
+        alpha0_ue_per_V=10.0,
+        gamma_ue_per_V=0.0,
+        vc_V=65.0,
+        lam_t=1.0,
+        tau_t_s=1e-7,
+        lam_d=1.0,
+        tau_d_s=1e-7,
+    )
+    assert modelled_creep_per_decade(p, 80.0) == pytest.approx(0.0, abs=1e-9)
+    c, t0, rate, ramp = 0.03, 0.004, 100.0, 0.2
+    dv = np.diff(np.concatenate(([0.0], step_hold(80.0, 400.0, rate, ramp_s=ramp)[:40])))
+
+    def strain(t: float) -> float:
+        lag = t - (np.arange(40) + 1) / rate
+        return float(np.sum(10.0 * dv * (1.0 + c * np.log10(1.0 + lag / t0))))
+
+    expected = (strain(100.0 + ramp) / strain(1.0 + ramp)) ** 0.5 - 1.0
+    creep = library()["creep"]
+    got = modelled_creep_per_decade(
+        p, 80.0, creep_effects=[(creep, {"c_per_decade": c, "t0_s": t0})]
+    )
+    assert got == pytest.approx(expected, abs=1e-6)
+    assert got == pytest.approx(c, rel=0.1)  # c per decade, for t >> t0
 
 
 def test_runner_up_gets_the_experiment_written_for_the_pair():

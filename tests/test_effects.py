@@ -121,18 +121,30 @@ def test_measured_voltage_ignores_monitor_noise():
     np.testing.assert_array_equal(m[big], limited[big])
 
 
-def test_creep_is_logarithmic_after_a_step():
+@pytest.mark.parametrize("t0", [0.002, 0.05])
+def test_creep_is_logarithmic_after_a_step(t0):
     e = Creep()
     n = 20000
     x = np.ones(n)
-    y = e.apply(x, _ctx(np.zeros(n)), {"c_per_decade": 0.02})
+    y = e.apply(x, _ctx(np.zeros(n)), {"c_per_decade": 0.02, "t0_s": t0})
     t = np.arange(n) / FS
+    # a unit step creeps by c log10(1 + t / t0) (the step enters at t = 0)
+    for tt in (0.01, 0.1, 1.0, 10.0):
+        i = round(tt * FS)
+        assert y[i] - 1.0 == pytest.approx(0.02 * np.log10(1.0 + t[i] / t0), rel=1e-9)
     # one decade later the strain has grown by c (for t >> t0)
     i1, i2 = round(1.0 * FS), round(10.0 * FS)
-    assert y[i2] - y[i1] == pytest.approx(
-        0.02 * np.log10((1 + t[i2] / e.t0_s) / (1 + t[i1] / e.t0_s))
-    )
     assert y[i2] - y[i1] == pytest.approx(0.02, rel=0.03)
+
+
+def test_creep_over_too_few_decades_is_a_caveat():
+    """Two decades of log creep between t0 and the data's span, or a caveat (one slow mode
+    would do as well)."""
+    e = Creep()
+    assert e.caveats({"c_per_decade": 0.04, "t0_s": 0.002}, 20.0) == []  # 4 decades
+    (said,) = e.caveats({"c_per_decade": 0.04, "t0_s": 0.3}, 20.0)  # 1.8 decades
+    assert "1.8 decades" in said and "viscoelastic_creep" in said
+    assert e.caveats({"c_per_decade": 0.0, "t0_s": 0.3}, 20.0) == []  # no creep, no caveat
 
 
 def test_thermal_drift_with_and_without_temperature():

@@ -64,7 +64,7 @@ from labrig.analysis.metrics import drive_frequency_hz
 from labrig.analysis.records import Record
 from labrig.blas import single_thread_blas
 from labrig.model import ModelParams
-from labrig.model.effects import EFFECT_NAMES, Effect, library
+from labrig.model.effects import CREEP_EFFECTS, EFFECT_NAMES, Effect, library
 
 __all__ = [
     "AT_FLOOR",
@@ -131,6 +131,8 @@ class Diagnosis:
     after_params: dict[str, float] = field(default_factory=dict)
     #: creep the base model describes (%/decade, 1-100 s after a full-scale step)
     base_creep_pct_per_decade: float | None = None
+    #: creep the final model describes (its base and any added creep effect), same measure
+    after_creep_pct_per_decade: float | None = None
     elapsed_s: float = 0.0
     messages: list[str] = field(default_factory=list)
 
@@ -229,8 +231,10 @@ def accept(
     held: dict[str, float],
     held_ref: dict[str, float],
     min_gain: float = MIN_GAIN,
+    span_s: float = float("inf"),
 ) -> tuple[bool, float, int, int, list[str], list[str]]:
-    """The acceptance rule (module docstring, step 6).
+    """The acceptance rule (module docstring, step 6). ``span_s``: the longest simulated
+    sequence (s), for the effect's own caveats (:meth:`Effect.caveats`).
 
     Returns ``(accepted, gain, wins, losses, reasons against, suspicious points)``.
     """
@@ -262,6 +266,7 @@ def accept(
         s = sd.get(q.name)
         if q.check_bounds and s is not None and s > 0.5 * abs(v - q.null):
             suspicious.append(f"{q.name} is poorly determined ({v:.3g} +- {s:.2g})")
+    suspicious += eff.caveats(p, span_s)
     return not reasons, gain, wins, losses, reasons, suspicious
 
 
@@ -423,6 +428,7 @@ def diagnose(
     messages += fr.messages
     base0 = _numeric(fr.params)
     contexts = _build_sequences(records, chain)
+    span_s = max(ctx.n / ctx.rate_hz for _, ctx in contexts)
     lib_context = effect_context(records, mains_hz)
     lib = library(**lib_context)
     names = [n for n in (effects or EFFECT_NAMES) if n in lib]
@@ -520,7 +526,7 @@ def diagnose(
             c.heldout_per_entry = prob.heldout(fo)
             c.heldout_nrmse_pct = _mean(c.heldout_per_entry)
             ok, gain, wins, losses, reasons, susp = accept(
-                eff, fo, c.heldout_per_entry, cur_held, min_gain
+                eff, fo, c.heldout_per_entry, cur_held, min_gain, span_s
             )
             c.accepted, c.gain, c.wins, c.losses = ok, gain, wins, losses
             c.reasons += reasons
@@ -578,10 +584,18 @@ def diagnose(
         for c in sorted(latest.values(), key=lambda c: (c.round, -c.score))
     ]
     cls, verdict = _verdict(ev_before, ev_after, before, after, added_cands, rounds, lib)
-    creep = modelled_creep_per_decade(before_fit.params(shape, memory), lib_context["v_ref"])
-    creep_added = any(c.effect == "creep" for c in added_cands)
-    if np.isfinite(creep):
-        verdict += _creep_sentence(creep, lib_context["v_ref"], records, creep_added)
+    step_V = lib_context["v_ref"]
+    creep = modelled_creep_per_decade(before_fit.params(shape, memory), step_V)
+    slow = [(lib[n], p) for n, p in cur.effects.items() if n in CREEP_EFFECTS]
+    creep_after = creep
+    if slow:
+        after_params = cur.params(shape, memory)
+        creep_after = modelled_creep_per_decade(after_params, step_V, creep_effects=slow)
+        creep_gt = modelled_creep_per_decade(after_params, step_V)
+        if np.isfinite(creep_after) and np.isfinite(creep_gt):
+            verdict += _creep_added_sentence(creep_after, creep_gt, step_V, records)
+    elif np.isfinite(creep):
+        verdict += _creep_sentence(creep, step_V, records)
     d = Diagnosis(
         before=before,
         after=after,
@@ -597,6 +611,7 @@ def diagnose(
         base_params=dict(before_fit.base),
         after_params=dict(cur.base),
         base_creep_pct_per_decade=100.0 * creep if np.isfinite(creep) else None,
+        after_creep_pct_per_decade=100.0 * creep_after if np.isfinite(creep_after) else None,
         messages=messages,
     )
     for cands in rounds:
@@ -655,22 +670,30 @@ def tell_apart(a: Effect, b: Effect) -> str:
     return f"for {a.name}: {a.tell_apart}; for {b.name}: {b.tell_apart}"
 
 
-def _creep_sentence(
-    creep: float, step_V: float, records: Sequence[Record], creep_added: bool
-) -> str:
-    """The creep the base model already describes (:func:`modelled_creep_per_decade`): a log
-    creep of the actuator goes into ``G_t`` and is measured here, not added as an effect."""
+def _creep_where(records: Sequence[Record]) -> str:
     longest = max(float(r.time_s[-1] - r.time_s[0]) for r in records)
-    where = "" if longest >= 100.0 else f", extrapolated beyond the longest entry ({longest:.3g} s)"
-    s = (
+    return "" if longest >= 100.0 else f", extrapolated beyond the longest entry ({longest:.3g} s)"
+
+
+def _creep_sentence(creep: float, step_V: float, records: Sequence[Record]) -> str:
+    """The creep the base model already describes (:func:`modelled_creep_per_decade`): a log
+    creep of the actuator that ``G_t`` follows within the noise is measured here."""
+    return (
         f" Creep: the base model's slow relaxor G_t makes the strain creep by "
-        f"{100 * creep:.1f} %/decade from 1 s to 100 s after a {step_V:.3g} V step{where}"
+        f"{100 * creep:.1f} %/decade from 1 s to 100 s after a {step_V:.3g} V step"
+        f"{_creep_where(records)}; any logarithmic creep of the actuator that G_t follows within "
+        "the noise is part of this figure and is not added as a separate effect."
     )
-    if creep_added:
-        return s + "; the added creep effect comes on top of it."
-    return s + (
-        "; any logarithmic creep of the actuator is part of this figure (G_t follows it), so "
-        "it is not added as a separate effect."
+
+
+def _creep_added_sentence(
+    total: float, from_gt: float, step_V: float, records: Sequence[Record]
+) -> str:
+    """The whole model's creep once a creep effect is in it, and the share of ``G_t``."""
+    return (
+        f" Creep: the model makes the strain creep by {100 * total:.1f} %/decade from 1 s to "
+        f"100 s after a {step_V:.3g} V step{_creep_where(records)}, {100 * from_gt:.1f} %/decade "
+        "of it from its slow relaxor G_t and the rest from the added effect."
     )
 
 

@@ -20,6 +20,7 @@ any structure is "significant"; the decision is made by held-out prediction erro
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,6 +31,7 @@ from labrig.analysis.diagnose_campaign import step_hold
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic
 from labrig.analysis.records import Record
 from labrig.model import DynamicHysteresisModel, ModelParams
+from labrig.model.effects import Context, Effect
 
 __all__ = ["EntryEvidence", "Evidence", "collect_evidence", "modelled_creep_per_decade"]
 
@@ -287,7 +289,11 @@ def _sentences(ev: Evidence) -> list[str]:
 
 
 def modelled_creep_per_decade(
-    params: ModelParams, step_V: float, t1_s: float = 1.0, t2_s: float = 100.0
+    params: ModelParams,
+    step_V: float,
+    t1_s: float = 1.0,
+    t2_s: float = 100.0,
+    creep_effects: Sequence[tuple[Effect, Mapping[str, float]]] = (),
 ) -> float:
     """Creep the dynamic model itself describes: the relative growth of the strain per decade of
     time between ``t1_s`` and ``t2_s`` after a step to ``step_V`` (V) from rest,
@@ -300,12 +306,19 @@ def modelled_creep_per_decade(
     response ``1 - E_lam(-(t/tau)^lam)`` grows almost logarithmically for a small ``lam``)
     passed through the operator's slope at ``step_V``; the seed's Table 1 stack creeps about
     6 %/decade this way. A logarithmic creep of the strain shifts ``lam_t``, ``tau_t`` and
-    ``alpha0`` and shows up here rather than as a separate effect (docs/diagnose.md).
+    ``alpha0`` and shows up here unless it is added as an effect (docs/diagnose.md).
+
+    ``creep_effects``: fitted library effects acting on the strain (``creep``,
+    ``viscoelastic_creep``) with their parameters, applied in order to the model's strain, so
+    that the figure is the whole model's.
     """
     rate_hz, ramp_s = 100.0, 0.2
     n = round((ramp_s + t2_s) * rate_hz) + 2
     v = step_hold(step_V, 2.0 * (ramp_s + t2_s), rate_hz, ramp_s=ramp_s)[:n]  # the held part
     s = DynamicHysteresisModel(params).predict(v, rate_hz)
+    ctx = Context(rate_hz, v, {"step": slice(0, n)})
+    for eff, p in creep_effects:
+        s = eff.apply(s, ctx, p)
     t = np.arange(n) / rate_hz - ramp_s
     s1, s2 = np.interp([t1_s, t2_s], t, s)
     if not (s1 > 0 and s2 > 0):  # no strain to creep (a 0 V step) or a sign change: undefined
