@@ -124,17 +124,19 @@ def test_measured_voltage_ignores_monitor_noise():
 @pytest.mark.parametrize("t0", [0.002, 0.05])
 def test_creep_is_logarithmic_after_a_step(t0):
     e = Creep()
-    n = 20000
+    n = 60000
     x = np.ones(n)
     y = e.apply(x, _ctx(np.zeros(n)), {"c_per_decade": 0.02, "t0_s": t0})
-    t = np.arange(n) / FS
-    # a unit step creeps by c log10(1 + t / t0) (the step enters at t = 0)
-    for tt in (0.01, 0.1, 1.0, 10.0):
-        i = round(tt * FS)
-        assert y[i] - 1.0 == pytest.approx(0.02 * np.log10(1.0 + t[i] / t0), rel=1e-9)
-    # one decade later the strain has grown by c (for t >> t0)
-    i1, i2 = round(1.0 * FS), round(10.0 * FS)
-    assert y[i2] - y[i1] == pytest.approx(0.02, rel=0.03)
+    # one decade later the strain has grown by c (for t >> t0), the same for every decade
+    i1, i5, i10, i50 = (round(tt * FS) for tt in (1.0, 5.0, 10.0, 50.0))
+    assert y[i10] - y[i1] == pytest.approx(0.02, rel=0.03)
+    assert y[i50] - y[i5] == pytest.approx(0.02, rel=0.01)
+    # linear in the strain change: a step back down at 10 s recovers, leaving the creep of a
+    # 10 s pulse, which fades: at 50 s, c log10(50 / 40) for t >> t0
+    down = np.where(np.arange(n) < i10, 1.0, 0.0)
+    z = e.apply(down, _ctx(np.zeros(n)), {"c_per_decade": 0.02, "t0_s": t0})
+    assert z[i50] == pytest.approx(0.02 * np.log10(50.0 / 40.0), rel=0.01)
+    assert np.all(np.diff(z[i10 + 1 :]) < 0)
 
 
 def test_creep_over_too_few_decades_is_a_caveat():
@@ -145,6 +147,8 @@ def test_creep_over_too_few_decades_is_a_caveat():
     (said,) = e.caveats({"c_per_decade": 0.04, "t0_s": 0.3}, 20.0)  # 1.8 decades
     assert "1.8 decades" in said and "viscoelastic_creep" in said
     assert e.caveats({"c_per_decade": 0.0, "t0_s": 0.3}, 20.0) == []  # no creep, no caveat
+    (said,) = e.caveats({"c_per_decade": 0.04, "t0_s": 5.0}, 3.0)  # t0 beyond the data
+    assert "less than a decade" in said
 
 
 def test_thermal_drift_with_and_without_temperature():

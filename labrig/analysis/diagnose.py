@@ -31,9 +31,12 @@ Procedure (spec ``residuals.md``, "a procedure that does not fool itself")
    above it; "explained" when the added effects bring the residual to the floor with plausible
    parameters; "partially explained" otherwise. Confusable runner-ups (candidates within
    :data:`CONFUSABLE_MARGIN` of the winner's gain) are named with the experiment that would tell
-   them apart. Every verdict ends with the creep the base model itself describes
-   (:func:`~labrig.analysis.diagnose_evidence.modelled_creep_per_decade`): the seed's ``G_t``
-   follows a logarithmic creep of the actuator, which is measured there rather than added.
+   them apart. An effect's own caveats (:meth:`~labrig.model.effects.Effect.caveats`, e.g. a
+   creep seen over less than two decades of time) count as suspicious points. Every verdict
+   ends with the creep the final model describes
+   (:func:`~labrig.analysis.diagnose_evidence.modelled_creep_per_decade`): from the seed's
+   ``G_t``, which follows most of a logarithmic creep of the actuator by itself, and from any
+   added creep effect.
 """
 
 from __future__ import annotations
@@ -264,7 +267,10 @@ def accept(
         if q.expect > 0 and v < q.null:
             suspicious.append(f"{q.name} = {v:.3g} has an unexpected (negative) sign")
         s = sd.get(q.name)
-        if q.check_bounds and s is not None and s > 0.5 * abs(v - q.null):
+        # a log-scaled parameter (a time constant) never reaches its null: judge its spread
+        # against its value
+        scale = abs(v) if q.log else abs(v - q.null)
+        if q.check_bounds and s is not None and s > 0.5 * scale:
             suspicious.append(f"{q.name} is poorly determined ({v:.3g} +- {s:.2g})")
     suspicious += eff.caveats(p, span_s)
     return not reasons, gain, wins, losses, reasons, suspicious
@@ -588,13 +594,17 @@ def diagnose(
     creep = modelled_creep_per_decade(before_fit.params(shape, memory), step_V)
     slow = [(lib[n], p) for n, p in cur.effects.items() if n in CREEP_EFFECTS]
     creep_after = creep
+    said = False
     if slow:
         after_params = cur.params(shape, memory)
         creep_after = modelled_creep_per_decade(after_params, step_V, creep_effects=slow)
         creep_gt = modelled_creep_per_decade(after_params, step_V)
         if np.isfinite(creep_after) and np.isfinite(creep_gt):
-            verdict += _creep_added_sentence(creep_after, creep_gt, step_V, records)
-    elif np.isfinite(creep):
+            verdict += _creep_added_sentence(
+                creep_after, creep_gt, step_V, records, [e.name for e, _ in slow]
+            )
+            said = True
+    if not said and np.isfinite(creep):
         verdict += _creep_sentence(creep, step_V, records)
     d = Diagnosis(
         before=before,
@@ -687,13 +697,14 @@ def _creep_sentence(creep: float, step_V: float, records: Sequence[Record]) -> s
 
 
 def _creep_added_sentence(
-    total: float, from_gt: float, step_V: float, records: Sequence[Record]
+    total: float, from_gt: float, step_V: float, records: Sequence[Record], names: list[str]
 ) -> str:
-    """The whole model's creep once a creep effect is in it, and the share of ``G_t``."""
+    """The whole model's creep once creep effects (``names``) are in it, and what ``G_t`` alone
+    gives."""
     return (
         f" Creep: the model makes the strain creep by {100 * total:.1f} %/decade from 1 s to "
-        f"100 s after a {step_V:.3g} V step{_creep_where(records)}, {100 * from_gt:.1f} %/decade "
-        "of it from its slow relaxor G_t and the rest from the added effect."
+        f"100 s after a {step_V:.3g} V step{_creep_where(records)}, against "
+        f"{100 * from_gt:.1f} %/decade from its slow relaxor G_t without {' and '.join(names)}."
     )
 
 

@@ -293,8 +293,8 @@ class Creep(Effect):
     the amplitude, strain shift after the drive stops; with ``t0`` of milliseconds, also a gain
     and phase that fall slowly with frequency across the sweep. Null: ``c = 0``. Confusable with
     offset drift, thermal drift and the model's own slow relaxor ``G_t``, which follows most of a
-    logarithmic creep by itself: what remains is of the order of 0.1 % of the span (docs/
-    diagnose.md), so the effect is found only on a quiet gauge or a long hold.
+    logarithmic creep by itself: what remains is 0.05-0.1 % of the span for 2-4 %/decade
+    (docs/diagnose.md), so the effect is found only on a gauge quiet enough to show it.
 
     ``t0`` is fitted (0.1 ms to 10 s, log scale) because the part of a creep that starts within
     the sweep's periods is what ``G_t`` cannot take. Measured on a noise-free campaign with
@@ -326,10 +326,12 @@ class Creep(Effect):
         t0 = p["t0_s"]
         if p["c_per_decade"] <= 0 or 100.0 * t0 <= span_s:
             return []
+        decades = np.log10(span_s / t0)
+        seen = f"{decades:.1f} decades" if decades >= 0.1 else "less than a decade"
         return [
-            f"creep is seen over {np.log10(span_s / t0):.1f} decades of time only (t0 = "
-            f"{1e3 * t0:.3g} ms, {span_s:.3g} s simulated at a stretch): one slow mode "
-            "(viscoelastic_creep) may do as well, and the rate per decade is an extrapolation"
+            f"creep is seen over {seen} of time only (t0 = {1e3 * t0:.3g} ms, {span_s:.3g} s "
+            "simulated at a stretch): one slow mode (viscoelastic_creep) may do as well, and the "
+            "rate per decade is an extrapolation"
         ]
 
     def kernel(self, ctx: Context, t0_s: float) -> NDArray:
