@@ -158,9 +158,9 @@ def test_log_creep_is_absorbed_by_the_models_transient_relaxor(entries):
     logarithmically, and the converged base fit shifts lam_t, tau_t and alpha0 to follow it
     (measured: in-sample NRMSE at the noise floor for 2-8 %/decade, also with a 100 V step held
     300 s and 300 s back at 0 V; what G_t misses, 0.083 % of the span, is a quarter of the
-    floor: creep would gain about 3 %, under the 15 % rule). Nothing is attributed and the verdict
-    says so; the model still predicts held-out entries at the floor. On a quiet gauge the
-    remainder shows and creep is found (the test below).
+    floor: creep gains 3.0 % in-sample, not enough to be cross-validated). Nothing is
+    attributed and the verdict says so; the model still predicts held-out entries at the floor.
+    On a quiet gauge the remainder shows and creep is found (the test below).
     (With the last-reversal memory the base fit stalled and ``creep`` was "found": an
     artefact.)"""
     recs = truth_campaign(

@@ -593,18 +593,15 @@ def diagnose(
     step_V = lib_context["v_ref"]
     creep = modelled_creep_per_decade(before_fit.params(shape, memory), step_V)
     slow = [(lib[n], p) for n, p in cur.effects.items() if n in CREEP_EFFECTS]
-    creep_after = creep
-    said = False
+    creep_after = creep_gt = creep
     if slow:
         after_params = cur.params(shape, memory)
         creep_after = modelled_creep_per_decade(after_params, step_V, creep_effects=slow)
         creep_gt = modelled_creep_per_decade(after_params, step_V)
-        if np.isfinite(creep_after) and np.isfinite(creep_gt):
-            verdict += _creep_added_sentence(
-                creep_after, creep_gt, step_V, records, [e.name for e, _ in slow]
-            )
-            said = True
-    if not said and np.isfinite(creep):
+    if slow and np.isfinite(creep_after) and np.isfinite(creep_gt):
+        names = [e.name for e, _ in slow]
+        verdict += _creep_added_sentence(creep_after, creep_gt, step_V, records, names)
+    elif np.isfinite(creep):
         verdict += _creep_sentence(creep, step_V, records)
     d = Diagnosis(
         before=before,

@@ -238,11 +238,8 @@ class ThermalDrift(Effect):
 
     def theta(self, ctx: Context, tau_s: float | None = None) -> NDArray:
         if self.temperature:
-            key = ("theta_T",)
-            if key not in ctx.cache:
-                T = ctx.temperature
-                ctx.cache[key] = T - T[0]
-            return ctx.cache[key]
+            T = ctx.temperature
+            return ctx.cached(("theta_T",), lambda: T - T[0])
         a = float(np.exp(-1.0 / (ctx.rate_hz * tau_s)))
         return ctx.cached(
             ("theta_P", tau_s), lambda: signal.lfilter([0.0, 1.0 - a], [1.0, -a], _entry_power(ctx))
@@ -293,7 +290,7 @@ class Creep(Effect):
     the amplitude, strain shift after the drive stops; with ``t0`` of milliseconds, also a gain
     and phase that fall slowly with frequency across the sweep. Null: ``c = 0``. Confusable with
     offset drift, thermal drift and the model's own slow relaxor ``G_t``, which follows most of a
-    logarithmic creep by itself: what remains is 0.05-0.1 % of the span for 2-4 %/decade
+    logarithmic creep by itself: what remains is 0.05-0.08 % of the span for 2-4 %/decade
     (docs/diagnose.md), so the effect is found only on a gauge quiet enough to show it.
 
     ``t0`` is fitted (0.1 ms to 10 s, log scale) because the part of a creep that starts within
