@@ -40,11 +40,11 @@ import numpy as np
 from labrig.control import (
     CompensationController,
     DirectController,
-    _StaticInverseStepper,
     compensated_drive,
     load_control_model,
     model_tracking_error,
 )
+from labrig.control.static_inverse import StaticInverseStepper
 
 ROOT = Path(__file__).resolve().parents[1]
 BUDGET_NS = 100_000  # 10 kHz loop
@@ -91,19 +91,19 @@ def stage_split(params, rate_hz: float, s: np.ndarray) -> dict[str, float]:
     p = params.params
     t0 = time.perf_counter_ns()
     for x in s:
-        ctl._uncreep(float(x))
+        ctl.uncreep(float(x))
     t_creep = (time.perf_counter_ns() - t0) / s.size
     op = p.operator()
-    st = _StaticInverseStepper(op)
+    st = StaticInverseStepper(op)
     t0 = time.perf_counter_ns()
     u = [st.step(x) for x in s]
     t_static = (time.perf_counter_ns() - t0) / s.size
-    st_full = ctl._static  # with the fitted remanence, if any
+    st_full = ctl.static_inverse  # with the fitted remanence, if any
     st_full.reset()
     t0 = time.perf_counter_ns()
     u = [st_full.step(x) for x in s]
     t_full = (time.perf_counter_ns() - t0) / s.size
-    gd, gt = ctl._gd, ctl._gt
+    gd, gt = ctl.gd_inverse, ctl.gt_inverse
     gd.reset()
     t0 = time.perf_counter_ns()
     vt = [gd.push(x) for x in u]

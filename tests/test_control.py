@@ -13,11 +13,10 @@ from labrig.control import (
     CompensationController,
     DirectController,
     InfeasibleCommandError,
-    _StaticInverseStepper,
     check_drive,
+    command_metrics,
     compensated_drive,
     compute_drive,
-    control_metrics,
     direct_drive,
     final_strain_ue,
     hysteresis_width_pct,
@@ -27,6 +26,8 @@ from labrig.control import (
     tracking_nrmse_pct,
     zero_command_strain_ue,
 )
+from labrig.control.inversion import relaxor_inverse
+from labrig.control.static_inverse import StaticInverseStepper
 from labrig.limits import RigLimits
 from labrig.model import PAPER_CONTROL, DynamicHysteresisModel, QuasiStaticHysteresis
 from labrig.model.relaxor import sampled_kernel
@@ -100,12 +101,12 @@ def test_static_inverse_stepper_matches_invert():
     rng = np.random.default_rng(0)
     s = np.concatenate(([0.0, 0.0], np.cumsum(rng.normal(0.0, 20.0, 2000))))
     s[100:110] = s[99]  # flat stretch: not a reversal
-    st = _StaticInverseStepper(op)
+    st = StaticInverseStepper(op)
     got = np.array([st.step(x) for x in s])
     assert np.max(np.abs(got - op.invert(s))) < 1e-9
     # and for a shape without a closed form here
     opg = QuasiStaticHysteresis(11.0, 3.0, 40.0, "gaussian")
-    st = _StaticInverseStepper(opg)
+    st = StaticInverseStepper(opg)
     got = np.array([st.step(x) for x in s])
     assert np.max(np.abs(got - opg.invert(s))) < 1e-9
 
@@ -211,24 +212,22 @@ def test_metrics_on_known_signals():
     m = 500.0 * (1 - np.cos(2 * np.pi * f * t - phi))
     w = hysteresis_width_pct(c, m, rate, f)
     assert w == pytest.approx(100 * math.sin(phi), rel=2e-3)
-    out = control_metrics(c, m, rate, f)
+    out = command_metrics(c, m, rate, f)
     assert set(out) >= {"tracking_nrmse_pct", "hysteresis_width_pct", "zero_command_strain_ue"}
     assert out["hysteresis_width_pct"] == pytest.approx(abs(w))
     mean, se = final_strain_ue(np.r_[np.zeros(100), np.full(1000, 3.0)], rate, 0.5)
     assert mean == 3.0 and se == 0.0
-    out = control_metrics(c, m, rate, None, periodic=False)
+    out = command_metrics(c, m, rate, None, periodic=False)
     assert out["hysteresis_width_pct"] is None and out["zero_command_strain_ue"] is None
 
 
 def test_relaxor_inverse_is_exact_up_to_the_last_sample():
     """The kernel equation holds at every sample but the first (the start-up defect), also at
     the end of a command that does not return to 0 (its continuation at the last value)."""
-    from labrig.control import _relaxor_inverse
-
     n = np.arange(400)
     y = 0.2 * n + 5 * np.sin(n / 7.0)
     for tau, lam, hold in ((2.2e-3, 1.35, "linear"), (FITTED.tau_t_s, FITTED.lam_t, "zoh")):
-        v, _ = _relaxor_inverse(y, tau, lam, RATE, hold)
+        v, _ = relaxor_inverse(y, tau, lam, RATE, hold)
         k = sampled_kernel(tau, lam, 1 / RATE, y.size + 1, hold)
         if hold == "zoh":  # V[n] reaches y[n+1]
             r = np.convolve(k[1:], v)[: v.size] - y[1:]

@@ -1,6 +1,6 @@
 """Strain-command protocol steps: planning, preflight, recording, and control on the hybrid rig.
 
-The threshold tests run the seed's control example (experiments/control.yaml) on the simulated
+The threshold tests run the paper's control example (experiments/control.yaml) on the simulated
 rig with the ``hybrid`` truth. ``test_control_thresholds_fast`` uses the committed parameters
 (experiments/hybrid-params.json, fitted by ``labrig fit`` on a paper.yaml run of that rig) and a
 shortened protocol; the slow test redoes the whole chain: campaign run, fit, control run.

@@ -10,7 +10,7 @@ checked on a ramp against the hand-derived exponentials). ``H`` is
 
 Checked:
 
-- the static inverse the controller uses (``_static_stepper(cm).step``) returns voltages ``u``
+- the static inverse the controller uses (``static_stepper(cm).step``) returns voltages ``u``
   with ``H[u] - h_ref[u] = S`` (1e-5 ue on 1000 ue commands; measured <= 5e-7 ue, the
   reference's own discretisation error) for a unipolar sine, a vanishing sine with a hold at
   0 ue and a rough random walk, with the fitted parameters of experiments/hybrid-params.json
@@ -40,11 +40,10 @@ from numpy.typing import NDArray
 from labrig.control import (
     CompensationController,
     ControlModel,
-    _static_stepper,
-    _StaticInverseStepper,
     compensated_drive,
     load_control_model,
 )
+from labrig.control.static_inverse import StaticInverseStepper, static_stepper
 from labrig.model import PAPER_CONTROL, DynamicHysteresisModel, ModelParams
 from labrig.model.hysteresis import QuasiStaticHysteresis
 
@@ -74,7 +73,7 @@ def _memory(p: ModelParams, rule: str | None = None) -> dict[str, str]:
     return {"memory": rule or p.memory}
 
 
-# a second set: the seed's control parameters, a stronger remanence with gamma < 0 that is still
+# a second set: the paper's control parameters, a stronger remanence with gamma < 0 that is still
 # invertible (|dh/dV*| <= 2 A beta / (beta + gamma) = 6.25 < alpha0 = 8.9 ue/V), and the other
 # memory rule of the operator (where the parameters have one)
 SECOND = ModelParams(**{**PAPER_CONTROL.model_dump(), **_memory(PAPER_CONTROL, "last_reversal")})
@@ -115,7 +114,7 @@ def static_strain(p: ModelParams, rem: Remanence, u: Array) -> Array:
 
 def static_inverse(p: ModelParams, rem: Remanence, s: Array) -> Array:
     """What the controller's static inverse returns for the command ``s``, sample by sample."""
-    stepper = _static_stepper(ControlModel(p, None, rem))
+    stepper = static_stepper(ControlModel(p, None, rem))
     return np.array([stepper.step(float(x)) for x in s])
 
 
@@ -208,7 +207,7 @@ def test_remanent_inverse_is_the_static_inverse_of_command_plus_reference_h(comm
     remanence part or in the operator part."""
     s = COMMANDS[command]()
     u = static_inverse(params, rem, s)
-    plain = _StaticInverseStepper(operator(params))
+    plain = StaticInverseStepper(operator(params))
     y = s + bouc_wen_reference(u, *rem)
     u_plain = np.array([plain.step(float(x)) for x in y])
     assert np.max(np.abs(u - u_plain)) < 1e-6  # V (measured ~1e-10 V)
@@ -219,7 +218,7 @@ def test_remanent_inverse_is_the_static_inverse_of_command_plus_reference_h(comm
 
 def _models() -> list[ControlModel]:
     """The fit file's model (creep and remanence) and the second set's operator and remanence on
-    the fitted relaxors (whose inverses are already set up: the seed's G_d costs seconds)."""
+    the fitted relaxors (whose inverses are already set up: the paper's G_d costs seconds)."""
     hyb = load_control_model(HYBRID)
     static = {k: getattr(SECOND, k) for k in ("alpha0_ue_per_V", "gamma_ue_per_V", "vc_V")}
     second = ModelParams(**{**hyb.params.model_dump(), **static, **_memory(SECOND)})
@@ -380,7 +379,7 @@ def test_a_remanence_with_negative_gamma_is_refused_or_inverted():
     except ValueError:
         return  # refused: fine
     s = 300.0 * (1.0 - np.cos(2 * np.pi * np.arange(1001) / 500))
-    stepper = _static_stepper(cm)
+    stepper = static_stepper(cm)
     got = np.array([stepper.step(float(x)) for x in s])
     miss = float(np.max(np.abs(static_strain(params, rem, got) - s)))
     if miss > STATIC_TOL_UE:

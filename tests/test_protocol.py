@@ -32,10 +32,10 @@ def proto(steps: str, head: str = "name: t\nrate_hz: 1000\n") -> str:
     return head + "steps:\n" + steps
 
 
-# --- the seed's experiments -------------------------------------------------------------------
+# --- the paper's experiments ------------------------------------------------------------------
 
 
-def test_sweep_yaml_expands_to_the_seed_sweep():
+def test_sweep_yaml_expands_to_the_paper_sweep():
     plan = check_protocol(EXP / "sweep.yaml")
     assert [s.name for s in plan.steps] == SWEEP_NAMES
     assert [(s.amplitude_V, s.frequency_hz) for s in plan.steps] == [
@@ -268,7 +268,7 @@ def _independent_fmax(amplitude_V: float, lim: RigLimits) -> float:
 def test_current_limit_frequency_at_100V(tmp_path):
     lim = RigLimits()
     fmax = _independent_fmax(100, lim)
-    assert fmax == pytest.approx(56.17, abs=0.01)  # "about 55 Hz" in the seed
+    assert fmax == pytest.approx(56.17, abs=0.01)  # "about 55 Hz" in the paper
     assert pf.max_sine_frequency_hz(100, lim) == pytest.approx(fmax)
 
     def plan_at(f):

@@ -1,6 +1,6 @@
 """labrig report on strain-command entries: the control metrics in --json and the HTML section.
 
-The run uses the default simulated rig, whose truth is the dynamic model with the seed's
+The run uses the default simulated rig, whose truth is the dynamic model with the paper's
 Table 1, and the compensation uses those same parameters: the compensated entry must then track
 far better than the direct one (an independent check that the report reads the right samples
 and that the metrics point the right way), and the --json keys are the issue's contract. The

@@ -1,46 +1,26 @@
-"""The compensation-control part of ``labrig report`` (seed Figs. 15-17).
+"""The compensation-control part of ``labrig report`` (the paper's Figs. 15-17).
 
 For every strain-command entry (a ``command_strain`` channel and a ``control`` key in its step
 definition): the metrics of :func:`labrig.control.entry_metrics` (tracking NRMSE and hysteresis
-width in % of the command span, strain at zero command), and one figure per command pairing the
-direct and compensated entries: measured strain versus command (Figs. 15-16) and the computed
-drive voltage in time (Fig. 17).
+width in % of the command span, strain at zero command; :func:`labrig.control.control_metrics`
+gives them for ``labrig report --json``), and one figure per command pairing the direct and
+compensated entries: measured strain versus command (Figs. 15-16) and the computed drive voltage
+in time (Fig. 17).
 """
 
 from __future__ import annotations
 
 from html import escape
-from typing import Any
 
 from matplotlib.figure import Figure
 
 from labrig.analysis.records import Record
-from labrig.control import entry_metrics
+from labrig.control.metrics import control_metrics, is_control_entry
 from labrig.report.plots import _style, png
 
-#: the keys ``labrig report --json`` gives for each strain-command entry
-JSON_KEYS = (
-    "control",
-    "frequency_hz",
-    "tracking_nrmse_pct",
-    "hysteresis_width_pct",
-    "zero_command_strain_ue",
-)
+__all__ = ["COLORS", "control_html", "control_metrics", "is_control_entry"]
+
 COLORS = {"direct": "tab:blue", "compensated": "tab:red"}
-
-
-def is_control_entry(r: Record) -> bool:
-    return "command_strain" in r.aux and "control" in r.meta
-
-
-def control_metrics(records: list[Record]) -> dict[str, dict[str, Any]]:
-    """Entry name -> the :data:`JSON_KEYS` for every strain-command entry."""
-    out = {}
-    for r in records:
-        if is_control_entry(r):
-            m = entry_metrics(r)
-            out[r.name] = {k: m.get(k) for k in JSON_KEYS}
-    return out
 
 
 def _pair_key(r: Record) -> tuple:
