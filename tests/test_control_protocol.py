@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 from labrig.analysis.load import records_from_run
-from labrig.control import compute_drive, entry_metrics, load_control_model
+from labrig.control import check_drive, compute_drive, entry_metrics, load_control_model
 from labrig.errors import InputFileError
 from labrig.limits import RigLimits
 from labrig.model import PAPER_TABLE1
@@ -156,6 +156,34 @@ def test_params_missing_unreadable_or_invalid(tmp_path):
     with pytest.raises(InputFileError) as e:
         load_plan(p)
     assert issues_of(e)[0].field == "steps[0].control"
+
+
+def test_preflight_and_check_drive_measure_a_drive_alike(tmp_path):
+    """The protocol preflight (on the step's waveform) and ``check_drive`` (on the drive array)
+    use one measurement: the same peak and cycle-mean current for the same drive, with the peak
+    found at the same time (``check_drive`` counts from the drive's first sample, one sample
+    after the entry's 0 V rest sample). The independent reference is the unipolar-sine formula
+    of a direct drive, ``pi C_eff A f`` and ``2 C_eff A f`` (A the drive's amplitude, V)."""
+    p = write_protocol(
+        tmp_path,
+        [{"kind": "strain_sine", "amplitude_ue": 900, "frequency_hz": 20, "cycles": 10,
+          "control": "direct"}],
+    )  # fmt: skip
+    plan = check_protocol(p)
+    (step,), (pf,) = plan.steps, plan.checks
+    d = step.definition
+    drive = step.samples(d["command_start_index"], d["command_stop_index"])
+    lim = RigLimits()
+    chk = check_drive(drive, 1000.0, lim, 20.0)
+    assert chk.peak_current_A == pytest.approx(pf.peak_current_A, rel=1e-12)
+    assert chk.mean_current_A == pytest.approx(pf.mean_current_A, rel=1e-9)
+    assert chk.window_s == pf.window_s == pytest.approx(1 / 20)
+    assert chk.peak_time_s + 1e-3 == pytest.approx(pf.peak_time_s, abs=1e-12)
+    # 50 samples per cycle played linearly between samples: the peak slope is a chord's, 0.3 %
+    # below the sine's
+    c_eff, amp = lim.effective_capacitance_F, float(np.max(drive))
+    assert chk.peak_current_A == pytest.approx(np.pi * c_eff * amp * 20, rel=5e-3)
+    assert chk.mean_current_A == pytest.approx(2 * c_eff * amp * 20, rel=5e-3)
 
 
 def test_preflight_names_the_strain_step_when_infeasible(tmp_path):

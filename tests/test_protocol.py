@@ -319,12 +319,11 @@ def test_other_rig_limits_refuse_the_sweep():
     assert all(i.line == 18 for i in e.value.issues)  # the amplitudes_V line of sweep.yaml
 
 
-def test_chunked_scan_equals_single_pass(monkeypatch):
+def test_chunked_scan_equals_single_pass():
     plan = load_plan(EXP / "envelope.yaml")
     step = plan.steps[0]
     whole = pf.measure(step, RigLimits())
-    monkeypatch.setattr(pf, "_CHUNK", 997)
-    chunked = pf.measure(step, RigLimits())
+    chunked = pf.measure(step, RigLimits(), chunk=997)
     assert chunked.peak_current_A == pytest.approx(whole.peak_current_A, rel=1e-12)
     assert chunked.mean_current_A == pytest.approx(whole.mean_current_A, rel=1e-9)
     assert chunked.v_max_V == whole.v_max_V and chunked.v_min_V == whole.v_min_V

@@ -1,11 +1,12 @@
 """Is a drive within the rig? Voltage range, peak and mean amplifier current.
 
-:func:`check_drive` compares a drive with a rig's :class:`~labrig.limits.RigLimits` the way the
-protocol preflight does (voltage range; peak current ``C_eff dV/dt`` via
-:meth:`RigLimits.current_A` on a grid finer than the rate; mean ``|i|`` over one command
-period, or 1 s) and raises :class:`InfeasibleCommandError` (a ``ValueError``) saying what the
-command needs and what the rig gives. Compensation asks for negative voltages (to cancel the
-drift, the paper's Fig. 17): within ``v_min_V`` they are allowed.
+:func:`check_drive` measures a drive with the protocol preflight's measurement
+(:func:`labrig.drive_load.measure_load`: peak current ``C_eff dV/dt`` on a grid finer than the
+rate, with the drive linear between its samples and at rest at 0 V before them; mean ``|i|`` over
+one command period, or 1 s), compares it and the drive's voltage range with a rig's
+:class:`~labrig.limits.RigLimits`, and raises :class:`InfeasibleCommandError` (a ``ValueError``)
+saying what the command needs and what the rig gives. Compensation asks for negative voltages (to
+cancel the drift, the paper's Fig. 17): within ``v_min_V`` they are allowed.
 """
 
 from __future__ import annotations
@@ -15,13 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from labrig.drive_load import OVERSAMPLE, averaging_window_s, measure_load, window_points
 from labrig.limits import RigLimits
 
 __all__ = ["DriveCheck", "InfeasibleCommandError", "check_drive"]
-
-#: preflight's grid refinement for the current (kept equal to labrig.protocol.preflight)
-_OVERSAMPLE = 4
-_AVG_WINDOW_S = 1.0
 
 
 class InfeasibleCommandError(ValueError):
@@ -65,22 +63,17 @@ def check_drive(
     # the drive starts from rest at 0 V (the step to v[0] counts); bringing the output back to
     # 0 V afterwards is the player's business (the protocol adds an edge ramp at its slew)
     vv = np.concatenate(([0.0], v))
-    fine = np.interp(
-        np.arange((vv.size - 1) * _OVERSAMPLE + 1) / _OVERSAMPLE, np.arange(vv.size), vv
-    )
-    cur = np.abs(limits.current_A(fine, rate_hz * _OVERSAMPLE))
-    k = int(np.argmax(cur))
-    peak, peak_t = float(cur[k]), (k / _OVERSAMPLE - 1) * dt
-    window_s = 1.0 / frequency_hz if frequency_hz else _AVG_WINDOW_S
-    w = max(1, round(window_s * rate_hz * _OVERSAMPLE))
-    cs = np.concatenate((np.zeros(w), np.cumsum(cur)))
-    means = (cs[w:] - cs[:-w]) / w
-    j = int(np.argmax(means))
-    mean, mean_t = float(means[j]), (j / _OVERSAMPLE - 1) * dt
+    fine = np.interp(np.arange((vv.size - 1) * OVERSAMPLE + 1) / OVERSAMPLE, np.arange(vv.size), vv)
+    fine_rate = rate_hz * OVERSAMPLE
+    # no cap on the window here (the preflight caps it at MAX_WINDOW_POINTS)
+    w = window_points(averaging_window_s(frequency_hz), fine_rate, cap=None)
+    load = measure_load(lambda lo, hi: fine[lo:hi], fine.size, fine_rate, limits, w, chunk=None)
+    # fine point j is at (j / OVERSAMPLE - 1) dt from the drive's first sample
+    peak, peak_t = load.peak_current_A, (load.peak_index / OVERSAMPLE - 1) * dt
+    mean, mean_t = load.mean_current_A, (load.mean_index / OVERSAMPLE - 1) * dt
+    # the drive's own range (its samples, not the rest at 0 V before it), for the message's time
     vmin_i, vmax_i = int(np.argmin(v)), int(np.argmax(v))
-    chk = DriveCheck(
-        float(v[vmin_i]), float(v[vmax_i]), peak, peak_t, mean, mean_t, w / (rate_hz * _OVERSAMPLE)
-    )
+    chk = DriveCheck(float(v[vmin_i]), float(v[vmax_i]), peak, peak_t, mean, mean_t, w / fine_rate)
     tol = 1e-9
     if chk.v_max_V > limits.v_max_V + tol or chk.v_min_V < limits.v_min_V - tol:
         hi = chk.v_max_V > limits.v_max_V + tol

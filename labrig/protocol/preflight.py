@@ -10,13 +10,13 @@ For each entry of a plan:
 - mean ``|i|`` over a sliding window at most ``i_avg_A``; the window is one carrier cycle for
   sines and envelopes, :data:`AVG_WINDOW_S` otherwise (0 V assumed before the entry starts).
 
-The current is computed with :meth:`RigLimits.current_A` on a grid :data:`OVERSAMPLE` times
-finer than the output rate: waveforms are functions of continuous time, and the finer grid
-sees the slope the amplifier follows after the DAQ's reconstruction, independent of the rate
-(a sampled 100 V, 56 Hz sine at 1 kHz underestimates its peak slope by 2 %). For a unipolar
-sine of amplitude A and frequency f this gives ``i_peak = pi C_eff A f`` and a cycle-mean
-``2 C_eff A f``, so the highest frequency at amplitude A is
-``min(i_peak_A / (pi C_eff A), i_avg_A / (2 C_eff A))`` (56.2 Hz at 100 V on the default rig).
+The measurement is :func:`labrig.drive_load.measure_load` (shared with the controller's
+:func:`labrig.control.check_drive`): the current ``i = C_eff dV/dt`` on a grid
+:data:`OVERSAMPLE` times finer than the output rate (waveforms are functions of continuous time,
+so the preflight evaluates them there). For a unipolar sine of amplitude A and frequency f this
+gives ``i_peak = pi C_eff A f`` and a cycle-mean ``2 C_eff A f``, so the highest frequency at
+amplitude A is ``min(i_peak_A / (pi C_eff A), i_avg_A / (2 C_eff A))`` (56.2 Hz at 100 V on the
+default rig).
 
 Problems are collected for all entries and raised together as :class:`InputFileError`, each
 naming the protocol file, line and field that produced the step, and what would be valid.
@@ -29,15 +29,33 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from labrig.drive_load import (
+    AVG_WINDOW_S,
+    CHUNK,
+    OVERSAMPLE,
+    averaging_window_s,
+    measure_load,
+    window_points,
+)
 from labrig.errors import InputFileError, InputIssue
 from labrig.limits import RigLimits
 from labrig.protocol.plan import Plan, PlannedStep, Where
 from labrig.protocol.schema import STRAIN_KINDS
 
-OVERSAMPLE = 4
+__all__ = [
+    "AVG_WINDOW_S",
+    "MIN_SAMPLES_PER_CYCLE",
+    "OVERSAMPLE",
+    "StepCheck",
+    "max_sine_amplitude_V",
+    "max_sine_frequency_hz",
+    "measure",
+    "preflight",
+    "sine_currents_A",
+]
+
+#: fewest samples per cycle of a sine or envelope carrier
 MIN_SAMPLES_PER_CYCLE = 20
-AVG_WINDOW_S = 1.0
-_CHUNK = 1 << 20
 _TOL = 1e-9
 
 
@@ -80,53 +98,28 @@ def sine_currents_A(amplitude_V: float, frequency_hz: float, limits: RigLimits) 
     return math.pi * c * amplitude_V * frequency_hz, 2.0 * c * amplitude_V * frequency_hz
 
 
-def _window_s(step: PlannedStep) -> float:
-    if step.frequency_hz:
-        return 1.0 / step.frequency_hz
-    return AVG_WINDOW_S
-
-
-def measure(step: PlannedStep, limits: RigLimits, oversample: int = OVERSAMPLE) -> StepCheck:
-    """Voltage range and currents of one entry (chunked: never holds the whole fine grid)."""
+def measure(
+    step: PlannedStep, limits: RigLimits, oversample: int = OVERSAMPLE, chunk: int = CHUNK
+) -> StepCheck:
+    """Voltage range and currents of one entry (:func:`labrig.drive_load.measure_load` on its
+    waveform, ``chunk`` fine-grid points at a time: never the whole fine grid at once)."""
     wave = step.waveform
-    m = (wave.n_samples - 1) * oversample + 1  # fine-grid points
     fine_rate = step.rate_hz * oversample
-    window_s = _window_s(step)
-    w = max(1, min(round(window_s * fine_rate), 50_000_000))
-    hist = np.zeros(w)  # cumulative |i| at the w fine points before the chunk (0 before t=0)
-    total = 0.0
-    vmin, vmax = math.inf, -math.inf
-    peak, peak_j, mean, mean_j = 0.0, 0, 0.0, 0
-    with np.errstate(all="ignore"):
-        for a in range(0, m, _CHUNK):
-            b = min(m, a + _CHUNK)
-            lo, hi = max(0, a - 1), min(m, b + 1)
-            v = wave.at_index(np.arange(lo, hi, dtype=float) / oversample)
-            cur = np.abs(limits.current_A(v, fine_rate)) if v.size > 1 else np.zeros(v.size)
-            body_v = v[a - lo : a - lo + (b - a)]
-            body = cur[a - lo : a - lo + (b - a)]
-            vmin = min(vmin, float(np.min(body_v)))
-            vmax = max(vmax, float(np.max(body_v)))
-            k = int(np.argmax(body))
-            if body[k] > peak or not math.isfinite(body[k]):
-                peak, peak_j = float(body[k]), a + k
-            cs = total + np.cumsum(body)
-            arr = np.concatenate([hist, cs])
-            means = (arr[w:] - arr[: b - a]) / w
-            k = int(np.argmax(means))
-            if means[k] > mean or not math.isfinite(means[k]):
-                mean, mean_j = float(means[k]), a + k
-            total = float(cs[-1])
-            hist = arr[-w:]
+    w = window_points(averaging_window_s(step.frequency_hz), fine_rate)
+
+    def voltage(lo: int, hi: int) -> np.ndarray:
+        return wave.at_index(np.arange(lo, hi, dtype=float) / oversample)
+
+    load = measure_load(voltage, (wave.n_samples - 1) * oversample + 1, fine_rate, limits, w, chunk)
     return StepCheck(
         name=step.name,
-        v_min_V=vmin,
-        v_max_V=vmax,
-        peak_current_A=peak,
-        peak_time_s=peak_j / fine_rate,
-        mean_current_A=mean,
-        mean_time_s=mean_j / fine_rate,
-        window_s=w / fine_rate,
+        v_min_V=load.v_min_V,
+        v_max_V=load.v_max_V,
+        peak_current_A=load.peak_current_A,
+        peak_time_s=load.peak_index / fine_rate,
+        mean_current_A=load.mean_current_A,
+        mean_time_s=load.mean_index / fine_rate,
+        window_s=load.window_points / fine_rate,
         duration_s=step.duration_s,
     )
 
