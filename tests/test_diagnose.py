@@ -3,7 +3,7 @@ optional effects switched on; the fitted model is never told which.
 
 Fast tests: the JSON contract, a null campaign (2 seeds), mains pickup and the conditioner
 low-pass, the CLI function. The many-seed and every-effect studies are ``@pytest.mark.slow``
-(``pytest -m slow tests/test_diagnose.py``); ``python -m labrig.analysis.diagnose_campaign``
+(``pytest -m slow tests/test_diagnose.py``); ``python -m labrig.analysis.diagnose.campaign``
 prints the confusion table.
 """
 
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from labrig.analysis.diagnose import diagnose
-from labrig.analysis.diagnose_campaign import (
+from labrig.analysis.diagnose.campaign import (
     HOLD_ENTRIES,
     SHORT_ENTRIES,
     STUDY_CASES,
@@ -154,7 +154,7 @@ def test_every_effect_is_named_first(expected):
 @pytest.mark.parametrize("entries", ["short", "hold"])
 def test_log_creep_is_absorbed_by_the_models_transient_relaxor(entries):
     """Logarithmic creep (4 %/decade, the bench's mode bank) on the default gauge (2 ue) is
-    within the model family's reach: the seed's ``G_t`` with a small order creeps almost
+    within the model family's reach: the paper's ``G_t`` with a small order creeps almost
     logarithmically, and the converged base fit shifts lam_t, tau_t and alpha0 to follow it
     (measured: in-sample NRMSE at the noise floor for 2-8 %/decade, also with a 100 V step held
     300 s and 300 s back at 0 V; what G_t misses, 0.083 % of the span, is a quarter of the
@@ -244,7 +244,7 @@ def _bench_creep_pct_per_decade(effects) -> float:
 @pytest.mark.slow
 @pytest.mark.parametrize("expected", ["mains_pickup", "sensor_lowpass", "thermal_drift"])
 def test_slightly_imperfect_base_effect_found_nothing_spurious(expected):
-    """The bench's truth is the seed's model with the Gaussian hysteresis shape, fitted with the
+    """The bench's truth is the paper's model with the Gaussian hysteresis shape, fitted with the
     exponential one (base residual 1.6x the floor with no effect): one effect is added, nothing
     beside it. It is the bench's, or (measured for the low-pass on seeds 1 and 2, not on this
     one) its documented confusable twin with the bench's effect named in the verdict as fitting
@@ -340,18 +340,19 @@ def test_effect_outside_the_library_is_not_claimed_as_certain():
 def test_verdict_says_what_became_of_each_usual_confusion():
     """Found on the hybrid bench: the verdict said creep "was tested and fit clearly worse" while
     creep had been added second. Each confusion is reported as it happened."""
-    from labrig.analysis.diagnose import Candidate, _confusions_sentence
+    from labrig.analysis.diagnose import Candidate
+    from labrig.analysis.diagnose.verdict import confusions_sentence
 
     lib = library(temperature=True)
     assert set(lib["thermal_drift"].confusable) == {"creep", "offset_drift"}
     first = Candidate("thermal_drift", 0, 0.3, tried=True, heldout_nrmse_pct=0.7)
     worse = Candidate("offset_drift", 0, 0.1, tried=True, heldout_nrmse_pct=0.9)
     low = Candidate("creep", 0, 0.0)
-    s = _confusions_sentence(first, [first, worse, low], ["thermal_drift", "creep"], lib)
+    s = confusions_sentence(first, [first, worse, low], ["thermal_drift", "creep"], lib)
     assert "(offset_drift) were cross-validated and fit clearly worse" in s
     assert "creep (usually confused with thermal_drift) was added after it" in s
     assert "creep" not in s.split("fit clearly worse")[0]
-    s = _confusions_sentence(first, [first, worse, low], ["thermal_drift"], lib)
+    s = confusions_sentence(first, [first, worse, low], ["thermal_drift"], lib)
     assert "creep (usually confused with thermal_drift) explained too little" in s
     assert "added" not in s
 
@@ -359,10 +360,10 @@ def test_verdict_says_what_became_of_each_usual_confusion():
 def test_modelled_creep_matches_the_relaxor_step_response_by_superposition():
     """With ``gamma = 0`` the model is linear, ``S = alpha0 G_d G_t V``; with ``G_d`` ~ 1 the
     strain after the ramped step is the superposition of ``G_t``'s closed-form step response
-    (Mittag-Leffler, seed Eq. 9) over the held voltage increments (zoh: ``S[n] = sum_k dV_k
+    (Mittag-Leffler, the paper's Eq. 9) over the held voltage increments (zoh: ``S[n] = sum_k dV_k
     g((n - k) dt)``), independent of the modal filter ``predict`` uses. Tolerance 1e-6."""
-    from labrig.analysis.diagnose_campaign import step_hold
-    from labrig.analysis.diagnose_evidence import modelled_creep_per_decade
+    from labrig.analysis.diagnose import modelled_creep_per_decade
+    from labrig.analysis.signals import step_hold
     from labrig.model import ModelParams
     from labrig.model.mittag_leffler import relaxor_step
 
@@ -385,7 +386,7 @@ def test_modelled_creep_matches_the_relaxor_step_response_by_superposition():
     )
     expected = (s2 / s1) ** 0.5 - 1.0
     assert modelled_creep_per_decade(p, 80.0) == pytest.approx(expected, abs=1e-6)
-    assert 0.03 < expected < 0.1  # the seed's G_t creeps several %/decade by itself
+    assert 0.03 < expected < 0.1  # the paper's G_t creeps several %/decade by itself
     assert np.isnan(modelled_creep_per_decade(p, 0.0))  # no strain, no creep figure
 
 
@@ -395,8 +396,8 @@ def test_modelled_creep_includes_an_added_creep_effect():
     sample later) with no creep of its own; with the library's creep effect the strain is the
     direct sum ``S[n] = sum_k alpha0 dV_k (1 + c log10(1 + (n - k - 1) dt / t0))`` over the
     ramp's increments (no convolution code involved). Tolerance 1e-6."""
-    from labrig.analysis.diagnose_campaign import step_hold
-    from labrig.analysis.diagnose_evidence import modelled_creep_per_decade
+    from labrig.analysis.diagnose import modelled_creep_per_decade
+    from labrig.analysis.signals import step_hold
     from labrig.model import ModelParams
 
     p = ModelParams(
@@ -430,7 +431,7 @@ def test_a_time_constant_is_poorly_determined_relative_to_its_value():
     compared with its distance from the start value (50 ms), which means nothing for a
     log-scaled parameter."""
     from labrig.analysis.diagnose import accept
-    from labrig.analysis.diagnose_fit import FitOutcome
+    from labrig.analysis.extended import FitOutcome
 
     eff = library()["creep"]
     held_ref = {f"e{i}": 1.0 for i in range(6)}
@@ -445,9 +446,9 @@ def test_a_time_constant_is_poorly_determined_relative_to_its_value():
             per_entry={},
             cost=0.0,
         )
-        ok, *_rest, susp = accept(eff, fo, held, held_ref)
-        assert ok
-        return susp
+        verdict = accept(eff, fo, held, held_ref)
+        assert verdict.accepted
+        return verdict.suspicious
 
     assert suspicious(0.008) == []
     assert any("t0_s is poorly determined" in x for x in suspicious(0.03))

@@ -19,10 +19,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from labrig.analysis import fit as fitmod
-from labrig.analysis.fit import DEFAULT_BOUNDS, PARAM_NAMES, FitResult, fit_model, predict_record
+from labrig.analysis.base_problem import BaseProblem, ParameterSpace
+from labrig.analysis.fit import (
+    DEFAULT_BOUNDS,
+    PARAM_NAMES,
+    FitResult,
+    fit_model,
+    predict_record,
+    scored_sequences,
+)
 from labrig.analysis.metrics import nrmse_pct
 from labrig.analysis.records import Record
+from labrig.analysis.simulate import OperatorFamily
 from labrig.model import PAPER_TABLE1, DynamicHysteresisModel, ModelParams
 
 RATE = 1000.0
@@ -141,7 +149,9 @@ def test_nrmse_at_the_noise_floor(fitted: tuple[FitResult, list], reduced) -> No
 def test_fit_is_converged(fitted: tuple[FitResult, list], reduced) -> None:
     """At an optimum: no lower than the truth's cost, and no gradient left."""
     res, _ = fitted
-    camp = fitmod._Campaign([fitmod._make_entry(r, 0.0) for r in reduced], fitmod._Family())
+    camp = BaseProblem(
+        scored_sequences(reduced, [r.name for r in reduced], 0.0, False), OperatorFamily()
+    )
     r_truth = camp.residuals(TRUTH.model_dump())
     assert res.cost <= 0.5 * float(r_truth @ r_truth)
     # the gradient relative to the cost scale: |J^T r| / (|J| |r|) per parameter
@@ -179,9 +189,9 @@ def test_uncertainty_and_json(fitted: tuple[FitResult, list]) -> None:
 
 def test_structured_jacobian_matches_finite_differences() -> None:
     recs = campaign(TRUTH, (1.0, 40.0), (100.0,), {1.0: 1.0, 40.0: 0.5}, 0.5, seed=3)
-    camp = fitmod._Campaign([fitmod._make_entry(r, 0.0) for r in recs], fitmod._Family())
+    camp = BaseProblem(scored_sequences(recs, [r.name for r in recs], 0.0, False), OperatorFamily())
     th = START.model_dump()
-    space = fitmod._Space(PARAM_NAMES, th, DEFAULT_BOUNDS)
+    space = ParameterSpace(PARAM_NAMES, th, DEFAULT_BOUNDS)
     z = space.z(th)
     J = camp.jacobian(space, z, central=True)
     for j in range(len(PARAM_NAMES)):
@@ -194,7 +204,7 @@ def test_structured_jacobian_matches_finite_differences() -> None:
 
 
 def test_staged_procedure(reduced: list[Record]) -> None:
-    """Seed 3.1: a sequential procedure, close to the truth but not at the joint optimum."""
+    """The paper's section 3.1: sequential, close to the truth but not at the joint optimum."""
     res = fit_model(reduced, method="staged", heldout=False)
     assert res.method == "staged" and res.heldout_nrmse_pct is None
     check_recovery(res.params, TRUTH, static=0.1, order=0.05, tau=0.5)

@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from labrig.analysis.diagnose_campaign import sine
 from labrig.analysis.fit import fit_model
 from labrig.analysis.fit_effects import fit_effects
 from labrig.analysis.records import Record
+from labrig.analysis.signals import sine
 from labrig.cli import app
 from labrig.cli_analysis import _fitted_effects, predict_entries, prepare
 from labrig.control import load_control_model

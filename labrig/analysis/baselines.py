@@ -51,9 +51,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
-from labrig.analysis.fit import single_thread_blas
 from labrig.analysis.metrics import nrmse_pct, second_half_nrmse_pct
 from labrig.analysis.records import Record
+from labrig.analysis.simulate import (
+    CONVERGED,
+    Segment,
+    SimSequence,
+    build_sequences,
+    score_segments,
+)
+from labrig.blas import single_thread_blas
 from labrig.model.bouc_wen import bouc_wen_exact, monotone_runs
 
 __all__ = [
@@ -184,27 +191,12 @@ class BoucWen:
 
 
 @dataclass
-class _Seg:
-    """The scored part of one record inside a simulated sequence."""
+class _PlayedSequence:
+    """A simulated sequence (:class:`~labrig.analysis.simulate.SimSequence`) as the baselines
+    see it: the voltage with the rest at 0 V before it, its monotone runs, cached play bases."""
 
-    name: str
-    lo: int  # first scored sample in the sequence
-    i0: int  # the same in the record (warm-up length)
-    meas: NDArray
-    w: float  # 1 / (span * sqrt(samples))
-
-    @property
-    def hi(self) -> int:
-        return self.lo + self.meas.size
-
-
-@dataclass
-class _Seq:
-    """One simulated voltage sequence (a record, or a run's records back to back)."""
-
-    v: NDArray
-    segs: list[_Seg]
-    starts: dict[str, int]
+    seq: SimSequence
+    segments: list[Segment]
     vp: NDArray = field(init=False, repr=False)
     runs: tuple = field(init=False, repr=False)
     _basis: dict = field(default_factory=dict, init=False, repr=False)
@@ -213,45 +205,32 @@ class _Seq:
         self.vp = _with_rest(self.v)
         self.runs = monotone_runs(self.vp)
 
+    @property
+    def v(self) -> NDArray:
+        return self.seq.voltage_V
+
+    def start(self, name: str) -> int:
+        return self.seq.entries[name].start
+
     def play_basis(self, thresholds: tuple[float, ...]) -> NDArray:
         if thresholds not in self._basis:
             self._basis[thresholds] = play_operators(self.v, thresholds)
         return self._basis[thresholds]
 
 
-def _seg(r: Record, lo: int, warmup_s: float) -> _Seg:
-    i0 = round(max(warmup_s, 0.0) * r.rate_hz)
-    meas = np.asarray(r.strain_ue[i0:], dtype=float)
-    if meas.size < 2 or not np.ptp(meas) > 0:
-        raise ValueError(f"entry {r.name!r}: nothing to score after the warm-up")
-    return _Seg(r.name, lo + i0, i0, meas, 1.0 / (np.ptp(meas) * np.sqrt(meas.size)))
-
-
 def _sequences(
     records: Sequence[Record], scored: Sequence[str], warmup_s: float, chain: bool
-) -> list[_Seq]:
+) -> list[_PlayedSequence]:
     keep = set(scored)
     if not chain:
-        return [
-            _Seq(r.voltage_V, [_seg(r, 0, warmup_s)], {r.name: 0})
-            for r in records
-            if r.name in keep
-        ]
-    parts, segs, starts, pos = [], [], {}, 0
-    for r in records:
-        starts[r.name] = pos
-        if r.name in keep:
-            segs.append(_seg(r, pos, warmup_s))
-        parts.append(r.voltage_V)
-        pos += r.n
-        n_rest = round(max(float(r.meta.get("rest_after_s", 0.0) or 0.0), 0.0) * r.rate_hz)
-        if n_rest:
-            parts.append(np.zeros(n_rest))
-            pos += n_rest
-    return [_Seq(np.concatenate(parts), segs, starts)]
+        records = [r for r in records if r.name in keep]
+    return [
+        _PlayedSequence(s, score_segments(s, keep, warmup_s))
+        for s in build_sequences(records, chain)
+    ]
 
 
-Items = list[tuple[_Seq, list[_Seg]]]
+Items = list[tuple[_PlayedSequence, list[Segment]]]
 
 
 def _centred(x: NDArray, offset: bool) -> NDArray:
@@ -266,8 +245,8 @@ def _fit_pi(items: Items, n_ops: int, offset: bool = False) -> PrandtlIshlinskii
     for q, segs in items:
         B = q.play_basis(r)
         for g in segs:
-            rows.append(_centred(B[g.lo : g.hi], offset) * g.w)
-            rhs.append(_centred(g.meas, offset) * g.w)
+            rows.append(_centred(B[g.lo : g.hi], offset) * g.weight)
+            rhs.append(_centred(g.measured_ue, offset) * g.weight)
     # same minimiser on the small triangular system: |Mw - b|^2 = |Rw - Q^T b|^2 + const
     qq, rr = np.linalg.qr(np.vstack(rows), mode="reduced")
     w, _ = optimize.nnls(rr, qq.T @ np.concatenate(rhs), maxiter=50 * n_ops)
@@ -283,9 +262,9 @@ def _bw_linear(
     for q, segs in items:
         h1 = bouc_wen_exact(q.vp, 1.0, beta, gamma, q.runs)[1:]
         for g in segs:
-            c0s.append(g.w * _centred(q.v[g.lo : g.hi], offset))
-            c1s.append(-g.w * _centred(h1[g.lo : g.hi], offset))
-            rhs.append(_centred(g.meas, offset) * g.w)
+            c0s.append(g.weight * _centred(q.v[g.lo : g.hi], offset))
+            c1s.append(-g.weight * _centred(h1[g.lo : g.hi], offset))
+            rhs.append(_centred(g.measured_ue, offset) * g.weight)
     c0, c1, b = np.concatenate(c0s), np.concatenate(c1s), np.concatenate(rhs)
     # two columns: the normal equations of the column-scaled problem
     n0, n1 = np.linalg.norm(c0) or 1.0, np.linalg.norm(c1) or 1.0
@@ -321,9 +300,7 @@ def _fit_bw(
     else:  # a small grid, then the best point
         grid = [(np.log(x), y) for x in (0.3, 1.0, 3.0, 10.0) for y in (-0.5, 0.3, 1.0, 3.0)]
         z0 = np.array(min(grid, key=lambda z: float(np.sum(fun(np.array(z)) ** 2))))
-    res = optimize.least_squares(
-        fun, z0, bounds=(lo, hi), x_scale="jac", ftol=1e-10, xtol=1e-10, gtol=1e-10
-    )
+    res = optimize.least_squares(fun, z0, bounds=(lo, hi), x_scale="jac", **CONVERGED)
     beta, gamma = unpack(res.x)
     (d, A), _ = _bw_linear(items, beta, gamma, offset)
     return BoucWen(float(d), float(A), beta, gamma)
@@ -409,7 +386,7 @@ def fit_baseline(
     if not scored:
         raise ValueError("no scored entries among the records")
     seqs = _sequences(records, scored, warmup_s, chain)
-    everything: Items = [(q, list(q.segs)) for q in seqs]
+    everything: Items = [(q, list(q.segments)) for q in seqs]
 
     def fit(items: Items, warm: PrandtlIshlinskii | BoucWen | None = None):
         if kind == "prandtl_ishlinskii":
@@ -420,28 +397,30 @@ def fit_baseline(
         out = {}
         for q in seqs:
             s = model.predict(q.v)
-            for g in q.segs:
-                out[g.name] = s[q.starts[g.name] : g.hi]
+            for g in q.segments:
+                out[g.name] = s[q.start(g.name) : g.hi]
         return out
 
-    segs = {g.name: g for q in seqs for g in q.segs}
+    segs = {g.name: g for q in seqs for g in q.segments}
     with single_thread_blas():
         model = fit(everything)
         preds = predictions(model)
         offsets = None
         if offset:
-            offsets = {n: float(np.mean(segs[n].meas - preds[n][segs[n].i0 :])) for n in scored}
+            offsets = {
+                n: float(np.mean(segs[n].measured_ue - preds[n][segs[n].i0 :])) for n in scored
+            }
             preds = {n: p + offsets.get(n, 0.0) for n, p in preds.items()}
-        per_entry = {n: nrmse_pct(segs[n].meas, preds[n][segs[n].i0 :]) for n in scored}
+        per_entry = {n: nrmse_pct(segs[n].measured_ue, preds[n][segs[n].i0 :]) for n in scored}
         held, held_per = None, None
         if heldout and len(scored) >= 2:
             held_per = {}
             for name in scored:
-                items = [(q, [g for g in q.segs if g.name != name]) for q in seqs]
+                items = [(q, [g for g in q.segments if g.name != name]) for q in seqs]
                 m_k = fit([(q, gs) for q, gs in items if gs], warm=model)
-                q = next(q for q in seqs if any(g.name == name for g in q.segs))
-                p_k = m_k.predict(q.v)[q.starts[name] : segs[name].hi][segs[name].i0 :]
-                m = segs[name].meas
+                q = next(q for q in seqs if any(g.name == name for g in q.segments))
+                p_k = m_k.predict(q.v)[q.start(name) : segs[name].hi][segs[name].i0 :]
+                m = segs[name].measured_ue
                 held_per[name] = (  # with an offset: from the first half, scored on the second
                     second_half_nrmse_pct(m, p_k, fit_offset=True) if offset else nrmse_pct(m, p_k)
                 )

@@ -2,7 +2,7 @@
 
 After the base fit (:func:`labrig.analysis.fit.fit_model`), the base parameters and the effects'
 parameters (:mod:`labrig.model.effects`) are refitted jointly by least squares on the same
-entries, weighting, chaining, warm-up and offsets (:class:`~labrig.analysis.diagnose_fit.
+entries, weighting, chaining, warm-up and offsets (:class:`~labrig.analysis.extended.
 ExtendedProblem`, the numerics ``labrig diagnose`` uses), from the base fit and the effects'
 starts (:meth:`~labrig.model.effects.Effect.refit_starts`, every combination; each start fitted
 loosely, the best cost then fitted to convergence).
@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from labrig.analysis.diagnose_fit import ExtendedProblem, FitOutcome, effect_context
+from labrig.analysis.extended import ExtendedProblem, FitOutcome, effect_context
 from labrig.analysis.fit import PARAM_NAMES, FitResult
 from labrig.analysis.records import Record
 from labrig.model import ModelParams
@@ -77,7 +77,7 @@ class EffectsFit:
 
 def resolve_effects(names: Sequence[str], context: dict | None = None) -> list[Effect]:
     """The library effects named (``ValueError`` naming an unknown or repeated one), configured
-    with ``context`` (:func:`~labrig.analysis.diagnose_fit.effect_context`; default: the
+    with ``context`` (:func:`~labrig.analysis.extended.effect_context`; default: the
     library's defaults, enough to check names)."""
     lib, ok = library(**(context or {})), known_effects()
     out = []

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from labrig.analysis.records import Record
+from labrig.analysis.signals import sine, step_hold
 from labrig.limits import RigLimits
 
 #: a short campaign (about 14 s recorded, 20 s with rests): both amplitudes at 1, 10, 40 Hz
@@ -40,30 +41,12 @@ HOLD_ENTRIES: tuple[tuple[float, float, float], ...] = (*SHORT_ENTRIES, (100.0, 
 __all__ = [
     "HOLD_ENTRIES",
     "SHORT_ENTRIES",
+    "STUDY_CASES",
     "TRUTHS",
+    "attribution_study",
     "bench_campaign",
-    "sine",
-    "step_hold",
     "truth_campaign",
 ]
-
-
-def sine(amplitude_V: float, frequency_hz: float, duration_s: float, rate_hz: float):
-    """Unipolar sine from 0 V over whole cycles (at least ``duration_s``)."""
-    cycles = max(1, int(np.ceil(duration_s * frequency_hz - 1e-9)))
-    n = round(cycles / frequency_hz * rate_hz)
-    t = np.arange(n) / rate_hz
-    return 0.5 * amplitude_V * (1.0 - np.cos(2.0 * np.pi * frequency_hz * t))
-
-
-def step_hold(amplitude_V: float, duration_s: float, rate_hz: float, ramp_s: float = 0.2):
-    """Raised-cosine ramp to ``amplitude_V`` over ``ramp_s``, held for half of ``duration_s``,
-    ramped back and held at 0 V for the other half (the ramp keeps the stack's current small:
-    100 V over 0.2 s peaks at 785 V/s, 4.7 mA into 6 uF)."""
-    n_ramp = max(1, round(ramp_s * rate_hz))
-    n_hold = round(0.5 * duration_s * rate_hz)
-    up = 0.5 * amplitude_V * (1.0 - np.cos(np.pi * np.arange(n_ramp) / n_ramp))
-    return np.concatenate([up, np.full(n_hold, amplitude_V), up[::-1], np.zeros(n_hold)])
 
 
 def _name(a: float, f: float) -> str:
@@ -144,7 +127,7 @@ def bench_campaign(
     return out
 
 
-# -- attribution study (python -m labrig.analysis.diagnose_campaign) --------------------------
+# -- attribution study (python -m labrig.analysis.diagnose.campaign) --------------------------
 
 #: bench effect (rig-file form) for each library effect, at clear strengths
 STUDY_CASES: dict[str, list[dict[str, Any]]] = {
@@ -198,7 +181,7 @@ def attribution_study(
     effect, all added, verdict class, held-out before/after, seconds)."""
     import time
 
-    from labrig.analysis.diagnose import diagnose
+    from labrig.analysis.diagnose.procedure import diagnose
 
     rows = []
     for truth in truths:

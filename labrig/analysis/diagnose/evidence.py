@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from labrig.analysis.diagnose_campaign import step_hold
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic
 from labrig.analysis.records import Record
+from labrig.analysis.signals import step_hold
 from labrig.model import DynamicHysteresisModel, ModelParams
 from labrig.model.effects import Context, Effect
 
@@ -300,7 +300,7 @@ def modelled_creep_per_decade(
     ``(S(t2) / S(t1))^(1 / log10(t2 / t1)) - 1`` (a fraction; 0.05 = 5 %/decade; NaN when the
     strain is not positive at both times).
 
-    The step is :func:`labrig.analysis.diagnose_campaign.step_hold` (raised-cosine ramp of
+    The step is :func:`labrig.analysis.signals.step_hold` (raised-cosine ramp of
     0.2 s; times count from its end), simulated at 100 Hz with the model's ``predict`` (seed
     Eq. 5-7). The creep comes from the transient relaxor ``G_t`` (seed Eq. 4-9: its step
     response ``1 - E_lam(-(t/tau)^lam)`` grows almost logarithmically for a small ``lam``)
