@@ -22,7 +22,7 @@ from labrig.errors import InputFileError
 from labrig.limits import RigLimits
 from labrig.model import PAPER_TABLE1
 from labrig.protocol.check import check_protocol, load_plan
-from labrig.protocol.preflight import preflight
+from labrig.protocol.preflight import preflight_checks
 from labrig.runner import execute
 from labrig.store import read_run
 
@@ -214,7 +214,7 @@ def test_preflight_names_the_strain_step_when_infeasible(tmp_path):
     )  # fmt: skip
     plan = load_plan(q)
     with pytest.raises(InputFileError, match="below 0 V to cancel the drift"):
-        preflight(plan, RigLimits(v_min_V=-1.0))
+        preflight_checks(plan, RigLimits(v_min_V=-1.0))
 
 
 def test_runner_records_the_command_strain(tmp_path):

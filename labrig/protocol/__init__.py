@@ -1,5 +1,13 @@
 """Protocol files: schema, waveform generators, expansion into a plan, preflight checks.
 
+The modules in the order a protocol goes through them: :mod:`~labrig.protocol.schema` (the file's
+keys, validated), :mod:`~labrig.protocol.expand` (steps, sweeps and repeats expanded into concrete
+steps, with :mod:`~labrig.protocol.waveforms` and :mod:`~labrig.protocol.csvsource` making their
+samples), :mod:`~labrig.protocol.plan` (the result: a :class:`Plan` of :class:`PlannedStep`),
+:mod:`~labrig.protocol.preflight` (every step against the rig's limits, one
+:class:`~labrig.protocol.step_check.StepCheck` each, measured by :mod:`labrig.drive_load`) and
+:mod:`~labrig.protocol.check` (the entry points the CLI calls).
+
 Typical use (what ``labrig check`` does)::
 
     from labrig.protocol import check_protocol, format_plan
@@ -9,13 +17,16 @@ Typical use (what ``labrig check`` does)::
         step.name, step.rate_hz, step.n_samples, step.samples(i0, i1), step.rest_after_s
 
 The preflight alone (e.g. against the limits of a rig chosen later) is
-``labrig.protocol.preflight.preflight(plan, limits)``. See docs/protocol.md for the file format.
+``checks = labrig.protocol.preflight.preflight_checks(plan, limits)``; the plan keeps them with
+``plan.take_checks(checks, limits)``. See docs/protocol.md for the file format.
 """
 
 from labrig.protocol.check import check_protocol, format_plan, load_plan, load_protocol
-from labrig.protocol.plan import Plan, PlannedStep, build_plan
-from labrig.protocol.preflight import StepCheck, max_sine_amplitude_V, max_sine_frequency_hz
+from labrig.protocol.expand import build_plan
+from labrig.protocol.plan import Plan, PlannedStep
+from labrig.protocol.preflight import max_sine_amplitude_V, max_sine_frequency_hz
 from labrig.protocol.schema import Protocol
+from labrig.protocol.step_check import StepCheck
 
 __all__ = [
     "Plan",

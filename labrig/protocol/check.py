@@ -2,7 +2,7 @@
 
 ``labrig check PROTOCOL`` is ``format_plan(check_protocol(path, limits))``; ``labrig run``
 calls :func:`load_plan`, resolves the rig (``--rig``, else ``plan.rig_path``, else the built-in
-simulated rig), then :func:`labrig.protocol.preflight.preflight` with that rig's limits.
+simulated rig), then the preflight (:mod:`labrig.protocol.preflight`) with that rig's limits.
 Every problem is an :class:`InputFileError` (exit 2) naming file, line and field.
 """
 
@@ -16,8 +16,9 @@ from rich.table import Table
 
 from labrig.errors import InputFileError, InputIssue
 from labrig.limits import RigLimits
-from labrig.protocol.plan import Plan, build_plan, field_name, line_of
-from labrig.protocol.preflight import preflight
+from labrig.protocol.expand import build_plan
+from labrig.protocol.plan import Plan, field_name, line_of
+from labrig.protocol.preflight import preflight_checks
 from labrig.protocol.schema import STEP_KINDS, Protocol
 from labrig.yamlio import read_yaml
 
@@ -113,10 +114,12 @@ def load_plan(path: Path | str) -> Plan:
 def check_protocol(path: Path | str, limits: RigLimits | None = None) -> Plan:
     """Validate, expand and preflight ``path`` against ``limits`` (default: built-in rig).
 
-    Returns the plan with ``plan.checks`` filled in; raises :class:`InputFileError`.
+    Returns the plan with the preflight's results (``plan.checks``, ``plan.limits``); raises
+    :class:`InputFileError`.
     """
     plan = load_plan(path)
-    preflight(plan, limits)
+    lim = limits if limits is not None else RigLimits()
+    plan.take_checks(preflight_checks(plan, lim), lim)
     return plan
 
 

@@ -25,7 +25,6 @@ naming the protocol file, line and field that produced the step, and what would 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -41,6 +40,7 @@ from labrig.errors import InputFileError, InputIssue
 from labrig.limits import RigLimits
 from labrig.protocol.plan import Plan, PlannedStep, Where
 from labrig.protocol.schema import STRAIN_KINDS
+from labrig.protocol.step_check import StepCheck
 
 __all__ = [
     "AVG_WINDOW_S",
@@ -51,27 +51,13 @@ __all__ = [
     "max_sine_frequency_hz",
     "measure",
     "preflight",
+    "preflight_checks",
     "sine_currents_A",
 ]
 
 #: fewest samples per cycle of a sine or envelope carrier
 MIN_SAMPLES_PER_CYCLE = 20
 _TOL = 1e-9
-
-
-@dataclass(frozen=True)
-class StepCheck:
-    """What preflight measured on one entry."""
-
-    name: str
-    v_min_V: float
-    v_max_V: float
-    peak_current_A: float
-    peak_time_s: float
-    mean_current_A: float
-    mean_time_s: float
-    window_s: float
-    duration_s: float
 
 
 def max_sine_frequency_hz(amplitude_V: float, limits: RigLimits) -> float:
@@ -318,29 +304,27 @@ def _step_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tupl
     return out
 
 
-def preflight(plan: Plan, limits: RigLimits | None = None) -> list[StepCheck]:
-    """Check every entry of ``plan`` against ``limits`` (default: the built-in rig's).
+def preflight_checks(plan: Plan, limits: RigLimits) -> list[StepCheck]:
+    """Check every entry of ``plan`` against ``limits``; the plan is left as it is.
 
-    Returns one :class:`StepCheck` per entry (also stored as ``plan.checks``); raises
-    :class:`InputFileError` listing every problem found.
+    Returns one :class:`StepCheck` per entry; raises :class:`InputFileError` listing every
+    problem found (a rate outside the DAQ's range alone: the samples at it would tell nothing).
     """
-    lim = limits if limits is not None else RigLimits()
     found: list[tuple[Where, str]] = []
     rate = plan.rate_hz
-    if not lim.rate_min_hz <= rate <= lim.rate_max_hz:
+    if not limits.rate_min_hz <= rate <= limits.rate_max_hz:
         found.append(
             (
                 plan.where(("rate_hz",)),
-                f"rate_hz {rate:g} is outside the rig's DAQ range {lim.rate_min_hz:g} to "
-                f"{lim.rate_max_hz:g} Hz",
+                f"rate_hz {rate:g} is outside the rig's DAQ range {limits.rate_min_hz:g} to "
+                f"{limits.rate_max_hz:g} Hz",
             )
         )
     checks = []
-    # at a rate the DAQ cannot do, scanning the samples would tell nothing useful
     for step in [] if found else plan.steps:
-        chk = measure(step, lim)
+        chk = measure(step, limits)
         checks.append(chk)
-        found.extend(_step_issues(step, chk, lim))
+        found.extend(_step_issues(step, chk, limits))
     issues, seen = [], set()
     for w, msg in found:
         if (w.line, w.field, msg) not in seen:
@@ -348,6 +332,14 @@ def preflight(plan: Plan, limits: RigLimits | None = None) -> list[StepCheck]:
             issues.append(InputIssue(plan.file, w.line, w.field, msg))
     if issues:
         raise InputFileError(issues)
-    plan.checks = checks
-    plan.limits = lim
+    return checks
+
+
+def preflight(plan: Plan, limits: RigLimits | None = None) -> list[StepCheck]:
+    """:func:`preflight_checks` against ``limits`` (default: the built-in rig's), handing the
+    results to the plan (:meth:`Plan.take_checks`) for callers that read them from it
+    (``labrig.runner.preflight``). Returns the checks; raises :class:`InputFileError`."""
+    lim = limits if limits is not None else RigLimits()
+    checks = preflight_checks(plan, lim)
+    plan.take_checks(checks, lim)
     return checks
