@@ -317,7 +317,7 @@ def test_null_campaigns_over_ten_seeds():
     ],
 )
 def test_hybrid_truth_effect_found_nothing_spurious(expected):
-    """The seed's section-4 plant (further from the family: base residual 2x the floor)."""
+    """The paper's section-4 plant (further from the family: base residual 2x the floor)."""
     _d, doc = _found(expected, seed=31, truth="hybrid")
     names = [e["effect"] for e in doc["effects_added"]]
     assert names and names[0] == expected, doc["verdict"]
@@ -498,10 +498,10 @@ def test_also_adds_the_structural_effect_to_the_candidates(tmp_path, monkeypatch
 @pytest.mark.slow
 @pytest.mark.timeout(1500)
 def test_hybrid_rig_structure_is_found_with_the_structural_effects(tmp_path):
-    """The seed's campaign (experiments/paper.yaml) on the simulated hybrid rig, no effect
+    """The paper's campaign (experiments/paper.yaml) on the simulated hybrid rig, no effect
     injected: by default offset_drift stands in for the plant's remanence ("partially
     explained"); with ``--also remanence --also viscoelastic_creep --max-effects 3`` diagnose
-    finds the plant's own two blocks the seed's model lacks, each against the plant's values
+    finds the plant's own two blocks the paper's model lacks, each against the plant's values
     (drivers/sim/hybrid.py, never given to the fit): its Bouc-Wen gain A = 1.5 ue/V (within
     15 %) and Eq. 11's slow mode, 7 % with 0.285 s (within 10 %); measured on seed 1:
     A 1.60, c 6.71 %, tau 0.274 s, held-out 0.965 -> 0.283 %, "explained"."""

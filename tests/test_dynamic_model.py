@@ -1,6 +1,6 @@
-"""Dynamic model ``S = alpha0 V* + H[V*]``, ``V* = G_t G_d V`` (spec model.md section 3).
+"""Dynamic model ``S = alpha0 V* + H[V*]``, ``V* = G_t G_d V`` ().
 
-Checks the seed's qualitative results with Table 1 (strain shift, loop size), the agreement of
+Checks the paper's qualitative results with Table 1 (strain shift, loop size), the agreement of
 the fast and exact realisations, block streaming, the wiring against an independent composition,
 and the parameter presets and validation.
 """
@@ -38,9 +38,9 @@ def table1_run() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def test_strain_shift_at_zero_voltage(table1_run) -> None:
-    # seed Fig. 10b: after the first cycle the strain at 0 V is positive (the transient relaxor's
-    # slow response keeps V* above the drive), and it grows over the following cycles as the long
-    # memory accumulates (G_t's step response is monotone for lam_t < 1)
+    # the paper's Fig. 10b: after the first cycle the strain at 0 V is positive (the transient
+    # relaxor's slow response keeps V* above the drive), and it grows over the following cycles
+    # as the long memory accumulates (G_t's step response is monotone for lam_t < 1)
     v, s, _ = table1_run
     at_zero = s[[1000, 2000, 3000]]  # t = 1, 2, 3 s, where V = 0
     assert np.all(v[[1000, 2000, 3000]] == pytest.approx(0.0, abs=1e-9))
@@ -88,7 +88,7 @@ def test_matches_independent_composition() -> None:
 
 
 def test_strain_keeps_decreasing_after_the_voltage_vanishes() -> None:
-    # seed section 4 (vanishing envelope): 1 Hz carrier fading to 0 over 5 s, then 0 V held; the
+    # section 4 (vanishing envelope): 1 Hz carrier fading to 0 over 5 s, then 0 V held; the
     # strain keeps decreasing while the voltage is zero (long memory), and stays positive
     t = np.arange(int(8 * RATE)) / RATE
     v = 50 * np.clip(1 - t / 5, 0, None) * (1 - np.cos(2 * np.pi * t))
@@ -128,7 +128,7 @@ def test_preset_table1() -> None:
 
 
 def test_preset_text() -> None:
-    # Table 1 with tau_t = 15.5e-6 s (tau_t^lam_t = 0.19 s^0.15 as the seed's text says)
+    # Table 1 with tau_t = 15.5e-6 s (tau_t^lam_t = 0.19 s^0.15 as the paper's text says)
     p = PAPER_TEXT
     assert p.tau_t_s == 15.5e-6
     assert p.tau_t_s**p.lam_t == pytest.approx(0.19, abs=0.005)
@@ -137,7 +137,7 @@ def test_preset_text() -> None:
 
 
 def test_preset_control() -> None:
-    # seed section 4: lam_t, tau_t, tau_d changed to 0.2, 32e-5 s, 2.2e-3 s (tau_t^lam_t = 0.2)
+    # section 4: lam_t, tau_t, tau_d changed to 0.2, 32e-5 s, 2.2e-3 s (tau_t^lam_t = 0.2)
     p = PAPER_CONTROL
     assert (p.lam_t, p.tau_t_s, p.tau_d_s) == (0.2, 32e-5, 2.2e-3)
     assert p.tau_t_s**p.lam_t == pytest.approx(0.2, abs=0.005)

@@ -1,7 +1,7 @@
 """Identification of the dynamic hysteresis model (labrig.analysis.fit).
 
 Synthetic campaigns are simulated with ``DynamicHysteresisModel(PAPER_TABLE1).predict`` (the
-seed's unipolar sines, 1 kHz, ZOH drive) plus Gaussian noise of known RMS; the fit starts from a
+paper's unipolar sines, 1 kHz, ZOH drive) plus Gaussian noise of known RMS; the fit starts from a
 perturbed guess, never the truth.
 
 Noise level and record lengths are chosen so the pass criteria are about three standard
@@ -251,7 +251,7 @@ def test_bad_input_is_refused(reduced: list[Record]) -> None:
         fit_model([])
 
 
-# -- the seed's full campaign (slow) -----------------------------------------------------------
+# -- the paper's full campaign (slow) -----------------------------------------------------------
 
 
 @pytest.mark.slow

@@ -1,4 +1,4 @@
-"""Quasi-static hysteresis operator ``dS = (alpha0 + h(|u - u_s|)) du`` (spec model.md section 1).
+"""Quasi-static hysteresis operator ``dS = (alpha0 + h(|u - u_s|)) du`` ().
 
 The reference (tests/reference/hysteresis_ref.py) integrates the slope numerically (adaptive
 Gauss-Kronrod, tolerance 1e-12) with its own reversal tracking and memory rule; labrig's
@@ -18,7 +18,7 @@ from scipy import special
 
 from labrig.model import HysteresisState, QuasiStaticHysteresis, Shape
 
-ALPHA0, GAMMA, VC = 8.9, 7.8, 65.0  # seed Table 1 (ue/V, ue/V, V)
+ALPHA0, GAMMA, VC = 8.9, 7.8, 65.0  # the paper's Table 1 (ue/V, ue/V, V)
 GAMMA_LINEAR = 0.12  # ue/V^2: h(x) = gamma x, same order of loop size as the exponential shape
 VC_CUSTOM = 30.0
 

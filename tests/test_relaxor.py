@@ -1,7 +1,7 @@
 """Fractional relaxor ``G(s) = 1/(1 + (tau s)^lam)``: closed forms, sampled filters and inverse.
 
 References are independent of labrig: mpmath (series / Gorenflo-Mainardi integral / Talbot, see
-tests/reference/mittag_leffler_ref.py), the published Table 1 gains (spec model.md section 3),
+tests/reference/mittag_leffler_ref.py), the published Table 1 gains (),
 and analytic hold factors. Tolerances are stated where they are used.
 """
 
@@ -20,8 +20,8 @@ from labrig.model import Relaxor
 from labrig.model.relaxor import check_inverse_stable
 
 LAMS = (0.15, 0.5, 0.99, 1.35, 1.8)
-TAU_T, LAM_T = 15.5e-5, 0.15  # seed Table 1, transient relaxor
-TAU_D, LAM_D = 2e-3, 1.35  # seed Table 1, harmonic relaxor
+TAU_T, LAM_T = 15.5e-5, 0.15  # the paper's Table 1, transient relaxor
+TAU_D, LAM_D = 2e-3, 1.35  # the paper's Table 1, harmonic relaxor
 STEP_CASES = [(1.0, lam) for lam in LAMS] + [(TAU_T, LAM_T), (TAU_D, LAM_D)]
 FULL_SCALE_V = 100.0
 
@@ -181,8 +181,8 @@ SINE_CASES = [
     # (tau, lam, f, rate, duration)
     *[(1e-3, lam, 10.0, 1e5, 1.0) for lam in LAMS],  # w tau = 0.063
     *[(1e-3, lam, 1 / (2 * np.pi * 1e-3), 1e6, 0.2) for lam in LAMS],  # w tau = 1
-    (TAU_T, LAM_T, 1.0, 1e4, 6.0),  # the seed's 1 Hz
-    (TAU_D, LAM_D, 40.0, 1e5, 0.5),  # the seed's 40 Hz, near G_d's resonance
+    (TAU_T, LAM_T, 1.0, 1e4, 6.0),  # the paper's 1 Hz
+    (TAU_D, LAM_D, 40.0, 1e5, 0.5),  # the paper's 40 Hz, near G_d's resonance
 ]
 SLOW_SINE_CASES = [(1e-3, lam, 10 / (2 * np.pi * 1e-3), 1e7, 0.03) for lam in LAMS]
 
@@ -299,7 +299,7 @@ def test_stepper_equals_fast_filter(case: tuple[float, float], hold: str) -> Non
     np.testing.assert_allclose(again, fast[:100], rtol=0, atol=1e-12 * FULL_SCALE_V)
 
 
-# spec model.md section 3, gains of the relaxors with Table 1 values (printed to 3 decimals in
+# , gains of the relaxors with Table 1 values (printed to 3 decimals in
 # |G| and 1 decimal in degrees): the tolerance is half a unit of the last printed digit
 TABLE1 = [
     # f, |G_t|, arg G_t, |G_d|, arg G_d

@@ -287,7 +287,7 @@ def fit_model(
     """Identify :class:`ModelParams` from ``records`` (module docstring for the method).
 
     - ``method``: ``"global"`` (least squares over all entries, default) or ``"staged"``
-      (seed section 3.1).
+      (the paper's section 3.1).
     - ``shape``: the hysteretic slope (``"exponential"``, ``"linear"``, ``"gaussian"``).
     - ``memory``: the operator's memory rule (``"return_point"`` or ``"last_reversal"``,
       :mod:`labrig.model.hysteresis`).
@@ -306,18 +306,7 @@ def fit_model(
     """
     if method not in ("global", "staged"):
         raise ValueError(f"method must be 'global' or 'staged', got {method!r}")
-    if not records:
-        raise ValueError("no records to fit")
-    names = [r.name for r in records]
-    if len(set(names)) != len(names):
-        raise ValueError(f"entry names must be unique, got {names}")
-    if scored is None:
-        scored = names
-    else:
-        unknown = [n for n in scored if n not in names]
-        if unknown or not scored:
-            raise ValueError(f"scored entries {unknown or '[]'} are not among {names}")
-        scored = [n for n in names if n in set(scored)]  # run order
+    scored = _scored_names(records, scored)
     bnd = dict(DEFAULT_BOUNDS)
     bnd.update(bounds or {})
     messages: list[str] = []
@@ -328,42 +317,107 @@ def fit_model(
         family = OperatorFamily(shape, memory)
         common = (chain, method, family, initial, warmup_s, offset, bnd)
         th, camp, space, res, nfev = _fit_once(records, scored, *common, messages)
-        params = family.params(th)
         J = camp.jacobian(space, space.z(th), central=True)
         r = camp.residuals(th)
         sizes = [g.measured_ue.size for g in camp.segments]
         unc, corr = _uncertainty(J, r, sizes, space, th, 1 if offset else 0)
-        preds = camp.predictions(th)
-        per_entry, offsets = {}, {} if offset else None
-        for g in camp.segments:
-            p = preds[g.name]
-            c = float(np.mean(g.measured_ue - p[g.i0 :])) if offset else 0.0
-            if offsets is not None:
-                offsets[g.name] = c
-                preds[g.name] = p + c
-            per_entry[g.name] = nrmse_pct(g.measured_ue, preds[g.name][g.i0 :])
+        per_entry, offsets, preds = _in_sample(camp, th, offset)
         elapsed = time.perf_counter() - t0
         if progress:
             progress("fit", 1, 1)
-
-        held, held_per = None, None
         t1 = time.perf_counter()
+        held_per = None
         if heldout and len(scored) >= 2:
-            held_per = {}
-            for k, name in enumerate(scored):
-                if progress:
-                    progress("heldout", k, len(scored))
-                rest = [n for n in scored if n != name]
-                th_k, *_ = _fit_once(records, rest, *common, [], warm=th, tight=True)
-                rec = records[names.index(name)]
-                held_per[name] = _score_heldout(
-                    family.params(th_k), rec, records, chain, warmup_s, offset
-                )
-            if progress:
-                progress("heldout", len(scored), len(scored))
-            held = float(np.mean(list(held_per.values())))
+            held_per = _heldout(records, scored, common, th, progress)
         held_elapsed = time.perf_counter() - t1
+    optimality = _optimality(J, r, space, th, messages)  # notes parameters on a bound
+    if res is None:  # the staged procedure ends with no converged least-squares run
+        optimality = float("nan")
+    return FitResult(
+        params=family.params(th),
+        uncertainty=unc,
+        correlation=corr,
+        nrmse_pct=float(np.mean(list(per_entry.values()))),
+        per_entry=per_entry,
+        heldout_nrmse_pct=None if held_per is None else float(np.mean(list(held_per.values()))),
+        method=method,
+        entries=list(scored),
+        heldout_per_entry=held_per,
+        offsets_ue=offsets,
+        warmup_s=warmup_s,
+        chain=chain,
+        cost=0.5 * float(r @ r),
+        optimality=optimality,
+        nfev=nfev,
+        elapsed_s=elapsed,
+        heldout_elapsed_s=held_elapsed,
+        messages=messages,
+        predictions=preds,
+        jacobian=J,
+        free=space.free,
+    )
 
+
+def _scored_names(records: Sequence[Record], scored: Sequence[str] | None) -> list[str]:
+    """The scored entries in run order (all by default); checks that names are unique."""
+    if not records:
+        raise ValueError("no records to fit")
+    names = [r.name for r in records]
+    if len(set(names)) != len(names):
+        raise ValueError(f"entry names must be unique, got {names}")
+    if scored is None:
+        return names
+    unknown = [n for n in scored if n not in names]
+    if unknown or not scored:
+        raise ValueError(f"scored entries {unknown or '[]'} are not among {names}")
+    return [n for n in names if n in set(scored)]
+
+
+def _in_sample(
+    camp: BaseProblem, th: dict[str, float], offset: bool
+) -> tuple[dict[str, float], dict[str, float] | None, dict[str, NDArray]]:
+    """NRMSE per scored entry, the fitted offsets (``offset``) and the predictions (offsets
+    included)."""
+    preds = camp.predictions(th)
+    per_entry, offsets = {}, {} if offset else None
+    for g in camp.segments:
+        p = preds[g.name]
+        c = float(np.mean(g.measured_ue - p[g.i0 :])) if offset else 0.0
+        if offsets is not None:
+            offsets[g.name] = c
+            preds[g.name] = p + c
+        per_entry[g.name] = nrmse_pct(g.measured_ue, preds[g.name][g.i0 :])
+    return per_entry, offsets, preds
+
+
+def _heldout(
+    records: Sequence[Record],
+    scored: list[str],
+    common: tuple,
+    th: dict[str, float],
+    progress: Progress | None,
+) -> dict[str, float]:
+    """Leave-one-entry-out NRMSE of each scored entry, refitted from ``th``."""
+    chain, _method, family, _initial, warmup_s, offset, _bounds = common
+    names = [r.name for r in records]
+    held_per = {}
+    for k, name in enumerate(scored):
+        if progress:
+            progress("heldout", k, len(scored))
+        rest = [n for n in scored if n != name]
+        th_k, *_ = _fit_once(records, rest, *common, [], warm=th, tight=True)
+        rec = records[names.index(name)]
+        held_per[name] = _score_heldout(family.params(th_k), rec, records, chain, warmup_s, offset)
+    if progress:
+        progress("heldout", len(scored), len(scored))
+    return held_per
+
+
+def _optimality(
+    J: NDArray, r: NDArray, space: ParameterSpace, th: dict[str, float], messages: list[str]
+) -> float:
+    """First-order optimality (largest gradient component, those pushing against an active
+    bound excluded); notes each parameter that ended on a bound."""
     g = J.T @ r
     z = space.z(th)
     on = space.at_bound(z)
@@ -376,29 +430,7 @@ def fit_model(
                 f"{name} ended at a bound ({th[name]:.4g}): the data do not determine it "
                 "within the bounds (see its uncertainty)"
             )
-    return FitResult(
-        params=params,
-        uncertainty=unc,
-        correlation=corr,
-        nrmse_pct=float(np.mean(list(per_entry.values()))),
-        per_entry=per_entry,
-        heldout_nrmse_pct=held,
-        method=method,
-        entries=list(scored),
-        heldout_per_entry=held_per,
-        offsets_ue=offsets,
-        warmup_s=warmup_s,
-        chain=chain,
-        cost=0.5 * float(r @ r),
-        optimality=float(np.max(np.abs(g))) if res is not None else float("nan"),
-        nfev=nfev,
-        elapsed_s=elapsed,
-        heldout_elapsed_s=held_elapsed,
-        messages=messages,
-        predictions=preds,
-        jacobian=J,
-        free=space.free,
-    )
+    return float(np.max(np.abs(g)))
 
 
 def _score_heldout(

@@ -8,7 +8,7 @@
   counter-clockwise in the (V, strain) plane, i.e. the rising branch lies below the falling one
   (strain lagging the voltage, the piezo's orientation). An ellipse ``V = a cos(wt)``,
   ``S = b cos(wt - phi)`` has area ``pi a b sin(phi)``.
-- **Strain at zero voltage** ("strain shift", seed Fig. 10b; ue): over the last period, the
+- **Strain at zero voltage** ("strain shift", the paper's Fig. 10b; ue): over the last period, the
   strain where the voltage crosses zero (mean over the crossings, linearly interpolated); when
   the voltage only touches its minimum (a unipolar sine), the mean strain over the contiguous
   samples around the smallest ``|V|`` whose ``|V|`` is within 1e-4 of the loop's voltage span

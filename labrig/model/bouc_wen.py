@@ -9,7 +9,7 @@ opposite to the motion and ``k = beta + gamma`` once it has the motion's sign (t
 zero is found in closed form), for ``A > 0``: bounded for ``beta > 0``, ``-beta < gamma <= beta``;
 its loops saturate at ``h = +-A / (beta + gamma)``. For ``A < 0`` ``h`` moves against the input;
 substituting ``h -> -h`` shows ``h(A, beta, gamma) = -h(-A, beta, -gamma)``, which is how every
-form below computes it. Unlike the seed's operator, a Bouc-Wen loop need not close where it
+form below computes it. Unlike the paper's operator, a Bouc-Wen loop need not close where it
 started: after an excursion and back to ``x = 0`` it keeps a remanent ``h`` (what the hybrid
 plant's Bouc-Wen block and the ``remanence`` effect model).
 

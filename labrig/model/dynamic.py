@@ -1,4 +1,4 @@
-"""The dynamic hysteresis model of seed Fig. 2 (Eq. 5-7; spec model.md §3).
+"""The dynamic hysteresis model of the paper's Fig. 2 (Eq. 5-7).
 
     V*(s) = G_t(s) G_d(s) V(s),      S = alpha0 V* + H[V*]
 
@@ -39,7 +39,7 @@ class DynamicHysteresisModel:
     def equivalent_static_voltage(
         self, v: ArrayLike, rate_hz: float, method: str = "fast", hold: str = "zoh"
     ) -> NDArray[np.float64]:
-        """``V* = G_d G_t V`` (V), seed Eq. 7."""
+        """``V* = G_d G_t V`` (V), the paper's Eq. 7."""
         vt = self.g_t.filter(v, rate_hz, method=method, hold=hold)
         return self.g_d.filter(vt, rate_hz, method=method, hold="linear")
 

@@ -1,4 +1,4 @@
-"""Quasi-static hysteresis operator (seed Eq. 1, 2, 10; spec model.md §1).
+"""Quasi-static hysteresis operator (the paper's Eq. 1, 2, 10).
 
     dS = alpha(u, u_s) du,     alpha = alpha0 + h(|u - u_s|),     h(0) = 0
 
@@ -28,7 +28,7 @@ Which reversal is the memory (``memory``):
 
 Shapes of ``h`` (``gamma`` in ue/V, ``vc`` in V):
 
-- ``"exponential"`` (fitted in the seed): ``h(x) = gamma (1 - exp(-x/vc))``
+- ``"exponential"`` (fitted in the paper): ``h(x) = gamma (1 - exp(-x/vc))``
 - ``"linear"`` (a differential Rayleigh law): ``h(x) = gamma x`` (``vc`` unused)
 - ``"gaussian"``: ``h(x) = gamma (1 - exp(-(x/vc)^2))``
 - any callable ``h(x)`` with ``h(0) = 0`` via :class:`Shape` (its integral is then evaluated by

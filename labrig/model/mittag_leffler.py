@@ -6,7 +6,7 @@ to about 1e-15 for real negative arguments); the naive power series is useless f
 arguments a slow relaxor produces. Our own accuracy check against a high-precision mpmath
 reference lives in ``tests/test_mittag_leffler.py``.
 
-For the relaxor ``G(s) = 1 / (1 + (tau s)^lam)`` (seed Eq. 4-9, spec model.md section 2):
+For the relaxor ``G(s) = 1 / (1 + (tau s)^lam)`` (the paper's Eq. 4-9):
 
 - step response      ``s(t) = 1 - E_lam(-(t/tau)^lam)``
 - ramp response      ``r(t) = t^(lam+1) / tau^lam * E_{lam,lam+2}(-(t/tau)^lam)``  (integral of s)

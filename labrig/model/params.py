@@ -1,4 +1,4 @@
-"""Parameters of the dynamic hysteresis model and the seed's published values."""
+"""Parameters of the dynamic hysteresis model and the paper's published values."""
 
 from __future__ import annotations
 
@@ -13,15 +13,15 @@ Memory = Literal["return_point", "last_reversal"]
 
 
 class ModelParams(BaseModel):
-    """Parameters of seed Fig. 2: ``V -> G_t -> G_d -> quasi-static operator -> strain``.
+    """Parameters of the paper's Fig. 2: ``V -> G_t -> G_d -> quasi-static operator -> strain``.
 
     Units are in the names: ue/V, V, s; the orders ``lam_*`` are dimensionless (0 < lam < 2).
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
 
-    alpha0_ue_per_V: float = Field(gt=0, description="small-signal coefficient (seed Eq. 2)")
-    gamma_ue_per_V: float = Field(description="maximal variation of the slope (seed Eq. 10)")
+    alpha0_ue_per_V: float = Field(gt=0, description="small-signal coefficient (the paper's Eq. 2)")
+    gamma_ue_per_V: float = Field(description="maximal variation of the slope (the paper's Eq. 10)")
     vc_V: float = Field(gt=0, description="saturation voltage of the hysteretic slope")
     shape: Shape = "exponential"
     memory: Memory = Field(
@@ -34,22 +34,22 @@ class ModelParams(BaseModel):
     tau_d_s: float = Field(gt=0, description="time constant of G_d")
 
     def operator(self) -> QuasiStaticHysteresis:
-        """The quasi-static operator of these parameters (seed Eq. 1, 2, 10)."""
+        """The quasi-static operator of these parameters (the paper's Eq. 1, 2, 10)."""
         return QuasiStaticHysteresis(
             self.alpha0_ue_per_V, self.gamma_ue_per_V, self.vc_V, self.shape, self.memory
         )
 
 
-#: seed Table 1 (tau_t = 15.5e-5 s as printed in the table)
+#: the paper's Table 1 (tau_t = 15.5e-5 s as printed in the table)
 PAPER_TABLE1 = ModelParams(
     alpha0_ue_per_V=8.9, gamma_ue_per_V=7.8, vc_V=65.0, shape="exponential",
     lam_t=0.15, tau_t_s=15.5e-5, lam_d=1.35, tau_d_s=2e-3,
 )  # fmt: skip
 
-#: Table 1 with tau_t = 15.5e-6 s, the value the seed's text implies (tau_t^lam_t = 0.19 s^0.15)
+#: Table 1 with tau_t = 15.5e-6 s, the value the paper's text implies (tau_t^lam_t = 0.19 s^0.15)
 PAPER_TEXT = PAPER_TABLE1.model_copy(update={"tau_t_s": 15.5e-6})
 
-#: seed section 4 (control example): lam_t = 0.2, tau_t = 32e-5 s, tau_d = 2.2e-3 s
+#: the paper's section 4 (control example): lam_t = 0.2, tau_t = 32e-5 s, tau_d = 2.2e-3 s
 PAPER_CONTROL = PAPER_TABLE1.model_copy(update={"lam_t": 0.2, "tau_t_s": 32e-5, "tau_d_s": 2.2e-3})
 
 PRESETS: dict[str, ModelParams] = {

@@ -1,4 +1,4 @@
-"""Fractional-order relaxor ``G(s) = 1 / (1 + (tau s)^lam)`` (seed Eq. 4-9; spec model.md §2).
+"""Fractional-order relaxor ``G(s) = 1 / (1 + (tau s)^lam)`` (the paper's Eq. 4-9).
 
 Sampling convention ("hold")
 ----------------------------
@@ -89,7 +89,7 @@ class Relaxor:
 
     # -- closed forms -------------------------------------------------------------------------
     def frequency_response(self, f_hz: ArrayLike) -> NDArray[np.complex128]:
-        """``G(j 2 pi f) = 1 / (1 + (tau w)^lam exp(j lam pi/2))`` (seed Eq. 6)."""
+        """``G(j 2 pi f) = 1 / (1 + (tau w)^lam exp(j lam pi/2))`` (the paper's Eq. 6)."""
         w = 2.0 * np.pi * np.abs(np.asarray(f_hz, dtype=float))
         g = 1.0 / (1.0 + (self.tau_s * w) ** self.lam * np.exp(1j * self.lam * np.pi / 2))
         return np.where(np.asarray(f_hz) < 0, np.conj(g), g)

@@ -151,8 +151,8 @@ STUDY_CASES: dict[str, list[dict[str, Any]]] = {
 
 
 #: the bench's truths of the study: ``paper`` (the fitted family itself), ``paper_gaussian``
-#: (slightly imperfect: the seed's model with the Gaussian hysteresis shape, fitted with the
-#: exponential one), ``hybrid`` (the seed's section-4 reference plant, further from the family)
+#: (slightly imperfect: the paper's model with the Gaussian hysteresis shape, fitted with the
+#: exponential one), ``hybrid`` (the paper's section-4 reference plant, further from the family)
 TRUTHS: dict[str, tuple[str, dict[str, Any]]] = {
     "paper": ("paper", {}),
     "paper_gaussian": ("paper", {"shape": "gaussian"}),

@@ -1,7 +1,7 @@
 """Residual evidence for ``labrig diagnose``: noise floor, harmonics, features, sentences.
 
 Everything here *describes* residuals (``measured - predicted``, ue) for the report and for the
-candidates' evidence; nothing here decides (spec ``residuals.md``: with 1e4-1e5 samples almost
+candidates' evidence; nothing here decides (docs/method.md: with 1e4-1e5 samples almost
 any structure is "significant"; the decision is made by held-out prediction error).
 
 - **Noise floor** of an entry: for a periodic entry, the RMS of the residual's period-to-period
@@ -302,9 +302,9 @@ def modelled_creep_per_decade(
 
     The step is :func:`labrig.analysis.signals.step_hold` (raised-cosine ramp of
     0.2 s; times count from its end), simulated at 100 Hz with the model's ``predict`` (seed
-    Eq. 5-7). The creep comes from the transient relaxor ``G_t`` (seed Eq. 4-9: its step
+    Eq. 5-7). The creep comes from the transient relaxor ``G_t`` (the paper's Eq. 4-9: its step
     response ``1 - E_lam(-(t/tau)^lam)`` grows almost logarithmically for a small ``lam``)
-    passed through the operator's slope at ``step_V``; the seed's Table 1 stack creeps about
+    passed through the operator's slope at ``step_V``; the paper's Table 1 stack creeps about
     6 %/decade this way. A logarithmic creep of the strain shifts ``lam_t``, ``tau_t`` and
     ``alpha0`` and shows up here unless it is added as an effect (docs/diagnose.md).
 
