@@ -71,9 +71,8 @@ def resolve_csv_path(step: CsvStep, base_dir: Path) -> Path:
     return p if p.is_absolute() else base_dir / p
 
 
-def load_csv(step: CsvStep, base_dir: Path, rate_hz: float) -> tuple[np.ndarray, dict]:
-    """Voltage samples at ``rate_hz`` and a JSON-able description; raises :class:`CsvError`."""
-    path = resolve_csv_path(step, base_dir)
+def _read_text(path: Path) -> str:
+    """The file's text (UTF-8, an optional BOM dropped), refusing large, missing or binary files."""
     name = path.name
     try:
         if not path.is_file():
@@ -90,8 +89,15 @@ def load_csv(step: CsvStep, base_dir: Path, rate_hz: float) -> tuple[np.ndarray,
         raise CsvError("path", f"{name} line {line}: not a text file (invalid UTF-8)") from e
     if "\x00" in text:
         raise CsvError("path", f"{name}: binary data in a CSV file")
+    return text
 
-    rows: list[tuple[int, list[str]]] = []
+
+Rows = list[tuple[int, list[str]]]
+
+
+def _table(text: str, name: str) -> tuple[list[str] | None, Rows]:
+    """``(header or None, data rows as (line number, fields))`` of the file's text."""
+    rows: Rows = []
     for i, line in enumerate(text.splitlines(), start=1):
         s = line.strip()
         if s and not s.startswith("#"):
@@ -106,8 +112,13 @@ def load_csv(step: CsvStep, base_dir: Path, rate_hz: float) -> tuple[np.ndarray,
         rows = rows[1:]
     if len(rows) < 2:
         raise CsvError("path", f"{name} needs at least 2 data rows, has {len(rows)}")
-    ncols = len(header) if header is not None else len(rows[0][1])
+    return header, rows
 
+
+def _columns(
+    step: CsvStep, header: list[str] | None, ncols: int, name: str
+) -> tuple[int | None, int]:
+    """``(time column or None, value column)``, 0-based."""
     tcol = None
     if step.time_column is not None:
         tcol = _resolve_column(step.time_column, header, ncols, "time_column", name)
@@ -119,23 +130,35 @@ def load_csv(step: CsvStep, base_dir: Path, rate_hz: float) -> tuple[np.ndarray,
             raise CsvError("path", f"{name} has no voltage column besides the time column")
     if vcol == tcol:
         raise CsvError("column", "column and time_column are the same column")
+    return tcol, vcol
 
-    def parse(col: int, key: str) -> np.ndarray:
-        out = np.empty(len(rows))
-        for j, (lineno, toks) in enumerate(rows):
-            if col >= len(toks):
-                raise CsvError(key, f"{name} line {lineno}: has no column {col} (0-based)")
-            try:
-                x = float(toks[col])
-            except ValueError:
-                msg = f"{name} line {lineno}: {toks[col]!r} is not a number"
-                raise CsvError(key, msg) from None
-            if not math.isfinite(x):
-                raise CsvError(key, f"{name} line {lineno}: {toks[col]!r} is not finite")
-            out[j] = x
-        return out
 
-    v = parse(vcol, "column" if step.column is not None else "path") * step.scale
+def _parse(rows: Rows, col: int, key: str, name: str) -> np.ndarray:
+    """Column ``col`` of every row as finite floats (``key`` blamed otherwise)."""
+    out = np.empty(len(rows))
+    for j, (lineno, toks) in enumerate(rows):
+        if col >= len(toks):
+            raise CsvError(key, f"{name} line {lineno}: has no column {col} (0-based)")
+        try:
+            x = float(toks[col])
+        except ValueError:
+            msg = f"{name} line {lineno}: {toks[col]!r} is not a number"
+            raise CsvError(key, msg) from None
+        if not math.isfinite(x):
+            raise CsvError(key, f"{name} line {lineno}: {toks[col]!r} is not finite")
+        out[j] = x
+    return out
+
+
+def load_csv(step: CsvStep, base_dir: Path, rate_hz: float) -> tuple[np.ndarray, dict]:
+    """Voltage samples at ``rate_hz`` and a JSON-able description; raises :class:`CsvError`."""
+    path = resolve_csv_path(step, base_dir)
+    name = path.name
+    header, rows = _table(_read_text(path), name)
+    ncols = len(header) if header is not None else len(rows[0][1])
+    tcol, vcol = _columns(step, header, ncols, name)
+
+    v = _parse(rows, vcol, "column" if step.column is not None else "path", name) * step.scale
     if not np.all(np.isfinite(v)):
         raise CsvError("scale", "scale makes the values overflow")
     info: dict = {"file": str(step.path), "rows": len(rows), "column": vcol, "scale": step.scale}
@@ -143,7 +166,7 @@ def load_csv(step: CsvStep, base_dir: Path, rate_hz: float) -> tuple[np.ndarray,
         info["column_name"] = header[vcol] if vcol < len(header) else None
 
     if tcol is not None:
-        t = parse(tcol, "time_column")
+        t = _parse(rows, tcol, "time_column", name)
         dt = np.diff(t)
         if np.any(dt <= 0):
             j = int(np.argmax(dt <= 0)) + 1

@@ -453,74 +453,18 @@ class _Builder:
                 f"the protocol expands to {n_entries} entries; at most {MAX_ENTRIES} are allowed",
             )
             raise _PlanError(self.issues)
-        slew = self.p.edge_slew_V_per_s
-        edge_where = self.where(("edge_slew_V_per_s",))
-
         steps: list[PlannedStep] = []
         used: set[str] = set()
         for si, step in enumerate(self.p.steps):
-            base = ("steps", si)
-            one = getattr(self, step.kind)(step, base)
+            one = getattr(self, step.kind)(step, ("steps", si))
             rest = self.p.rest_s if step.rest_s is None else step.rest_s
             for r in range(step.repeat):
                 for c in one:
-                    name = c.base_name
-                    k = 2
-                    while name.lower() in used or name.lower() == "run":
-                        name = f"{c.base_name}_{k}"
-                        k += 1
+                    name = _unique_name(c.base_name, used)
                     used.add(name.lower())
-                    where = dict(c.where)
-                    where["edge_slew_V_per_s"] = edge_where
-                    where["rate_hz"] = self.where(("rate_hz",))
-                    try:
-                        waveform = wf.compose(
-                            c.pieces, self.rate, slew, "edge_slew_V_per_s", MAX_STEP_SAMPLES
-                        )
-                    except wf.TooLongError as e:
-                        self.issue(
-                            edge_where if e.edge else where["length"],
-                            f"{name} would have {e.n} samples, more than the {MAX_STEP_SAMPLES} "
-                            "allowed in one entry"
-                            + (" (the edge ramps are too slow)" if e.edge else ""),
-                        )
-                        continue
-                    aux = {}
-                    if c.strain is not None:
-                        # expected strain at each entry sample: rest, the command, then its
-                        # last value during the closing 0 V edge ramp (control is lost there)
-                        tail = waveform.n_samples - 1 - c.strain.size
-                        aux["command_strain"] = (
-                            "ue",
-                            "strain command (expected strain at each sample)",
-                            np.concatenate(([0.0], c.strain, np.full(tail, c.strain[-1]))),
-                        )
-                    definition = {
-                        **c.definition,
-                        "rate_hz": self.rate,
-                        "n_samples": waveform.n_samples,
-                        "total_duration_s": waveform.duration_s,
-                        "edge_ramps": sum(1 for g in waveform.segments if g.role == "edge"),
-                        "source_step": si,
-                        "repeat": r + 1,
-                    }
-                    steps.append(
-                        PlannedStep(
-                            index=len(steps),
-                            name=name,
-                            kind=c.kind,
-                            source_step=si,
-                            repeat_index=r + 1,
-                            definition=definition,
-                            rate_hz=self.rate,
-                            waveform=waveform,
-                            rest_after_s=rest,
-                            amplitude_V=c.amplitude_V,
-                            frequency_hz=c.frequency_hz,
-                            where=where,
-                            aux=aux,
-                        )
-                    )
+                    planned = self.entry(c, name, len(steps), si, r + 1, rest)
+                    if planned is not None:
+                        steps.append(planned)
         if steps:
             steps[-1].rest_after_s = 0.0
         total = sum(s.duration_s + s.rest_after_s for s in steps)
@@ -533,6 +477,72 @@ class _Builder:
         if self.issues:
             raise _PlanError(self.issues)
         return steps
+
+    def entry(
+        self, c: _Concrete, name: str, index: int, si: int, repeat: int, rest: float
+    ) -> PlannedStep | None:
+        """Repetition ``repeat`` of the concrete step ``c`` of protocol step ``si`` as the plan's
+        entry ``index``: its pieces joined by edge ramps, or None (issue recorded)."""
+        edge_where = self.where(("edge_slew_V_per_s",))
+        where = dict(c.where)
+        where["edge_slew_V_per_s"] = edge_where
+        where["rate_hz"] = self.where(("rate_hz",))
+        try:
+            waveform = wf.compose(
+                c.pieces, self.rate, self.p.edge_slew_V_per_s, "edge_slew_V_per_s", MAX_STEP_SAMPLES
+            )
+        except wf.TooLongError as e:
+            self.issue(
+                edge_where if e.edge else where["length"],
+                f"{name} would have {e.n} samples, more than the {MAX_STEP_SAMPLES} "
+                "allowed in one entry" + (" (the edge ramps are too slow)" if e.edge else ""),
+            )
+            return None
+        aux = {}
+        if c.strain is not None:
+            # expected strain at each entry sample: rest, the command, then its last value
+            # during the closing 0 V edge ramp (control is lost there)
+            tail = waveform.n_samples - 1 - c.strain.size
+            aux["command_strain"] = (
+                "ue",
+                "strain command (expected strain at each sample)",
+                np.concatenate(([0.0], c.strain, np.full(tail, c.strain[-1]))),
+            )
+        definition = {
+            **c.definition,
+            "rate_hz": self.rate,
+            "n_samples": waveform.n_samples,
+            "total_duration_s": waveform.duration_s,
+            "edge_ramps": sum(1 for g in waveform.segments if g.role == "edge"),
+            "source_step": si,
+            "repeat": repeat,
+        }
+        return PlannedStep(
+            index=index,
+            name=name,
+            kind=c.kind,
+            source_step=si,
+            repeat_index=repeat,
+            definition=definition,
+            rate_hz=self.rate,
+            waveform=waveform,
+            rest_after_s=rest,
+            amplitude_V=c.amplitude_V,
+            frequency_hz=c.frequency_hz,
+            where=where,
+            aux=aux,
+        )
+
+
+def _unique_name(base: str, used: set[str]) -> str:
+    """``base``, else ``base_2``, ``base_3``, ...: the first not in ``used`` (lower case) and not
+    ``run`` (the run file's own group)."""
+    name = base
+    k = 2
+    while name.lower() in used or name.lower() == "run":
+        name = f"{base}_{k}"
+        k += 1
+    return name
 
 
 def build_plan(

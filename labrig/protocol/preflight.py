@@ -131,6 +131,35 @@ def _blame_segment(step: PlannedStep, t_s: float) -> tuple[Where, str]:
     return step.blame(seg.field or "step"), seg.kind
 
 
+def _samples_per_cycle_issue(step: PlannedStep, f: float | None) -> tuple[Where, str] | None:
+    """Too few samples per cycle of a carrier at ``f`` (Hz; ``None``: not periodic)."""
+    if not (f and step.rate_hz / f < MIN_SAMPLES_PER_CYCLE - _TOL):
+        return None
+    return (
+        step.blame("frequency_hz"),
+        f"{f:g} Hz sampled at rate_hz {step.rate_hz:g} gives "
+        f"{step.rate_hz / f:.3g} samples per cycle; at least {MIN_SAMPLES_PER_CYCLE} "
+        f"are needed: raise rate_hz to >= {MIN_SAMPLES_PER_CYCLE * f:g} or lower the "
+        "frequency",
+    )
+
+
+def _outside_range(chk: StepCheck, lim: RigLimits) -> tuple[bool, float] | None:
+    """``(too high, the voltage out of range)``, or None when the entry stays in range."""
+    if chk.v_max_V > lim.v_max_V + _TOL or chk.v_min_V < lim.v_min_V - _TOL:
+        hi = chk.v_max_V > lim.v_max_V + _TOL
+        return hi, chk.v_max_V if hi else chk.v_min_V
+    return None
+
+
+def _peak_too_high(chk: StepCheck, lim: RigLimits) -> bool:
+    return not chk.peak_current_A <= lim.i_peak_A * (1 + 1e-6)
+
+
+def _mean_too_high(chk: StepCheck, lim: RigLimits) -> bool:
+    return not chk.mean_current_A <= lim.i_avg_A * (1 + 1e-6)
+
+
 def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tuple[Where, str]]:
     """Limits of a strain-command entry: its computed drive is checked like any waveform;
     the messages say which command and control need it and what to change."""
@@ -143,9 +172,9 @@ def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tu
     else:
         what = f"the {d['control']} drive for {d['amplitude_ue']:g} ue at {d['frequency_hz']:g} Hz"
     lower = "lower amplitude_ue or frequency_hz" if key == "amplitude_ue" else "check the file"
-    if chk.v_max_V > lim.v_max_V + _TOL or chk.v_min_V < lim.v_min_V - _TOL:
-        hi = chk.v_max_V > lim.v_max_V + _TOL
-        bad = chk.v_max_V if hi else chk.v_min_V
+    outside = _outside_range(chk, lim)
+    if outside is not None:
+        hi, bad = outside
         why = (
             ""
             if hi
@@ -161,17 +190,10 @@ def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tu
             )
         )
     f = step.frequency_hz
-    if f and step.rate_hz / f < MIN_SAMPLES_PER_CYCLE - _TOL:
-        out.append(
-            (
-                step.blame("frequency_hz"),
-                f"{f:g} Hz sampled at rate_hz {step.rate_hz:g} gives "
-                f"{step.rate_hz / f:.3g} samples per cycle; at least {MIN_SAMPLES_PER_CYCLE} "
-                f"are needed: raise rate_hz to >= {MIN_SAMPLES_PER_CYCLE * f:g} or lower the "
-                "frequency",
-            )
-        )
-    if not chk.peak_current_A <= lim.i_peak_A * (1 + 1e-6):
+    cycles = _samples_per_cycle_issue(step, f)
+    if cycles is not None:
+        out.append(cycles)
+    if _peak_too_high(chk, lim):
         where, seg = _blame_segment(step, chk.peak_time_s)
         need = _amps(chk.peak_current_A, lim.i_peak_A)
         if seg == "edge":
@@ -185,7 +207,7 @@ def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tu
                 f"gives {_amps(lim.i_peak_A)}; {lower}"
             )
         out.append((where, msg))
-    if not chk.mean_current_A <= lim.i_avg_A * (1 + 1e-6):
+    if _mean_too_high(chk, lim):
         where = step.blame(key)
         window = "a cycle" if f else f"{chk.window_s:g} s"
         out.append(
@@ -199,109 +221,112 @@ def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tu
     return out
 
 
+def _voltage_range_issue(
+    step: PlannedStep, chk: StepCheck, lim: RigLimits, what: str | None
+) -> tuple[Where, str] | None:
+    """A voltage step outside the rig's range, blamed on the key that sets the voltage
+    (``what``: the periodic step's description, ``None`` for the others)."""
+    outside = _outside_range(chk, lim)
+    if outside is None:
+        return None
+    _, bad = outside
+    key = {"sine": "amplitude_V", "vanishing": "amplitude_V", "hold": "voltage_V"}.get(
+        step.kind, "path"
+    )
+    hint = ""
+    if step.kind == "ramp":
+        to = step.definition["to_V"]
+        key = "to_V" if (to > lim.v_max_V or to < lim.v_min_V) else "from_V"
+    if key == "amplitude_V":
+        hint = f"; use amplitude_V <= {lim.v_max_V:g}"
+    elif step.kind == "csv":
+        hint = " (check column and scale)"
+    return (
+        step.blame(key),
+        f"{what if what is not None else step.kind + ' ' + step.name} reaches {bad:.4g} V; "
+        f"the rig allows {lim.v_min_V:g} to {lim.v_max_V:g} V{hint}",
+    )
+
+
+def _peak_current_issue(
+    step: PlannedStep, chk: StepCheck, lim: RigLimits, periodic: bool, what: str
+) -> tuple[Where, str]:
+    """The message for a voltage step over the peak current: what to change, by step kind."""
+    c = lim.effective_capacitance_F
+    a, f = step.amplitude_V, step.frequency_hz
+    where, seg = _blame_segment(step, chk.peak_time_s)
+    need = _amps(chk.peak_current_A, lim.i_peak_A)
+    gives = f"the amplifier gives {_amps(lim.i_peak_A)}"
+    if seg == "edge":
+        msg = (
+            f"the 0 V edge ramps of {step.name} need {need} peak; {gives}; use "
+            f"edge_slew_V_per_s <= {lim.i_peak_A / c:.0f}"
+        )
+    elif step.kind == "vanishing" and sine_currents_A(a, f, lim)[0] <= lim.i_peak_A:
+        where = step.blame("length")
+        msg = (
+            f"the envelope of {what} falls too fast: it needs {need} peak; {gives}; "
+            "make decay_s (or tau_s) longer"
+        )
+    elif periodic:
+        msg = (
+            f"{what} needs {need} peak; {gives}; max frequency at {a:g} V is "
+            f"{max_sine_frequency_hz(a, lim):.1f} Hz (max amplitude at {f:g} Hz is "
+            f"{max_sine_amplitude_V(f, lim):.1f} V)"
+        )
+    elif step.kind == "ramp":
+        d = step.definition
+        dv = abs(d["to_V"] - d["from_V"])
+        msg = (
+            f"the ramp {d['from_V']:g} -> {d['to_V']:g} V in {d['duration_s']:g} s needs "
+            f"{need}; {gives}; use duration_s >= {dv * c / lim.i_peak_A:.3g} s"
+        )
+    else:
+        msg = (
+            f"{step.kind} {step.name} needs {need} peak at t = {chk.peak_time_s:.4g} s; "
+            f"{gives}; its slope may be at most {lim.i_peak_A / c:.0f} V/s"
+        )
+    return where, msg
+
+
+def _mean_current_issue(
+    step: PlannedStep, chk: StepCheck, lim: RigLimits, periodic: bool, what: str
+) -> tuple[Where, str]:
+    """The message for a voltage step over the mean current."""
+    where, _seg = _blame_segment(step, chk.mean_time_s)
+    draws = f"draws {_amps(chk.mean_current_A, lim.i_avg_A)} on average over"
+    if periodic:
+        a = step.amplitude_V
+        where = step.blame("frequency_hz")
+        msg = (
+            f"{what} {draws} a cycle; the "
+            f"amplifier's average limit is {_amps(lim.i_avg_A)}; max frequency at {a:g} V "
+            f"is {max_sine_frequency_hz(a, lim):.1f} Hz"
+        )
+    else:
+        msg = (
+            f"{step.kind} {step.name} {draws} "
+            f"{chk.window_s:g} s (around t = {chk.mean_time_s:.4g} s); the amplifier's "
+            f"average limit is {_amps(lim.i_avg_A)}"
+        )
+    return where, msg
+
+
 def _step_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tuple[Where, str]]:
+    """Every limit ``step`` breaks, in the order: voltage range, samples per cycle, peak
+    current, mean current."""
     if step.kind in STRAIN_KINDS:
         return _strain_issues(step, chk, lim)
-    out: list[tuple[Where, str]] = []
-    c = lim.effective_capacitance_F
     a, f = step.amplitude_V, step.frequency_hz
     periodic = step.kind in ("sine", "vanishing") and a is not None and f is not None
     what = f"{a:g} V at {f:g} Hz" if periodic else f"entry {step.name}"
-
-    # voltage range
-    if chk.v_max_V > lim.v_max_V + _TOL or chk.v_min_V < lim.v_min_V - _TOL:
-        hi = chk.v_max_V > lim.v_max_V + _TOL
-        bad = chk.v_max_V if hi else chk.v_min_V
-        key = {"sine": "amplitude_V", "vanishing": "amplitude_V", "hold": "voltage_V"}.get(
-            step.kind, "path"
-        )
-        hint = ""
-        if step.kind == "ramp":
-            to = step.definition["to_V"]
-            key = "to_V" if (to > lim.v_max_V or to < lim.v_min_V) else "from_V"
-        if key == "amplitude_V":
-            hint = f"; use amplitude_V <= {lim.v_max_V:g}"
-        elif step.kind == "csv":
-            hint = " (check column and scale)"
-        out.append(
-            (
-                step.blame(key),
-                f"{what if periodic else step.kind + ' ' + step.name} reaches {bad:.4g} V; "
-                f"the rig allows {lim.v_min_V:g} to {lim.v_max_V:g} V{hint}",
-            )
-        )
-
-    # samples per cycle
-    if periodic and step.rate_hz / f < MIN_SAMPLES_PER_CYCLE - _TOL:
-        out.append(
-            (
-                step.blame("frequency_hz"),
-                f"{f:g} Hz sampled at rate_hz {step.rate_hz:g} gives "
-                f"{step.rate_hz / f:.3g} samples per cycle; at least {MIN_SAMPLES_PER_CYCLE} "
-                f"are needed: raise rate_hz to >= {MIN_SAMPLES_PER_CYCLE * f:g} or lower the "
-                "frequency",
-            )
-        )
-
-    # peak current
-    if not chk.peak_current_A <= lim.i_peak_A * (1 + 1e-6):
-        where, seg = _blame_segment(step, chk.peak_time_s)
-        need = _amps(chk.peak_current_A, lim.i_peak_A)
-        gives = f"the amplifier gives {_amps(lim.i_peak_A)}"
-        if seg == "edge":
-            msg = (
-                f"the 0 V edge ramps of {step.name} need {need} peak; {gives}; use "
-                f"edge_slew_V_per_s <= {lim.i_peak_A / c:.0f}"
-            )
-        elif (
-            step.kind == "vanishing"
-            and sine_currents_A(a, f, lim)[0] <= lim.i_peak_A
-            and seg != "edge"
-        ):
-            where = step.blame("length")
-            msg = (
-                f"the envelope of {what} falls too fast: it needs {need} peak; {gives}; "
-                "make decay_s (or tau_s) longer"
-            )
-        elif periodic:
-            msg = (
-                f"{what} needs {need} peak; {gives}; max frequency at {a:g} V is "
-                f"{max_sine_frequency_hz(a, lim):.1f} Hz (max amplitude at {f:g} Hz is "
-                f"{max_sine_amplitude_V(f, lim):.1f} V)"
-            )
-        elif step.kind == "ramp":
-            d = step.definition
-            dv = abs(d["to_V"] - d["from_V"])
-            msg = (
-                f"the ramp {d['from_V']:g} -> {d['to_V']:g} V in {d['duration_s']:g} s needs "
-                f"{need}; {gives}; use duration_s >= {dv * c / lim.i_peak_A:.3g} s"
-            )
-        else:
-            msg = (
-                f"{step.kind} {step.name} needs {need} peak at t = {chk.peak_time_s:.4g} s; "
-                f"{gives}; its slope may be at most {lim.i_peak_A / c:.0f} V/s"
-            )
-        out.append((where, msg))
-
-    # mean current
-    if not chk.mean_current_A <= lim.i_avg_A * (1 + 1e-6):
-        where, _seg = _blame_segment(step, chk.mean_time_s)
-        draws = f"draws {_amps(chk.mean_current_A, lim.i_avg_A)} on average over"
-        if periodic:
-            where = step.blame("frequency_hz")
-            msg = (
-                f"{what} {draws} a cycle; the "
-                f"amplifier's average limit is {_amps(lim.i_avg_A)}; max frequency at {a:g} V "
-                f"is {max_sine_frequency_hz(a, lim):.1f} Hz"
-            )
-        else:
-            msg = (
-                f"{step.kind} {step.name} {draws} "
-                f"{chk.window_s:g} s (around t = {chk.mean_time_s:.4g} s); the amplifier's "
-                f"average limit is {_amps(lim.i_avg_A)}"
-            )
-        out.append((where, msg))
-    return out
+    found = [
+        _voltage_range_issue(step, chk, lim, what if periodic else None),
+        _samples_per_cycle_issue(step, f if periodic else None),
+        _peak_current_issue(step, chk, lim, periodic, what) if _peak_too_high(chk, lim) else None,
+        _mean_current_issue(step, chk, lim, periodic, what) if _mean_too_high(chk, lim) else None,
+    ]
+    return [x for x in found if x is not None]
 
 
 def preflight_checks(plan: Plan, limits: RigLimits) -> list[StepCheck]:
