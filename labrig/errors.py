@@ -47,3 +47,14 @@ class DeviceError(LabrigError):
     def __init__(self, device: str, operation: str, detail: str):
         self.device, self.operation, self.detail = device, operation, detail
         super().__init__(f"{device}: {operation} failed: {detail}")
+
+
+class StorageError(LabrigError):
+    """The run file could not be written (disk full, quota, I/O error) (exit code 3, like a
+    device fault: the run stops, ramps to 0 V, and keeps what was written readable)."""
+
+    exit_code = 3
+
+    def __init__(self, path: str, operation: str, detail: str):
+        self.path, self.operation, self.detail = path, operation, detail
+        super().__init__(f"run file {path}: {operation} failed: {detail}")
