@@ -57,6 +57,7 @@ class NIDAQmx:
         self.rate_hz = 1000.0
         self.channels = list(settings.ai)
         self._tasks: list = []
+        self._ao_last = 0.0  # AO volts last output (sample of the latest block read, or static)
 
     def _phys(self, ch: str) -> str:
         return f"{self.s.device}/{ch}"
@@ -118,6 +119,7 @@ class NIDAQmx:
                 data = np.asarray(
                     ai_task.read(number_of_samples_per_channel=m, timeout=timeout), dtype=float
                 ).reshape(len(self.channels), m)
+                self._ao_last = float(ao[start + m - 1])
                 yield AcquiredBlock(start, dict(zip(self.channels, data, strict=True)))
         except nidaqmx.DaqError as e:
             raise DeviceError(self.device, "play", str(e)) from e
@@ -144,6 +146,15 @@ class NIDAQmx:
                 t.write(float(volts), auto_start=True)
         except nidaqmx.DaqError as e:
             raise DeviceError(self.device, "write_static", str(e)) from e
+        self._ao_last = float(volts)
+
+    def ao_level(self) -> float:
+        """The AO volts last output (for a playback: the sample of the latest block read)."""
+        return self._ao_last
+
+    def abort_playback(self) -> None:
+        """Stop a playback's tasks; the AO holds the value it reached."""
+        self._close_tasks()
 
     def stop(self) -> None:
         self._close_tasks()

@@ -12,11 +12,15 @@ input (the DAQ's AO) times the amplifier gain. So:
 
 - :meth:`E503Amplifier.enable`: ``SVA A 0`` then ``ONL 1 0`` (the DAQ drives the stack);
 - :meth:`E503Amplifier.disable` and :meth:`E503Amplifier.safe_zero`: ``ONL 1 1`` then
-  ``SVA A 0`` (output held at 0 V whatever the DAQ does).
+  ``SVA A 0`` (output held at 0 V whatever the DAQ does: a step, so the Rig calls them after
+  it has ramped the output to 0 V);
+- :meth:`E503Amplifier.take_digital_control` and :meth:`E503Amplifier.set_setpoint`: ``SVA A
+  <V>`` then ``ONL 1 1``, then ``SVA A <V>`` steps: the Rig's ramp to 0 V when the DAQ fails.
 
 Faults: a dropped link, a missing answer (timeout) or a damaged answer raise
-:class:`~labrig.errors.DeviceError` naming the amplifier and the operation; before raising, the
-driver reconnects and brings the output to 0 V (best effort). The next call reconnects if needed.
+:class:`~labrig.errors.DeviceError` naming the amplifier and the operation. The driver does not
+move the output on a fault (the Rig ramps it to 0 V within the current limit); it closes a
+link that is out of step, and the next call reconnects.
 """
 
 from __future__ import annotations
@@ -167,13 +171,6 @@ class E503Amplifier:
         self._idn: str | None = None
 
     # -- plumbing --------------------------------------------------------------------------------
-    def _guard(self, operation: str, fn):
-        try:
-            return fn()
-        except DeviceError:
-            self._zero_quietly()
-            raise
-
     def _check_error(self, operation: str) -> None:
         lines = self.link.query("ERR?", operation)
         code = self._int(lines, "ERR?", operation)
@@ -213,67 +210,54 @@ class E503Amplifier:
         self._set(f"ONL {s.channel} 1", operation)
         self._set(f"SVA {s.axis} 0", operation)
 
-    def _zero_quietly(self) -> None:
-        try:
-            self._zero_commands("safe_zero")
-        except Exception as e:
-            log.error("%s: could not bring the output to 0 V: %s", self.device, e)
-
     # -- the Amplifier role ----------------------------------------------------------------------
     def identify(self) -> str:
-        def run():
-            lines = self.link.query("*IDN?", "identify")
-            if len(lines) != 1 or not lines[0].isprintable() or not lines[0]:
-                raise DeviceError(self.device, "identify (*IDN?)", f"garbled answer {lines!r}")
-            self._idn = lines[0]
-            return self._idn
-
-        return self._guard("identify", run)
+        lines = self.link.query("*IDN?", "identify")
+        if len(lines) != 1 or not lines[0].isprintable() or not lines[0]:
+            raise DeviceError(self.device, "identify (*IDN?)", f"garbled answer {lines!r}")
+        self._idn = lines[0]
+        return self._idn
 
     def output_limits(self) -> tuple[float, float]:
         ch = self.settings.channel
-        return self._guard(
-            "output_limits",
-            lambda: (
-                self._float("VMI?", ch, "output_limits"),
-                self._float("VMA?", ch, "output_limits"),
-            ),
-        )
+        return (self._float("VMI?", ch, "output_limits"), self._float("VMA?", ch, "output_limits"))
 
     def set_output_limits(self, v_min: float, v_max: float) -> None:
         """Set the device's own output clamp (VMI/VMA), a hardware-side safety net."""
         ch = self.settings.channel
-
-        def run():
-            _lo, hi = self.output_limits()
-            # order the two writes so VMI < VMA holds at every step
-            if v_min >= hi:
-                self._set(f"VMA {ch} {v_max:.4f}", "set_output_limits")
-                self._set(f"VMI {ch} {v_min:.4f}", "set_output_limits")
-            else:
-                self._set(f"VMI {ch} {v_min:.4f}", "set_output_limits")
-                self._set(f"VMA {ch} {v_max:.4f}", "set_output_limits")
-
-        self._guard("set_output_limits", run)
+        _lo, hi = self.output_limits()
+        # order the two writes so VMI < VMA holds at every step
+        if v_min >= hi:
+            self._set(f"VMA {ch} {v_max:.4f}", "set_output_limits")
+            self._set(f"VMI {ch} {v_min:.4f}", "set_output_limits")
+        else:
+            self._set(f"VMI {ch} {v_min:.4f}", "set_output_limits")
+            self._set(f"VMA {ch} {v_max:.4f}", "set_output_limits")
 
     def enable(self) -> None:
         s = self.settings
-
-        def run():
-            self._set(f"SVA {s.axis} 0", "enable")
-            self._set(f"ONL {s.channel} 0", "enable")
-            online = self._value("ONL?", s.channel, "enable")
-            if online != "0":
-                raise DeviceError(self.device, "enable", "the channel did not go OFFLINE")
-
-        self._guard("enable", run)
+        self._set(f"SVA {s.axis} 0", "enable")
+        self._set(f"ONL {s.channel} 0", "enable")
+        online = self._value("ONL?", s.channel, "enable")
+        if online != "0":
+            raise DeviceError(self.device, "enable", "the channel did not go OFFLINE")
 
     def disable(self) -> None:
-        self._guard("disable", lambda: self._zero_commands("disable"))
+        self._zero_commands("disable")
+
+    def take_digital_control(self, volts: float) -> None:
+        """Hold ``volts`` from the digital setpoint (``SVA`` first, then ONLINE), so the output
+        does not move when the analog input is dropped: the start of a setpoint ramp."""
+        s = self.settings
+        self._set(f"SVA {s.axis} {volts:.4f}", "take_digital_control")
+        self._set(f"ONL {s.channel} 1", "take_digital_control")
+
+    def set_setpoint(self, volts: float) -> None:
+        """Set the digital setpoint (V): the output in ONLINE mode."""
+        self._set(f"SVA {self.settings.axis} {volts:.4f}", "set_setpoint")
 
     def read_voltage(self) -> float:
-        ch = self.settings.channel
-        return self._guard("read_voltage", lambda: self._float("VOL?", ch, "read_voltage"))
+        return self._float("VOL?", self.settings.channel, "read_voltage")
 
     def read_current(self) -> float | None:
         """The E-503 has no current read-back."""
@@ -281,35 +265,32 @@ class E503Amplifier:
 
     def status(self) -> AmplifierStatus:
         s = self.settings
-
-        def run():
-            ovf = self._value("OVF?", s.axis, "status") == "1"
-            lines = self.link.query(f"SRG? {s.axis} 1", "status")
-            m = _SRG.match(lines[0]) if len(lines) == 1 else None
-            if not m or m["id"] != s.axis:
-                self.link.close()
-                raise DeviceError(self.device, "status (SRG?)", f"garbled answer {lines!r}")
-            bits = int(m["val"], 16)
-            code = self._int(self.link.query("ERR?", "status"), "ERR?", "status")
-            return AmplifierStatus(
-                overflow=ovf or bool(bits & 1),
-                over_temperature=bool(bits & 2),
-                error_code=code,
-                online=bool(bits & 4),
-                detail=f"SRG=0x{bits:X}",
-            )
-
-        return self._guard("status", run)
+        ovf = self._value("OVF?", s.axis, "status") == "1"
+        lines = self.link.query(f"SRG? {s.axis} 1", "status")
+        m = _SRG.match(lines[0]) if len(lines) == 1 else None
+        if not m or m["id"] != s.axis:
+            self.link.close()
+            raise DeviceError(self.device, "status (SRG?)", f"garbled answer {lines!r}")
+        bits = int(m["val"], 16)
+        code = self._int(self.link.query("ERR?", "status"), "ERR?", "status")
+        return AmplifierStatus(
+            overflow=ovf or bool(bits & 1),
+            over_temperature=bool(bits & 2),
+            error_code=code,
+            online=bool(bits & 4),
+            detail=f"SRG=0x{bits:X}",
+        )
 
     def check(self) -> None:
-        """Raise DeviceError (output zeroed first) if the amplifier reports a fault."""
+        """Raise DeviceError if the amplifier reports a fault (the output is left where it is:
+        the Rig ramps it to 0 V)."""
         st = self.status()
         if not st.ok:
-            self._zero_quietly()
             raise DeviceError(self.device, "status check", "; ".join(st.problems()))
 
     def safe_zero(self) -> None:
-        """ONLINE with SVA 0: output 0 V whatever the analog input does. Never raises."""
+        """ONLINE with SVA 0: output 0 V whatever the analog input does (a step: call it once
+        the output is at 0 V). Never raises."""
         for attempt in range(2):
             try:
                 self._zero_commands("safe_zero")

@@ -1,7 +1,14 @@
-"""``labrig run``: preflight, then execute with a progress bar; returns the exit code."""
+"""``labrig run``: preflight, then execute with a progress bar; returns the exit code.
+
+Exit codes: 0 complete; 2 bad input (protocol, rig file, ``--out``, not enough disk space for
+the run file), found before anything is energised; 3 a device fault or a full disk during the
+run; 128 + signal number when stopped by a signal (SIGINT 130, SIGTERM 143, SIGHUP 129,
+SIGQUIT 131); 1 anything unexpected. Every path that energised the output ramped it to 0 V.
+"""
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import typer
@@ -9,7 +16,8 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from labrig.runner import execute, interrupt_once, preflight
+from labrig.interrupts import Interrupted, interrupt_once
+from labrig.runner import execute, preflight
 
 
 def run_with_progress(
@@ -36,16 +44,27 @@ def run_with_progress(
         f"[bold]{escape(plan.name)}[/]: {len(plan.steps)} entries, "
         f"{plan.total_duration_s:.1f} s of protocol time on {where}"
     )
-    # Ctrl-C and SIGTERM stop the run once (0 V, file closed); repeats are ignored until the
-    # outcome is printed
+    # SIGINT, SIGTERM, SIGHUP and SIGQUIT stop the run once (ramp to 0 V, file closed);
+    # repeats are ignored until the outcome is printed
     with interrupt_once():
-        outcome = _execute_with_bar(console, plan, rig_path, out, seed, realtime, overwrite)
+        try:
+            outcome = _execute_with_bar(console, plan, rig_path, out, seed, realtime, overwrite)
+        except Interrupted as e:  # before the run file existed: nothing energised or written
+            _say(console, f"[red]stopped before the run began[/]: {escape(e.reason)}")
+            return e.exit_code
         if outcome.status == "complete":
-            console.print(f"run complete: {len(outcome.entries)} entries (seed {outcome.seed})")
+            _say(console, f"run complete: {len(outcome.entries)} entries (seed {outcome.seed})")
         else:
-            console.print(f"[red]run {outcome.status}[/]: {escape(outcome.reason)}")
-        typer.echo(str(outcome.path))
+            _say(console, f"[red]run {outcome.status}[/]: {escape(outcome.reason)}")
+        with contextlib.suppress(OSError):  # a closed terminal (SIGHUP) must not change the code
+            typer.echo(str(outcome.path))
     return outcome.exit_code
+
+
+def _say(console: Console, text: str) -> None:
+    """Print to the terminal if it is still there (after SIGHUP it may not be)."""
+    with contextlib.suppress(OSError):
+        console.print(text)
 
 
 def _execute_with_bar(console, plan, rig_path, out, seed, realtime, overwrite):

@@ -9,13 +9,20 @@ rig file, starts the simulators when the rig is simulated, creates the drivers a
 Units: V, s, Hz, ue (microstrain). Raw DAQ data are volts at the DAQ input; the Rig's helpers
 convert them (``gauge_to_strain``, ``monitor_to_volts``, ``temperature_to_degC``).
 
-Safety contract: every driver that can move the actuator brings its output to 0 V (best effort)
-before it raises a :class:`~labrig.errors.DeviceError`; :meth:`Rig.safe_zero` never raises.
+Safety contract: a driver never steps the output on its own: on a fault it raises a
+:class:`~labrig.errors.DeviceError` and leaves the output where it is. Bringing the actuator to
+0 V is the :class:`Rig`'s job, always by a ramp within the amplifier's current limit
+(:mod:`labrig.ramp`): :meth:`Rig.ramp_to_zero` / :meth:`Rig.safe_zero` (never raise),
+:meth:`Rig.check` before it raises, :meth:`Rig.zero_on_error` and :meth:`Rig.close`. The ramp
+goes through the DAQ's analog output; if the DAQ cannot be written, through the amplifier's
+digital setpoint (optional amplifier methods ``take_digital_control(volts)`` and
+``set_setpoint(volts)``); only if neither works is the amplifier told to hold 0 V at once.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -27,6 +34,7 @@ from pydantic import BaseModel
 
 from labrig.errors import DeviceError
 from labrig.limits import RigLimits
+from labrig.ramp import RampRecord, paced_ramp, ramp_rate_V_per_s
 
 log = logging.getLogger("labrig.instruments")
 
@@ -107,7 +115,12 @@ class ConditionerStatus:
 
 @runtime_checkable
 class DAQ(Protocol):
-    """Hardware-timed AO playback with synchronised AI (one AI sample per AO sample)."""
+    """Hardware-timed AO playback with synchronised AI (one AI sample per AO sample).
+
+    Optional: ``abort_playback()`` ends a playback with the AO holding its present value (the
+    ramp to 0 V starts from there), ``ao_level()`` the AO volts last output (used when the
+    amplifier cannot report its output voltage).
+    """
 
     def identify(self) -> str: ...
     def configure(self, rate_hz: float, ai_channels: list[str]) -> None: ...
@@ -120,7 +133,13 @@ class DAQ(Protocol):
 
 @runtime_checkable
 class Amplifier(Protocol):
-    """Piezo amplifier: gain, limits, enable (analog control) / disable (held at 0 V)."""
+    """Piezo amplifier: gain, limits, enable (analog control) / disable (held at 0 V).
+
+    ``safe_zero`` holds the output at 0 V at once: the Rig calls it after the ramp, when the
+    output is already at 0 V. Optional, for the ramp when the DAQ fails:
+    ``take_digital_control(volts)`` (hold ``volts`` from the digital setpoint, ignoring the
+    analog input) and ``set_setpoint(volts)``.
+    """
 
     gain: float
 
@@ -282,7 +301,7 @@ class Rig:
     # -- health and safety ---------------------------------------------------------------------
     def check(self) -> None:
         """Raise :class:`DeviceError` if the amplifier or the conditioner reports a fault (the
-        amplifier is brought to 0 V first)."""
+        output is ramped to 0 V first)."""
         amp = self.amplifier.status()
         if not amp.ok:
             self.safe_zero()
@@ -292,8 +311,70 @@ class Rig:
             self.safe_zero()
             raise DeviceError("conditioner", "status check", "; ".join(cond.problems()))
 
-    def safe_zero(self) -> None:
-        """DAQ output to 0 V and the amplifier to 0 V / disabled; best effort, never raises."""
+    def output_now(self) -> tuple[float, str]:
+        """The actuator voltage now (V) and where it came from: the amplifier's read-back,
+        else the DAQ's last output times the gain, else 0 V ("unknown")."""
+        try:
+            v = float(self.amplifier.read_voltage())
+            if math.isfinite(v):
+                return v, "amplifier read-back"
+        except Exception as e:
+            log.error("ramp: cannot read the amplifier's output voltage: %s", e)
+        level = getattr(self.daq, "ao_level", None)
+        if callable(level):
+            try:
+                v = float(self.ao_to_volts(level()))
+                if math.isfinite(v):
+                    return v, "DAQ output level"
+            except Exception as e:
+                log.error("ramp: cannot read the DAQ's output level: %s", e)
+        return 0.0, "unknown"
+
+    def ramp_to_zero(self) -> RampRecord:
+        """Ramp the actuator from its present voltage to 0 V within the current limit, paced by
+        the wall clock (:func:`labrig.ramp.paced_ramp`), then hold 0 V (DAQ stopped at 0 V,
+        amplifier at 0 V and disabled). Never raises; what happened is in the record."""
+        abort = getattr(self.daq, "abort_playback", None)
+        if callable(abort):  # a suspended playback holds the AO; end it without moving it
+            try:
+                abort()
+            except Exception as e:
+                log.error("ramp: ending the DAQ playback failed: %s", e)
+        start, source = self.output_now()
+        rec = RampRecord(start, source, ramp_rate_V_per_s(self.limits))
+        try:
+            paced_ramp(self._write_ao, start, rec.rate_V_per_s, rec)
+            rec.path = "daq"
+        except Exception as e:
+            rec.errors.append(f"DAQ: {e}")
+            log.error("ramp: the DAQ failed (%s); ramping the amplifier's setpoint", e)
+            self._ramp_setpoint(rec)
+        self._hold_zero()
+        return rec
+
+    def _write_ao(self, volts: float) -> None:
+        self.daq.write_static(float(self.volts_to_ao(volts)))
+
+    def _ramp_setpoint(self, rec: RampRecord) -> None:
+        take = getattr(self.amplifier, "take_digital_control", None)
+        setpoint = getattr(self.amplifier, "set_setpoint", None)
+        if not (callable(take) and callable(setpoint)):
+            rec.errors.append("amplifier: no digital setpoint to ramp")
+            return
+        start = rec.volts[-1] if rec.volts else rec.start_V
+        try:
+            start = float(self.amplifier.read_voltage())
+        except Exception as e:
+            log.error("ramp: no read-back before the setpoint ramp: %s", e)
+        try:
+            take(start)
+            paced_ramp(setpoint, start, rec.rate_V_per_s, rec)
+            rec.path = "amplifier setpoint"
+        except Exception as e:
+            rec.errors.append(f"amplifier: {e}")
+            log.error("ramp: the amplifier setpoint ramp failed: %s", e)
+
+    def _hold_zero(self) -> None:
         try:
             self.daq.stop()
         except Exception as e:
@@ -302,6 +383,10 @@ class Rig:
             self.amplifier.safe_zero()
         except Exception as e:  # safe_zero must not raise, but be sure
             log.error("safe_zero: amplifier safe_zero failed: %s", e)
+
+    def safe_zero(self) -> None:
+        """Ramp to 0 V and hold it there (:meth:`ramp_to_zero`); best effort, never raises."""
+        self.ramp_to_zero()
 
     @contextmanager
     def zero_on_error(self):
@@ -313,7 +398,8 @@ class Rig:
             raise
 
     def close(self) -> None:
-        """Zero the output, close the devices, then stop the simulators this rig started."""
+        """Ramp the output to 0 V, close the devices, then stop the simulators this rig
+        started."""
         if self._closed:
             return
         self._closed = True

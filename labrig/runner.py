@@ -3,20 +3,27 @@
 The runner is the only place that sequences hardware. For each concrete step of the plan it
 plays the command waveform through the DAQ (actuator volts / amplifier gain), converts the
 acquired channels to physical units, and appends every block to the run file, which is flushed
-after each block (so a crash loses at most the block in flight). On Ctrl-C, a device fault or
-any error the output is ramped to 0 V within the amplifier's current limit, the amplifier is
-disabled, the entry and the run are marked ``aborted`` / ``failed`` with the reason, and the
-file is closed. Device health (amplifier and conditioner status) is checked every
-``STATUS_CHECK_S`` of protocol time and at the end of each step; rests between entries are
-played as 0 V through the DAQ (not recorded). On every exit path the amplifier's read-back
-voltage after zeroing is stored as ``/run/final_amplifier_voltage_V``.
+after each block (so a crash loses at most the block in flight). Device health (amplifier and
+conditioner status) is checked every ``STATUS_CHECK_S`` of protocol time and at the end of each
+step; rests between entries are played as 0 V through the DAQ (not recorded).
+
+Every way a run ends - complete, a stop signal (SIGINT, SIGTERM, SIGHUP, SIGQUIT), a device
+fault, a full disk, any other error - ends the same way: the output is ramped to 0 V within
+the current limit, paced by the wall clock (:mod:`labrig.ramp`), the amplifier is disabled, and
+the file records the cause (``status``, ``status_reason``, ``exit_code``), the ramp
+(``/run/ramp_to_zero``) and the amplifier's read-back voltage after it
+(``/run/final_amplifier_voltage_V``). Exit codes: 0 complete, 128 + signal number for a signal
+(SIGINT 130, SIGTERM 143, SIGHUP 129, SIGQUIT 131), 3 for a device fault or a full disk, 2
+for bad input found before the output is energised, 1 for anything unexpected.
+
+Stop signals are deferred while the rig is energised (:class:`labrig.interrupts.SignalGuard`)
+and acted on after the block in flight, so no exception lands in the middle of a write; a
+second signal never interrupts the ramp or the closing of the file.
 """
 
 from __future__ import annotations
 
 import contextlib
-import signal
-import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -27,20 +34,36 @@ import numpy as np
 from labrig import __version__
 from labrig.errors import DeviceError, InputFileError, InputIssue, LabrigError
 from labrig.instruments import Rig
+from labrig.interrupts import SignalGuard, exit_code_for, interrupt_once, reason_for, signum_of
 from labrig.limits import RigLimits
 from labrig.protocol.check import load_plan
 from labrig.protocol.plan import Plan, PlannedStep
 from labrig.protocol.preflight import preflight as check_plan
+from labrig.ramp import RAMP_CURRENT_FRACTION, RampRecord
 from labrig.rigfile import load_rig, open_rig
-from labrig.store import Channel, RunWriter
+from labrig.run_record import record_end
+from labrig.store import Channel, RunWriter, estimate_run_bytes, free_bytes
+from labrig.store_space import RESERVE_BYTES
 
 #: acquisition block length (s): the most a crash can lose
 BLOCK_S = 0.1
 #: device health (amplifier and conditioner status) is checked at least this often during a
 #: step or a rest, in protocol time (s), and at the end of every step
 STATUS_CHECK_S = 1.0
-#: ramp-down current as a fraction of the amplifier's peak current
-RAMP_CURRENT_FRACTION = 0.5
+
+__all__ = [
+    "BLOCK_S",
+    "RAMP_CURRENT_FRACTION",
+    "STATUS_CHECK_S",
+    "DeviceError",
+    "RunOutcome",
+    "default_out_path",
+    "execute",
+    "interrupt_once",
+    "open_rig",
+    "preflight",
+    "ramp_to_zero",
+]
 
 # DAQ channel -> (run-file dataset, units, long name)
 _CHANNEL_MAP: dict[str, tuple[str, str, str]] = {
@@ -90,21 +113,10 @@ def preflight(protocol: Path, rig_path: Path | None) -> tuple[Plan, Path | None]
     return plan, rig
 
 
-def ramp_to_zero(rig: Rig, from_volts: float) -> None:
-    """Bring the actuator from ``from_volts`` to 0 V at a current within the amplifier's limit.
-
-    A ramp at ``RAMP_CURRENT_FRACTION`` of the peak current (``dV/dt = I / C_eff``) written
-    with ``write_static`` steps; then the DAQ stops at 0 V. Never raises.
-    """
-    try:
-        lim = rig.limits
-        slew = RAMP_CURRENT_FRACTION * lim.i_peak_A / lim.effective_capacitance_F  # V/s
-        n = max(2, int(np.ceil(abs(from_volts) / (slew * 1e-3))))
-        for v in np.linspace(from_volts, 0.0, min(n, 200)):
-            rig.daq.write_static(float(rig.volts_to_ao(v)))
-    except Exception:
-        pass
-    rig.safe_zero()
+def ramp_to_zero(rig: Rig) -> RampRecord:
+    """Ramp the actuator to 0 V within the current limit, paced by the wall clock, and hold it
+    there (:meth:`labrig.instruments.Rig.ramp_to_zero`). Never raises."""
+    return rig.ramp_to_zero()
 
 
 def _channels(rig: Rig) -> tuple[list[str], list[Channel]]:
@@ -119,7 +131,21 @@ def _channels(rig: Rig) -> tuple[list[str], list[Channel]]:
     return names, chans
 
 
-def _run_step(rig, writer, step: PlannedStep, ai: list[str], chans, progress, k, n_steps, left):
+def _run_step(
+    rig: Rig,
+    writer: RunWriter,
+    step: PlannedStep,
+    ai: list[str],
+    chans: list[Channel],
+    progress: ProgressFn | None,
+    k: int,
+    n_steps: int,
+    left: float,
+    guard: SignalGuard,
+) -> None:
+    """Play one step, log every block, check health; a pending stop signal is raised after
+    the block in flight. On any exception the playback ends (the output holds its value for
+    the ramp) and the exception propagates: the run's end finishes the entry."""
     # the rest that follows matters to analysis: the actuator's long memory spans it
     meta = {**step.definition, "rest_after_s": step.rest_after_s}
     # channels the plan adds to this entry (strain-command steps: command_strain, ue)
@@ -154,26 +180,29 @@ def _run_step(rig, writer, step: PlannedStep, ai: list[str], chans, progress, k,
                 progress(k, n_steps, step.name, frac, left - frac * step.duration_s)
             if j % check_every == 0:
                 _check_health(rig, step.name)
+            guard.check()
         _close_playback(gen)
         _check_health(rig, step.name)
-    except KeyboardInterrupt:
+    except BaseException:
         _close_playback(gen)
-        entry.finish("aborted", "interrupted (Ctrl-C)")
-        raise
-    except BaseException as e:
-        _close_playback(gen)
-        entry.finish("failed", str(e) or type(e).__name__)
         raise
     entry.finish("complete")
 
 
 def _check_health(rig: Rig, where: str) -> None:
     """Raise :class:`DeviceError` naming the device and the step if a device reports a fault
-    (:meth:`Rig.check`: amplifier overflow / over-temperature / error, conditioner faults)."""
+    (amplifier overflow / over-temperature / error, conditioner faults). The output is left
+    where it is: the run's end ramps it."""
     try:
-        rig.check()
+        amp = rig.amplifier.status()
+        cond = rig.conditioner.status() if amp.ok else None
     except DeviceError as e:
         raise DeviceError(e.device, f"{e.operation} during {where}", e.detail) from e
+    if not amp.ok:
+        raise DeviceError("amplifier", f"status check during {where}", "; ".join(amp.problems()))
+    if cond is not None and not cond.ok:
+        problems = "; ".join(cond.problems())
+        raise DeviceError("conditioner", f"status check during {where}", problems)
 
 
 def _close_playback(gen) -> None:
@@ -185,18 +214,25 @@ def _close_playback(gen) -> None:
             close()
 
 
-def _rest(rig: Rig, step: PlannedStep, progress, k: int, n_steps: int, left: float) -> None:
+def _rest(
+    rig: Rig,
+    step: PlannedStep,
+    progress: ProgressFn | None,
+    k: int,
+    n_steps: int,
+    left: float,
+    guard: SignalGuard,
+) -> None:
     """Hold 0 V for the step's ``rest_after_s`` (not recorded).
 
     The rest is played through the DAQ as zeros, like a step: it takes real time on a real rig
     (with or without ``--realtime``), is paced with ``--realtime`` on a simulated one, and
-    advances a simulated rig's physics (the strain relaxes as on the bench); Ctrl-C and device
-    faults are seen during a rest as during a step.
+    advances a simulated rig's physics (the strain relaxes as on the bench); stop signals and
+    device faults are seen during a rest as during a step.
     """
     n = round(step.rest_after_s * step.rate_hz)
     if n <= 0:
         return
-    rig.daq.write_static(0.0)
     block = max(1, round(BLOCK_S * step.rate_hz))
     check_every = max(1, round(STATUS_CHECK_S * step.rate_hz / block))
     where = f"the rest after {step.name}"
@@ -208,6 +244,7 @@ def _rest(rig: Rig, step: PlannedStep, progress, k: int, n_steps: int, left: flo
                 progress(k, n_steps, where, frac, left - frac * step.rest_after_s)
             if j % check_every == 0:
                 _check_health(rig, where)
+            guard.check()
     finally:
         _close_playback(gen)
 
@@ -222,132 +259,149 @@ def execute(
     overwrite: bool = False,
 ) -> RunOutcome:
     """Run a preflighted plan on the rig and log it; returns the outcome (never raises for
-    device faults or Ctrl-C: those are recorded in the file and in the outcome).
+    device faults, a full disk or stop signals once the run file exists: those are recorded
+    in the file and in the outcome).
 
-    Called from the main thread, Ctrl-C (SIGINT) and SIGTERM stop the run once: repeats are
-    ignored until the output is at 0 V and the file is closed (see :func:`interrupt_once`).
+    Called from the main thread, SIGINT, SIGTERM, SIGHUP and SIGQUIT stop the run once:
+    repeats are ignored until the output is at 0 V and the file is closed (see
+    :func:`labrig.interrupts.interrupt_once`). Before the run file exists, a stop signal
+    propagates as :class:`labrig.interrupts.Interrupted`, and bad input as
+    :class:`~labrig.errors.InputFileError` (nothing energised).
     """
-    with interrupt_once():
-        return _execute(plan, rig_path, out, seed, realtime, progress, overwrite)
-
-
-@contextlib.contextmanager
-def interrupt_once():
-    """SIGINT and SIGTERM raise :class:`KeyboardInterrupt` the first time only; later ones are
-    ignored until the block ends (a second, impatient Ctrl-C must not interrupt the ramp to
-    0 V or the closing of the run file). The previous handlers come back afterwards. Does
-    nothing outside the main thread (Python delivers signals there only)."""
-    if threading.current_thread() is not threading.main_thread() or getattr(
-        signal.getsignal(signal.SIGINT), "labrig_interrupt_once", False
-    ):  # not the main thread, or inside an outer interrupt_once (the CLI's)
-        yield
-        return
-    seen: list[int] = []
-
-    def handler(signum, frame):
-        # decide before recording: a repeat can run this handler again at any bytecode of this
-        # one, and the first call must still raise
-        first = not seen
-        seen.append(signum)
-        if first:
-            raise KeyboardInterrupt
-
-    handler.labrig_interrupt_once = True
-    old = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
-    for sig in old:
-        signal.signal(sig, handler)
-    try:
-        yield
-    finally:
-        for sig, h in old.items():
-            if h is not None:
-                signal.signal(sig, h)
-
-
-def _execute(plan, rig_path, out, seed, realtime, progress, overwrite) -> RunOutcome:
-    out = out or default_out_path(plan)
-    rig = open_rig(rig_path, seed)
-    outcome = RunOutcome(path=out, status="running", seed=rig.seed)
-    try:
-        if realtime and hasattr(rig.daq, "realtime"):
-            rig.daq.realtime = True
-        rig.check()
-        ai, chans = _channels(rig)
-        rig.daq.configure(plan.rate_hz, ["gauge", *[c for c in ai if c != "gauge"]])
-        rig.conditioner.zero()
+    with interrupt_once() as guard:
+        out = out or default_out_path(plan)
+        rig = open_rig(rig_path, seed)  # a stop signal here: open_rig closes what it opened
         try:
-            writer = RunWriter(
-                out,
-                plan.text,
-                rig.rig_text,
-                rig.describe(),
-                rig.seed,
-                __version__,
-                protocol_name=plan.name,
-                protocol_file=str(plan.path),
-                rig_file=str(rig_path or ""),
-                planned_entries=[s.name for s in plan.steps],
-                overwrite=overwrite,
-            )
-        except FileExistsError:
-            raise
-        except OSError as e:  # unwritable --out (a directory, no permission, no such place)
-            why = e.strerror or str(e)
-            raise InputFileError(
-                [InputIssue(str(out), None, "--out", f"cannot create the run file: {why}")]
-            ) from None
-        with writer:
-            try:
-                rig.amplifier.enable()
-                left = plan.total_duration_s
-                for k, step in enumerate(plan.steps):
-                    _run_step(rig, writer, step, ai, chans, progress, k, len(plan.steps), left)
-                    outcome.entries.append(step.name)
-                    left -= step.duration_s
-                    if step.rest_after_s > 0:
-                        _rest(rig, step, progress, k, len(plan.steps), left)
-                        left -= step.rest_after_s
-                rig.safe_zero()
-                status, reason, code = "complete", "", 0
-            except KeyboardInterrupt:
-                ramp_to_zero(rig, _last_output(rig))
-                status, reason, code = "aborted", "interrupted (Ctrl-C)", 130
-            except LabrigError as e:
-                ramp_to_zero(rig, _last_output(rig))
-                status, reason, code = "failed", str(e), e.exit_code
-            except Exception as e:
-                ramp_to_zero(rig, _last_output(rig))
-                status, reason, code = "failed", f"{type(e).__name__}: {e}", 1
-            _record_final_voltage(writer, rig)
-            writer.finish(status, reason or None)
-            outcome.status, outcome.reason, outcome.exit_code = status, reason, code
-    finally:
-        rig.close()
+            with guard.defer():
+                return _run_on(rig, plan, rig_path, out, realtime, progress, overwrite, guard)
+        finally:
+            with guard.defer():
+                rig.close()
+
+
+@dataclass
+class _Setup:
+    ai: list[str]
+    chans: list[Channel]
+
+
+def _prepare(rig: Rig, plan: Plan, realtime: bool) -> _Setup:
+    """Devices ready, nothing energised: health, channels, DAQ rate, conditioner balance."""
+    if realtime and hasattr(rig.daq, "realtime"):
+        rig.daq.realtime = True
+    rig.check()
+    ai, chans = _channels(rig)
+    rig.daq.configure(plan.rate_hz, ["gauge", *[c for c in ai if c != "gauge"]])
+    rig.conditioner.zero()
+    return _Setup(ai, chans)
+
+
+def _check_disk(plan: Plan, rig: Rig, out: Path, chans: list[Channel], overwrite: bool) -> None:
+    """Refuse (exit 2, before anything is energised) a run whose file cannot fit on the disk
+    that holds ``out``: the estimated size plus the reserve against the free space."""
+    entries = [
+        (s.n_samples, s.rate_hz, 1 + len(chans) + len(getattr(s, "aux", None) or {}))
+        for s in plan.steps
+    ]
+    need = estimate_run_bytes(entries, len(plan.text) + len(rig.rig_text)) + RESERVE_BYTES
+    free = free_bytes(out)
+    if overwrite and out.is_file():
+        free += out.stat().st_size
+    if free < need:
+        samples = sum(e[0] for e in entries)
+        raise InputFileError(
+            [
+                InputIssue(
+                    str(out),
+                    None,
+                    "--out",
+                    f"not enough disk space: {free / 1e6:.2f} MB free where the run file goes, "
+                    f"the run needs about {need / 1e6:.2f} MB ({len(entries)} entries, "
+                    f"{samples} samples); free some space or choose another --out",
+                )
+            ]
+        )
+
+
+def _open_writer(
+    plan: Plan, rig: Rig, rig_path, out: Path, overwrite: bool, chans: list[Channel]
+) -> RunWriter:
+    """The run file, once its place exists and has room for it (InputFileError otherwise)."""
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        why = e.strerror or str(e)
+        raise InputFileError(
+            [InputIssue(str(out), None, "--out", f"cannot create the run file: {why}")]
+        ) from None
+    _check_disk(plan, rig, out, chans, overwrite)
+    try:
+        return RunWriter(
+            out,
+            plan.text,
+            rig.rig_text,
+            rig.describe(),
+            rig.seed,
+            __version__,
+            protocol_name=plan.name,
+            protocol_file=str(plan.path),
+            rig_file=str(rig_path or ""),
+            planned_entries=[s.name for s in plan.steps],
+            overwrite=overwrite,
+            reserve_bytes=RESERVE_BYTES,
+        )
+    except FileExistsError:
+        raise
+    except OSError as e:  # unwritable --out (a directory, no permission, no such place)
+        why = e.strerror or str(e)
+        raise InputFileError(
+            [InputIssue(str(out), None, "--out", f"cannot create the run file: {why}")]
+        ) from None
+
+
+def _run_on(rig, plan, rig_path, out, realtime, progress, overwrite, guard) -> RunOutcome:
+    """The run proper, with stop signals deferred (checked between blocks)."""
+    setup = _prepare(rig, plan, realtime)
+    guard.check()  # a stop signal during the setup: nothing written, nothing energised
+    writer = _open_writer(plan, rig, rig_path, out, overwrite, setup.chans)
+    outcome = RunOutcome(path=out, status="running", seed=rig.seed)
+    with writer:
+        try:
+            guard.check()
+            rig.amplifier.enable()
+            left = plan.total_duration_s
+            n = len(plan.steps)
+            for k, step in enumerate(plan.steps):
+                guard.check()
+                _run_step(rig, writer, step, setup.ai, setup.chans, progress, k, n, left, guard)
+                outcome.entries.append(step.name)
+                left -= step.duration_s
+                if step.rest_after_s > 0:
+                    _rest(rig, step, progress, k, n, left, guard)
+                    left -= step.rest_after_s
+            status, reason, code = "complete", "", 0
+        except KeyboardInterrupt as e:
+            sig = signum_of(e)
+            status, reason, code = "aborted", reason_for(sig), exit_code_for(sig)
+        except LabrigError as e:
+            status, reason, code = "failed", str(e), e.exit_code
+        except Exception as e:
+            status, reason, code = "failed", f"{type(e).__name__}: {e}", 1
+        ramp = rig.ramp_to_zero()
+        reason = _late_signals(guard, status, reason)
+        problems = record_end(writer, rig, ramp, status, reason, code)
+    if writer.close_error:
+        problems.append(writer.close_error)
+    outcome.status, outcome.reason, outcome.exit_code = status, reason, code
+    if problems:
+        outcome.reason += "; the run file could not record its end: " + "; ".join(problems)
     return outcome
 
 
-def _record_final_voltage(writer: RunWriter, rig: Rig) -> None:
-    """Store the amplifier's read-back output voltage, taken after the output was brought to
-    0 V at the end of the run (every exit path), as ``/run/final_amplifier_voltage_V`` (NaN and
-    an ``error`` attribute if it could not be read). Never raises."""
-    try:
-        try:
-            volts, err = float(rig.amplifier.read_voltage()), ""
-        except Exception as e:
-            volts, err = float("nan"), str(e) or type(e).__name__
-        group = writer._g  # the /run group: RunWriter has no public API for run-level values
-        ds = group.create_dataset("final_amplifier_voltage_V", data=volts)
-        ds.attrs["units"] = "V"
-        ds.attrs["long_name"] = "amplifier output voltage read back after the output was zeroed"
-        if err:
-            ds.attrs["error"] = err
-        writer.flush()
-    except Exception:
-        pass
-
-
-def _last_output(rig: Rig) -> float:
-    try:
-        return float(rig.amplifier.read_voltage())
-    except Exception:
-        return 0.0
+def _late_signals(guard: SignalGuard, status: str, reason: str) -> str:
+    """Name stop signals that arrived while the run was already ending for another cause."""
+    if status == "aborted" or not guard.received:
+        return reason
+    late = ", ".join(dict.fromkeys(reason_for(s).split(" (")[0] for s in guard.received))
+    note = f"stop signal(s) during the shutdown ({late}) waited for the output to reach 0 V"
+    return f"{reason}; {note}" if reason else note

@@ -1,9 +1,11 @@
-"""Every injected fault ends in a clear DeviceError and 0 V at the amplifier.
+"""Every injected fault ends in a clear DeviceError and, through the Rig, 0 V at the amplifier.
 
 The faults are injected in the simulators (the drivers under test are the real ones, talking
 over their transports): a serial link dropped mid-command, missing and garbled GCS answers,
 Modbus timeouts, exception responses and damaged frames, amplifier overload and
-over-temperature, and a conditioner excitation fault.
+over-temperature, and a conditioner excitation fault. A driver leaves the output where it is
+when it raises (no step to 0 V); the Rig ramps it down (tests/test_safety_ramp.py measures the
+ramp's slope).
 """
 
 from __future__ import annotations
@@ -65,7 +67,10 @@ def test_gcs_faults(rig, fault, command, op, operation, words):
     assert e.device.startswith("amplifier (PI E-503 at socket://127.0.0.1:")
     assert e.operation.startswith(operation)
     assert words in e.detail
-    assert_zero(rig)  # the driver zeroed the output before raising
+    # the driver did not step the output to 0 V on its own: the Rig ramps it
+    assert rig.sim.bench.amp.v_out == pytest.approx(50.0, abs=0.01)
+    rig.safe_zero()
+    assert_zero(rig)
     assert "E-503" in rig.amplifier.identify()  # and reconnects on the next call
 
 
@@ -95,10 +100,13 @@ def test_amplifier_flags(rig, flag):
     assert_zero(rig)
 
 
-def test_amplifier_driver_check_zeroes_itself(rig):
+def test_amplifier_driver_check_leaves_the_output_to_the_rig(rig):
     rig.sim.bench.inject("overload")
     with pytest.raises(DeviceError, match="overflow"):
         rig.amplifier.check()
+    assert rig.sim.bench.amp.v_out == pytest.approx(50.0, abs=0.01)  # no step by the driver
+    with pytest.raises(DeviceError, match="overflow"):
+        rig.check()  # the Rig ramps to 0 V, then raises
     assert rig.sim.bench.amp.v_out == 0.0 and rig.sim.bench.amp.online
 
 

@@ -7,7 +7,12 @@ faster than real time, unless ``realtime`` is set (then each block is released w
 sample's time has passed on the wall clock).
 
 After a playback ends the AO keeps its last value (as a DAQ's DAC does); :meth:`SimDAQ.stop`
-aborts a playback and writes 0 V.
+aborts a playback and writes 0 V, :meth:`SimDAQ.abort_playback` aborts it holding the value.
+
+A static write (:meth:`SimDAQ.write_static`, no playback) advances the bench by ``settle_s`` of
+simulated time, or with ``realtime`` by the wall-clock time since the bench last advanced (at
+least one sample, at most ``MAX_STATIC_ADVANCE_S``): the bench then follows the wall clock, so
+a ramp written by static writes has, on the bench, the slope it has in real time.
 """
 
 from __future__ import annotations
@@ -22,6 +27,9 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from labrig.errors import DeviceError
 from labrig.instruments import AcquiredBlock, DriverContext, DriverInfo
+
+#: realtime static writes advance the bench by at most this much simulated time (s)
+MAX_STATIC_ADVANCE_S = 1.0
 
 
 class SimDAQSettings(BaseModel):
@@ -47,6 +55,7 @@ class SimDAQ:
         self._abort = False
         self._closed = False
         self._active: Iterator[AcquiredBlock] | None = None
+        self._wall: float | None = None  # realtime: wall-clock time the bench has reached
 
     def _check_open(self, operation: str) -> None:
         if self._closed:
@@ -127,6 +136,7 @@ class SimDAQ:
                     delay = due - time.monotonic()
                     if delay > 0:
                         time.sleep(delay)
+                    self._wall = due
                 yield AcquiredBlock(start, {c: out[c] for c in self.channels})
 
     def write_static(self, volts: float) -> None:
@@ -136,14 +146,33 @@ class SimDAQ:
             raise DeviceError(self.device, "write_static", f"{volts} V outside {lo:g}..{hi:g} V")
         with self.bench.lock:
             self.bench.ao_level = float(volts)
-        self.bench.settle()
+        self._advance_static()
 
-    def stop(self) -> None:
+    def _advance_static(self) -> None:
+        """Let the bench settle after a static change: ``settle_s``, or the wall-clock time
+        since it last advanced when ``realtime``."""
+        if not self.realtime:
+            self.bench.settle()
+            return
+        now = time.monotonic()
+        elapsed = now - self._wall if self._wall is not None else 0.0
+        self.bench.settle(min(max(elapsed, 1.0 / self.rate_hz), MAX_STATIC_ADVANCE_S))
+        self._wall = now
+
+    def ao_level(self) -> float:
+        """The AO volts output now (the last sample played or written)."""
+        return float(self.bench.ao_level)
+
+    def abort_playback(self) -> None:
+        """End a playback; the AO holds the last value it played."""
         self._abort = True
         self._close_active()
+
+    def stop(self) -> None:
+        self.abort_playback()
         with self.bench.lock:
             self.bench.ao_level = 0.0
-        self.bench.settle()
+        self._advance_static()
 
     def close(self) -> None:
         if not self._closed:
