@@ -233,7 +233,8 @@ class VirtualBench:
         self.rng = np.random.default_rng(seed)
         self.lock = threading.RLock()
         c = self.config
-        self.amp = AmplifierState(vmi_V=c.amplifier.out_min_V, vma_V=c.amplifier.out_max_V)
+        lo, hi = self.allowed_range_V
+        self.amp = AmplifierState(vmi_V=lo, vma_V=hi)  # the rig's limits from power-on
         g = c.gauge
         self.cond = ConditionerState(
             excitation_V=g.excitation_V, gain=g.gain, filter_hz=g.filter_hz
@@ -251,6 +252,14 @@ class VirtualBench:
         self.set_rate(rate_hz)
 
     # -- derived parameters --------------------------------------------------------------------
+    @property
+    def allowed_range_V(self) -> tuple[float, float]:
+        """Output range the simulated amplifier allows VMI/VMA (and so SVA) within (V): the
+        rig's limits, inside the amplifier's hardware range ``out_min_V``..``out_max_V``."""
+        a, lim = self.config.amplifier, self.limits
+        lo, hi = max(a.out_min_V, lim.v_min_V), min(a.out_max_V, lim.v_max_V)
+        return (lo, hi) if lo < hi else (a.out_min_V, a.out_max_V)
+
     @property
     def c_eff_F(self) -> float:
         a, lim = self.config.amplifier, self.limits

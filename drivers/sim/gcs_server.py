@@ -6,6 +6,12 @@ line but the last with a space before the LF). Reach it with pyserial:
 ``serial.serial_for_url("socket://127.0.0.1:PORT")``. The amplifier's state lives in the
 :class:`~labrig.drivers.sim.bench.VirtualBench`.
 
+Limits: VMI/VMA start at the rig's voltage limits and can be set only within them (error 17
+beyond), so ``SVA`` beyond the rig's range is refused from the first command. Numbers are plain
+decimals (``[+-]digits[.digits][e[+-]digits]``; ``1_0``, ``nan`` or ``0x10`` are syntax errors,
+error 1). At most ``MAX_CONNECTIONS`` clients are served at once; a further client is
+disconnected at once.
+
 Faults for tests (:meth:`GCSServer.inject`), each for the next ``count`` matching commands:
 ``drop`` (close the connection after the command arrives, without executing it: a link dropped
 mid-command), ``silent`` (execute, never answer), ``garble`` (execute, answer with damaged bytes).
@@ -15,12 +21,19 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
+import re
 import socket
 import threading
 from collections import deque
 from dataclasses import dataclass
 
 log = logging.getLogger("labrig.sim.gcs")
+
+#: clients served at once (one thread each); a further connection is closed at once
+MAX_CONNECTIONS = 16
+#: a GCS number: plain decimal with an optional exponent (no underscores, nan, inf or hex)
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 
 IDN = "labrig virtual bench, E-503 amplifier / E-517-style GCS interface (simulated), 0, 1.0.0"
 
@@ -57,8 +70,11 @@ class _Fault:
 
 
 def _num(s: str) -> float:
+    """A GCS number (ValueError unless it matches ``_NUMBER`` and is finite)."""
+    if not _NUMBER.fullmatch(s):
+        raise ValueError(s)
     x = float(s)
-    if x != x or x in (float("inf"), float("-inf")):
+    if not math.isfinite(x):
         raise ValueError(s)
     return x
 
@@ -138,9 +154,16 @@ class GCSServer:
                 continue
             except OSError:
                 return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             with self._lock:
-                self._conns.add(conn)
+                full = len(self._conns) >= MAX_CONNECTIONS
+                if not full:
+                    self._conns.add(conn)
+            if full:
+                log.warning("refusing a client: %d connections already", MAX_CONNECTIONS)
+                with contextlib.suppress(OSError):
+                    conn.close()
+                continue
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
             t = threading.Thread(target=self._serve, args=(conn,), name="gcs-conn", daemon=True)
             t.start()
             self._threads = [x for x in self._threads if x.is_alive()] + [t]
@@ -245,15 +268,12 @@ class GCSServer:
                     else:
                         x = _num(val)
                         with b.lock:
-                            lo_hw, hi_hw = (
-                                b.config.amplifier.out_min_V,
-                                b.config.amplifier.out_max_V,
-                            )
+                            lo, hi = b.allowed_range_V
                             if cmd == "SVA" and not a.vmi_V <= x <= a.vma_V:
                                 return self._fail(17)
-                            if cmd == "VMA" and not (a.vmi_V < x <= hi_hw):
+                            if cmd == "VMA" and not (a.vmi_V < x <= hi):
                                 return self._fail(17)
-                            if cmd == "VMI" and not (lo_hw <= x < a.vma_V):
+                            if cmd == "VMI" and not (lo <= x < a.vma_V):
                                 return self._fail(17)
                             setattr(a, {"SVA": "sva_V", "VMA": "vma_V", "VMI": "vmi_V"}[cmd], x)
                 b.settle()

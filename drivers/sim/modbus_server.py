@@ -78,6 +78,8 @@ class ModbusConditionerServer:
         self._thread.start()
         if not ready.wait(5.0):
             raise RuntimeError("the Modbus simulator did not start within 5 s")
+        if isinstance(self._error, OSError):  # e.g. the port is in use
+            raise self._error
         if self._error is not None:
             raise RuntimeError(f"the Modbus simulator could not start: {self._error}")
         return self

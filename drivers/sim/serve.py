@@ -7,10 +7,15 @@ Started together, all on 127.0.0.1 (free ports unless given): the GCS responder 
 ``127.0.0.1:PORT`` and ``socket://127.0.0.1:PORT``). The DAQ is in-process only; in ``serve``
 the bench clock runs in real time with the DAQ output held at 0 V, so ``SVA`` in ONLINE mode
 moves the output and ``VOL?`` follows it.
+
+The simulated amplifier applies the rig's voltage limits from the start (VMI/VMA at the rig's
+``v_min_V``/``v_max_V``, never beyond them). A fixed port that cannot be bound raises
+:class:`SimulatorPortError` (exit 2, naming the rig file's ``simulator.*_port`` field).
 """
 
 from __future__ import annotations
 
+import errno
 import threading
 import time
 from pathlib import Path
@@ -19,7 +24,31 @@ from labrig.drivers.sim.bench import BenchConfig, VirtualBench
 from labrig.drivers.sim.gcs_server import GCSServer
 from labrig.drivers.sim.modbus_server import ModbusConditionerServer
 
+from labrig.errors import InputFileError, InputIssue, LabrigError
+from labrig.interrupts import interrupt_once
 from labrig.limits import RigLimits
+from labrig.rigspec import load_rig
+
+#: simulator kind -> the rig file's port field
+PORT_FIELDS = {
+    "gcs": "simulator.gcs_port",
+    "modbus_tcp": "simulator.modbus_tcp_port",
+    "modbus_rtu": "simulator.modbus_rtu_port",
+}
+
+
+class SimulatorPortError(LabrigError):
+    """A simulator could not listen on its port (exit 2: the rig file names the port)."""
+
+    exit_code = 2
+
+    def __init__(self, kind: str, port: int, reason: str):
+        self.kind, self.port, self.field = kind, port, PORT_FIELDS[kind]
+        self.detail = (
+            f"the {kind} simulator cannot listen on 127.0.0.1:{port} ({reason}); "
+            "choose a free port, or 0 for any free one"
+        )
+        super().__init__(f"{self.field}: {self.detail}")
 
 
 class Simulators:
@@ -49,9 +78,15 @@ class Simulators:
         self._clock_stop = threading.Event()
 
     def start(self) -> Simulators:
+        kinds = {"gcs": self.gcs, "modbus_tcp": self.modbus_tcp, "modbus_rtu": self.modbus_rtu}
         try:
-            for srv in (self.gcs, self.modbus_tcp, self.modbus_rtu):
-                srv.start()
+            for kind, srv in kinds.items():
+                try:
+                    srv.start()
+                except OSError as e:
+                    in_use = e.errno == errno.EADDRINUSE
+                    why = "the port is in use" if in_use else (e.strerror or str(e))
+                    raise SimulatorPortError(kind, srv.port, why) from None
                 self._started.append(srv)
         except BaseException:
             self.stop()
@@ -100,26 +135,34 @@ class Simulators:
 
 def serve(rig_path: Path | None) -> None:
     """Start the simulators of a rig file's bench (default rig if None), print their addresses
-    and run until Ctrl-C or SIGTERM (both stop the servers and free their ports)."""
-    from labrig.rigfile import load_rig
-    from labrig.runner import interrupt_once
-
+    and run until Ctrl-C, SIGTERM, SIGHUP or SIGQUIT (each stops the servers and frees their
+    ports)."""
     spec = load_rig(rig_path)
-    sims = Simulators(
-        spec.bench_config or BenchConfig(), spec.limits, spec.seed_hint, spec.sim_ports
-    ).start()
-    sims.run_clock()
-    print(f"labrig virtual bench for rig {spec.name!r} (truth: {sims.bench.config.truth.preset})")
-    print(f"  amplifier (GCS, pyserial URL):     {sims.endpoints['gcs']}")
-    print(f"  conditioner (Modbus TCP):          {sims.endpoints['modbus_tcp']}  unit 1")
-    print(f"  conditioner (Modbus RTU framing):  {sims.endpoints['modbus_rtu']}  unit 1")
-    print("  try: python -m serial.tools.miniterm --eol LF " + sims.endpoints["gcs"])
-    print("Press Ctrl-C to stop.", flush=True)
     with interrupt_once():
         try:
+            sims = Simulators(
+                spec.bench_config or BenchConfig(), spec.limits, spec.seed_hint, spec.sim_ports
+            ).start()
+        except SimulatorPortError as e:
+            raise InputFileError([InputIssue(spec.source, None, e.field, e.detail)]) from None
+        try:
+            sims.run_clock()
+            _print_addresses(spec.name, sims)
             while True:
                 time.sleep(0.5)
         except KeyboardInterrupt:
             print("stopping the simulators", flush=True)
         finally:
             sims.stop()
+
+
+def _print_addresses(rig_name: str, sims: Simulators) -> None:
+    lo, hi = sims.bench.allowed_range_V
+    ep = sims.endpoints
+    print(f"labrig virtual bench for rig {rig_name!r} (truth: {sims.bench.config.truth.preset})")
+    print(f"  amplifier output limits (VMI/VMA): {lo:g} to {hi:g} V (the rig's limits)")
+    print(f"  amplifier (GCS, pyserial URL):     {ep['gcs']}")
+    print(f"  conditioner (Modbus TCP):          {ep['modbus_tcp']}  unit 1")
+    print(f"  conditioner (Modbus RTU framing):  {ep['modbus_rtu']}  unit 1")
+    print("  try: python -m serial.tools.miniterm --eol LF " + ep["gcs"])
+    print("Press Ctrl-C to stop.", flush=True)

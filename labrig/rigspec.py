@@ -1,0 +1,309 @@
+"""Rig files: which driver per role, addresses, calibrations, limits, and the simulated bench.
+
+A rig file is YAML validated by pydantic (errors name the file, the line and the field). Top
+level keys::
+
+    name: sim                      # required
+    description: ...               # optional, free text
+    daq:         {driver: sim_daq, ...driver settings}
+    amplifier:   {driver: pi_e503, url: sim, gain_V_per_V: 10, ...}
+    conditioner: {driver: strain_modbus, transport: tcp, address: sim, ...}
+    limits:      {v_min_V: -20, v_max_V: 100, capacitance_F: 6e-6, ...}   (labrig.limits.RigLimits)
+    bench:       {truth: ..., amplifier: ..., gauge: ..., daq: ..., effects: [...]}  (simulated)
+    simulator:   {seed: null, gcs_port: 0, modbus_tcp_port: 0, modbus_rtu_port: 0}
+
+Each role's keys besides ``driver`` are that driver's settings (its pydantic model). Drivers are
+found through the ``labrig.drivers`` entry-point group (built-in ones also without installation).
+A rig is *simulated* when it has a ``bench`` section, uses the ``sim_daq`` driver, or gives the
+address ``sim``: :func:`labrig.rigfile.open_rig` then starts the virtual bench and its protocol
+servers on 127.0.0.1 and the real drivers talk to them over their transports. Full reference:
+``docs/instruments.md``.
+
+This module reads and validates (it opens nothing and starts nothing); :mod:`labrig.rigfile`
+opens a rig. The simulators (:mod:`labrig.drivers.sim.serve`) read rig files from here, so
+imports run one way: ``rigfile -> drivers.sim.serve -> rigspec``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
+
+from labrig.errors import InputFileError, InputIssue
+from labrig.instruments import DriverInfo
+from labrig.limits import RigLimits
+from labrig.yamlio import _line_index, issues_from_validation, read_yaml
+
+log = logging.getLogger("labrig.rigspec")
+
+ENTRY_POINT_GROUP = "labrig.drivers"
+ROLES = ("daq", "amplifier", "conditioner")
+
+BUILTIN_DRIVERS = {
+    "sim_daq": "labrig.drivers.sim.daq:DRIVER",
+    "pi_e503": "labrig.drivers.pi_e503:DRIVER",
+    "strain_modbus": "labrig.drivers.strain_modbus:DRIVER",
+    "nidaqmx": "labrig.drivers.ni_daqmx:DRIVER",
+}
+
+DEFAULT_RIG_NAME = "<built-in default rig: experiments/rigs/sim.yaml>"
+
+#: the default simulated rig (kept identical to experiments/rigs/sim.yaml; a test checks)
+DEFAULT_RIG_YAML = """\
+# The default simulated rig: the seed's bench on the virtual bench.
+# A PI E-503 (gain 10) drives a P-888.51-class stack (6 uF, 0-100 V); a 120 ohm foil gauge on a
+# DH3840-class conditioner (1.085 mV/ue) feeds a 16-bit DAQ. The simulators start on 127.0.0.1
+# and the real drivers talk to them over their transports (address "sim").
+name: sim
+description: Virtual bench with the seed's instruments (paper truth, realistic noise)
+
+daq:
+  driver: sim_daq
+  realtime: false
+
+amplifier:
+  driver: pi_e503
+  url: sim                   # pyserial URL of the GCS link; sim = the simulated amplifier
+  timeout_s: 0.5
+  axis: A
+  channel: "1"
+  gain_V_per_V: 10.0         # calibration: actuator volts per DAQ AO volt
+  monitor_V_per_V: 0.05      # amp_monitor channel volts per actuator volt
+  apply_voltage_limits: true # set the amplifier's VMI/VMA to limits.v_min_V/v_max_V
+
+conditioner:
+  driver: strain_modbus
+  transport: tcp             # tcp (address host:port) or rtu (serial port or pyserial URL)
+  address: sim
+  unit: 1
+  timeout_s: 0.5
+  excitation_V: 2.0
+  gain: 1
+  filter_hz: 0               # conditioner low-pass, 0 = off
+  sensitivity_mV_per_ue: 1.085   # calibration at gain 1
+  zero_on_open: true
+
+limits:
+  v_min_V: -20.0
+  v_max_V: 100.0
+  capacitance_F: 6.0e-6
+  large_signal_factor: 1.7
+  i_peak_A: 0.18
+  i_avg_A: 0.12
+  rate_min_hz: 10.0
+  rate_max_hz: 100000.0
+
+bench:
+  truth:
+    preset: paper            # paper (labrig.model with a preset) or hybrid (seed section 4)
+    paper_params: PAPER_TABLE1
+  amplifier:
+    gain_V_per_V: 10.0
+    out_min_V: -30.0
+    out_max_V: 130.0
+    current_limit: true      # peak/average current from limits (i_peak_A, i_avg_A)
+    monitor_V_per_V: 0.05
+  gauge:
+    sensitivity_mV_per_ue: 1.085
+    noise_ue: 2.0
+    bridge_offset_ue: 40.0
+  daq:
+    ai_range_V: 10.0
+    ai_bits: 16
+    ao_range_V: 10.0
+    ao_bits: 16
+  effects: []                # e.g. [{name: self_heating}, {name: mains_pickup, amplitude_mV: 3}]
+"""
+
+
+class _Role(BaseModel):
+    model_config = ConfigDict(extra="allow")
+
+    driver: str = Field(description="driver name (labrig.drivers entry point)")
+
+
+class SimulatorSettings(BaseModel):
+    """Seed and ports of the simulators (0 = a free port)."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
+
+    seed: int | None = Field(None, description="bench RNG seed when open_rig is given none")
+    gcs_port: int = Field(0, ge=0, le=65535)
+    modbus_tcp_port: int = Field(0, ge=0, le=65535)
+    modbus_rtu_port: int = Field(0, ge=0, le=65535)
+
+
+def _bench_model():
+    from labrig.drivers.sim.bench import BenchConfig
+
+    return BenchConfig
+
+
+def _outline() -> type[BaseModel]:
+    return create_model(
+        "RigFileOutline",
+        __config__=ConfigDict(extra="forbid", strict=True),
+        name=(str, Field(min_length=1)),
+        description=(str, ""),
+        daq=(_Role, ...),
+        amplifier=(_Role, ...),
+        conditioner=(_Role, ...),
+        limits=(RigLimits, RigLimits()),
+        bench=(_bench_model() | None, None),
+        simulator=(SimulatorSettings, SimulatorSettings()),
+    )
+
+
+# -- driver registry ------------------------------------------------------------------------
+
+
+def _load_ref(ref: str) -> DriverInfo:
+    mod, _, attr = ref.partition(":")
+    return getattr(importlib.import_module(mod), attr)
+
+
+def driver_names() -> dict[str, str]:
+    """Driver name -> ``module:object`` reference, built-in and from entry points."""
+    names = dict(BUILTIN_DRIVERS)
+    try:
+        for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+            names[ep.name] = ep.value
+    except Exception as e:  # a broken installation must not hide the built-in drivers
+        log.warning("reading the %s entry points failed: %s", ENTRY_POINT_GROUP, e)
+    return names
+
+
+def get_driver(name: str, names: dict[str, str] | None = None) -> DriverInfo:
+    """The :class:`DriverInfo` registered as ``name`` (KeyError if there is none)."""
+    ref = (names or driver_names()).get(name)
+    if ref is None:
+        raise KeyError(name)
+    info = _load_ref(ref)
+    if not isinstance(info, DriverInfo):
+        raise TypeError(f"entry point {name!r} ({ref}) is not a labrig DriverInfo")
+    return info
+
+
+# -- loading --------------------------------------------------------------------------------
+
+
+@dataclass
+class RigSpec:
+    """A validated rig file: settings per role and their drivers."""
+
+    name: str
+    source: str
+    text: str
+    description: str
+    limits: RigLimits
+    drivers: dict[str, DriverInfo]
+    settings: dict[str, BaseModel]
+    bench_config: Any
+    simulator: SimulatorSettings
+
+    @property
+    def simulated(self) -> bool:
+        addr = [getattr(s, k, None) for s in self.settings.values() for k in ("url", "address")]
+        return (
+            self.bench_config is not None or self.drivers["daq"].name == "sim_daq" or "sim" in addr
+        )
+
+    @property
+    def seed_hint(self) -> int | None:
+        return self.simulator.seed
+
+    @property
+    def sim_ports(self) -> dict[str, int]:
+        s = self.simulator
+        return {"gcs": s.gcs_port, "modbus_tcp": s.modbus_tcp_port, "modbus_rtu": s.modbus_rtu_port}
+
+
+def _parse_text(text: str, name: str) -> tuple[Any, dict]:
+    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)(text)
+    try:
+        node = loader.get_single_node()
+        data = loader.construct_document(node) if node is not None else None
+    except yaml.YAMLError as e:
+        raise InputFileError([InputIssue(name, None, "", f"YAML error: {e}")]) from e
+    finally:
+        loader.dispose()
+    return data, (_line_index(node) if node is not None else {})
+
+
+def load_rig(path: Path | str | None = None) -> RigSpec:
+    """Read and validate a rig file (None: the built-in default rig) without opening anything."""
+    if path is None:
+        name, text = DEFAULT_RIG_NAME, DEFAULT_RIG_YAML
+        data, lines = _parse_text(text, name)
+    else:
+        name = str(path)
+        data, lines, text = read_yaml(path)
+    if not isinstance(data, dict):
+        what = "empty" if data is None else f"a {type(data).__name__}"
+        line = lines.get((), 1)
+        raise InputFileError([InputIssue(name, line, "", f"expected a YAML mapping, got {what}")])
+    outline_model = _outline()
+    try:
+        outline = outline_model.model_validate(data)
+    except ValidationError as e:
+        raise InputFileError(issues_from_validation(name, e, lines)) from e
+    # resolve the drivers, then validate each role section against its driver's settings
+    issues: list[InputIssue] = []
+    drivers: dict[str, DriverInfo] = {}
+    names = driver_names()
+    for role in ROLES:
+        drv = getattr(outline, role).driver
+        line = lines.get((role, "driver"))
+        try:
+            info = get_driver(drv, names)
+        except KeyError:
+            known = ", ".join(sorted(names))
+            issues.append(
+                InputIssue(
+                    name, line, f"{role}.driver", f"unknown driver {drv!r}; known drivers: {known}"
+                )
+            )
+            continue
+        except Exception as e:
+            issues.append(InputIssue(name, line, f"{role}.driver", f"driver {drv!r} fails: {e}"))
+            continue
+        if info.role != role:
+            issues.append(
+                InputIssue(
+                    name,
+                    line,
+                    f"{role}.driver",
+                    f"driver {drv!r} is a {info.role} driver, not a {role} one",
+                )
+            )
+            continue
+        drivers[role] = info
+    if issues:
+        raise InputFileError(issues)
+    full = create_model(
+        "RigFileResolved",
+        __base__=outline_model,
+        **{role: (drivers[role].settings, ...) for role in ROLES},
+    )
+    try:
+        resolved = full.model_validate(data)
+    except ValidationError as e:
+        raise InputFileError(issues_from_validation(name, e, lines)) from e
+    return RigSpec(
+        name=resolved.name,
+        source=name,
+        text=text,
+        description=resolved.description,
+        limits=resolved.limits,
+        drivers=drivers,
+        settings={role: getattr(resolved, role) for role in ROLES},
+        bench_config=resolved.bench,
+        simulator=resolved.simulator,
+    )
