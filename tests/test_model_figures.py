@@ -1,4 +1,4 @@
-"""The seed's section-2 figures: files written, valid PNGs, fast enough for CI."""
+"""The paper's section-2 figures: files written, valid PNGs, fast enough for CI."""
 
 from __future__ import annotations
 

@@ -1,11 +1,11 @@
 """Import, fit and report on real measurements (skipped when the data are absent).
 
-``../shared/data/real/yan9a-micromanipulator/`` (see its README): a piezo micromanipulator at
-1 Hz, 200 Hz sampling, no time column; column 1 the command at DAQ level (V), column 5 a
-capacitive sensor in raw units. The raw reading rises with the voltage and its loop runs
-counter-clockwise (rising branch below the falling one), the orientation of a piezo's strain
-lagging its voltage, so it is imported as it is (no sign flip) and fitted in raw units per DAQ
-volt. Both files start mid-stroke (not at rest) and the sensor's zero is arbitrary: the fit
+The yan9a-micromanipulator data set (:data:`REAL`; its README describes it): a piezo
+micromanipulator at 1 Hz, 200 Hz sampling, no time column; column 1 the command at DAQ level
+(V), column 5 a capacitive sensor in raw units. The raw reading rises with the voltage and its
+loop runs counter-clockwise (rising branch below the falling one), the orientation of a piezo's
+strain lagging its voltage, so it is imported as it is (no sign flip) and fitted in raw units
+per DAQ volt. Both files start mid-stroke (not at rest) and the sensor's zero is arbitrary: the fit
 uses its automatic two-period warm-up and one offset per entry.
 """
 

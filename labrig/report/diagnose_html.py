@@ -1,7 +1,7 @@
 """``DIR/diagnosis.html``: the diagnosis as one self-contained HTML page (inline CSS, base64
-PNG figures from matplotlib's Agg canvas, no scripts), in the style of ``labrig report``
-(its CSS and helpers are imported from :mod:`labrig.report.html` / :mod:`labrig.report.plots`
-when present; a minimal fallback otherwise).
+PNG figures from matplotlib's Agg canvas, no scripts), in the style of ``labrig report`` (its
+CSS and helpers from :mod:`labrig.report.html` and :mod:`labrig.report.plots`);
+:func:`write_diagnosis` writes it beside ``diagnosis.json``.
 
 Figures: per-entry residual before and after (time series), and the held-out NRMSE of every
 candidate tried against the base model's.
@@ -9,45 +9,20 @@ candidate tried against the base model's.
 
 from __future__ import annotations
 
-import base64
-import io
+import json
 from html import escape
+from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from labrig.analysis.diagnose import Diagnosis
 from labrig.analysis.records import Record
+from labrig.report.html import CSS, img
+from labrig.report.plots import png
 
-try:  # share the look of ``labrig report``
-    from labrig.report.html import CSS as _CSS
-except Exception:  # pragma: no cover - the report module is optional here
-    _CSS = (
-        "body{font-family:Arial,sans-serif;max-width:1100px;margin:auto;padding:20px;"
-        "font-size:14px}table{border-collapse:collapse}td,th{padding:3px 8px;"
-        "border-bottom:1px solid #ddd}td.num{text-align:right}img{max-width:100%}"
-    )
-
-__all__ = ["render_diagnosis"]
-
-
-def _png(fig: Figure) -> bytes:
-    try:
-        from labrig.report.plots import png
-
-        return png(fig)
-    except Exception:  # pragma: no cover
-        FigureCanvasAgg(fig)
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=100)
-        return buf.getvalue()
-
-
-def _img(png: bytes, alt: str) -> str:
-    uri = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
-    return f'<img src="{uri}" alt="{escape(alt)}">'
+__all__ = ["render_diagnosis", "write_diagnosis"]
 
 
 def _residual_figure(d: Diagnosis, records: list[Record]) -> bytes:
@@ -71,7 +46,7 @@ def _residual_figure(d: Diagnosis, records: list[Record]) -> bytes:
         if k % cols == 0:
             ax.set_ylabel("residual (ue)", fontsize=8)
     fig.tight_layout()
-    return _png(fig)
+    return png(fig)
 
 
 def _candidates_figure(d: Diagnosis) -> bytes | None:
@@ -93,7 +68,7 @@ def _candidates_figure(d: Diagnosis) -> bytes | None:
     ax.tick_params(labelsize=8)
     ax.grid(True, axis="x", alpha=0.3)
     fig.tight_layout()
-    return _png(fig)
+    return png(fig)
 
 
 def _num(v: Any) -> str:
@@ -108,7 +83,7 @@ def render_diagnosis(d: Diagnosis, records: list[Record], title: str = "labrig d
     """The page (a string)."""
     h = []
     h.append(f"<!doctype html><html><head><meta charset='utf-8'><title>{escape(title)}</title>")
-    h.append(f"<style>{_CSS}</style></head><body><main>")
+    h.append(f"<style>{CSS}</style></head><body><main>")
     h.append(f"<h1>{escape(title)}</h1>")
     box = "ok" if d.classification in ("explained", "consistent_with_noise") else "notes"
     h.append(f"<h2>Verdict</h2><div class='{box}'><p>{escape(d.verdict)}</p></div>")
@@ -145,9 +120,9 @@ def render_diagnosis(d: Diagnosis, records: list[Record], title: str = "labrig d
             f"<td>{escape(c['evidence'])}</td></tr>"
         )
     h.append("</table>")
-    png = _candidates_figure(d)
-    if png:
-        h.append(f"<figure>{_img(png, 'held-out NRMSE of the candidates')}")
+    bars = _candidates_figure(d)
+    if bars:
+        h.append(f"<figure>{img(bars, 'held-out NRMSE of the candidates')}")
         h.append(
             "<figcaption>Held-out NRMSE of the base model and of each candidate tried "
             "(red: added).</figcaption></figure>"
@@ -165,7 +140,7 @@ def render_diagnosis(d: Diagnosis, records: list[Record], title: str = "labrig d
             f"<td class='num'>{_num(e.floor_pct)}</td><td>{escape(harm)}</td></tr>"
         )
     h.append("</table>")
-    h.append(f"<h2>Residuals</h2><figure>{_img(_residual_figure(d, records), 'residuals')}")
+    h.append(f"<h2>Residuals</h2><figure>{img(_residual_figure(d, records), 'residuals')}")
     h.append(
         "<figcaption>Measured minus predicted strain, base model (grey) and with the added "
         "effects (red).</figcaption></figure>"
@@ -175,3 +150,12 @@ def render_diagnosis(d: Diagnosis, records: list[Record], title: str = "labrig d
         h.append("</ul>")
     h.append(f"<p class='small'>Diagnosis took {d.elapsed_s:.1f} s.</p></main></body></html>")
     return "".join(h)
+
+
+def write_diagnosis(
+    out_dir: Path, doc: dict[str, Any], d: Diagnosis, records: list[Record], title: str
+) -> None:
+    """``out_dir/diagnosis.json`` (the JSON contract ``doc``) and ``out_dir/diagnosis.html``."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "diagnosis.json").write_text(json.dumps(doc, indent=2) + "\n")
+    (out_dir / "diagnosis.html").write_text(render_diagnosis(d, records, title=title))

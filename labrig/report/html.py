@@ -68,10 +68,12 @@ pre { background: var(--band); padding: 10px; overflow-x: auto; font-size: 12px;
 
 
 def data_uri(png: bytes) -> str:
+    """The PNG ``png`` as a ``data:`` URI."""
     return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
 
 
-def _img(png: bytes | None, alt: str) -> str:
+def img(png: bytes | None, alt: str) -> str:
+    """An ``<img>`` of the PNG ``png`` inlined as a data URI (empty without a figure)."""
     if png is None:
         return ""
     return f'<img src="{data_uri(png)}" alt="{escape(alt)}">'
@@ -319,7 +321,7 @@ def _entry_card(e: EntryView, data: ReportData, png: bytes | None) -> str:
     return (
         f'<div class="card" id="{escape(anchor)}"><h3>{escape(e.name)}</h3>'
         f'<div class="meta">{escape(", ".join(drive))} · NRMSE {escape("; ".join(scores))}</div>'
-        f"<figure>{_img(png, 'loop and time series of ' + e.name)}</figure></div>"
+        f"<figure>{img(png, 'loop and time series of ' + e.name)}</figure></div>"
     )
 
 
@@ -386,10 +388,11 @@ def render(
     )
     if frequency_png is not None:
         freq = (
-            f"<figure>{_img(frequency_png, 'loop area and strain shift versus frequency')}"
+            f"<figure>{img(frequency_png, 'loop area and strain shift versus frequency')}"
             "<figcaption>Measured (circles) and predicted (lines) over the last full period of "
-            "each periodic entry, one colour per drive amplitude (cf. seed Fig. 10). The baselines "
-            "are rate-independent: their loops do not change with frequency.</figcaption></figure>"
+            "each periodic entry, one colour per drive amplitude (cf. the paper's Fig. 10). The "
+            "baselines are rate-independent: their loops do not change with frequency."
+            "</figcaption></figure>"
         )
     else:
         freq = (
@@ -420,8 +423,9 @@ def render(
 {extra_html}
 <h2 id="entries">Entries: model versus measurement</h2>
 <p class="small">Left: voltage-strain loop, measured (dark) and our model (red) over the scored
-samples (cf. seed Fig. 9). Right: strain in time and the residual (measured − model) underneath
-(cf. seed Fig. 12); dashed lines at ±1σ of the noise when known; a grey area is the warm-up.</p>
+samples (cf. the paper's Fig. 9). Right: strain in time and the residual (measured − model)
+underneath (cf. the paper's Fig. 12); dashed lines at ±1σ of the noise when known; a grey area is
+the warm-up.</p>
 {cards}
 <h2 id="provenance">Provenance</h2>
 {_provenance(data)}

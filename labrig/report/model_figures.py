@@ -1,22 +1,24 @@
-"""The seed's section-2 figures regenerated from :mod:`labrig.model` (PNG, matplotlib Agg).
+"""The paper's section-2 figures regenerated from :mod:`labrig.model` (PNG, matplotlib Agg).
 
 ``write_model_figures(out)`` writes four files into ``out`` and returns their paths:
 
-- ``fig1_hysteresis_loop.png`` (cf. seed Fig. 1): the dynamic model with the seed's Table 1
-  parameters driven by a 0-100 V unipolar sine at 1 Hz from rest: voltage and the equivalent
-  static voltage ``V*`` in time, the strain in time with its value at each 0 V minimum (the
-  strain shift), the strain-voltage loops cycle by cycle next to the quasi-static operator alone,
-  and the slope ``alpha = dS/dV*`` of the quasi-static operator (seed Eq. 2 and 10).
-- ``fig3_frequency_response.png`` (cf. seed Fig. 3): magnitude and phase of unit relaxors
+- ``fig1_hysteresis_loop.png`` (cf. the paper's Fig. 1): the dynamic model with the paper's
+  Table 1 parameters driven by a 0-100 V unipolar sine at 1 Hz from rest: voltage and the
+  equivalent static voltage ``V*`` in time, the strain in time with its value at each 0 V
+  minimum (the strain shift), the strain-voltage loops cycle by cycle next to the quasi-static
+  operator alone, and the slope ``alpha = dS/dV*`` of the quasi-static operator (the paper's
+  Eqs. 2 and 10).
+- ``fig3_frequency_response.png`` (cf. the paper's Fig. 3): magnitude and phase of unit relaxors
   ``1 / (1 + (tau s)^lam)``, ``tau = 1 s``, for ``lam = 0.25 ... 1.75``.
-- ``fig4_input_output.png`` (cf. seed Fig. 4): output versus input of unit relaxors for a
+- ``fig4_input_output.png`` (cf. the paper's Fig. 4): output versus input of unit relaxors for a
   bipolar (a) and a unipolar (b) sine at three frequencies, from rest (the transient is shown).
-- ``fig5_step_response.png`` (cf. seed Fig. 5): unit-step responses ``1 - E_lam(-(t/tau)^lam)``
-  on a linear and a logarithmic time axis (overshoot for ``lam > 1``, long tail for ``lam < 1``).
+- ``fig5_step_response.png`` (cf. the paper's Fig. 5): unit-step responses
+  ``1 - E_lam(-(t/tau)^lam)`` on a linear and a logarithmic time axis (overshoot for
+  ``lam > 1``, long tail for ``lam < 1``).
 
-The seed calls the order ``n``; the code calls it ``lam`` (spec model.md §2). Only the object
-API of matplotlib is used (``Figure`` + ``FigureCanvasAgg``): no pyplot, no global backend
-switch, no display.
+The paper calls the order ``n``; the code calls it ``lam`` (docs/model.md, section 3). Only the
+object API of matplotlib is used (``Figure`` + ``FigureCanvasAgg``): no pyplot, no global
+backend switch, no display.
 """
 
 from __future__ import annotations
@@ -31,11 +33,11 @@ from numpy.typing import NDArray
 
 from labrig.model import PAPER_TABLE1, DynamicHysteresisModel, Relaxor
 
-#: fractional orders of the unit-relaxor figures (seed Figs. 3 and 5)
+#: fractional orders of the unit-relaxor figures (the paper's Figs. 3 and 5)
 ORDERS: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75)
-#: orders of the input-output figure (seed Fig. 4), fewer for legibility
+#: orders of the input-output figure (the paper's Fig. 4), fewer for legibility
 ORDERS_IO: tuple[float, ...] = (0.25, 0.5, 1.0, 1.5)
-#: normalised angular frequencies ``omega tau`` of seed Fig. 4
+#: normalised angular frequencies ``omega tau`` of the paper's Fig. 4
 OMEGA_TAU_IO: tuple[float, ...] = (0.1, 1.0, 10.0)
 
 _DPI = 120
@@ -56,11 +58,11 @@ def _lam_label(lam: float) -> str:
     return f"λ = {lam:g}"
 
 
-# -- seed Fig. 3 ---------------------------------------------------------------------------------
+# -- the paper's Fig. 3 ---------------------------------------------------------------------------
 
 
 def figure_frequency_response(path: Path) -> Path:
-    """Bode plot of the unit relaxors (seed Fig. 3)."""
+    """Bode plot of the unit relaxors (the paper's Fig. 3)."""
     w = np.logspace(-3, 3, 601)  # rad/s; tau = 1 s so w is also w*tau
     f = w / (2 * np.pi)
     fig = Figure(figsize=(7.0, 6.5), layout="constrained")
@@ -78,11 +80,13 @@ def figure_frequency_response(path: Path) -> Path:
     for ax in (ax_m, ax_p):
         ax.grid(True, which="both", alpha=0.3)
     ax_m.legend(ncol=2, fontsize=8, loc="lower left")
-    fig.suptitle("Frequency response of unit relaxors H(s) = 1/(1 + (τs)^λ)  (cf. seed Fig. 3)")
+    fig.suptitle(
+        "Frequency response of unit relaxors H(s) = 1/(1 + (τs)^λ)  (cf. the paper's Fig. 3)"
+    )
     return _save(fig, path)
 
 
-# -- seed Fig. 4 ---------------------------------------------------------------------------------
+# -- the paper's Fig. 4 ---------------------------------------------------------------------------
 
 
 def _sine_io(
@@ -97,7 +101,7 @@ def _sine_io(
 
 
 def figure_input_output(path: Path, cycles: int = 6, per_cycle: int = 240) -> Path:
-    """Input-output characteristics of unit relaxors for sines (seed Fig. 4).
+    """Input-output characteristics of unit relaxors for sines (the paper's Fig. 4).
 
     Each sine starts from rest; the first ``cycles - 1`` cycles (the transient) are drawn thin,
     the last one bold (close to the steady-state ellipse, except for the slow drift of the
@@ -130,16 +134,16 @@ def figure_input_output(path: Path, cycles: int = 6, per_cycle: int = 240) -> Pa
     axes[0, 0].legend(fontsize=8, loc="upper left")
     fig.suptitle(
         f"Input-output characteristics of unit relaxors (τ = 1 s), {cycles} cycles from rest: "
-        "thin = transient, bold = last cycle  (cf. seed Fig. 4)"
+        "thin = transient, bold = last cycle  (cf. the paper's Fig. 4)"
     )
     return _save(fig, path)
 
 
-# -- seed Fig. 5 ---------------------------------------------------------------------------------
+# -- the paper's Fig. 5 ---------------------------------------------------------------------------
 
 
 def figure_step_response(path: Path) -> Path:
-    """Unit-step responses on linear and logarithmic time axes (seed Fig. 5)."""
+    """Unit-step responses on linear and logarithmic time axes (the paper's Fig. 5)."""
     t_lin = np.linspace(0.0, 10.0, 801)
     t_log = np.logspace(-3, 3, 1201)
     fig = Figure(figsize=(11.0, 4.8), layout="constrained")
@@ -161,15 +165,16 @@ def figure_step_response(path: Path) -> Path:
         ax.set_ylim(-0.05, 1.7)
         ax.grid(True, which="both", alpha=0.3)
     ax_l.legend(fontsize=8, ncol=2, loc="lower right")
-    fig.suptitle("Step responses of unit relaxors 1 - E_λ(-(t/τ)^λ)  (cf. seed Fig. 5)")
+    fig.suptitle("Step responses of unit relaxors 1 - E_λ(-(t/τ)^λ)  (cf. the paper's Fig. 5)")
     return _save(fig, path)
 
 
-# -- seed Fig. 1 ---------------------------------------------------------------------------------
+# -- the paper's Fig. 1 ---------------------------------------------------------------------------
 
 
 def figure_hysteresis_loop(path: Path, cycles: int = 8, rate_hz: float = 1000.0) -> Path:
-    """The dynamic model (Table 1) under a 0-100 V unipolar 1 Hz sine (seed Fig. 1, Eq. 1-10)."""
+    """The dynamic model (Table 1) under a 0-100 V unipolar 1 Hz sine (the paper's Fig. 1,
+    Eqs. 1-10)."""
     p = PAPER_TABLE1
     model = DynamicHysteresisModel(p)
     n = round(cycles * rate_hz) + 1
@@ -222,7 +227,7 @@ def figure_hysteresis_loop(path: Path, cycles: int = 8, rate_hz: float = 1000.0)
     ax_loop.set_title("(c) strain-voltage loops, 1 Hz, from rest", fontsize=10)
     ax_loop.legend(fontsize=7, ncol=2, loc="upper left")
 
-    # slope of the quasi-static operator along its input (seed Fig. 1, alpha vs voltage)
+    # slope of the quasi-static operator along its input (the paper's Fig. 1, alpha vs voltage)
     one = slice(0, per + 1)
     dv = np.diff(v[one])
     alpha = np.diff(s_static[one]) / np.where(dv == 0, np.nan, dv)
@@ -240,8 +245,8 @@ def figure_hysteresis_loop(path: Path, cycles: int = 8, rate_hz: float = 1000.0)
     for ax in (ax_v, ax_s, ax_loop, ax_a):
         ax.grid(True, alpha=0.3)
     fig.suptitle(
-        "Dynamic hysteresis model, seed Table 1 parameters, 0-100 V unipolar sine at 1 Hz "
-        "(cf. seed Fig. 1)"
+        "Dynamic hysteresis model, the paper's Table 1 parameters, 0-100 V unipolar sine at 1 Hz "
+        "(cf. the paper's Fig. 1)"
     )
     return _save(fig, path)
 
@@ -257,7 +262,7 @@ FIGURES = (
 
 
 def write_model_figures(out: Path) -> list[Path]:
-    """Write the section-2 figures (seed Figs. 1, 3, 4, 5) as PNG files into ``out``."""
+    """Write the section-2 figures (the paper's Figs. 1, 3, 4, 5) as PNG files into ``out``."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     return [fn(out / name) for name, fn in FIGURES]

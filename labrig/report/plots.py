@@ -1,10 +1,10 @@
 """Figures of the model-versus-measurement report, as PNG bytes (matplotlib Agg, object API).
 
-- :func:`entry_figure` (seed Figs. 9 and 12): one entry's voltage-strain loop, measured and
+- :func:`entry_figure` (the paper's Figs. 9 and 12): one entry's voltage-strain loop, measured and
   predicted overlaid, beside its strain time series with the residual underneath.
-- :func:`frequency_figure` (seed Fig. 10): (a) loop area and (b) strain at zero voltage versus
-  the drive frequency, one colour per amplitude: measured as markers, our model as solid lines,
-  the baselines dashed and dotted.
+- :func:`frequency_figure` (the paper's Fig. 10): (a) loop area and (b) strain at zero voltage
+  versus the drive frequency, one colour per amplitude: measured as markers, our model as solid
+  lines, the baselines dashed and dotted.
 
 Only the object API (``Figure`` + ``FigureCanvasAgg``): no pyplot, no global state.
 """
@@ -14,6 +14,7 @@ from __future__ import annotations
 import io
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
@@ -37,9 +38,14 @@ def png(fig: Figure) -> bytes:
     return buf.getvalue()
 
 
-def _style(ax) -> None:
+def style_axes(ax: Axes) -> None:
+    """The report's look of an axes: a light grid, small tick labels."""
     ax.grid(True, alpha=0.3)
     ax.tick_params(labelsize=8)
+
+
+#: former name of :func:`style_axes` (labrig/report/control_section.py still imports it)
+_style = style_axes
 
 
 def entry_figure(
@@ -116,7 +122,7 @@ def entry_figure(
             color="0.35",
         )
     for ax in (ax_l, ax_s, ax_r):
-        _style(ax)
+        style_axes(ax)
     k = _final_hold(v, r.rate_hz)
     if k is not None and k > i0:
         _hold_inset(ax_s, t[k:], s[k:], p[k:], others, k, strain_unit)
@@ -172,7 +178,7 @@ def frequency_figure(
         ax.set_xlabel("drive frequency (Hz)", fontsize=9)
         ax.set_ylabel(ylabel, fontsize=9)
         ax.set_xlim(left=0)
-        _style(ax)
+        style_axes(ax)
     ax_a.set_title("(a) loop area versus frequency", fontsize=10)
     ax_b.set_title("(b) strain at zero voltage versus frequency", fontsize=10)
     handles = [

@@ -1,0 +1,249 @@
+"""A run file's records as an analysis command fits and scores them: :func:`prepare` for ``fit``
+and ``report``, :func:`prepare_diagnosis` for ``diagnose``.
+
+How a run file's entries are treated (:func:`prepare`):
+
+- **Rig runs** (entries recorded by ``labrig run``: a DAQ-driven, zero-order-hold voltage, one
+  sample rate): the actuator's memory spans the entries and the 0 V rests between them, so the
+  entries are simulated back to back as the run (``chain``), each followed by the rest recorded
+  in its step definition; entries that are not scored (not chosen with ``--entries``, or not
+  complete) still drive the simulation as history. The run starts at rest: no warm-up, no
+  offset (the conditioner is zeroed at rest).
+- **Imported data** (``labrig import``: a measured voltage, linear hold, unrelated files): every
+  entry on its own, from rest at 0 V; one constant strain offset per entry is fitted (the
+  sensor's zero is arbitrary); when a record does not start at rest (its first voltage is not
+  near 0 V) the first two drive periods are a warm-up, simulated but not scored
+  (:func:`auto_warmup`).
+
+``--warmup-s`` and ``--offset/--no-offset`` override the automatic choices; every choice is
+stated in :attr:`Setup.notes` (the commands print them and the report shows them).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from labrig.analysis import load
+from labrig.analysis.metrics import drive_frequency_hz
+from labrig.analysis.records import Record
+from labrig.errors import InputFileError, InputIssue, LabrigError
+from labrig.model import ModelParams
+from labrig.store import RunFile, read_run
+
+#: fewest entries ``diagnose`` scores (leave-one-entry-out needs some left in)
+MIN_DIAGNOSE_ENTRIES = 3
+#: a run file of a single entry is cut into this many parts for ``diagnose``
+DIAGNOSE_SPLIT = 4
+
+
+class AnalysisError(LabrigError):
+    """The data cannot be fitted as asked (exit code 2)."""
+
+    exit_code = 2
+
+
+@dataclass
+class Setup:
+    """The records of a run file and how to fit them (module docstring)."""
+
+    path: Path
+    run: RunFile
+    records: list[Record]  # simulated, in run order (with chain: history included)
+    scored: list[str]  # fitted and scored
+    chain: bool
+    warmup_s: float
+    offset: bool
+    imported: bool
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def scored_records(self) -> list[Record]:
+        keep = set(self.scored)
+        return [r for r in self.records if r.name in keep]
+
+
+def _issue(path: Path, message: str, fld: str = "") -> InputFileError:
+    return InputFileError([InputIssue(str(path), None, fld, message)])
+
+
+def parse_entries(text: str | None) -> list[str] | None:
+    """``--entries a,b``: the names, or ``None`` for every complete entry."""
+    if text is None:
+        return None
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    return names or None
+
+
+def auto_warmup(records: Sequence[Record]) -> tuple[float, str | None]:
+    """Two drive periods (s, at the lowest drive frequency; at most a quarter of the shortest
+    record) when a record does not start at rest, else 0; and why, for the notes."""
+    late = []
+    for r in records:
+        span = float(np.ptp(r.voltage_V)) or 1.0
+        if abs(float(r.voltage_V[0])) > 0.01 * span:
+            late.append(r)
+    if not late:
+        return 0.0, None
+    fs = [f for f in (drive_frequency_hz(r) for r in records) if f]
+    w = 2.0 / min(fs) if fs else 1.0
+    shortest = min(r.duration_s for r in records)
+    w = min(w, 0.25 * shortest)
+    w = float(f"{w:.3g}")
+    first = late[0]
+    why = (
+        f"{len(late)} of {len(records)} records do not start at rest (e.g. {first.name} starts "
+        f"at {first.voltage_V[0]:.3g} V): the first {w:g} s of every record are simulated but "
+        "not scored (warm-up; --warmup-s to change)"
+    )
+    return w, why
+
+
+def prepare(
+    path: Path,
+    entries: list[str] | None = None,
+    warmup_s: float | None = None,
+    offset: bool | None = None,
+) -> Setup:
+    """Read the run file and decide chain, warm-up and offset (module docstring)."""
+    run = read_run(path, load_data=False)
+    names = list(run.entries)
+    if not names:
+        raise _issue(path, "the run file has no entries")
+    _check_entries(path, names, entries)
+    complete = [n for n in names if run[n].complete]
+    all_recs = load.records_from_run(path, names)  # incomplete ones too (history of a chain)
+    by_name = {r.name: r for r in all_recs}
+    if entries:
+        unusable = [n for n in entries if n not in by_name]
+        if unusable:
+            raise _issue(
+                path, f"entry {unusable[0]!r} has no voltage and strain to fit", "--entries"
+            )
+        scored = [n for n in names if n in set(entries)]
+    else:
+        scored = [n for n in names if n in by_name and n in set(complete)]
+    if not scored:
+        raise _issue(path, "no complete entry with voltage and strain to fit")
+    notes: list[str] = []
+    skipped = [n for n in names if n not in complete and n not in scored]
+    if skipped:
+        notes.append(
+            f"not complete, not scored (name them with --entries to score them anyway): "
+            f"{', '.join(skipped)}"
+        )
+    imported = all(
+        r.hold == "linear" or r.meta.get("kind") == "import" for r in all_recs if r.name in scored
+    )
+    chain = (
+        not imported
+        and all(r.hold == "zoh" for r in all_recs)
+        and len({r.rate_hz for r in all_recs}) == 1
+    )
+    if not imported and not chain:
+        notes.append("entries differ in sample rate or hold: each is simulated on its own")
+    if chain:
+        records = all_recs
+        history = [r.name for r in records if r.name not in set(scored)]
+        if history:
+            notes.append(f"not scored, simulated as history of the run: {', '.join(history)}")
+    else:
+        records = [by_name[n] for n in scored]
+    warmup = _warmup(path, records, chain, warmup_s, notes)
+    offset = _offset(imported, offset, notes)
+    short = [r.name for r in records if r.name in scored and r.duration_s <= warmup * 1.01]
+    if short:
+        raise _issue(path, f"the warm-up of {warmup:g} s leaves nothing of {short[0]!r} to score")
+    return Setup(path, run, records, scored, chain, warmup, offset, imported, notes)
+
+
+def _check_entries(path: Path, names: list[str], entries: list[str] | None) -> None:
+    """``--entries`` names entries of the file, each once."""
+    if not entries:
+        return
+    missing = [n for n in entries if n not in names]
+    if missing:
+        raise _issue(
+            path,
+            f"no entry {', '.join(map(repr, missing))} (entries: {', '.join(names)})",
+            "--entries",
+        )
+    if len(set(entries)) != len(entries):
+        raise _issue(path, "an entry is named twice", "--entries")
+
+
+def _warmup(
+    path: Path, records: list[Record], chain: bool, warmup_s: float | None, notes: list[str]
+) -> float:
+    """The warm-up (s): ``--warmup-s`` when given (checked), else 0 for a chained run and
+    :func:`auto_warmup` otherwise; the choice is added to ``notes``."""
+    if warmup_s is None:
+        if chain:
+            return 0.0
+        warmup, why = auto_warmup(records)
+        if why:
+            notes.append(why)
+        return float(warmup)
+    if warmup_s < 0 or not math.isfinite(warmup_s):
+        raise _issue(path, f"--warmup-s must be >= 0, got {warmup_s}", "--warmup-s")
+    if warmup_s > 0:
+        notes.append(f"warm-up: the first {warmup_s:g} s of each record are not scored")
+    return float(warmup_s)
+
+
+def _offset(imported: bool, offset: bool | None, notes: list[str]) -> bool:
+    """One strain offset per entry: ``--offset/--no-offset`` when given, else for imported
+    data; the choice is added to ``notes``."""
+    if offset is None:
+        if imported:
+            notes.append(
+                "imported data: one constant strain offset per entry is fitted (the sensor's "
+                "zero is unknown; --no-offset to change)"
+            )
+        return imported
+    if offset:
+        notes.append("one constant strain offset per entry is fitted (--offset)")
+    return bool(offset)
+
+
+@dataclass
+class DiagnoseSetup:
+    """What ``diagnose`` starts from: the records it scores, whether to fit one strain offset
+    per entry, and the start parameters (``None``: the diagnosis fits its own)."""
+
+    records: list[Record]
+    offset: bool
+    start: ModelParams | None
+
+
+def prepare_diagnosis(
+    path: Path, params_file: Path | None = None, say: Callable[[str], None] = print
+) -> DiagnoseSetup:
+    """Read the run file (and the start parameters, :func:`labrig.params_file.start_params`)
+    for ``diagnose``.
+
+    A file of one entry is cut into :data:`DIAGNOSE_SPLIT` consecutive parts (said through
+    ``say``) for leave-one-entry-out; imported data get an offset per entry (the sensor's zero
+    is arbitrary). Fewer than :data:`MIN_DIAGNOSE_ENTRIES` entries: an
+    :class:`~labrig.errors.InputFileError`."""
+    from labrig.analysis.diagnose import split_entries
+    from labrig.params_file import start_params
+
+    records = load.records_from_run(path)
+    start = start_params(params_file, say) if params_file is not None else None
+    if len(records) == 1 and records[0].duration_s > 0:
+        records = split_entries(records, DIAGNOSE_SPLIT)
+        say(f"one entry: cut into {len(records)} consecutive parts for leave-one-entry-out")
+    offset = any(r.meta.get("kind") == "import" for r in records)
+    if len(records) < MIN_DIAGNOSE_ENTRIES:
+        raise _issue(
+            path,
+            f"diagnose needs at least {MIN_DIAGNOSE_ENTRIES} complete entries "
+            f"(leave-one-entry-out), found {len(records)}",
+            "entries",
+        )
+    return DiagnoseSetup(records, offset, start)

@@ -1,0 +1,221 @@
+"""``labrig fit``: identify the model (or a baseline) from a run file; print parameters and NRMSE
+(:func:`labrig.analysis.fit_run.fit_run_file`; how entries are treated:
+:mod:`labrig.analysis.prepare`)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+from labrig.cli.common import (
+    ENTRIES_HELP,
+    HELDOUT_OPTION,
+    OFFSET_OPTION,
+    WARMUP_OPTION,
+    FitEffect,
+    Memory,
+    Method,
+    Model,
+    choice,
+    flag,
+    friendly,
+    one_of,
+)
+
+if TYPE_CHECKING:
+    from labrig.analysis.baselines import BaselineResult
+    from labrig.analysis.fit import FitResult
+    from labrig.analysis.fit_effects import EffectsFit
+    from labrig.analysis.fit_run import FitOutcome
+
+UNITS = {
+    "alpha0_ue_per_V": "ue/V",
+    "gamma_ue_per_V": "ue/V",
+    "vc_V": "V",
+    "tau_t_s": "s",
+    "tau_d_s": "s",
+}
+
+METHOD_OPTION = typer.Option(
+    Method.GLOBAL,
+    "--method",
+    parser=choice(Method, "a fit method"),
+    metavar="<method>",
+    help="global or staged (the paper's section 3.1).",
+)
+MODEL_OPTION = typer.Option(
+    Model.DYNAMIC,
+    "--model",
+    parser=choice(Model, "a model"),
+    metavar="<model>",
+    help="dynamic (ours), prandtl_ishlinskii or bouc_wen.",
+)
+EFFECT_OPTION = typer.Option(
+    [],
+    "--effect",
+    parser=choice(FitEffect, "an effect fit can add"),
+    metavar="<effect>",
+    help=f"Also fit this library effect with the model (repeatable): {one_of(FitEffect)}; "
+    "e.g. viscoelastic_creep (which compensation control inverts); see docs/diagnose.md.",
+)
+MEMORY_OPTION = typer.Option(
+    Memory.RETURN_POINT,
+    "--memory",
+    parser=choice(Memory, "a memory rule"),
+    metavar="<rule>",
+    help="The hysteresis operator's memory: return_point (minor loops close and are "
+    "forgotten) or last_reversal (the paper's single memory); docs/analysis.md.",
+)
+
+
+@friendly
+def fit(
+    run_file: Path = typer.Argument(..., help="Run file (HDF5), recorded or imported."),
+    entries: str | None = typer.Option(
+        None, "--entries", help=ENTRIES_HELP.format("Entries to fit")
+    ),
+    out: Path | None = typer.Option(None, "--out", help="Write the result as JSON to this file."),
+    as_json: bool = flag(False, "--json", help="Print only the JSON result on stdout."),
+    method: Method = METHOD_OPTION,
+    model: Model = MODEL_OPTION,
+    warmup_s: float | None = WARMUP_OPTION,
+    heldout: bool = HELDOUT_OPTION,
+    offset: bool | None = OFFSET_OPTION,
+    effect: list[FitEffect] = EFFECT_OPTION,
+    memory: Memory = MEMORY_OPTION,
+) -> None:
+    """Identify the model (or a baseline) from a run file; print parameters and NRMSE."""
+    from labrig.analysis.fit_effects import EffectsFit
+    from labrig.analysis.fit_run import fit_run_file
+    from labrig.analysis.prepare import AnalysisError, parse_entries
+    from labrig.cli.progress import RichUI
+    from labrig.jsonsafe import json_safe
+
+    if out is not None and out.is_dir():
+        raise AnalysisError(f"--out {out} is a directory; give a file name such as params.json")
+    ui = RichUI()
+    outcome = fit_run_file(
+        run_file,
+        entries=parse_entries(entries),
+        method=method.value,
+        model=model.value,
+        memory=memory.value,
+        effects=[e.value for e in effect],
+        warmup_s=warmup_s,
+        heldout=heldout,
+        offset=offset,
+        ui=ui,
+    )
+    res = outcome.result
+    text = json.dumps(json_safe(res.to_json()), indent=2, allow_nan=False)
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text + "\n", encoding="utf-8")
+    for m in getattr(res, "messages", []):
+        ui.err.print(f"[yellow]note:[/] {escape(m)}")
+    if as_json:
+        typer.echo(text)
+    else:
+        con = Console()
+        for t in summary_tables(res, model.value):
+            con.print(t)
+        if isinstance(res, EffectsFit):
+            con.print(effects_table(res))
+        print_floor_and_time(con, outcome)
+    if out is not None:
+        ui.err.print(f"wrote {escape(str(out))}")
+
+
+def print_floor_and_time(con: Console, outcome: FitOutcome) -> None:
+    """The noise floor of the scored records (when known) and the fit's time."""
+    from labrig.analysis.fit import FitResult
+    from labrig.report.data import noise_floor
+
+    setup, res = outcome.setup, outcome.result
+    floor = noise_floor(setup.scored_records, setup.run.instrument, setup.warmup_s)
+    if floor is not None:
+        con.print(
+            f"noise floor (NRMSE of a perfect model): {floor.nrmse_pct:.3g} % "
+            f"({floor.noise_ue:.3g} rms from {escape(floor.source)})"
+        )
+    if isinstance(res, FitResult):
+        held = f", leave-one-out {res.heldout_elapsed_s:.1f} s" if res.heldout_per_entry else ""
+        con.print(f"fit {res.elapsed_s:.1f} s{held}")
+
+
+def number(v: float | None, digits: int = 4) -> str:
+    """A parameter for a table cell: ``digits`` significant digits, scientific when tiny or
+    huge, ``—`` when undefined."""
+    if v is None or not math.isfinite(v):
+        return "—"
+    if v != 0 and (abs(v) < 1e-3 or abs(v) >= 1e5):
+        return f"{v:.{digits - 1}e}"
+    return f"{v:.{digits}g}"
+
+
+def summary_tables(res: FitResult | BaselineResult | EffectsFit, model: str) -> list[Table]:
+    """Parameters (with uncertainties) and NRMSE per entry, as rich tables."""
+    from labrig.analysis.fit import PARAM_NAMES
+
+    j = res.to_json()
+    t = Table(title=f"{'model' if model == 'dynamic' else model} parameters ({j['method']})")
+    t.add_column("parameter")
+    t.add_column("value", justify="right")
+    if model == "dynamic":
+        t.add_column("± 1σ", justify="right")
+        t.add_column("rel.", justify="right")
+        t.add_column("unit")
+        for name in PARAM_NAMES:
+            v = j["params"][name]
+            u = j["uncertainty"].get(name)
+            rel = "fixed" if u is None else (f"{100 * u / abs(v):.2g} %" if v else "—")
+            t.add_row(name, number(v, 5), number(u, 2), rel, UNITS.get(name, ""))
+        t.add_row("shape", str(j["params"]["shape"]), "", "", "")
+        t.add_row("memory", str(j["params"]["memory"]), "", "", "")
+    else:
+        for name, v in j["params"].items():
+            if isinstance(v, list):
+                v = ", ".join(number(x, 3) for x in v)
+            elif isinstance(v, float):
+                v = number(v, 5)
+            t.add_row(name, str(v))
+    e = Table(title="NRMSE (%) per entry")
+    e.add_column("entry")
+    e.add_column("in-sample", justify="right")
+    e.add_column("held-out", justify="right")
+    held = res.heldout_per_entry or {}
+    for name, v in j["per_entry"].items():
+        e.add_row(name, f"{v:.3g}", f"{held[name]:.3g}" if name in held else "—")
+    hm = j["heldout_nrmse_pct"]
+    e.add_row(
+        "[bold]mean[/]",
+        f"[bold]{j['nrmse_pct']:.3g}[/]",
+        f"[bold]{hm:.3g}[/]" if hm is not None else "—",
+    )
+    return [t, e]
+
+
+def effects_table(res: EffectsFit) -> Table:
+    """The fitted effects and the NRMSE with and without them (same held-out scoring)."""
+    t = Table(title="effects fitted with the model")
+    t.add_column("effect")
+    t.add_column("parameters")
+    for e in res.effects:
+        t.add_row(e["effect"], escape(e["description"]))
+    held = (
+        f"{number(res.base_heldout_nrmse_pct, 3)} % -> {number(res.heldout_nrmse_pct, 3)} %"
+        if res.heldout_nrmse_pct is not None
+        else "not computed"
+    )
+    t.caption = (
+        f"NRMSE without -> with the effects: in-sample {number(res.base_nrmse_pct, 3)} % -> "
+        f"{number(res.nrmse_pct, 3)} %; held-out (second half of each left-out entry) {held}"
+    )
+    return t

@@ -1,0 +1,323 @@
+"""``labrig report`` as a library call: :func:`build_run_report` reads the run file, fits our model
+(or takes its parameters from a ``labrig fit`` file) and the baselines on the same records, and
+returns the HTML page with its metrics table.
+
+Steps: :func:`~labrig.analysis.prepare.prepare` (which records, chained or not, warm-up,
+offset); :func:`fit_report_models` (our model and the baselines, as
+:class:`~labrig.report.data.Fitted`); :func:`~labrig.report.data.build_report` (the metrics);
+the figures (:mod:`labrig.report.plots`, :mod:`labrig.report.control_section`) and the page
+(:func:`labrig.report.html.render`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from labrig import __version__
+from labrig.analysis.baselines import KINDS
+from labrig.analysis.fit import predict_record
+from labrig.analysis.fit_run import CommandUI, Progress, QuietUI, fit_base, fit_dynamic
+from labrig.analysis.prepare import AnalysisError, Setup, prepare
+from labrig.analysis.records import Record
+from labrig.jsonsafe import json_safe
+from labrig.model import DynamicHysteresisModel, ModelParams
+from labrig.model.effects import Effect
+from labrig.params_file import fitted_effects, read_fit_output
+from labrig.report.data import (
+    Fitted,
+    Provenance,
+    ReportData,
+    build_report,
+    metrics_json,
+    noise_floor,
+)
+
+
+@dataclass
+class FittedModels:
+    """The report's models fitted to a :class:`~labrig.analysis.prepare.Setup`."""
+
+    models: dict[str, Fitted]
+    source: str  # where our model's parameters come from
+    notes: list[str] = field(default_factory=list)
+    elapsed_s: float = 0.0
+
+
+@dataclass
+class BuiltReport:
+    """The report: the HTML page and the metrics table ``labrig report --json`` prints."""
+
+    setup: Setup
+    page: str
+    metrics: dict[str, Any]
+
+
+def predict_entries(
+    params: ModelParams,
+    setup: Setup,
+    effects: tuple[list[Effect], dict[str, dict[str, float]]] | None = None,
+) -> dict[str, np.ndarray]:
+    """The model's strain for each scored entry (chained as the run when ``setup.chain``),
+    with one offset per entry fitted over the scored samples when ``setup.offset``; with the
+    fitted ``effects`` (:func:`labrig.params_file.fitted_effects`) when given, simulated as
+    ``labrig fit --effect`` fitted them."""
+    if effects and effects[0]:
+        from labrig.analysis.diagnose_fit import ExtendedProblem
+
+        prob = ExtendedProblem(
+            setup.records,
+            effects[0],
+            chain=setup.chain,
+            shape=params.shape,
+            memory=params.memory,
+            scored=setup.scored,
+            warmup_s=setup.warmup_s,
+            offset=setup.offset,
+        )
+        return prob.predictions(params.model_dump(), effects[1])
+    keep = set(setup.scored)
+    out: dict[str, np.ndarray] = {}
+    if setup.chain:
+        rate = setup.records[0].rate_hz
+        stream = DynamicHysteresisModel(params).stream(rate, setup.records[0].hold)
+        for r in setup.records:
+            p = stream.process(r.voltage_V)
+            if r.name in keep:
+                out[r.name] = np.array(p, dtype=float)
+            n_rest = round(max(float(r.meta.get("rest_after_s", 0.0) or 0.0), 0.0) * rate)
+            if n_rest:
+                stream.process(np.zeros(n_rest))
+    else:
+        for r in setup.records:
+            if r.name in keep:
+                out[r.name] = predict_record(params, r)
+    if setup.offset:
+        for r in setup.records:
+            if r.name in out:
+                i0 = round(setup.warmup_s * r.rate_hz)
+                out[r.name] = out[r.name] + float(np.mean(r.strain_ue[i0:] - out[r.name][i0:]))
+    return out
+
+
+def _fitted_now(setup: Setup, method: str, heldout: bool, progress: Progress) -> FittedModels:
+    """Our model fitted to the setup's records."""
+    res = fit_dynamic(setup, method, heldout, progress)
+    j = res.to_json()
+    model = Fitted(
+        "dynamic",
+        res.predictions,
+        res.heldout_per_entry,
+        j["heldout_nrmse_pct"],
+        j["params"],
+        j["uncertainty"],
+        j["correlation"],
+        res.method,
+    )
+    return FittedModels(
+        {"dynamic": model},
+        f"fitted now ({res.method}, {res.elapsed_s:.1f} s)",
+        [f"fit: {m}" for m in res.messages],
+    )
+
+
+def _from_file(setup: Setup, doc: dict[str, Any], params_file: Path) -> FittedModels:
+    """Our model with the parameters (and effects) of a ``labrig fit`` file."""
+    params = ModelParams(**doc["params"])
+    effects = fitted_effects(doc, params_file, setup.records)
+    model = Fitted(
+        "dynamic",
+        predict_entries(params, setup, effects),
+        None,
+        doc.get("heldout_nrmse_pct"),
+        doc["params"],
+        doc.get("uncertainty") or {},
+        doc.get("correlation") or {},
+        str(doc.get("method", "")),
+    )
+    source = f"from {params_file}"
+    if effects[0]:
+        source += " with the effects fitted with it: " + ", ".join(e.name for e in effects[0])
+    notes = []
+    fitted_on = doc.get("entries")
+    if isinstance(fitted_on, list) and fitted_on != setup.scored:
+        notes.append(
+            f"the parameters were fitted on {', '.join(map(str, fitted_on))}; this "
+            f"report scores {', '.join(setup.scored)}"
+        )
+    notes.append(
+        "held-out NRMSE per entry not available with --params (the file gives its mean only)"
+    )
+    return FittedModels({"dynamic": model}, source, notes)
+
+
+def fit_report_models(
+    setup: Setup,
+    doc: dict[str, Any] | None,
+    params_file: Path | None,
+    method: str,
+    heldout: bool,
+    progress: Progress,
+) -> FittedModels:
+    """Our model (fitted now, or from the ``labrig fit`` output ``doc`` read from
+    ``params_file``) and the baselines, fitted on the same records; a baseline that cannot be
+    fitted is reported as such (its ``note``)."""
+    t0 = time.perf_counter()
+    if doc is None or params_file is None:
+        fitted = _fitted_now(setup, method, heldout, progress)
+    else:
+        fitted = _from_file(setup, doc, params_file)
+    for kind in KINDS:
+        try:
+            b = fit_base(setup, kind, heldout, progress)
+        except AnalysisError as e:
+            fitted.models[kind] = Fitted(kind, None, note=str(e))
+            continue
+        bj = b.to_json()
+        fitted.models[kind] = Fitted(
+            kind,
+            b.predictions,
+            b.heldout_per_entry,
+            bj["heldout_nrmse_pct"],
+            bj["params"],
+            method=kind,
+        )
+    fitted.elapsed_s = time.perf_counter() - t0
+    return fitted
+
+
+def provenance(setup: Setup) -> Provenance:
+    """Where the data came from, as the run file records it."""
+    run = setup.run
+    return Provenance(
+        run_file=str(setup.path),
+        status=run.status,
+        reason=run.reason,
+        start_time=run.start_time,
+        end_time=run.end_time,
+        protocol_name=run.protocol_name,
+        protocol_file=run.protocol_file,
+        protocol_text=run.protocol_text,
+        rig_file=run.rig_file,
+        rig_text=run.rig_text,
+        software_version=run.software_version,
+        seed=run.seed,
+        instrument=run.instrument,
+        n_entries=len(run),
+    )
+
+
+def strain_unit(records: Sequence[Record]) -> str:
+    """The strain's unit as the records state it (``ue`` when none does)."""
+    for r in records:
+        units = r.meta.get("units")
+        u = units.get("strain") if isinstance(units, dict) else None
+        if u:
+            return str(u)
+    return "ue"
+
+
+def report_data(setup: Setup, fitted: FittedModels, heldout: bool, from_file: bool) -> ReportData:
+    """The report's content (:func:`labrig.report.data.build_report`) for the fitted models."""
+    notes = list(setup.notes) + fitted.notes
+    if not heldout:
+        notes.append("held-out NRMSE not computed (--no-heldout)")
+    elif len(setup.scored) < 2:
+        notes.append("held-out NRMSE needs two scored entries or more")
+    run = setup.run
+    scored = setup.scored_records
+    if setup.imported or not run.protocol_name:
+        title = f"Model versus measurement: {setup.path.name} (imported data)"
+    else:
+        title = f"Model versus measurement: {run.protocol_name}"
+    settings = {
+        "entries": setup.scored,
+        "chain": setup.chain,
+        "offset": setup.offset,
+        "params_source": fitted.source,
+        "fit_time": (
+            f"{fitted.elapsed_s:.1f} s ("
+            + ("baselines" if from_file else "model and baselines")
+            + (", with leave-one-out)" if heldout else ")")
+        ),
+    }
+    return build_report(
+        title,
+        scored,
+        fitted.models,
+        setup.warmup_s,
+        provenance(setup),
+        settings,
+        notes,
+        noise_floor(scored, run.instrument, setup.warmup_s),
+        datetime.now().astimezone().isoformat(timespec="seconds"),
+        __version__,
+    )
+
+
+def render_page(setup: Setup, data: ReportData) -> str:
+    """The figures and the HTML page of ``data``."""
+    from labrig.report.control_section import control_html
+    from labrig.report.html import img, render
+    from labrig.report.plots import entry_figure, frequency_figure
+
+    models = data.models
+    unit = strain_unit(setup.scored_records)
+    noise = data.noise_floor.noise_ue if data.noise_floor else None
+    dyn = models["dynamic"].predictions or {}
+    pngs = {}
+    for e in data.entries:
+        if e.name not in dyn:
+            continue
+        others = {
+            fm.label: fm.predictions[e.name]
+            for k, fm in models.items()
+            if k != "dynamic" and fm.predictions and e.name in fm.predictions
+        }
+        pngs[e.name] = entry_figure(e, dyn[e.name], setup.warmup_s, noise, unit, others)
+    freq = frequency_figure(data.entries, list(models), unit)
+    ctrl_html = control_html(list(setup.records), img)
+    return render(data, freq, pngs, ctrl_html)
+
+
+def metrics_table(setup: Setup, data: ReportData) -> dict[str, Any]:
+    """``labrig report --json``: the metrics of every scored entry and model
+    (:func:`labrig.report.data.metrics_json`), with the control metrics of the strain-command
+    entries, as strict JSON (undefined values ``null``)."""
+    from labrig.report.control_section import control_metrics
+
+    table = metrics_json(data)
+    for name, m in control_metrics(list(setup.records)).items():
+        table.setdefault(name, {}).update(m)
+    return json_safe(table)
+
+
+def build_run_report(
+    path: Path,
+    params_file: Path | None = None,
+    *,
+    entries: list[str] | None = None,
+    warmup_s: float | None = None,
+    offset: bool | None = None,
+    method: str = "global",
+    heldout: bool = True,
+    ui: CommandUI | None = None,
+) -> BuiltReport:
+    """``labrig report``: the report of the run file ``path`` (module docstring); our model's
+    parameters from ``params_file`` (``labrig fit`` output) when given, else fitted now."""
+    ui = ui or QuietUI()
+    doc = read_fit_output(params_file) if params_file is not None else None
+    setup = prepare(path, entries, warmup_s, offset)
+    ui.announce(setup)
+    with ui.fitting() as progress:
+        fitted = fit_report_models(setup, doc, params_file, method, heldout, progress)
+    data = report_data(setup, fitted, heldout, doc is not None)
+    with ui.busy("drawing the figures"):
+        page = render_page(setup, data)
+    return BuiltReport(setup, page, metrics_table(setup, data))
