@@ -191,7 +191,7 @@ class _StrainStepBase(_StepBase):
     computed from it by a controller (:mod:`labrig.control`) with fitted model parameters."""
 
     control: Literal["direct", "compensated"] = Field(
-        description="direct: V = S/alpha0; compensated: the inverse model (seed Eq. 13)"
+        description="direct: V = S/alpha0; compensated: the inverse model (the paper's Eq. 13)"
     )
     params: FilePath | None = Field(
         None,
