@@ -139,3 +139,20 @@ def test_help_does_not_load_the_numerical_stack() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
     )
     assert out.stdout.strip() == ""
+
+
+def test_warmup_note_counts_records() -> None:
+    import numpy as np
+
+    from labrig.analysis.prepare import auto_warmup
+    from labrig.analysis.records import Record
+
+    t = np.arange(4000) / 1000.0
+    late = Record.from_arrays("late", 1000.0, 50 + 50 * np.sin(2 * np.pi * t), np.zeros(t.size))
+    rest = Record.from_arrays("rest", 1000.0, 50 - 50 * np.cos(2 * np.pi * t), np.zeros(t.size))
+    w, why = auto_warmup([late])
+    assert w == 1.0  # two periods of 1 Hz, at most a quarter of the 4 s record
+    assert why is not None and why.startswith("late does not start at rest (it starts at 50 V)")
+    _, why = auto_warmup([late, rest])
+    assert why is not None and why.startswith("1 of 2 records do not start at rest (e.g. late")
+    assert auto_warmup([rest]) == (0.0, None)

@@ -95,10 +95,14 @@ def auto_warmup(records: Sequence[Record]) -> tuple[float, str | None]:
     w = min(w, 0.25 * shortest)
     w = float(f"{w:.3g}")
     first = late[0]
+    if len(records) == 1:
+        some = f"{first.name} does not start at rest (it starts"
+    else:
+        some = f"{len(late)} of {len(records)} records do not start at rest (e.g. {first.name}"
+        some += " starts"
     why = (
-        f"{len(late)} of {len(records)} records do not start at rest (e.g. {first.name} starts "
-        f"at {first.voltage_V[0]:.3g} V): the first {w:g} s of every record are simulated but "
-        "not scored (warm-up; --warmup-s to change)"
+        f"{some} at {first.voltage_V[0]:.3g} V): the first {w:g} s of every record are "
+        "simulated but not scored (warm-up; --warmup-s to change)"
     )
     return w, why
 

@@ -372,7 +372,8 @@ def render(
     """The whole page."""
     p = data.provenance
     fm: Fitted | None = data.models.get("dynamic")
-    sub = f"{escape(p.run_file)} · {len(data.entries)} entries scored"
+    n = len(data.entries)
+    sub = f"{escape(p.run_file)} · {n} {'entry' if n == 1 else 'entries'} scored"
     if fm is not None and fm.method:
         sub += f" · {escape(fm.method)} fit"
     nav = "".join(
