@@ -26,11 +26,10 @@ from labrig.analysis.fit import (
     FitResult,
     fit_model,
     predict_record,
-    scored_sequences,
 )
 from labrig.analysis.metrics import nrmse_pct
 from labrig.analysis.records import Record
-from labrig.analysis.simulate import OperatorFamily
+from labrig.analysis.simulate import OperatorFamily, scored_sequences
 from labrig.model import PAPER_TABLE1, DynamicHysteresisModel, ModelParams
 
 RATE = 1000.0

@@ -16,7 +16,6 @@ bank each; ``G_t``'s output is cached for the ``G_d`` columns.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,25 +27,16 @@ from labrig.analysis.simulate import (
     LOOSE,
     LRUCache,
     OperatorFamily,
-    Segment,
-    SimSequence,
+    Scored,
     relaxor_output,
 )
 from labrig.model import QuasiStaticHysteresis
 
-__all__ = ["BaseProblem", "ParameterSpace", "Scored", "best_of", "solve"]
+__all__ = ["BaseProblem", "ParameterSpace", "best_of", "solve"]
 
 FD_FORWARD = 1e-6  # forward-difference step in transformed coordinates (iterations)
 FD_CENTRAL = 1e-4  # central-difference step (final Jacobian)
 FD_VC = 1e-5  # central step in log vc (operator only)
-
-
-@dataclass
-class Scored:
-    """A simulated sequence and its scored segments."""
-
-    seq: SimSequence
-    segments: list[Segment]
 
 
 class ParameterSpace:

@@ -57,8 +57,8 @@ from labrig.analysis.simulate import (
     CONVERGED,
     Segment,
     SimSequence,
-    build_sequences,
-    score_segments,
+    scored_names,
+    scored_sequences,
 )
 from labrig.blas import single_thread_blas
 from labrig.model.bouc_wen import bouc_wen_exact, monotone_runs
@@ -192,8 +192,8 @@ class BoucWen:
 
 @dataclass
 class _PlayedSequence:
-    """A simulated sequence (:class:`~labrig.analysis.simulate.SimSequence`) as the baselines
-    see it: the voltage with the rest at 0 V before it, its monotone runs, cached play bases."""
+    """A simulated sequence as the baselines see it: the voltage with the rest at 0 V before
+    it, its monotone runs, cached play bases."""
 
     seq: SimSequence
     segments: list[Segment]
@@ -216,18 +216,6 @@ class _PlayedSequence:
         if thresholds not in self._basis:
             self._basis[thresholds] = play_operators(self.v, thresholds)
         return self._basis[thresholds]
-
-
-def _sequences(
-    records: Sequence[Record], scored: Sequence[str], warmup_s: float, chain: bool
-) -> list[_PlayedSequence]:
-    keep = set(scored)
-    if not chain:
-        records = [r for r in records if r.name in keep]
-    return [
-        _PlayedSequence(s, score_segments(s, keep, warmup_s))
-        for s in build_sequences(records, chain)
-    ]
 
 
 Items = list[tuple[_PlayedSequence, list[Segment]]]
@@ -377,15 +365,11 @@ def fit_baseline(
     """
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
-    if not records:
-        raise ValueError("no records to fit")
-    names = [r.name for r in records]
-    if len(set(names)) != len(names):
-        raise ValueError(f"entry names must be unique, got {names}")
-    scored = names if scored is None else [n for n in names if n in set(scored)]
-    if not scored:
-        raise ValueError("no scored entries among the records")
-    seqs = _sequences(records, scored, warmup_s, chain)
+    scored = scored_names(records, scored)
+    seqs = [
+        _PlayedSequence(s.seq, s.segments)
+        for s in scored_sequences(records, scored, warmup_s, chain)
+    ]
     everything: Items = [(q, list(q.segments)) for q in seqs]
 
     def fit(items: Items, warm: PrandtlIshlinskii | BoucWen | None = None):

@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from labrig.analysis.base_problem import BaseProblem, ParameterSpace, Scored, best_of
+from labrig.analysis.base_problem import BaseProblem, ParameterSpace, best_of
 from labrig.analysis.metrics import nrmse_pct, second_half_nrmse_pct
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import (
@@ -47,8 +47,8 @@ from labrig.analysis.simulate import (
     LOG_PARAMS,
     PARAM_NAMES,
     OperatorFamily,
-    build_sequences,
-    score_segments,
+    scored_names,
+    scored_sequences,
 )
 from labrig.analysis.staged import classify, generic_starts, staged_fit
 from labrig.blas import single_thread_blas
@@ -60,22 +60,10 @@ __all__ = [
     "FitResult",
     "fit_model",
     "predict_record",
-    "scored_sequences",
     "single_thread_blas",
 ]
 
 Progress = Callable[[str, int, int], Any]
-
-
-def scored_sequences(
-    records: Sequence[Record], scored: Sequence[str], warmup_s: float, chain: bool
-) -> list[Scored]:
-    """The sequences to simulate for fitting ``scored``: the whole run as one chain (the other
-    records as history), or each scored record on its own."""
-    keep = set(scored)
-    if not chain:
-        records = [r for r in records if r.name in keep]
-    return [Scored(s, score_segments(s, keep, warmup_s)) for s in build_sequences(records, chain)]
 
 
 # -- results -----------------------------------------------------------------------------------
@@ -286,29 +274,22 @@ def fit_model(
 ) -> FitResult:
     """Identify :class:`ModelParams` from ``records`` (module docstring for the method).
 
-    - ``method``: ``"global"`` (least squares over all entries, default) or ``"staged"``
-      (the paper's section 3.1).
-    - ``shape``: the hysteretic slope (``"exponential"``, ``"linear"``, ``"gaussian"``).
-    - ``memory``: the operator's memory rule (``"return_point"`` or ``"last_reversal"``,
-      :mod:`labrig.model.hysteresis`).
-    - ``initial``: an extra start for the global fit (the staged result is always one).
-    - ``heldout``: also compute the leave-one-entry-out NRMSE (needs 2 scored entries or more).
+    - ``method``: ``"global"`` (default) or ``"staged"`` (the paper's section 3.1).
+    - ``shape``, ``memory``: the operator family; ``initial``: an extra start for the global fit.
+    - ``heldout``: also the leave-one-entry-out NRMSE (needs 2 scored entries or more).
     - ``warmup_s``: seconds at the start of each record simulated but not scored.
-    - ``progress``: called as ``progress(stage, done, total)`` with stage ``"fit"`` or
-      ``"heldout"``.
-    - ``chain``: the records are consecutive entries of one run, in this order, each followed by
-      ``record.meta["rest_after_s"]`` seconds at 0 V (module docstring); simulate them as one
-      sequence. Use it for runs recorded on one actuator (the model's memory spans entries).
-    - ``scored``: names of the entries to fit and score (default all); with ``chain`` the
-      others still drive the simulation as history.
+    - ``progress``: ``progress(stage, done, total)``, stage ``"fit"`` or ``"heldout"``.
+    - ``chain``: the records are a run's consecutive entries, each followed by
+      ``record.meta["rest_after_s"]`` at 0 V: simulate them as one sequence.
+    - ``scored``: the entries to fit and score (default all); with ``chain`` the others still
+      drive the simulation as history.
     - ``offset``: fit one constant strain offset per entry (sensors with an arbitrary zero).
     - ``bounds``: native-unit bounds overriding :data:`DEFAULT_BOUNDS` per parameter.
     """
     if method not in ("global", "staged"):
         raise ValueError(f"method must be 'global' or 'staged', got {method!r}")
-    scored = _scored_names(records, scored)
-    bnd = dict(DEFAULT_BOUNDS)
-    bnd.update(bounds or {})
+    scored = scored_names(records, scored)
+    bnd = {**DEFAULT_BOUNDS, **(bounds or {})}
     messages: list[str] = []
     t0 = time.perf_counter()
     with single_thread_blas(), np.errstate(over="ignore"):
@@ -356,21 +337,6 @@ def fit_model(
         jacobian=J,
         free=space.free,
     )
-
-
-def _scored_names(records: Sequence[Record], scored: Sequence[str] | None) -> list[str]:
-    """The scored entries in run order (all by default); checks that names are unique."""
-    if not records:
-        raise ValueError("no records to fit")
-    names = [r.name for r in records]
-    if len(set(names)) != len(names):
-        raise ValueError(f"entry names must be unique, got {names}")
-    if scored is None:
-        return names
-    unknown = [n for n in scored if n not in names]
-    if unknown or not scored:
-        raise ValueError(f"scored entries {unknown or '[]'} are not among {names}")
-    return [n for n in names if n in set(scored)]
 
 
 def _in_sample(

@@ -49,6 +49,7 @@ __all__ = [
     "PARAM_NAMES",
     "LRUCache",
     "OperatorFamily",
+    "Scored",
     "Segment",
     "SimSequence",
     "build_sequences",
@@ -56,6 +57,8 @@ __all__ = [
     "pad_to_block",
     "relaxor_output",
     "score_segments",
+    "scored_names",
+    "scored_sequences",
 ]
 
 #: the fitted (numeric) fields of ModelParams, in the order of the parameter vector
@@ -261,6 +264,43 @@ def score_segments(seq: SimSequence, scored: Collection[str], warmup_s: float) -
         lo = seq.entries[r.name].start + i0
         out.append(Segment(r.name, lo, i0, meas, 1.0 / (span * np.sqrt(meas.size)), r.time_s[i0:]))
     return out
+
+
+@dataclass
+class Scored:
+    """A simulated sequence and its scored segments."""
+
+    seq: SimSequence
+    segments: list[Segment]
+
+
+def scored_names(records: Sequence[Record], scored: Sequence[str] | None) -> list[str]:
+    """The names of the entries to fit and score (all by default), in run order.
+
+    Raises ``ValueError`` for no records, repeated names, or scored names that are not among
+    the records."""
+    if not records:
+        raise ValueError("no records to fit")
+    names = [r.name for r in records]
+    if len(set(names)) != len(names):
+        raise ValueError(f"entry names must be unique, got {names}")
+    if scored is None:
+        return names
+    unknown = [n for n in scored if n not in names]
+    if unknown or not scored:
+        raise ValueError(f"scored entries {unknown or '[]'} are not among {names}")
+    return [n for n in names if n in set(scored)]
+
+
+def scored_sequences(
+    records: Sequence[Record], scored: Sequence[str], warmup_s: float, chain: bool
+) -> list[Scored]:
+    """The sequences to simulate for fitting ``scored``: the whole run as one chain (the other
+    records as history), or each scored record on its own."""
+    keep = set(scored)
+    if not chain:
+        records = [r for r in records if r.name in keep]
+    return [Scored(s, score_segments(s, keep, warmup_s)) for s in build_sequences(records, chain)]
 
 
 def relaxor_output(

@@ -29,10 +29,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize
 
-from labrig.analysis.base_problem import BaseProblem, ParameterSpace, Scored, best_of
+from labrig.analysis.base_problem import BaseProblem, ParameterSpace, best_of
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic, last_period
 from labrig.analysis.records import Record
-from labrig.analysis.simulate import OperatorFamily, build_sequences, score_segments
+from labrig.analysis.simulate import OperatorFamily, Scored, build_sequences, score_segments
 from labrig.model import Relaxor
 
 __all__ = ["EntryKind", "classify", "generic_starts", "staged_fit"]

@@ -285,6 +285,45 @@ class _Branches:
         return np.repeat(values[self.seg_anchor], self.counts)
 
 
+def _monotone_runs(
+    x: NDArray, x_last: float, direction: float
+) -> tuple[NDArray, NDArray[np.intp], NDArray[np.intp], NDArray]:
+    """The monotone runs of ``x`` (preceded by ``x_last``, travelling in ``direction``):
+    whether each sample starts a reversal, each run's first and end (exclusive) sample, and its
+    direction. Flat stretches keep the direction before them and are not reversals."""
+    n = x.size
+    d = np.sign(np.diff(x, prepend=x_last))
+    if d[0] == 0:
+        d[0] = direction
+    nz = d != 0
+    if not nz.all():  # flat stretches keep the direction before them
+        idx = np.where(nz, np.arange(n), 0)
+        np.maximum.accumulate(idx, out=idx)
+        d = np.where(nz[idx], d[idx], 0.0)
+    before = np.empty(n)
+    before[0] = direction
+    before[1:] = d[:-1]
+    reversal = (d != before) & (d != 0) & (before != 0)
+    rev = np.flatnonzero(reversal)
+    starts = rev if rev.size and rev[0] == 0 else np.concatenate(([0], rev))
+    ends = np.append(starts[1:], n)
+    return reversal, starts, ends, d[ends - 1]  # each run's samples are monotone its way
+
+
+def _first_past(
+    x: NDArray, lo: NDArray[np.intp], hi: NDArray[np.intp], dirs: NDArray, thr: NDArray
+) -> NDArray[np.intp]:
+    """For each monotone run ``x[lo:hi + 1]`` travelling in ``dirs``, the first sample at or past
+    ``thr`` (vectorised bisection; the runs are known to reach it)."""
+    pos = lo.copy()
+    while np.any(pos < hi):
+        mid = (pos + hi) // 2
+        past = dirs * x[mid] >= dirs * thr
+        hi = np.where(past, mid, hi)
+        pos = np.where(past, pos, np.minimum(mid + 1, hi))
+    return pos
+
+
 def _branches(
     x: NDArray,
     stack: list[tuple[float, float]],
@@ -304,22 +343,7 @@ def _branches(
     found and evaluated vectorised.
     """
     n = x.size
-    d = np.sign(np.diff(x, prepend=x_last))
-    if d[0] == 0:
-        d[0] = direction
-    nz = d != 0
-    if not nz.all():  # flat stretches keep the direction before them
-        idx = np.where(nz, np.arange(n), 0)
-        np.maximum.accumulate(idx, out=idx)
-        d = np.where(nz[idx], d[idx], 0.0)
-    before = np.empty(n)
-    before[0] = direction
-    before[1:] = d[:-1]
-    reversal = (d != before) & (d != 0) & (before != 0)
-    rev = np.flatnonzero(reversal)
-    starts = rev if rev.size and rev[0] == 0 else np.concatenate(([0], rev))
-    ends = np.append(starts[1:], n)
-    dirs = d[ends - 1]  # each run's direction (its samples are monotone that way)
+    reversal, starts, ends, dirs = _monotone_runs(x, x_last, direction)
     x_ext = np.where(starts > 0, x[np.maximum(starts - 1, 0)], x_last)  # the turning point
 
     m = len(stack)
@@ -356,15 +380,7 @@ def _branches(
     # where each branch starts: a reversal run's first sample, or the first sample of a run past
     # a turning point (vectorised bisection inside the monotone run)
     cj = np.asarray(cross_run, dtype=np.intp)
-    pos_c = starts[cj].copy()
-    if cj.size:
-        t, dd = np.asarray(cross_thr), dirs[cj]
-        hi = ends[cj] - 1
-        while np.any(pos_c < hi):
-            mid = (pos_c + hi) // 2
-            past = dd * x[mid] >= dd * t
-            hi = np.where(past, mid, hi)
-            pos_c = np.where(past, pos_c, np.minimum(mid + 1, hi))
+    pos_c = _first_past(x, starts[cj], ends[cj] - 1, dirs[cj], np.asarray(cross_thr))
     pos = np.concatenate(([0], starts[rev_runs], pos_c))
     anchors = np.concatenate(([anchor0], node_of_run[rev_runs], cross_anchor)).astype(np.intp)
     # in time order; at one sample a run's reversal comes before the turning points it passes

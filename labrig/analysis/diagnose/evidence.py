@@ -125,12 +125,110 @@ def _lines(res: NDArray, rate: float, f0: float | None) -> list[dict[str, float]
     return out
 
 
+def _harmonics(e: EntryEvidence, res: NDArray, m: NDArray, rate: float, period: int) -> None:
+    """The residual's harmonic table over whole periods, in % of the strain's fundamental, and
+    the quadrature share and lag of its fundamental."""
+    f0 = e.frequency_hz
+    assert f0 is not None
+    nper = (res.size // period) * period
+    x = res[res.size - nper :]
+    s = m[m.size - nper :]
+    fund = _fourier(s, rate, f0)
+    for k in range(1, 6):
+        if k * f0 >= 0.5 * rate:
+            break
+        c = _fourier(x, rate, k * f0)
+        e.harmonics.append(
+            {
+                "k": k,
+                "amplitude_pct": 100 * abs(c) / max(abs(fund), 1e-12),
+                "phase_deg": float(np.degrees(np.angle(c / fund))) if fund else 0.0,
+            }
+        )
+    c1 = _fourier(x, rate, f0)
+    if abs(c1) > 0 and fund:
+        rel = c1 / fund
+        e.quadrature = float(abs(rel.imag) / abs(rel))
+        e.lag_deg = float(np.degrees(np.angle(rel)))
+
+
+def _entry_evidence(r: Record, m: NDArray, p: NDArray) -> EntryEvidence:
+    """The evidence of one entry from its measured ``m`` and predicted ``p`` strain (after the
+    warm-up)."""
+    res = m - p
+    span = float(np.ptp(m))
+    f0 = drive_frequency_hz(r)
+    per = is_periodic(r.voltage_V, r.rate_hz, f0)
+    period = round(r.rate_hz / f0) if per and f0 else None
+    rms = float(np.sqrt(np.mean(res * res)))
+    e = EntryEvidence(
+        r.name,
+        100 * rms / span,
+        100 * _floor(res, period) / span,
+        span,
+        rms,
+        f0,
+        float(np.ptp(r.voltage_V)),
+        per,
+    )
+    if per and period:
+        _harmonics(e, res, m, r.rate_hz, period)
+    cc = _corr(res, np.arange(res.size).astype(float))
+    e.trend_share = cc * cc
+    e.lines = _lines(res, r.rate_hz, f0 if per else None)
+    if "temperature" in r.aux:
+        T = r.aux["temperature"]
+        e.temperature_rise_K = float(np.median(T[-50:]) - np.median(T[:50]))
+    if "amplifier_voltage" in r.aux:
+        e.amp_departure_V = float(np.max(np.abs(r.aux["amplifier_voltage"] - r.voltage_V)))
+    return e
+
+
+def _campaign_features(
+    ents: list[EntryEvidence],
+    res: NDArray,
+    inputs: list[NDArray],
+    temps: list[tuple[NDArray, NDArray, NDArray]],
+    rate_hz: list[float],
+) -> dict[str, float | None]:
+    """Features over all entries: correlations of the span-normalised residual ``res`` with the
+    inputs ``inputs`` (per entry, after the warm-up), scaling of the excess over the floor with
+    frequency and amplitude, trends, and the residual against strain x temperature."""
+    dv = [np.abs(np.diff(v, prepend=v[0])) * fs for v, fs in zip(inputs, rate_hz, strict=True)]
+    v2 = [(v - v.mean()) ** 2 for v in inputs]
+    feats: dict[str, float | None] = {}
+    feats["abs_residual_vs_abs_dVdt"] = _corr(np.abs(res), np.concatenate(dv))
+    feats["residual_vs_V2"] = _corr(res, np.concatenate([x - x.mean() for x in v2]))
+    feats["lag1_autocorrelation"] = _corr(res[1:], res[:-1])
+    vv = np.concatenate(inputs)
+    xc = [abs(_corr(res[k:], vv[: vv.size - k])) for k in (0, 1, 2, 5, 10, 20)]
+    feats["max_residual_input_xcorr"] = max(xc)
+    fs = np.array([e.frequency_hz or np.nan for e in ents])
+    amps = np.array([e.amplitude_V for e in ents])
+    ratio_e = np.array([e.nrmse_pct / max(e.floor_pct, 1e-12) for e in ents])
+    ok = np.isfinite(fs) & (fs > 0)
+    feats["excess_vs_log_frequency"] = (
+        _corr(np.log(fs[ok]), ratio_e[ok]) if ok.sum() >= 3 and np.ptp(fs[ok]) > 0 else None
+    )
+    feats["excess_vs_amplitude"] = (
+        _corr(amps, ratio_e) if len(ents) >= 3 and np.ptp(amps) > 0 else None
+    )
+    q = [e.quadrature for e in ents if e.quadrature is not None]
+    feats["mean_quadrature_fraction"] = float(np.mean(q)) if q else None
+    feats["mean_trend_share"] = float(np.mean([e.trend_share for e in ents]))
+    if temps:
+        rr = np.concatenate([a for a, _, _ in temps])
+        pt = np.concatenate([p * (T - T[0]) for _, p, T in temps])
+        feats["residual_vs_strain_x_temperature"] = _corr(rr, pt)
+    return feats
+
+
 def collect_evidence(
     records: list[Record], predictions: dict[str, NDArray], warmup_s: float = 0.0
 ) -> Evidence:
     """Evidence from the residuals of ``predictions`` (entry name -> strain over the record)."""
     ents: dict[str, EntryEvidence] = {}
-    all_res, all_dv, all_v2, all_v = [], [], [], []
+    all_res, inputs, rates = [], [], []
     temps = []
     for r in records:
         if r.name not in predictions:
@@ -138,86 +236,14 @@ def collect_evidence(
         i0 = round(max(warmup_s, 0.0) * r.rate_hz)
         m = r.strain_ue[i0:]
         p = predictions[r.name][i0:]
-        res = m - p
-        span = float(np.ptp(m))
-        f0 = drive_frequency_hz(r)
-        per = is_periodic(r.voltage_V, r.rate_hz, f0)
-        period = round(r.rate_hz / f0) if per and f0 else None
-        fl = _floor(res, period)
-        rms = float(np.sqrt(np.mean(res * res)))
-        e = EntryEvidence(
-            r.name,
-            100 * rms / span,
-            100 * fl / span,
-            span,
-            rms,
-            f0,
-            float(np.ptp(r.voltage_V)),
-            per,
-        )
-        if per and period:
-            nper = (res.size // period) * period
-            x = res[res.size - nper :]
-            s = m[m.size - nper :]
-            fund = _fourier(s, r.rate_hz, f0)
-            for k in range(1, 6):
-                if k * f0 >= 0.5 * r.rate_hz:
-                    break
-                c = _fourier(x, r.rate_hz, k * f0)
-                e.harmonics.append(
-                    {
-                        "k": k,
-                        "amplitude_pct": 100 * abs(c) / max(abs(fund), 1e-12),
-                        "phase_deg": float(np.degrees(np.angle(c / fund))) if fund else 0.0,
-                    }
-                )
-            c1 = _fourier(x, r.rate_hz, f0)
-            if abs(c1) > 0 and fund:
-                rel = c1 / fund
-                e.quadrature = float(abs(rel.imag) / abs(rel))
-                e.lag_deg = float(np.degrees(np.angle(rel)))
-        t = np.arange(res.size)
-        cc = _corr(res, t.astype(float))
-        e.trend_share = cc * cc
-        e.lines = _lines(res, r.rate_hz, f0 if per else None)
+        e = ents[r.name] = _entry_evidence(r, m, p)
         if "temperature" in r.aux:
-            T = r.aux["temperature"]
-            e.temperature_rise_K = float(np.median(T[-50:]) - np.median(T[:50]))
-            temps.append((res, p, T[i0:]))
-        if "amplifier_voltage" in r.aux:
-            e.amp_departure_V = float(np.max(np.abs(r.aux["amplifier_voltage"] - r.voltage_V)))
-        ents[r.name] = e
-        v = r.voltage_V[i0:]
-        all_res.append(res / span)
-        all_dv.append(np.abs(np.diff(v, prepend=v[0])) * r.rate_hz)
-        all_v2.append((v - v.mean()) ** 2)
-        all_v.append(v)
-    res = np.concatenate(all_res)
-    feats: dict[str, float | None] = {}
-    feats["abs_residual_vs_abs_dVdt"] = _corr(np.abs(res), np.concatenate(all_dv))
-    feats["residual_vs_V2"] = _corr(res, np.concatenate([x - x.mean() for x in all_v2]))
-    feats["lag1_autocorrelation"] = _corr(res[1:], res[:-1])
-    vv = np.concatenate(all_v)
-    xc = [abs(_corr(res[k:], vv[: vv.size - k])) for k in (0, 1, 2, 5, 10, 20)]
-    feats["max_residual_input_xcorr"] = max(xc)
+            temps.append((m - p, p, r.aux["temperature"][i0:]))
+        all_res.append((m - p) / e.span_ue)
+        inputs.append(r.voltage_V[i0:])
+        rates.append(r.rate_hz)
     lst = list(ents.values())
-    fs = np.array([e.frequency_hz or np.nan for e in lst])
-    amps = np.array([e.amplitude_V for e in lst])
-    ratio_e = np.array([e.nrmse_pct / max(e.floor_pct, 1e-12) for e in lst])
-    ok = np.isfinite(fs) & (fs > 0)
-    feats["excess_vs_log_frequency"] = (
-        _corr(np.log(fs[ok]), ratio_e[ok]) if ok.sum() >= 3 and np.ptp(fs[ok]) > 0 else None
-    )
-    feats["excess_vs_amplitude"] = (
-        _corr(amps, ratio_e) if len(lst) >= 3 and np.ptp(amps) > 0 else None
-    )
-    q = [e.quadrature for e in lst if e.quadrature is not None]
-    feats["mean_quadrature_fraction"] = float(np.mean(q)) if q else None
-    feats["mean_trend_share"] = float(np.mean([e.trend_share for e in lst]))
-    if temps:
-        rr = np.concatenate([a for a, _, _ in temps])
-        pt = np.concatenate([p * (T - T[0]) for _, p, T in temps])
-        feats["residual_vs_strain_x_temperature"] = _corr(rr, pt)
+    feats = _campaign_features(lst, np.concatenate(all_res), inputs, temps, rates)
     floor = float(np.mean([e.floor_pct for e in lst]))
     nr = float(np.mean([e.nrmse_pct for e in lst]))
     ev = Evidence(ents, floor, nr, nr / floor if floor > 0 else float("inf"), feats, [])
