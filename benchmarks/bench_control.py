@@ -29,6 +29,7 @@ import os
 import platform
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 if "numpy" not in sys.modules:  # one BLAS thread: small products, a shared machine
@@ -39,6 +40,7 @@ import numpy as np
 
 from labrig.control import (
     CompensationController,
+    ControlModel,
     DirectController,
     compensated_drive,
     load_control_model,
@@ -85,7 +87,7 @@ def time_steps(ctl, s: np.ndarray) -> dict[str, float]:
     }
 
 
-def stage_split(params, rate_hz: float, s: np.ndarray) -> dict[str, float]:
+def stage_split(params: ControlModel, rate_hz: float, s: np.ndarray) -> dict[str, float]:
     """Mean ns per sample of the static inverse and of each relaxor stage alone."""
     ctl = CompensationController(params, rate_hz)
     p = params.params
@@ -125,31 +127,11 @@ def stage_split(params, rate_hz: float, s: np.ndarray) -> dict[str, float]:
     }
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="fewer samples (smoke run)")
-    ap.add_argument("--out", type=Path, default=None, help="also write the report here")
-    args = ap.parse_args(argv)
-    # the model and the creep and remanence fitted with it (labrig fit --effect)
-    params = load_control_model(ROOT / "experiments" / "hybrid-params.json")
-    lines: list[str] = []
+Say = Callable[..., None]
 
-    def say(s: str = "") -> None:
-        lines.append(s)
-        print(s, flush=True)
 
-    say("# Compensation control: cost and accuracy")
-    say()
-    say(
-        f"{platform.python_implementation()} {platform.python_version()}, numpy "
-        f"{np.__version__}, {platform.machine()}, {os.cpu_count()} CPUs, load average "
-        f"{' '.join(f'{x:.2f}' for x in os.getloadavg())} at start; one BLAS thread. "
-        f"Parameters: experiments/hybrid-params.json."
-    )
-    say()
-    seconds = 1.0 if args.quick else 4.0
-
-    # 1. per-sample controller
+def per_sample_section(params: ControlModel, seconds: float, say: Say) -> None:
+    """1. The per-sample controller's cost at 1 and 10 kHz, its stages, the direct controller."""
     say("## Per-sample controller (`CompensationController.step`), 0-1000 ue sine at 10 Hz")
     say()
     say(
@@ -191,7 +173,9 @@ def main(argv: list[str] | None = None) -> int:
         )
     say()
 
-    # 2. agreement with the offline drive
+
+def agreement_section(params: ControlModel, say: Say) -> None:
+    """2. The per-sample drive against the offline one."""
     say("## Per-sample versus offline drive")
     say()
     say("| command | max abs(V_step - V_offline) (V) | drive range (V) |")
@@ -206,12 +190,14 @@ def main(argv: list[str] | None = None) -> int:
         )
     say()
 
-    # 3. offline drive: time and exactness
+
+def offline_section(params: ControlModel, quick: bool, say: Say) -> None:
+    """3. The offline drive's time and how exactly it inverts the model."""
     say("## Offline drive (`compensated_drive`)")
     say()
     say("| samples | time (s) |")
     say("|---|---|")
-    for n in (10_000, 100_000) if args.quick else (10_000, 100_000, 1_000_000):
+    for n in (10_000, 100_000) if quick else (10_000, 100_000, 1_000_000):
         s = sine(10.0, (n - 1) / 1000.0, 1000.0)
         times = []
         for _ in range(3 if n <= 100_000 else 1):
@@ -236,6 +222,35 @@ def main(argv: list[str] | None = None) -> int:
             f"{100 * np.sqrt(np.mean(e**2)) / 1000:.1e} |"
         )
     say()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer samples (smoke run)")
+    ap.add_argument("--out", type=Path, default=None, help="also write the report here")
+    args = ap.parse_args(argv)
+    # the model and the creep and remanence fitted with it (labrig fit --effect)
+    params = load_control_model(ROOT / "experiments" / "hybrid-params.json")
+    lines: list[str] = []
+
+    def say(s: str = "") -> None:
+        lines.append(s)
+        print(s, flush=True)
+
+    say("# Compensation control: cost and accuracy")
+    say()
+    say(
+        f"{platform.python_implementation()} {platform.python_version()}, numpy "
+        f"{np.__version__}, {platform.machine()}, {os.cpu_count()} CPUs, load average "
+        f"{' '.join(f'{x:.2f}' for x in os.getloadavg())} at start; one BLAS thread. "
+        f"Parameters: experiments/hybrid-params.json."
+    )
+    say()
+    seconds = 1.0 if args.quick else 4.0
+
+    per_sample_section(params, seconds, say)
+    agreement_section(params, say)
+    offline_section(params, args.quick, say)
     say(f"Load average at the end: {' '.join(f'{x:.2f}' for x in os.getloadavg())}.")
     if args.out:
         args.out.write_text("\n".join(lines) + "\n")
