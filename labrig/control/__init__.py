@@ -11,7 +11,7 @@ and the drive that makes it follow a strain command ``S_com`` (ue) is (the paper
 ("direct" control, the paper's baseline: ``V = S_com / alpha0``). Modules, in the order the data
 flows through them:
 
-- :mod:`~labrig.control.params_file`: the parameter file of ``labrig fit --out`` as a
+- :mod:`~labrig.control.control_model`: the parameter file of ``labrig fit --out`` as a
   :class:`ControlModel` (the model and the creep and remanence fitted with it);
 - :mod:`~labrig.control.inversion`: the offline drive of a whole command
   (:func:`compute_drive`, :func:`compensated_drive`, :func:`direct_drive`), the exact inverse of the
@@ -31,6 +31,13 @@ docs/control.md describes the method with its measured accuracy and cost
 """
 
 from labrig.control.bank_inverse import PREVIEW_TOL
+from labrig.control.control_model import (
+    INVERTIBLE_EFFECTS,
+    ControlModel,
+    as_control_model,
+    load_control_model,
+    load_params,
+)
 from labrig.control.controllers import CompensationController, DirectController
 from labrig.control.drive_check import DriveCheck, InfeasibleCommandError, check_drive
 from labrig.control.inverse_system import outside_zeros
@@ -49,13 +56,6 @@ from labrig.control.metrics import (
     hysteresis_width_pct,
     tracking_nrmse_pct,
     zero_command_strain_ue,
-)
-from labrig.control.params_file import (
-    INVERTIBLE_EFFECTS,
-    ControlModel,
-    as_control_model,
-    load_control_model,
-    load_params,
 )
 
 __all__ = [

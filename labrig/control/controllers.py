@@ -14,8 +14,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from labrig.control.bank_inverse import PREVIEW_TOL, BankInverse
+from labrig.control.control_model import ControlModel, as_control_model
 from labrig.control.inversion import strain_command
-from labrig.control.params_file import ControlModel, as_control_model
 from labrig.control.static_inverse import static_stepper
 from labrig.limits import RigLimits
 from labrig.model import ModelParams

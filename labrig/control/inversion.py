@@ -53,9 +53,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
+from labrig.control.control_model import ControlModel, as_control_model
 from labrig.control.drive_check import check_drive
 from labrig.control.inverse_system import outside_zeros
-from labrig.control.params_file import ControlModel, as_control_model
 from labrig.control.static_inverse import static_stepper
 from labrig.limits import RigLimits
 from labrig.model import ModelParams

@@ -2,7 +2,7 @@
 
 :class:`StaticInverseStepper` is :meth:`~labrig.model.QuasiStaticHysteresis.invert` per sample
 (the operator ``S = alpha0 u + H[u]`` with the same memory rule); :class:`RemanentInverseStepper`
-adds the Bouc-Wen remanence ``h`` of a :class:`~labrig.control.params_file.ControlModel`
+adds the Bouc-Wen remanence ``h`` of a :class:`~labrig.control.control_model.ControlModel`
 (``S = H[u] - h[u]``). Both the offline drive (with remanence) and the per-sample controller use
 them, so the two forms share one static inverse. Units: strain in ue, voltage in V.
 """
@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from labrig.control.params_file import ControlModel
+from labrig.control.control_model import ControlModel
 from labrig.model import QuasiStaticHysteresis
 from labrig.model.bouc_wen import bouc_wen_step
 from labrig.model.hysteresis import BUILTIN_SHAPES, Shape

@@ -1,4 +1,4 @@
-"""Parameter files for the controller: what ``labrig fit --out`` wrote, as a :class:`ControlModel`.
+"""What the controller inverts (:class:`ControlModel`), read from a ``labrig fit --out`` file.
 
 A control model is the dynamic model (:class:`~labrig.model.ModelParams`) and, optionally, the
 actuator effects fitted with it that the controller inverts (:data:`INVERTIBLE_EFFECTS`):
@@ -7,7 +7,9 @@ actuator effects fitted with it that the controller inverts (:data:`INVERTIBLE_E
 
 ``KV`` the Kelvin-Voigt creep (``c``, ``tau_s``), ``h`` the Bouc-Wen remanence (``A`` ue/V,
 ``beta`` and ``gamma`` 1/V). :func:`load_params` reads the model alone, :func:`load_control_model`
-the model with its effects; both raise ``ValueError`` naming the file and the problem.
+the model with its effects; both raise ``ValueError`` naming the file and the problem (the
+controller's reader: ``labrig report`` and ``diagnose`` read the same files with
+:mod:`labrig.params_file`).
 """
 
 from __future__ import annotations
