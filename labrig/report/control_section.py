@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 
 from labrig.analysis.records import Record
 from labrig.control.metrics import control_metrics, is_control_entry
-from labrig.report.plots import _style, png
+from labrig.report.plots import png, style_axes
 
 __all__ = ["COLORS", "control_html", "control_metrics", "is_control_entry"]
 
@@ -50,7 +50,7 @@ def _figure(group: list[Record]) -> bytes:
     ax_t.set(xlabel="time (s)", ylabel="strain (ue)", title="tracking")
     ax_v.set(xlabel="time (s)", ylabel="drive voltage (V)", title="computed voltage (Fig. 17)")
     for ax in (ax_l, ax_t, ax_v):
-        _style(ax)
+        style_axes(ax)
         ax.legend(fontsize=7)
     fig.tight_layout()
     return png(fig)
