@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from labrig.analysis.metrics import compare, drive_frequency_hz, is_periodic, last_period
 from labrig.analysis.records import Record
+from labrig.jsonsafe import json_safe
 
 #: models of a report, in display order: ours first, then the baselines
 MODEL_KEYS: tuple[str, ...] = ("dynamic", "prandtl_ishlinskii", "bouc_wen")
@@ -177,12 +178,6 @@ def amplitude_of(record: Record) -> float:
     return float(f"{span:.3g}") if span > 0 else 0.0
 
 
-def _finite(x: Any) -> Any:
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    return x
-
-
 def build_report(
     title: str,
     records: Sequence[Record],
@@ -210,7 +205,7 @@ def build_report(
             if fm.heldout_per_entry is not None:
                 held = fm.heldout_per_entry.get(r.name)
             m["heldout_nrmse_pct"] = held
-            ev.metrics[key] = {k: _finite(v) for k, v in m.items()}
+            ev.metrics[key] = json_safe(m)  # undefined metrics as None
         entries.append(ev)
     not_periodic = [e.name for e in entries if not e.periodic]
     if not_periodic:
