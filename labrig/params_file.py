@@ -124,7 +124,7 @@ def fitted_effects(
     """The library effects of a ``labrig fit --effect`` file and their parameters (checked),
     configured as when they were fitted (the file's ``effects_context``; else from ``records``;
     a file without either can only have its names checked: ``check_params=False``)."""
-    from labrig.analysis.diagnose_fit import effect_context
+    from labrig.analysis.extended import effect_context
     from labrig.analysis.fit_effects import resolve_effects
 
     listed = doc.get("effects") or []

@@ -79,7 +79,7 @@ def test_effect_is_named_first_and_halves_heldout(expected):
 
 def test_cli_function_writes_json_and_html(tmp_path, monkeypatch, capsys):
     import labrig.analysis.load as load
-    from labrig.cli_diagnose import diagnose_command
+    from labrig.cli.diagnose import diagnose_command
 
     recs = bench_campaign(CASES["mains_pickup"], seed=5)
     monkeypatch.setattr(load, "records_from_run", lambda path, entries=None: recs)
@@ -95,7 +95,7 @@ def test_cli_function_writes_json_and_html(tmp_path, monkeypatch, capsys):
 
 def test_params_file_is_validated(tmp_path, monkeypatch):
     import labrig.analysis.load as load
-    from labrig.cli_diagnose import diagnose_command
+    from labrig.cli.diagnose import diagnose_command
     from labrig.errors import InputFileError
 
     monkeypatch.setattr(load, "records_from_run", lambda path, entries=None: [])
@@ -107,7 +107,7 @@ def test_params_file_is_validated(tmp_path, monkeypatch):
 
 def test_params_from_a_baseline_fit_are_refused(tmp_path, monkeypatch):
     import labrig.analysis.load as load
-    from labrig.cli_diagnose import diagnose_command
+    from labrig.cli.diagnose import diagnose_command
     from labrig.errors import InputFileError
 
     monkeypatch.setattr(load, "records_from_run", lambda path, entries=None: [])
@@ -120,8 +120,8 @@ def test_params_from_a_baseline_fit_are_refused(tmp_path, monkeypatch):
 def test_params_with_fitted_effects_use_the_base_and_say_so(tmp_path):
     """A ``labrig fit --effect`` file: its base parameters are the start, its effects are named
     as not assumed (diagnose tests every effect itself)."""
-    from labrig.cli_diagnose import _load_params
     from labrig.model import PAPER_TABLE1
+    from labrig.params_file import start_params
 
     doc = {
         "params": PAPER_TABLE1.model_dump(),
@@ -130,7 +130,7 @@ def test_params_with_fitted_effects_use_the_base_and_say_so(tmp_path):
     f = tmp_path / "fit.json"
     f.write_text(json.dumps(doc))
     said: list[str] = []
-    assert _load_params(f, said.append) == PAPER_TABLE1
+    assert start_params(f, said.append) == PAPER_TABLE1
     assert len(said) == 1 and "viscoelastic_creep" in said[0] and "not assumed" in said[0]
 
 
@@ -480,7 +480,7 @@ def test_also_accepts_only_structural_effects(tmp_path):
 
 def test_also_adds_the_structural_effect_to_the_candidates(tmp_path, monkeypatch, capsys):
     import labrig.analysis.load as load
-    from labrig.cli_diagnose import diagnose_command
+    from labrig.cli.diagnose import diagnose_command
 
     recs = bench_campaign([], seed=6, truth="hybrid")
     monkeypatch.setattr(load, "records_from_run", lambda path, entries=None: recs)

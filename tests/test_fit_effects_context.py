@@ -21,12 +21,14 @@ from typer.testing import CliRunner
 
 from labrig.analysis.fit import fit_model
 from labrig.analysis.fit_effects import fit_effects
+from labrig.analysis.prepare import prepare
 from labrig.analysis.records import Record
 from labrig.analysis.signals import sine
 from labrig.cli import app
-from labrig.cli_analysis import _fitted_effects, predict_entries, prepare
 from labrig.control import load_control_model
 from labrig.model import PAPER_TABLE1, DynamicHysteresisModel
+from labrig.params_file import fitted_effects
+from labrig.report.build import predict_entries
 
 ROOT = Path(__file__).resolve().parents[1]
 RATE = 1000.0
@@ -34,7 +36,7 @@ RATE = 1000.0
 
 def test_quadratic_term_is_relative_to_the_runs_full_scale():
     v_full, c2 = 3.6, 0.05  # V at the DAQ; 5 % of full scale at full scale
-    # the seed's model seen from a 0-3.6 V command (gain folded into alpha0 and gamma, Vc)
+    # the paper's model seen from a 0-3.6 V command (gain folded into alpha0 and gamma, Vc)
     g = 100.0 / v_full
     p = PAPER_TABLE1.model_copy(
         update={
@@ -89,7 +91,7 @@ def test_report_with_a_fit_effect_file_predicts_with_the_effect(tmp_path: Path):
 
     setup = prepare(run, None, None, None)
     cm = load_control_model(params)
-    pred = predict_entries(cm.params, setup, _fitted_effects(doc, params, setup.records))
+    pred = predict_entries(cm.params, setup, fitted_effects(doc, params, setup.records))
     first = setup.records[0]
     want = cm.predict(first.voltage_V, RATE)
     np.testing.assert_allclose(pred[first.name], want, rtol=0, atol=1e-6 * np.ptp(want))
@@ -110,8 +112,8 @@ def test_a_fit_file_without_its_effects_context_is_read_and_configured_from_the_
     """Files written before ``effects_context`` existed: the names are checked when the file is
     read, the parameters once the run's records say how the effects are configured (a
     temperature channel gives thermal_drift its ``k_per_K`` form)."""
-    from labrig.cli_analysis import read_params
     from labrig.errors import InputFileError
+    from labrig.params_file import read_fit_output as read_params
 
     doc = {
         "params": PAPER_TABLE1.model_dump(),
@@ -122,14 +124,14 @@ def test_a_fit_file_without_its_effects_context_is_read_and_configured_from_the_
     assert read_params(path)["effects"] == doc["effects"]
     t = np.arange(100) / RATE
     rec = Record("e", RATE, t, np.zeros(100), np.zeros(100), {"temperature": 23 + t})
-    effects, values = _fitted_effects(doc, path, [rec])
+    effects, values = fitted_effects(doc, path, [rec])
     assert [e.name for e in effects] == ["thermal_drift"] and values == {
         "thermal_drift": {"k_per_K": 0.004}
     }
     # without a temperature channel the same file does not fit the run: a clear error
     bare = Record("e", RATE, t, np.zeros(100), np.zeros(100))
     with pytest.raises(InputFileError, match="thermal_drift needs numeric params"):
-        _fitted_effects(doc, path, [bare])
+        fitted_effects(doc, path, [bare])
     # an unknown effect is refused when the file is read
     path.write_text(json.dumps({**doc, "effects": [{"effect": "gremlins", "params": {}}]}))
     with pytest.raises(InputFileError, match="gremlins"):

@@ -69,7 +69,7 @@ def predict_entries(
     fitted ``effects`` (:func:`labrig.params_file.fitted_effects`) when given, simulated as
     ``labrig fit --effect`` fitted them."""
     if effects and effects[0]:
-        from labrig.analysis.diagnose_fit import ExtendedProblem
+        from labrig.analysis.extended import ExtendedProblem
 
         prob = ExtendedProblem(
             setup.records,
