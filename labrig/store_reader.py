@@ -137,16 +137,17 @@ def _open(path: Path | str) -> h5py.File:
 
 
 def _read_samples(path: Path | str, entry: str, name: str, ds: h5py.Dataset) -> np.ndarray:
-    """A channel's samples; a chunk that fails its checksum (or cannot be read) is an
-    :class:`InputFileError` naming the entry and the channel."""
+    """A channel's samples; a chunk that fails its Fletcher32 checksum (or cannot be read) is
+    an :class:`InputFileError` naming the entry and the channel."""
     try:
         return ds[()]
     except (OSError, RuntimeError) as e:
-        why = "checksum mismatch" if "Fletcher32" in str(e) else "unreadable"
-        detail = (str(e).strip().splitlines() or [""])[0][:160]
-        raise InputFileError(
-            [InputIssue(str(path), None, f"{entry}/data/{name}", f"{why}: {detail}")]
-        ) from None
+        text = str(e)
+        if ds.fletcher32 and ("Fletcher32" in text or "filter" in text):
+            why = "checksum mismatch: the stored samples are damaged"
+        else:
+            why = "unreadable: " + ((text.strip().splitlines() or [""])[0][:160])
+        raise InputFileError([InputIssue(str(path), None, f"{entry}/data/{name}", why)]) from None
 
 
 def _read_entry(path: Path | str, name: str, g: h5py.Group, load_data: bool) -> RunEntry:

@@ -1,12 +1,14 @@
-"""Signals for real: Ctrl-C (SIGINT), SIGTERM and SIGKILL sent to a running ``labrig run``.
+"""Signals for real: SIGINT, SIGTERM, SIGHUP, SIGQUIT and SIGKILL sent to a running ``labrig run``.
 
 Each test starts the run in a subprocess on the simulated rig, paced to the wall clock
 (``--realtime``), lets it write for a while and signals it:
 
-- SIGINT / SIGTERM: exit code 130, a valid file whose run and running entry are ``aborted``,
-  and the amplifier at 0 V at the end. The simulators live in the killed process, so the 0 V
-  is read from the file: the runner stores the amplifier's read-back voltage after zeroing as
-  ``/run/final_amplifier_voltage_V``.
+- SIGINT (Ctrl-C), SIGTERM, SIGHUP (terminal or SSH session closed), SIGQUIT (Ctrl-\\): exit
+  code 128 + signal number (130, 143, 129, 131), a valid file whose run and running entry are
+  ``aborted`` with the signal named, the exit code recorded, a ramp to 0 V recorded from the
+  voltage the run was at, and the amplifier at 0 V at the end. The simulators live in the
+  signalled process, so the 0 V is read from the file: the runner stores the amplifier's
+  read-back voltage after the ramp as ``/run/final_amplifier_voltage_V``.
 - SIGKILL: no cleanup at all. The file must open as it is (labrig has no ``recover`` step:
   blocks are flushed as they are written), hold every block the run reported flushed before
   the kill, intact, and read as incomplete (status ``running``).
@@ -113,24 +115,40 @@ def check_prefix(entry, plan_step) -> None:
         assert np.all(np.isfinite(entry[ch])), ch
 
 
+#: signal -> (exit code, words of the run's status_reason)
+EXPECTED = {
+    signal.SIGINT: (130, "Ctrl-C"),
+    signal.SIGTERM: (143, "SIGTERM"),
+    signal.SIGHUP: (129, "SIGHUP"),
+    signal.SIGQUIT: (131, "SIGQUIT"),
+}
+#: the ramp's limit on the default rig: 0.5 x 0.18 A / (6 uF x 1.7)
+RAMP_LIMIT_V_PER_S = 0.5 * 0.18 / (6e-6 * 1.7)
+
+
 @pytest.mark.parametrize(
     ("sig", "repeats"),
     [
         (signal.SIGINT, 1),
-        pytest.param(signal.SIGTERM, 1, marks=pytest.mark.slow),
+        (signal.SIGTERM, 1),
+        (signal.SIGHUP, 1),
+        (signal.SIGQUIT, 1),
         (signal.SIGINT, 5),
+        (signal.SIGHUP, 3),
     ],
-    ids=["SIGINT", "SIGTERM", "SIGINTx5"],
+    ids=["SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT", "SIGINTx5", "SIGHUPx3"],
 )
 def test_interrupt_stops_at_0V_with_an_aborted_valid_file(tmp_path, sig, repeats):
-    """One signal, or an impatient Ctrl-C pressed five times within 40 ms: the repeats must
-    not interrupt the ramp to 0 V or the closing of the file, nor swallow the first one."""
+    """One signal, or an impatient burst (Ctrl-C pressed five times within 40 ms; a closing
+    terminal's repeated SIGHUP): the repeats must not interrupt the ramp to 0 V or the closing
+    of the file, nor swallow the first one."""
+    code_expected, words = EXPECTED[sig]
     out = tmp_path / "run.h5"
     proc = Proc([*labrig_cmd(), "run", str(SWEEP), "--realtime", "--out", str(out)], tmp_path)
     try:
         proc.wait_line(lambda s: "entries" in s, timeout=30)
         wait_for_file(out, proc)
-        time.sleep(2.0)  # sine_50V_1Hz is 5 s long: this lands mid-entry
+        time.sleep(2.5)  # sine_50V_1Hz is 5 s long: this lands mid-entry, near its 50 V peak
         t_sig = time.monotonic()
         proc.p.send_signal(sig)
         for gap in (0.0, 0.002, 0.005, 0.01, 0.02)[: repeats - 1]:
@@ -144,17 +162,18 @@ def test_interrupt_stops_at_0V_with_an_aborted_valid_file(tmp_path, sig, repeats
     err = proc.stderr
     assert "Traceback" not in err
     if repeats == 1:
-        assert code == 130, err
+        assert code == code_expected, err
         assert "run aborted" in err
         assert "".join(proc.out).strip().splitlines()[-1] == str(out)  # prints the path
     else:
         # a repeat arriving after the run was cleaned up (while the CLI prints) may end the
-        # process by SIGINT itself: the shell shows 130 either way
-        assert code in (130, -signal.SIGINT), err
+        # process by the signal itself: the shell shows 128 + n either way
+        assert code in (code_expected, -sig), err
     assert stop_s < 5.0  # it stops promptly, it does not finish the entry first
 
     f = read_run(out)
-    assert f.status == "aborted" and "Ctrl-C" in f.reason
+    assert f.status == "aborted" and words in f.reason
+    assert f.exit_code == code_expected
     assert f.end_time
     assert len(f.planned_entries) == 10
     entries = list(f)
@@ -167,6 +186,14 @@ def test_interrupt_stops_at_0V_with_an_aborted_valid_file(tmp_path, sig, repeats
     with h5py.File(out, "r") as h:
         v = h["run/final_amplifier_voltage_V"]
         assert float(v[()]) == 0.0 and v.attrs["units"] == "V"
+        ramp = h["run/ramp_to_zero"]
+        t, volts = ramp["time"][()], ramp["voltage"][()]
+        v0 = float(ramp.attrs["start_voltage_V"])
+    # it ramped from where the run was (the 50 V sine, 2 s in: not at 0 V) to 0 V, and the
+    # recorded times of the writes keep to the limit
+    assert v0 > 1.0 and volts[0] == v0 and volts[-1] == 0.0
+    assert t[-1] >= 0.9 * v0 / RAMP_LIMIT_V_PER_S
+    assert np.all(np.abs(volts) >= abs(v0) - RAMP_LIMIT_V_PER_S * t - 1e-9)
 
 
 WRITER = textwrap.dedent(

@@ -1,21 +1,32 @@
-"""``labrig sim serve``: the simulators run standalone and real clients reach them."""
+"""``labrig sim serve``: the simulators run standalone, real clients reach them, the rig's
+limits hold from the first command, and a port in use is a clear error."""
 
 from __future__ import annotations
 
 import signal
+import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 import serial
+import yaml
 from pymodbus.client import ModbusTcpClient
+
+from labrig.rigfile import DEFAULT_RIG_YAML
 
 pytestmark = pytest.mark.timeout(60)
 
 
-@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
-def test_serve_prints_addresses_and_answers_until_stopped(stop):
+def labrig_cmd() -> list[str]:
+    exe = Path(sys.executable).parent / "labrig"
+    return [str(exe)] if exe.exists() else [sys.executable, "-m", "labrig.cli"]
+
+
+def start_serve() -> tuple[subprocess.Popen, list[str]]:
+    """``serve(None)`` in a subprocess; its lines up to "Press Ctrl-C"."""
     code = "from labrig.drivers.sim.serve import serve; serve(None)"
     proc = subprocess.Popen(
         [sys.executable, "-c", code],
@@ -27,19 +38,46 @@ def test_serve_prints_addresses_and_answers_until_stopped(stop):
         # never arrive (the test hung in such runs)
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
+    lines: list[str] = []
+    deadline = time.monotonic() + 30
+    while not any("Ctrl-C" in x for x in lines):
+        if time.monotonic() > deadline:
+            proc.kill()
+            raise AssertionError(lines)
+        line = proc.stdout.readline()
+        if not line:
+            proc.kill()
+            raise AssertionError(proc.stderr.read())
+        lines.append(line)
+    return proc, lines
+
+
+def stop_serve(proc: subprocess.Popen, sig: int = signal.SIGTERM) -> str:
+    proc.send_signal(sig)
     try:
-        lines = []
-        deadline = time.monotonic() + 30
-        while not any("Ctrl-C" in x for x in lines):
-            assert time.monotonic() < deadline, lines
-            line = proc.stdout.readline()
-            assert line, proc.stderr.read()
-            lines.append(line)
+        out, _ = proc.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        raise
+    return out
+
+
+def gcs_url(lines: list[str]) -> str:
+    return next(w for x in lines if "GCS" in x for w in x.split() if w.startswith("socket://"))
+
+
+@pytest.mark.parametrize(
+    "stop",
+    [signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT],
+    ids=["ctrl-c", "sigterm", "sighup", "sigquit"],
+)
+def test_serve_prints_addresses_and_answers_until_stopped(stop):
+    proc, lines = start_serve()
+    try:
         text = "".join(lines)
-        gcs = next(w for x in lines if "GCS" in x for w in x.split() if w.startswith("socket://"))
         tcp = next(x for x in lines if "Modbus TCP" in x).split()[-3]
         assert "Modbus RTU" in text
-        with serial.serial_for_url(gcs, timeout=2) as s:
+        with serial.serial_for_url(gcs_url(lines), timeout=2) as s:
             s.write(b"ONL 1 1\nSVA A 10\n")
             time.sleep(0.3)  # the bench clock runs in real time
             s.write(b"VOL? 1\n")
@@ -49,11 +87,70 @@ def test_serve_prints_addresses_and_answers_until_stopped(stop):
         assert client.read_input_registers(0, count=1, device_id=1).registers == [0x3840]
         client.close()
     finally:
-        proc.send_signal(stop)
-        try:
-            out, _ = proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            raise
+        out = stop_serve(proc, stop)
     assert "stopping the simulators" in out  # stopped cleanly, not killed by the signal
     assert proc.returncode == 0
+
+
+def ask(s: serial.SerialBase, line: bytes) -> bytes:
+    s.write(line)
+    return s.read_until(b"\n")
+
+
+def test_serve_applies_the_rigs_limits_from_the_start():
+    """The default rig allows -20..100 V: the standalone amplifier starts with VMI/VMA there
+    (not at its hardware -30..130 V) and refuses SVA beyond them, before any labrig driver
+    has configured it."""
+    proc, lines = start_serve()
+    try:
+        assert "-20 to 100 V" in "".join(lines)
+        with serial.serial_for_url(gcs_url(lines), timeout=2) as s:
+            assert ask(s, b"VMA? 1\n") == b"1=100.0000\n"
+            assert ask(s, b"VMI? 1\n") == b"1=-20.0000\n"
+            s.write(b"ONL 1 1\n")
+            assert ask(s, b"ERR?\n") == b"0\n"
+            for cmd, err in ((b"SVA A 130\n", b"17\n"), (b"VMA 1 130\n", b"17\n")):
+                s.write(cmd)
+                assert ask(s, b"ERR?\n") == err, cmd
+            s.write(b"SVA A 1_0\n")  # not a number in GCS (Python's float() would say 10)
+            assert ask(s, b"ERR?\n") == b"1\n"
+            time.sleep(0.2)
+            assert ask(s, b"VOL? 1\n") == b"1=0.0000\n"  # the output never moved
+            assert ask(s, b"SVA? A\n") == b"A=0.0000\n"
+    finally:
+        stop_serve(proc)
+
+
+@pytest.fixture
+def busy_port():
+    """A port on 127.0.0.1 that something else listens on."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    s.bind(("127.0.0.1", 0))
+    s.listen(1)
+    yield s.getsockname()[1]
+    s.close()
+
+
+@pytest.mark.parametrize("kind", ["gcs_port", "modbus_tcp_port"])
+@pytest.mark.parametrize("command", ["sim-serve", "run"])
+def test_a_fixed_port_in_use_is_exit_2_naming_the_field(tmp_path, busy_port, kind, command):
+    data = yaml.safe_load(DEFAULT_RIG_YAML)
+    data["simulator"] = {kind: busy_port}
+    rig = tmp_path / "rig.yaml"
+    rig.write_text(yaml.safe_dump(data))
+    if command == "sim-serve":
+        args = ["sim", "serve", "--rig", str(rig)]
+    else:
+        proto = tmp_path / "p.yaml"
+        proto.write_text(
+            "name: p\nrate_hz: 1000\nsteps:\n  - {kind: hold, voltage_V: 5, duration_s: 0.2}\n"
+        )
+        args = ["run", str(proto), "--rig", str(rig), "--out", str(tmp_path / "run.h5")]
+    res = subprocess.run(
+        [*labrig_cmd(), *args], capture_output=True, text=True, timeout=30, cwd=tmp_path
+    )
+    assert res.returncode == 2, res.stderr
+    assert "Traceback" not in res.stderr
+    assert str(rig) in res.stderr and f"simulator.{kind}" in res.stderr
+    assert f"127.0.0.1:{busy_port}" in res.stderr and "in use" in res.stderr
+    assert not (tmp_path / "run.h5").exists()

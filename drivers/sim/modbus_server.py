@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 import threading
 
 from labrig.drivers import strain_registers as R
@@ -81,6 +82,10 @@ class ModbusConditionerServer:
         if isinstance(self._error, OSError):  # e.g. the port is in use
             raise self._error
         if self._error is not None:
+            # pymodbus reports a failed bind in its own words: find out whether it is the port
+            refused = _bind_error(self.host, self.port)
+            if refused is not None:
+                raise refused
             raise RuntimeError(f"the Modbus simulator could not start: {self._error}")
         return self
 
@@ -243,3 +248,16 @@ class ModbusConditionerServer:
         for i in range(len(damaged) // 2, len(damaged)):
             damaged[i] ^= 0x5A
         return bytes(damaged)
+
+
+def _bind_error(host: str, port: int) -> OSError | None:
+    """The OSError binding ``host:port`` gives now (None if it binds, or for port 0)."""
+    if not port:
+        return None
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host, port))
+        except OSError as e:
+            return e
+    return None
