@@ -1,8 +1,8 @@
 """`labrig run / info / export / check` end to end on the simulated rig.
 
-The seed's campaign (experiments/paper.yaml, 11 entries) runs once in a real ``labrig``
+The paper's campaign (experiments/paper.yaml, 11 entries) runs once in a real ``labrig``
 process; the tests read its file: statuses, the NeXus layout, and loops that look like the
-seed's (about 1000 ue at 100 V, hysteresis, a positive strain at 0 V after the first cycle).
+paper's (about 1000 ue at 100 V, hysteresis, a positive strain at 0 V after the first cycle).
 Device faults and bad --out paths go through the CLI in-process (typer's CliRunner).
 """
 

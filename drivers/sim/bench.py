@@ -1,6 +1,6 @@
 """The virtual bench: the physics behind the three simulators (DAQ, amplifier, conditioner).
 
-One :class:`VirtualBench` holds the whole signal chain of the seed's bench and is shared by the
+One :class:`VirtualBench` holds the whole signal chain of the paper's bench and is shared by the
 simulated DAQ (in-process), the GCS responder (amplifier, over a socket) and the Modbus server
 (conditioner, over TCP or RTU framing). Per sample interval ``n`` (rate ``fs``)::
 
@@ -68,7 +68,8 @@ class _Cfg(BaseModel):
 
 
 class TruthConfig(_Cfg):
-    """The actuator: ``paper`` (the dynamic model with a preset) or ``hybrid`` (seed section 4)."""
+    """The actuator: ``paper`` (the dynamic model with a preset) or ``hybrid`` (the paper's
+    section-4 reference plant)."""
 
     preset: Literal["paper", "hybrid"] = "paper"
     paper_params: str = Field("PAPER_TABLE1", description="a labrig.model.PRESETS name")

@@ -1,17 +1,17 @@
-"""The seed's section-4 reference plant ("hybrid" truth preset of the virtual bench).
+"""The paper's section-4 reference plant ("hybrid" truth preset of the virtual bench).
 
-The seed tests its controller on a different, previously validated actuator model (its ref. [28]):
+The paper tests its controller on a different, previously validated actuator model (its ref. [28]):
 a quasi-static part made of linear, system-level and Bouc-Wen blocks, followed by the transfer
-function of seed Eq. 11 (spec ``model.md`` section 5)::
+function of the paper's Eq. 11 (docs/model.md, section 7)::
 
     S_stat = L[V] - h,                 L = system-level operator (alpha0_ue_per_V, gamma, Vc)
     dh/dt  = A dV/dt - beta |dV/dt| h - gamma_bw dV/dt |h|          (Bouc-Wen, n = 1)
     S(s)/S_stat(s) = (92144 s^3 - 68696e3 s^2 + 114816e6 s + 432e9)
                    / (148196 s^3 + 154912e3 s^2 + 123824e6 s + 432e9)
 
-``L`` is the seed's quasi-static operator (``labrig.model.QuasiStaticHysteresis``: the linear
+``L`` is the paper's quasi-static operator (``labrig.model.QuasiStaticHysteresis``: the linear
 block is its ``alpha0`` term, the system-level block its exponential ``h``), with its own values,
-so the hybrid plant is never the object being fitted. The seed does not give the Bouc-Wen
+so the hybrid plant is never the object being fitted. The paper does not give the Bouc-Wen
 parameters; :data:`HYBRID_DEFAULT` was chosen (and is checked in the tests) so that a 0-100 V
 unipolar sine at 1 Hz gives a loop of about 1 180 ue (steady state) with a hysteresis width (largest
 ascending/descending difference at equal voltage) of about 12.6 % of the span; the strain at
@@ -34,7 +34,7 @@ from scipy import signal
 from labrig.model.bouc_wen import bouc_wen_stream
 from labrig.model.hysteresis import HysteresisState, QuasiStaticHysteresis
 
-#: seed Eq. 11, numerator and denominator in descending powers of s (DC gain 1)
+#: the paper's Eq. 11, numerator and denominator in descending powers of s (DC gain 1)
 EQ11_NUM = (92144.0, -68696e3, 114816e6, 432e9)
 EQ11_DEN = (148196.0, 154912e3, 123824e6, 432e9)
 
@@ -50,7 +50,7 @@ class HybridParams(BaseModel):
     bw_A_ue_per_V: float = Field(1.5, description="Bouc-Wen gain A (ue/V)")
     bw_beta_per_V: float = Field(0.040, ge=0, description="Bouc-Wen beta (1/V)")
     bw_gamma_per_V: float = Field(0.013, description="Bouc-Wen gamma (1/V), |gamma| <= beta")
-    use_eq11: bool = Field(True, description="apply the seed's Eq. 11 transfer function")
+    use_eq11: bool = Field(True, description="apply the paper's Eq. 11 transfer function")
 
 
 HYBRID_DEFAULT = HybridParams()
