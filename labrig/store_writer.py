@@ -27,6 +27,7 @@ import numpy as np
 
 from labrig import __version__
 from labrig.errors import StorageError
+from labrig.interrupts import reason_for, signum_of
 from labrig.store_format import (
     FINAL_STATUSES,
     FORMAT_VERSION,
@@ -328,7 +329,7 @@ class RunWriter:
                 if exc_type is None:
                     self.finish("complete")
                 elif issubclass(exc_type, KeyboardInterrupt):
-                    self.finish("aborted", "interrupted (Ctrl-C)")
+                    self.finish("aborted", reason_for(signum_of(exc)))
                 else:
                     self.finish("failed", f"{exc_type.__name__}: {exc}")
         except StorageError as e:
