@@ -9,6 +9,7 @@ SIGQUIT 131); 1 anything unexpected. Every path that energised the output ramped
 from __future__ import annotations
 
 import contextlib
+import os
 from pathlib import Path
 
 import typer
@@ -56,34 +57,58 @@ def run_with_progress(
             _say(console, f"run complete: {len(outcome.entries)} entries (seed {outcome.seed})")
         else:
             _say(console, f"[red]run {outcome.status}[/]: {escape(outcome.reason)}")
-        with contextlib.suppress(OSError):  # a closed terminal (SIGHUP) must not change the code
+        try:
             typer.echo(str(outcome.path))
+        except OSError:
+            _terminal_gone()
     return outcome.exit_code
 
 
 def _say(console: Console, text: str) -> None:
     """Print to the terminal if it is still there (after SIGHUP it may not be)."""
-    with contextlib.suppress(OSError):
+    try:
         console.print(text)
+    except OSError:
+        _terminal_gone()
+
+
+def _terminal_gone() -> None:
+    """The terminal closed (SIGHUP, a dropped SSH session): send stdout and stderr to the null
+    device, so that later writes, and Python's flush at exit, cannot fail and change the exit
+    code (Python exits 120 when that flush fails)."""
+    with contextlib.suppress(OSError):
+        null = os.open(os.devnull, os.O_WRONLY)
+        for fd in (1, 2):
+            os.dup2(null, fd)
+        os.close(null)
 
 
 def _execute_with_bar(console, plan, rig_path, out, seed, realtime, overwrite):
-    with Progress(
-        TextColumn("[bold]{task.fields[step]}[/] {task.description}"),
-        BarColumn(),
-        TextColumn("{task.percentage:>5.1f} %"),
-        TimeRemainingColumn(),
-        console=console,
-        transient=False,
-    ) as bar:
-        task = bar.add_task("", total=plan.total_duration_s, step="")
+    """``execute`` under a progress bar; a terminal that disappears during the run (the bar's
+    last redraw fails) does not lose the outcome."""
+    done: list = []
+    try:
+        with Progress(
+            TextColumn("[bold]{task.fields[step]}[/] {task.description}"),
+            BarColumn(),
+            TextColumn("{task.percentage:>5.1f} %"),
+            TimeRemainingColumn(),
+            console=console,
+            transient=False,
+        ) as bar:
+            task = bar.add_task("", total=plan.total_duration_s, step="")
 
-        def progress(k: int, n: int, name: str, frac: float, left: float) -> None:
-            bar.update(
-                task,
-                completed=plan.total_duration_s - left,
-                step=f"step {k + 1}/{n}",
-                description=escape(name),
-            )
+            def progress(k: int, n: int, name: str, frac: float, left: float) -> None:
+                bar.update(
+                    task,
+                    completed=plan.total_duration_s - left,
+                    step=f"step {k + 1}/{n}",
+                    description=escape(name),
+                )
 
-        return execute(plan, rig_path, out, seed, realtime, progress, overwrite)
+            done.append(execute(plan, rig_path, out, seed, realtime, progress, overwrite))
+    except OSError:
+        if not done:
+            raise
+        _terminal_gone()
+    return done[0]

@@ -16,11 +16,15 @@ Each test starts the run in a subprocess on the simulated rig, paced to the wall
 
 from __future__ import annotations
 
+import fcntl
 import os
+import pty
 import queue
+import select
 import signal
 import subprocess
 import sys
+import termios
 import textwrap
 import threading
 import time
@@ -294,3 +298,53 @@ def test_sigkill_of_the_cli_leaves_a_readable_incomplete_file(tmp_path):
     check_prefix(e, plan.step(e.name))
     # paced to the clock: about the time it ran, give or take startup and one block
     assert 0.5 <= e.duration_s <= elapsed + 0.2
+
+
+def test_closing_the_terminal_ends_at_0V_with_exit_129(tmp_path):
+    """The real SIGHUP: ``labrig run`` on a pseudo-terminal that is its controlling terminal;
+    closing the terminal's master side makes the kernel send SIGHUP, and every later write to
+    the terminal fails. The run must still ramp to 0 V, record the hangup and exit 129 (a
+    failed write of the progress bar or the summary must not turn it into 1 or 120)."""
+    out = tmp_path / "run.h5"
+    master, slave = pty.openpty()
+
+    def controlling_terminal() -> None:
+        fcntl.ioctl(0, termios.TIOCSCTTY, 0)
+
+    p = subprocess.Popen(
+        [*labrig_cmd(), "run", str(SWEEP), "--realtime", "--out", str(out)],
+        stdin=slave,
+        stdout=slave,
+        stderr=slave,
+        cwd=tmp_path,
+        start_new_session=True,
+        preexec_fn=controlling_terminal,
+    )
+    os.close(slave)
+    seen = b""
+    try:
+        deadline = time.monotonic() + 30
+        while b"step 1/10" not in seen and time.monotonic() < deadline:  # the bar runs
+            ready, _, _ = select.select([master], [], [], 0.1)
+            if ready:
+                seen += os.read(master, 65536)
+        assert b"step 1/10" in seen, seen[-2000:]
+        end = time.monotonic() + 2.0
+        while time.monotonic() < end:  # keep reading: the terminal is alive until closed
+            ready, _, _ = select.select([master], [], [], 0.05)
+            if ready:
+                os.read(master, 65536)
+    finally:
+        os.close(master)  # the terminal goes away
+    try:
+        code = p.wait(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait(5)
+    assert code == 129
+    f = read_run(out)
+    assert f.status == "aborted" and "SIGHUP" in f.reason and f.exit_code == 129
+    with h5py.File(out, "r") as h:
+        assert float(h["run/final_amplifier_voltage_V"][()]) == 0.0
+        assert h["run/ramp_to_zero/voltage"][-1] == 0.0
