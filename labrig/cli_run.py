@@ -46,22 +46,28 @@ def run_with_progress(
         f"{plan.total_duration_s:.1f} s of protocol time on {where}"
     )
     # SIGINT, SIGTERM, SIGHUP and SIGQUIT stop the run once (ramp to 0 V, file closed);
-    # repeats are ignored until the outcome is printed
-    with interrupt_once():
+    # repeats, and a first signal after the run ended, are ignored until the outcome is printed
+    with interrupt_once() as guard:
         try:
             outcome = _execute_with_bar(console, plan, rig_path, out, seed, realtime, overwrite)
         except Interrupted as e:  # before the run file existed: nothing energised or written
             _say(console, f"[red]stopped before the run began[/]: {escape(e.reason)}")
             return e.exit_code
-        if outcome.status == "complete":
-            _say(console, f"run complete: {len(outcome.entries)} entries (seed {outcome.seed})")
-        else:
-            _say(console, f"[red]run {outcome.status}[/]: {escape(outcome.reason)}")
-        try:
-            typer.echo(str(outcome.path))
-        except OSError:
-            _terminal_gone()
+        with guard.defer():
+            _report(console, outcome)
     return outcome.exit_code
+
+
+def _report(console: Console, outcome) -> None:
+    """The outcome in one line and the run file's path (the last line of stdout)."""
+    if outcome.status == "complete":
+        _say(console, f"run complete: {len(outcome.entries)} entries (seed {outcome.seed})")
+    else:
+        _say(console, f"[red]run {outcome.status}[/]: {escape(outcome.reason)}")
+    try:
+        typer.echo(str(outcome.path))
+    except OSError:
+        _terminal_gone()
 
 
 def _say(console: Console, text: str) -> None:
@@ -85,7 +91,7 @@ def _terminal_gone() -> None:
 
 def _execute_with_bar(console, plan, rig_path, out, seed, realtime, overwrite):
     """``execute`` under a progress bar; a terminal that disappears during the run (the bar's
-    last redraw fails) does not lose the outcome."""
+    last redraw fails), or a stop signal while the bar closes, does not lose the outcome."""
     done: list = []
     try:
         with Progress(
@@ -111,4 +117,8 @@ def _execute_with_bar(console, plan, rig_path, out, seed, realtime, overwrite):
         if not done:
             raise
         _terminal_gone()
+    except Interrupted:
+        if not done:  # the run had not begun (see run_with_progress)
+            raise
+        # the run has ended and is recorded: a signal while the bar closes changes nothing
     return done[0]
