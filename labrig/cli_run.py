@@ -18,7 +18,8 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from labrig.interrupts import Interrupted, interrupt_once
-from labrig.runner import execute, preflight
+from labrig.protocol.plan import Plan
+from labrig.runner import RunOutcome, execute, preflight
 
 
 def run_with_progress(
@@ -58,7 +59,7 @@ def run_with_progress(
     return outcome.exit_code
 
 
-def _report(console: Console, outcome) -> None:
+def _report(console: Console, outcome: RunOutcome) -> None:
     """The outcome in one line and the run file's path (the last line of stdout)."""
     if outcome.status == "complete":
         _say(console, f"run complete: {len(outcome.entries)} entries (seed {outcome.seed})")
@@ -89,7 +90,15 @@ def _terminal_gone() -> None:
         os.close(null)
 
 
-def _execute_with_bar(console, plan, rig_path, out, seed, realtime, overwrite):
+def _execute_with_bar(
+    console: Console,
+    plan: Plan,
+    rig_path: Path | None,
+    out: Path | None,
+    seed: int | None,
+    realtime: bool,
+    overwrite: bool,
+) -> RunOutcome:
     """``execute`` under a progress bar; a terminal that disappears during the run (the bar's
     last redraw fails), or a stop signal while the bar closes, does not lose the outcome."""
     done: list = []

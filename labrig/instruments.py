@@ -366,6 +366,10 @@ class Rig:
             start = float(self.amplifier.read_voltage())
         except Exception as e:
             log.error("ramp: no read-back before the setpoint ramp: %s", e)
+        if rec.volts:  # the record keeps the ramp that brought the output down
+            rec.errors.append(f"DAQ ramp stopped after {len(rec.volts)} writes at {start:g} V")
+            rec.times_s.clear()
+            rec.volts.clear()
         try:
             take(start)
             paced_ramp(setpoint, start, rec.rate_V_per_s, rec)

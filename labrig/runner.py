@@ -324,7 +324,7 @@ def _check_disk(plan: Plan, rig: Rig, out: Path, chans: list[Channel], overwrite
 
 
 def _open_writer(
-    plan: Plan, rig: Rig, rig_path, out: Path, overwrite: bool, chans: list[Channel]
+    plan: Plan, rig: Rig, rig_path: Path | None, out: Path, overwrite: bool, chans: list[Channel]
 ) -> RunWriter:
     """The run file, once its place exists and has room for it (InputFileError otherwise)."""
     try:
@@ -359,7 +359,16 @@ def _open_writer(
         ) from None
 
 
-def _run_on(rig, plan, rig_path, out, realtime, progress, overwrite, guard) -> RunOutcome:
+def _run_on(
+    rig: Rig,
+    plan: Plan,
+    rig_path: Path | None,
+    out: Path,
+    realtime: bool,
+    progress: ProgressFn | None,
+    overwrite: bool,
+    guard: SignalGuard,
+) -> RunOutcome:
     """The run proper, with stop signals deferred (checked between blocks)."""
     setup = _prepare(rig, plan, realtime)
     guard.check()  # a stop signal during the setup: nothing written, nothing energised
