@@ -114,7 +114,7 @@ class BaseProblem:
         return self._vt.get(
             (lam_t, tau_t),
             lambda: [
-                relaxor_output(tau_t, lam_t, s.seq.rate_hz, s.seq.hold, s.seq.padded)
+                relaxor_output(tau_t, lam_t, s.seq.rate_hz, s.seq.hold, s.seq.padded, s.seq.rest_V)
                 for s in self.scored
             ],
         )
@@ -128,7 +128,7 @@ class BaseProblem:
         return self._vd.get(
             key,
             lambda: [
-                relaxor_output(th["tau_d_s"], th["lam_d"], s.seq.rate_hz, "linear", x)
+                relaxor_output(th["tau_d_s"], th["lam_d"], s.seq.rate_hz, "linear", x, s.seq.rest_V)
                 for s, x in zip(self.scored, vt, strict=True)
             ],
         )
@@ -139,7 +139,10 @@ class BaseProblem:
     def strains(self, th: dict[str, float]) -> list[NDArray]:
         """Predicted strain of each simulated sequence (full length)."""
         op = self._op(th)
-        return [op.apply(x[: s.seq.n]) for s, x in zip(self.scored, self.vd(th), strict=True)]
+        return [
+            op.apply(x[: s.seq.n], op.held_state(s.seq.rest_V))
+            for s, x in zip(self.scored, self.vd(th), strict=True)
+        ]
 
     def _weighted(self, per_seq: Sequence[NDArray], subtract: bool = False) -> NDArray:
         """The scored parts of per-sequence arrays, weighted (about their mean with ``offset``).
@@ -166,9 +169,11 @@ class BaseProblem:
                 out[g.name] = y[s.seq.entries[g.name].start : g.hi].copy()
         return out
 
-    def _hyst_part(self, vd: NDArray, vc: float) -> NDArray:
-        """``G_vc(V*)``: the operator's output per unit gamma (alpha0 part removed)."""
-        return self.family.operator(1.0, 1.0, vc).apply(vd) - vd
+    def _hyst_part(self, vd: NDArray, vc: float, held_V: float) -> NDArray:
+        """``G_vc(V*)``: the operator's output per unit gamma (alpha0 part removed), held at
+        ``held_V`` before."""
+        op = self.family.operator(1.0, 1.0, vc)
+        return op.apply(vd, op.held_state(held_V)) - vd
 
     def _difference_columns(
         self, space: ParameterSpace, z: NDArray, j: int, central: bool, base: list | None
@@ -195,19 +200,25 @@ class BaseProblem:
         th = space.full(z)
         cols: list[list[NDArray]] = [[] for _ in space.free]
         vd = [x[: s.seq.n] for s, x in zip(self.scored, self.vd(th), strict=True)]
+        rests = [s.seq.rest_V for s in self.scored]
         base = None
         for j, name in enumerate(space.free):
             if name == "alpha0_ue_per_V":
                 cols[j] = vd
             elif name == "gamma_ue_per_V":
-                cols[j] = [self._hyst_part(x, th["vc_V"]) for x in vd]
+                cols[j] = [
+                    self._hyst_part(x, th["vc_V"], r) for x, r in zip(vd, rests, strict=True)
+                ]
             elif name == "vc_V":
                 g, vc, h = th["gamma_ue_per_V"], th["vc_V"], FD_VC
                 cols[j] = [
                     g
-                    * (self._hyst_part(x, vc * np.exp(h)) - self._hyst_part(x, vc * np.exp(-h)))
+                    * (
+                        self._hyst_part(x, vc * np.exp(h), r)
+                        - self._hyst_part(x, vc * np.exp(-h), r)
+                    )
                     / (2 * h)
-                    for x in vd
+                    for x, r in zip(vd, rests, strict=True)
                 ]
             else:
                 cols[j], base = self._difference_columns(space, z, j, central, base)

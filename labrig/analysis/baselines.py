@@ -2,13 +2,14 @@
 
 Both are classical *rate-independent* models driven by the voltage record (they see only the
 sequence of voltage values, not the time), written here because no maintained package exists.
-Both start from rest at 0 V (the record is preceded by 0 V), the same convention as our model.
+Both start from rest at the voltage the record was held at before it
+(:attr:`~labrig.analysis.records.Record.rest_V`, 0 V for a run), the convention of our model.
 
 Prandtl-Ishlinskii (PI)
 -----------------------
 ``S(t) = sum_i w_i F_{r_i}[V](t)`` with play (backlash) operators
 
-    y_r[n] = max(V[n] - r, min(V[n] + r, y_r[n-1])),     y_r[-1] = 0  (at V = 0)
+    y_r[n] = max(V[n] - r, min(V[n] + r, y_r[n-1])),     y_r[-1] = V_rest  (relaxed)
 
 the standard initial-loading convention (every operator relaxed at the start). Thresholds on a
 uniform grid ``r_i = R i / n_ops``, ``i = 0..n_ops-1``, with ``R`` the largest ``|V|`` of the
@@ -77,22 +78,24 @@ __all__ = [
 KINDS = ("prandtl_ishlinskii", "bouc_wen")
 
 
-def _with_rest(v: ArrayLike) -> NDArray:
-    return np.concatenate(([0.0], np.asarray(v, dtype=float)))
+def _with_rest(v: ArrayLike, rest_V: float = 0.0) -> NDArray:
+    """The record preceded by the voltage the actuator rested at (0 V for a run)."""
+    return np.concatenate(([float(rest_V)], np.asarray(v, dtype=float)))
 
 
 # -- Prandtl-Ishlinskii ------------------------------------------------------------------------
 
 
-def play_operators(v: ArrayLike, thresholds: ArrayLike) -> NDArray[np.float64]:
+def play_operators(v: ArrayLike, thresholds: ArrayLike, rest_V: float = 0.0) -> NDArray[np.float64]:
     """Outputs of play operators with the given thresholds (V) for the record ``v``: shape
-    ``(len(v), len(thresholds))``, every operator at 0 with the input at 0 before the record."""
+    ``(len(v), len(thresholds))``, every operator relaxed at ``rest_V`` (the voltage the
+    actuator rested at, 0 V for a run) before the record."""
     r = np.asarray(thresholds, dtype=float)
     if np.any(r < 0):
         raise ValueError("play thresholds must be non-negative")
-    vp = _with_rest(v)
+    vp = _with_rest(v, rest_V)
     out = np.zeros((vp.size, r.size))
-    y = np.zeros(r.size)
+    y = np.full(r.size, vp[0])  # relaxed at rest
     for a, b, s in zip(*monotone_runs(vp), strict=True):
         seg = vp[a + 1 : b + 1, None]
         blk = np.maximum(seg - r, y) if s > 0 else np.minimum(seg + r, y)
@@ -113,8 +116,8 @@ class PrandtlIshlinskii:
     thresholds: tuple[float, ...]
     weights: tuple[float, ...]
 
-    def predict(self, v: ArrayLike) -> NDArray[np.float64]:
-        return play_operators(v, self.thresholds) @ np.asarray(self.weights)
+    def predict(self, v: ArrayLike, rest_V: float = 0.0) -> NDArray[np.float64]:
+        return play_operators(v, self.thresholds, rest_V) @ np.asarray(self.weights)
 
     def params(self) -> dict[str, Any]:
         return {"thresholds_V": list(self.thresholds), "weights_ue_per_V": list(self.weights)}
@@ -135,12 +138,13 @@ def bouc_wen_response(
     gamma: float,
     n: float = 1.0,
     substeps: int | None = None,
+    rest_V: float = 0.0,
 ) -> NDArray[np.float64]:
     """Hysteretic state ``h`` (ue) of the Bouc-Wen model for the record ``v`` (V), from ``h = 0``
     at 0 V before the record. ``n = 1`` without ``substeps``: exact closed form per monotone run;
     otherwise classical RK4 along the voltage with ``substeps`` steps per sample interval
     (default 8)."""
-    vp = _with_rest(v)
+    vp = _with_rest(v, rest_V)
     h = np.zeros(vp.size)
     if n == 1.0 and substeps is None:
         return bouc_wen_exact(vp, A, beta, gamma)[1:]
@@ -173,9 +177,12 @@ class BoucWen:
     gamma: float
     n: float = 1.0
 
-    def predict(self, v: ArrayLike, substeps: int | None = None) -> NDArray[np.float64]:
+    def predict(
+        self, v: ArrayLike, substeps: int | None = None, rest_V: float = 0.0
+    ) -> NDArray[np.float64]:
         v = np.asarray(v, dtype=float)
-        return self.d * v - bouc_wen_response(v, self.A, self.beta, self.gamma, self.n, substeps)
+        h = bouc_wen_response(v, self.A, self.beta, self.gamma, self.n, substeps, rest_V)
+        return self.d * v - h
 
     def params(self) -> dict[str, Any]:
         return {
@@ -192,8 +199,8 @@ class BoucWen:
 
 @dataclass
 class _PlayedSequence:
-    """A simulated sequence as the baselines see it: the voltage with the rest at 0 V before
-    it, its monotone runs, cached play bases."""
+    """A simulated sequence as the baselines see it: the voltage with its rest before it, its
+    monotone runs, cached play bases."""
 
     seq: SimSequence
     segments: list[Segment]
@@ -202,7 +209,7 @@ class _PlayedSequence:
     _basis: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        self.vp = _with_rest(self.v)
+        self.vp = _with_rest(self.v, self.seq.rest_V)
         self.runs = monotone_runs(self.vp)
 
     @property
@@ -214,7 +221,7 @@ class _PlayedSequence:
 
     def play_basis(self, thresholds: tuple[float, ...]) -> NDArray:
         if thresholds not in self._basis:
-            self._basis[thresholds] = play_operators(self.v, thresholds)
+            self._basis[thresholds] = play_operators(self.v, thresholds, self.seq.rest_V)
         return self._basis[thresholds]
 
 
@@ -324,7 +331,7 @@ class BaselineResult:
     def predict(self, record: Record) -> NDArray[np.float64]:
         """Strain (ue) for the record's voltage, from rest (see ``predictions`` for a chain),
         plus its fitted offset if any."""
-        s = self.model.predict(record.voltage_V)
+        s = self.model.predict(record.voltage_V, rest_V=record.rest_V)
         if self.offsets_ue and record.name in self.offsets_ue:
             s = s + self.offsets_ue[record.name]
         return s
@@ -380,7 +387,7 @@ def fit_baseline(
     def predictions(model) -> dict[str, NDArray]:
         out = {}
         for q in seqs:
-            s = model.predict(q.v)
+            s = model.predict(q.v, rest_V=q.seq.rest_V)
             for g in q.segments:
                 out[g.name] = s[q.start(g.name) : g.hi]
         return out
@@ -403,7 +410,8 @@ def fit_baseline(
                 items = [(q, [g for g in q.segments if g.name != name]) for q in seqs]
                 m_k = fit([(q, gs) for q, gs in items if gs], warm=model)
                 q = next(q for q in seqs if any(g.name == name for g in q.segments))
-                p_k = m_k.predict(q.v)[q.start(name) : segs[name].hi][segs[name].i0 :]
+                p_k = m_k.predict(q.v, rest_V=q.seq.rest_V)
+                p_k = p_k[q.start(name) : segs[name].hi][segs[name].i0 :]
                 m = segs[name].measured_ue
                 held_per[name] = (  # with an offset: from the first half, scored on the second
                     second_half_nrmse_pct(m, p_k, fit_offset=True) if offset else nrmse_pct(m, p_k)

@@ -265,8 +265,13 @@ class ExtendedProblem:
         return base, eff
 
     # -- simulation ---------------------------------------------------------------------------
-    def _vd(self, base: Mapping[str, float], eff: Mapping[str, Mapping[str, float]]):
-        """``V* = G_d G_t V'`` of each sequence (``V'``: the voltage effects applied)."""
+    def _vd(
+        self, base: Mapping[str, float], eff: Mapping[str, Mapping[str, float]]
+    ) -> list[tuple[NDArray, float]]:
+        """``(V*, rest)`` of each sequence: ``V* = G_d G_t V'`` (``V'``: the voltage effects
+        applied), the actuator held before it at ``rest`` (V), the sequence's rest voltage
+        through the voltage effects (the first sample of ``V'`` when the sequence begins at a
+        held voltage, else 0 V)."""
         vkey = tuple((e.name, tuple(sorted(eff.get(e.name, {}).items()))) for e in self.vol)
         lt, tt, ld, td = base["lam_t"], base["tau_t_s"], base["lam_d"], base["tau_d_s"]
         out = []
@@ -277,12 +282,13 @@ class ExtendedProblem:
                 for e in self.vol:
                     v = e.apply(v, seq.context, eff.get(e.name, {}))
                 vin = pad_to_block(v) if self.vol else seq.padded
-                return relaxor_output(tt, lt, seq.rate_hz, seq.hold, vin)
+                rest = float(v[0]) if seq.rest_V != 0.0 else 0.0
+                return relaxor_output(tt, lt, seq.rate_hz, seq.hold, vin, rest), rest
 
-            x_t = self._cache.get(("t", k, vkey, lt, tt), vt)
+            x_t, rest = self._cache.get(("t", k, vkey, lt, tt), vt)
 
-            def vd(seq=seq, x_t=x_t):
-                return relaxor_output(td, ld, seq.rate_hz, "linear", x_t)[: seq.n]
+            def vd(seq=seq, x_t=x_t, rest=rest):
+                return relaxor_output(td, ld, seq.rate_hz, "linear", x_t, rest)[: seq.n], rest
 
             out.append(self._cache.get(("d", k, vkey, lt, tt, ld, td), vd))
         return out
@@ -311,8 +317,8 @@ class ExtendedProblem:
         xs = self._vd(base, eff)
         return self._post(
             [
-                op.apply(x) + self._beside(x, seq.context, eff)
-                for x, seq in zip(xs, self.sequences, strict=True)
+                op.apply(x, op.held_state(rest)) + self._beside(x, seq.context, eff)
+                for (x, rest), seq in zip(xs, self.sequences, strict=True)
             ],
             eff,
         )
@@ -349,7 +355,7 @@ class ExtendedProblem:
         vd0 = self._vd(base, eff)
         vol_names = {e.name for e in self.vol}
         ctxs = [seq.context for seq in self.sequences]
-        beside0 = [self._beside(x, c, eff) for x, c in zip(vd0, ctxs, strict=True)]
+        beside0 = [self._beside(x, c, eff) for (x, _), c in zip(vd0, ctxs, strict=True)]
         J = np.empty((r0.size, z.size))
         for j, (who, n) in enumerate(self.names):
             h = self._step[j] if self._step[j] is not None else 1e-6 * max(1.0, abs(z[j]))
@@ -366,8 +372,8 @@ class ExtendedProblem:
             bp, ep = self.unpack(zp, base0)
             vdp = self._vd(bp, ep)
             ds = [
-                op.tangent(x, (xp - x) / h) + (self._beside(xp, c, eff) - b0) / h
-                for x, xp, c, b0 in zip(vd0, vdp, ctxs, beside0, strict=True)
+                op.tangent(x, (xp - x) / h, rest) + (self._beside(xp, c, eff) - b0) / h
+                for (x, rest), (xp, _), c, b0 in zip(vd0, vdp, ctxs, beside0, strict=True)
             ]
             J[:, j] = self._resid(self._post(ds, eff), subtract=False)
         return J

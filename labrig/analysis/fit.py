@@ -125,10 +125,11 @@ class FitResult:
 
 
 def predict_record(params: ModelParams, record: Record) -> NDArray[np.float64]:
-    """``DynamicHysteresisModel(params).predict`` for a record (fast method, record's hold)."""
+    """``DynamicHysteresisModel(params).predict`` for a record (fast method, record's hold), the
+    actuator held at the record's :attr:`~labrig.analysis.records.Record.rest_V` before it."""
     with single_thread_blas(), np.errstate(over="ignore"):
         return DynamicHysteresisModel(params).predict(
-            record.voltage_V, record.rate_hz, method="fast", hold=record.hold
+            record.voltage_V, record.rate_hz, method="fast", hold=record.hold, rest_V=record.rest_V
         )
 
 

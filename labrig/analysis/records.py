@@ -17,6 +17,12 @@ HOLDS = ("zoh", "linear")
 #: keys of ``Record.meta`` read as the drive frequency (Hz), first match wins
 FREQUENCY_KEYS = ("frequency_hz", "freq_hz", "f_hz", "frequency")
 
+#: a record "begins at a held voltage" when its voltage moves, over its first HELD_S seconds
+#: (at least HELD_SAMPLES samples), at under HELD_TOL of its RMS rate over the whole record
+HELD_S = 0.1
+HELD_SAMPLES = 20
+HELD_TOL = 0.1
+
 
 @dataclass
 class Record:
@@ -97,6 +103,35 @@ class Record:
                 if np.isfinite(f) and f > 0:
                     return f
         return None
+
+    @property
+    def rest_V(self) -> float:
+        """The voltage (V) the actuator was held at before the record.
+
+        ``meta["rest_V"]`` when the source states it; else the first sample when the record
+        begins at a held voltage (over its first :data:`HELD_S` s, and at least
+        :data:`HELD_SAMPLES` samples, its mean ``|dV/dt|`` is under :data:`HELD_TOL` of its RMS
+        ``dV/dt`` over the whole record: a biased drive whose envelope grows from zero, a capture
+        that starts on a hold); else 0 V (a record that starts at 0 V, or starts moving, is taken
+        to begin from rest at 0 V)."""
+        stated = self.meta.get("rest_V")
+        if stated is not None:
+            try:
+                r = float(stated)
+            except (TypeError, ValueError):
+                r = float("nan")
+            if np.isfinite(r):
+                return r
+        v = self.voltage_V
+        if v.size < 2 or v[0] == 0.0:
+            return 0.0
+        k = max(HELD_SAMPLES, round(HELD_S * self.rate_hz))
+        dv = np.diff(v)
+        rms = float(np.sqrt(np.mean(dv * dv)))
+        if v.size <= 2 * k or not rms > 0:
+            return float(v[0]) if not rms > 0 else 0.0
+        held = float(np.mean(np.abs(dv[:k]))) <= HELD_TOL * rms
+        return float(v[0]) if held else 0.0
 
     def with_strain(self, strain_ue: ArrayLike, name: str | None = None) -> Record:
         """A copy with another strain (e.g. a prediction), same voltage, time, hold and meta."""

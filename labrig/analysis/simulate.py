@@ -10,6 +10,12 @@ records into the voltage sequences that are actually simulated:
   first. Use it for the entries of one run on one actuator.
 - ``chain=False``: each record on its own, from rest (records from unrelated files).
 
+A sequence starts with the actuator held at its first record's rest voltage
+(:attr:`~labrig.analysis.records.Record.rest_V`): 0 V for a run and for a record that starts
+moving, the held voltage for a record that begins at one (a biased drive, a capture that starts on
+a hold): the relaxors settled there, the operator brought there from rest at 0 V
+(:meth:`~labrig.model.QuasiStaticHysteresis.held_state`).
+
 Each sequence is scored on :class:`Segment` objects (:func:`score_segments`): the samples of a
 scored record after its warm-up. A segment's residual is weighted by
 ``1 / (span * sqrt(samples))``, ``span`` the measured strain's peak-to-peak over the segment, so
@@ -190,6 +196,13 @@ class SimSequence:
     def duration_s(self) -> float:
         return self.n / self.rate_hz
 
+    @property
+    def rest_V(self) -> float:
+        """The voltage the actuator is held at before the sequence: its first record's
+        :attr:`~labrig.analysis.records.Record.rest_V` (0 V for a run; the held voltage for a
+        record that begins at one)."""
+        return self.records[0].rest_V if self.records else 0.0
+
     @cached_property
     def padded(self) -> NDArray[np.float64]:
         """The voltage padded to whole relaxor blocks (:func:`pad_to_block`)."""
@@ -304,14 +317,17 @@ def scored_sequences(
 
 
 def relaxor_output(
-    tau_s: float, lam: float, rate_hz: float, hold: str, v_padded: NDArray
+    tau_s: float, lam: float, rate_hz: float, hold: str, v_padded: NDArray, rest_V: float = 0.0
 ) -> NDArray[np.float64]:
     """``G v`` for ``G(s) = 1 / (1 + (tau s)^lam)`` on a padded sequence, by the relaxor's modal
-    bank (the ``"fast"`` method). Extreme time constants make the bank's tail-moment quadrature
+    bank (the ``"fast"`` method), the relaxor at rest at ``rest_V`` before it (``G(0) = 1``:
+    ``rest_V + G (v - rest_V)``). Extreme time constants make the bank's tail-moment quadrature
     overflow harmlessly to a zero integrand; that warning is hushed."""
     with np.errstate(over="ignore"):
         bank = Relaxor(tau_s, lam).bank(rate_hz, hold)
-    return run_bank(bank, v_padded, block=BLOCK)[0]
+    if rest_V == 0.0:
+        return run_bank(bank, v_padded, block=BLOCK)[0]
+    return rest_V + run_bank(bank, v_padded - rest_V, block=BLOCK)[0]
 
 
 @dataclass

@@ -77,7 +77,8 @@ def _fit_static(
         rows, rhs = [], []
         for i, (r, s, w) in enumerate(zip(records, singles, windows, strict=True)):
             v = r.voltage_V
-            g = family.operator(1.0, 1.0, vc).apply(v) - v
+            op = family.operator(1.0, 1.0, vc)
+            g = op.apply(v, op.held_state(v[0])) - v
             a = np.zeros((w.stop - w.start, 2 + k))
             a[:, 0], a[:, 1], a[:, 2 + i] = v[w], g[w], 1.0
             weight = s.segments[0].weight

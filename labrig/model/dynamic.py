@@ -23,7 +23,8 @@ from labrig.model.relaxor import Relaxor
 
 @dataclass(frozen=True)
 class DynamicHysteresisModel:
-    """``predict(v, rate_hz)``: strain (ue) for a voltage record (V), system at rest at 0 V."""
+    """``predict(v, rate_hz)``: strain (ue) for a voltage record (V), system at rest at 0 V (or
+    held at ``rest_V``)."""
 
     params: ModelParams
     g_t: Relaxor = field(init=False)
@@ -37,17 +38,35 @@ class DynamicHysteresisModel:
         object.__setattr__(self, "operator", p.operator())
 
     def equivalent_static_voltage(
-        self, v: ArrayLike, rate_hz: float, method: str = "fast", hold: str = "zoh"
+        self,
+        v: ArrayLike,
+        rate_hz: float,
+        method: str = "fast",
+        hold: str = "zoh",
+        rest_V: float = 0.0,
     ) -> NDArray[np.float64]:
-        """``V* = G_d G_t V`` (V), the paper's Eq. 7."""
-        vt = self.g_t.filter(v, rate_hz, method=method, hold=hold)
-        return self.g_d.filter(vt, rate_hz, method=method, hold="linear")
+        """``V* = G_d G_t V`` (V), the paper's Eq. 7, the relaxors at rest at ``rest_V`` before
+        the record (``G(0) = 1``, so ``V* = rest_V + G_d G_t (V - rest_V)``)."""
+        if rest_V == 0.0:
+            vt = self.g_t.filter(v, rate_hz, method=method, hold=hold)
+            return self.g_d.filter(vt, rate_hz, method=method, hold="linear")
+        u = np.asarray(v, dtype=float) - rest_V
+        vt = self.g_t.filter(u, rate_hz, method=method, hold=hold)
+        return rest_V + self.g_d.filter(vt, rate_hz, method=method, hold="linear")
 
     def predict(
-        self, v: ArrayLike, rate_hz: float, method: str = "fast", hold: str = "zoh"
+        self,
+        v: ArrayLike,
+        rate_hz: float,
+        method: str = "fast",
+        hold: str = "zoh",
+        rest_V: float = 0.0,
     ) -> NDArray[np.float64]:
-        """Strain (ue) for the voltage record ``v`` (V) sampled at ``rate_hz``."""
-        return self.operator.apply(self.equivalent_static_voltage(v, rate_hz, method, hold))
+        """Strain (ue) for the voltage record ``v`` (V) sampled at ``rate_hz``, the actuator held
+        at ``rest_V`` before it (brought there from rest at 0 V, its relaxors settled:
+        :meth:`~labrig.model.QuasiStaticHysteresis.held_state`)."""
+        x = self.equivalent_static_voltage(v, rate_hz, method, hold, rest_V)
+        return self.operator.apply(x, self.operator.held_state(rest_V))
 
     def stream(self, rate_hz: float, hold: str = "zoh") -> ModelStream:
         """A stateful evaluator for records that arrive in blocks (simulators, control loops)."""

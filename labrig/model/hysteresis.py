@@ -9,7 +9,8 @@ is ``S_s``. Between reversals the branch has the closed form
     S = S_s + sign(u - u_s) F(|u - u_s|),     F(x) = alpha0 x + int_0^x h(y) dy,
 
 so no integration error is made. Initial state: the actuator rests at 0 V with zero strain
-(``u_s = 0``, ``S_s = 0``), which is the spec's ``u_s = u(0)`` for records that start at 0 V.
+(``u_s = 0``, ``S_s = 0``); a record that begins at a held voltage ``u0`` starts as an actuator
+brought there from that rest and held (:meth:`QuasiStaticHysteresis.held_state`).
 
 Which reversal is the memory (``memory``):
 
@@ -183,6 +184,15 @@ class QuasiStaticHysteresis:
         """Strain change (ue) along a branch from input ``a`` to ``b`` (V)."""
         return self._odd_branch(b - a)
 
+    def held_state(self, u0_V: float) -> HysteresisState:
+        """The state of an actuator brought from rest at 0 V to ``u0_V`` (V) and held there: the
+        state before a record that begins at a held voltage. The rest point at 0 V stays the
+        bottom of the memory, the input arrived at ``u0_V`` along the first branch
+        (strain ``sign(u0) F(|u0|)``)."""
+        u0 = float(u0_V)
+        d = float(np.sign(u0))
+        return HysteresisState(0.0, 0.0, u0, d * float(self.branch(abs(u0))), d)
+
     def apply(self, u: ArrayLike, state: HysteresisState | None = None) -> NDArray[np.float64]:
         """Strain (ue) for the voltage record ``u`` (V). ``state`` is updated in place if given."""
         u = _finite(u, "voltage")
@@ -197,10 +207,10 @@ class QuasiStaticHysteresis:
         st.u_last, st.s_last = float(u[-1]), float(out[-1])
         return out
 
-    def tangent(self, u: ArrayLike, du: ArrayLike) -> NDArray[np.float64]:
-        """Derivative of ``apply(u)`` (from rest) along ``du``, with the branch structure (which
-        samples are turning points, which minor loops close where) held fixed (ue per unit of
-        ``du``'s scale).
+    def tangent(self, u: ArrayLike, du: ArrayLike, held_V: float = 0.0) -> NDArray[np.float64]:
+        """Derivative of ``apply(u, self.held_state(held_V))`` along ``du`` (the voltage it was
+        held at does not move), with the branch structure (which samples are turning points,
+        which minor loops close where) held fixed (ue per unit of ``du``'s scale).
 
         On the branch from turning point ``k``: ``S[n] = S_k + sign F(|u[n] - u_k|)``, and
         ``S_k = S_p + sign F(|u_k - u_p|)`` with ``p`` the turning point whose branch led to
@@ -213,7 +223,8 @@ class QuasiStaticHysteresis:
         du = np.asarray(du, dtype=float)
         if u.size == 0:
             return np.zeros(0)
-        br, _, _ = _branches(u, [(0.0, 0.0)], 0.0, 0.0, self._along, self._wipe)
+        h = float(held_V)
+        br, _, _ = _branches(u, [(0.0, 0.0)], h, float(np.sign(h)), self._along, self._wipe)
         dx0 = np.where(br.at >= 0, du[np.maximum(br.at, 0)], 0.0)
         dy0 = np.zeros(br.x0.size)
         new = np.flatnonzero(br.parent >= 0)
