@@ -21,7 +21,7 @@ from labrig.analysis.load import records_from_run
 from labrig.analysis.metrics import loop_area
 from labrig.cli import app
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "yan9a-micromanipulator"
+REAL = Path(__file__).resolve().parent / "data" / "real" / "yan9a-micromanipulator"
 FILES = ("Model_Vi_Do.dat", "Test_Vi_Do_Di.dat")
 
 pytestmark = pytest.mark.skipif(
