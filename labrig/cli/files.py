@@ -1,5 +1,5 @@
 """``labrig info``, ``labrig export`` and ``labrig import``: run files in and out
-(:mod:`labrig.store`, :mod:`labrig.importer`)."""
+(:mod:`labrig.store`, :mod:`labrig.importers`)."""
 
 from __future__ import annotations
 
@@ -35,35 +35,66 @@ def export(
 @friendly
 def import_(
     files: list[Path] = typer.Argument(..., help="Data files: delimited text or MATLAB .mat."),
-    out: Path = typer.Option(..., "--out", help="Run file to write (HDF5)."),
-    time: str | None = typer.Option(None, "--time", help="Time column: name or 1-based index."),
-    voltage: str | None = typer.Option(None, "--voltage", help="Voltage column (name/index)."),
-    strain: str | None = typer.Option(None, "--strain", help="Strain column (name/index)."),
+    out: Path | None = typer.Option(None, "--out", help="Run file to write (HDF5)."),
+    list_: bool = flag(
+        False, "--list", help="Print each file's columns or channels; write nothing."
+    ),
+    time: str | None = typer.Option(None, "--time", help="Time column: name or 1-based number."),
+    voltage: str | None = typer.Option(None, "--voltage", help="Voltage column: name or number."),
+    strain: str | None = typer.Option(None, "--strain", help="Strain column: name or number."),
     rate_hz: float | None = typer.Option(None, "--rate-hz", help="Sample rate if no time column."),
-    voltage_scale: float = typer.Option(1.0, help="Multiply the voltage column (e.g. amp gain)."),
+    window: str | None = typer.Option(None, "--window", help="Keep T0:T1 (s of the file's time)."),
+    capture: list[str] = typer.Option(
+        [], "--capture", help="ControlDesk capture to import: name or number (default: all)."
+    ),
+    voltage_scale: float = typer.Option(1.0, help="Multiply the voltage (e.g. amplifier gain)."),
     voltage_offset: float = typer.Option(0.0, help="Then add this (V)."),
-    strain_scale: float = typer.Option(1.0, help="Multiply the strain column (to ue)."),
-    strain_offset: float = typer.Option(0.0, help="Then add this."),
-    strain_units: str = typer.Option("ue", help="Units of the scaled strain column."),
+    strain_scale: float = typer.Option(1.0, help="Multiply the strain (-1: flip its sign)."),
+    strain_offset: float = typer.Option(0.0, help="Then add this (ue)."),
+    strain_units: str | None = typer.Option(
+        None, help="Unit of the strain column in the file (default: from the header; else ue)."
+    ),
+    stack_length_mm: float | None = typer.Option(
+        None, help="Stack length: a displacement column (um...) becomes strain = d / L."
+    ),
+    scale: list[str] = typer.Option(
+        [], "--scale", help="CHANNEL=FACTOR: multiply a channel (voltage, strain or auxiliary)."
+    ),
     aux: list[str] = typer.Option(
         [],
         "--aux",
-        help="Extra channel to keep: NAME or NAME=COLUMN "
-        "(NAME like temperature_C gives name and unit).",
+        help="Keep a column as a channel: COLUMN or NAME=COLUMN (NAME like "
+        "temperature_C gives name and unit). Named columns are kept without it.",
     ),
-    delimiter: str | None = typer.Option(None, help="Column delimiter (default: detect)."),
+    delimiter: str | None = typer.Option(None, help="Column separator (default: detect; tab)."),
+    decimal: str | None = typer.Option(None, help="Decimal mark . or , (default: detect)."),
+    encoding: str | None = typer.Option(None, help="Text encoding (default: detect)."),
     overwrite: bool = flag(False, "--overwrite", help="Replace an existing --out file."),
 ) -> None:
-    """Bring measured data into a run file, one entry per input file (named after its stem)."""
-    from labrig.importer import ImportOptions, import_files
+    """Bring measured data into a run file, one entry per input file or ControlDesk capture
+    (named after the file's stem). docs/import.md describes the formats and options."""
+    from labrig.importers import ImportOptions, check_options, import_files, list_table, read_tables
+    from labrig.importers.table import option_error
 
     opt = ImportOptions(
-        time=time, voltage=voltage, strain=strain, rate_hz=rate_hz,
-        voltage_scale=voltage_scale, voltage_offset=voltage_offset,
+        time=time, voltage=voltage, strain=strain, rate_hz=rate_hz, window=window,
+        captures=list(capture), voltage_scale=voltage_scale, voltage_offset=voltage_offset,
         strain_scale=strain_scale, strain_offset=strain_offset, strain_units=strain_units,
-        aux=list(aux), delimiter=delimiter,
+        stack_length_mm=stack_length_mm, scale=list(scale), aux=list(aux),
+        delimiter=delimiter, decimal=decimal, encoding=encoding,
     )  # fmt: skip
+    if list_:
+        checked = check_options(opt)
+        for f in files:
+            for table in read_tables(f, checked):
+                typer.echo("\n".join(list_table(table, checked)))
+        return
+    if out is None:
+        raise option_error("--out", "missing: give the run file to write (or --list)")
     for e in import_files(list(files), out, opt, overwrite):
-        cols = ", ".join(f"{k}={v}" for k, v in e.columns.items())
-        typer.echo(f"{e.name}: {e.voltage_V.size} samples at {e.rate_hz:g} Hz ({cols})")
+        cols = ", ".join(f"{k}={v}" for k, v in e.meta["columns"].items() if v)
+        aux_text = (
+            "; aux " + ", ".join(f"{k} [{u}]" for k, (_, u) in e.aux.items()) if e.aux else ""
+        )
+        typer.echo(f"{e.name}: {e.voltage_V.size} samples at {e.rate_hz:g} Hz ({cols}{aux_text})")
     typer.echo(str(out))

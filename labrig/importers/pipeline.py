@@ -1,0 +1,110 @@
+"""``labrig import``: every input read and checked, then one run file written (beside the target,
+renamed over it when complete), one entry per input file or ControlDesk capture.
+
+Formats (docs/import.md shows each with a file under tests/data/import/): delimited text
+(:mod:`~labrig.importers.text`), plain MATLAB variables (:mod:`~labrig.importers.mat_tables`)
+and dSPACE ControlDesk captures (:mod:`~labrig.importers.dspace`) from v4-v7.3 ``.mat`` files
+(:mod:`~labrig.importers.mat_read`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+from pathlib import Path
+
+from labrig.errors import InputFileError, InputIssue
+from labrig.importers.dspace import capture_table, find_captures
+from labrig.importers.entry import ImportedEntry, build_entry
+from labrig.importers.labels import entry_name
+from labrig.importers.limits import MAX_FILE_BYTES
+from labrig.importers.mat_read import mat_version, read_tree
+from labrig.importers.mat_tables import plain_table
+from labrig.importers.options import Checked, ImportOptions, check_options
+from labrig.importers.table import Table, bad, option_error
+from labrig.importers.text import read_text
+from labrig.importers.writer import import_description, write_run
+
+
+def _looks_like_mat(path: Path) -> bool:
+    if path.suffix.lower() == ".mat":
+        with path.open("rb") as f:
+            head = f.read(512)
+        return mat_version(path) != "4" or b"\x00" in head
+    return mat_version(path) != "4"
+
+
+def _pick_captures(path: Path, tables: list[Table], wanted: list[str]) -> list[Table]:
+    if not wanted:
+        return tables
+    names = [t.capture for t in tables]
+    picked = []
+    for spec in wanted:
+        hits = [t for i, t in enumerate(tables, start=1)
+                if spec.lower() == t.capture.lower() or spec == str(i)]  # fmt: skip
+        if not hits:
+            raise bad(path, f"--capture {spec}: no such capture (captures: {', '.join(names)})")
+        picked += [t for t in hits if t not in picked]
+    return picked
+
+
+def read_tables(path: Path, checked: Checked) -> list[Table]:
+    """The tables of one input file (one, or one per picked ControlDesk capture)."""
+    if not path.is_file():
+        raise bad(path, "file not found" if not path.exists() else "not a file")
+    size = path.stat().st_size
+    if size > MAX_FILE_BYTES:
+        raise bad(
+            path, f"{size / 2**20:.0f} MiB: at most {MAX_FILE_BYTES / 2**20:.0f} MiB are read"
+        )
+    try:
+        is_mat = _looks_like_mat(path)
+    except OSError as e:
+        raise bad(path, f"cannot read: {e.strerror}") from None
+    if not is_mat:
+        if checked.opt.captures:
+            raise bad(path, "--capture: a text file holds no ControlDesk captures")
+        return [read_text(path, checked.separator, checked.decimal, checked.encoding)]
+    tree, version = read_tree(path)
+    captures = find_captures(tree)
+    if not captures:
+        if checked.opt.captures:
+            raise bad(path, "--capture: the file holds no ControlDesk capture (a struct with X, Y)")
+        return [plain_table(path, tree, version)]
+    tables = [capture_table(path, n, c, len(captures), version) for n, c in captures]
+    return _pick_captures(path, tables, checked.opt.captures)
+
+
+def _check_out(files: list[Path], out: Path, overwrite: bool) -> None:
+    if out.is_dir():
+        raise option_error("--out", f"{out} is a folder; give a file name, e.g. {out}/run.h5")
+    if out.exists() and not overwrite:
+        raise option_error("--out", f"{out} exists; pass --overwrite to replace it")
+    if out.exists() and any(f.exists() and f.resolve() == out.resolve() for f in files):
+        raise option_error("--out", f"{out} is also an input; write to another file")
+
+
+def read_entries(files: list[Path], checked: Checked) -> list[ImportedEntry]:
+    """Every input read and checked, in the order given (nothing is written)."""
+    entries: list[ImportedEntry] = []
+    taken: set[str] = set()
+    for f in files:
+        for table in read_tables(Path(f), checked):
+            name = entry_name(table.source, table.capture, table.n_captures, taken)
+            entries.append(build_entry(table, checked, name))
+            taken.add(name)
+    return entries
+
+
+def import_files(
+    files: list[Path], out: Path, opt: ImportOptions, overwrite: bool = False
+) -> list[ImportedEntry]:
+    """Read every file, then write the run file ``out`` (beside it, renamed over it when
+    complete: a bad input or a failed write leaves an existing ``out`` as it was)."""
+    if not files:
+        raise InputFileError([InputIssue("", None, "", "no input files given")])
+    checked = check_options(opt)
+    files = [Path(f) for f in files]
+    _check_out(files, out, overwrite)
+    entries = read_entries(files, checked)
+    write_run(out, entries, import_description(files, asdict(opt)))
+    return entries

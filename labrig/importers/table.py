@@ -1,0 +1,103 @@
+"""What every reader produces: the columns (signals) of one record, with names, units and where
+each came from, so that later steps can name the place of a problem.
+
+A text file gives one :class:`Table`; a MATLAB file one per set of signals of the same length
+(plain variables), or one per ControlDesk capture. A text file's values are read only for the
+columns an import uses (:meth:`Table.load`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from labrig.errors import InputFileError, InputIssue
+
+
+def bad(path: Path | str, message: str, line: int | None = None, where: str = "") -> InputFileError:
+    """The error for one problem in an input file: ``FILE:LINE: [WHERE] MESSAGE`` (exit 2)."""
+    return InputFileError([InputIssue(str(path), line, where, message)])
+
+
+def option_error(option: str, message: str) -> InputFileError:
+    """The error for a bad option value: ``--OPTION: MESSAGE`` (exit 2)."""
+    return InputFileError([InputIssue(option, None, "", message)])
+
+
+@dataclass
+class Column:
+    """One signal: its label as the file gives it ("" if none), the unit the file states (""
+    if none), its place for messages (``"column 3"``, ``"Y(2)"``), whether it has a name of its
+    own (False for columns known only by position), its values (float64, NaN where a cell was
+    empty; None until loaded), the number that picks it (``--voltage 3``), other names that
+    pick it (a raw header cell, a ControlDesk channel's short name), and for a ControlDesk
+    channel the index of its time column (``axis``; ``is_axis`` marks a time column)."""
+
+    label: str
+    unit: str
+    where: str
+    named: bool = True
+    values: NDArray[np.float64] | None = None
+    length: int | None = None
+    number: int | None = None
+    aliases: tuple[str, ...] = ()
+    axis: int | None = None
+    is_axis: bool = False
+
+    def __post_init__(self) -> None:
+        if self.values is not None:
+            self.values = np.asarray(self.values, dtype=np.float64).reshape(-1)
+            self.length = int(self.values.size)
+
+
+#: a text reader's loader: (columns to read, columns that must be numbers) -> fills the values
+Loader = Callable[["Table", list[int], set[int]], None]
+
+
+@dataclass
+class Table:
+    """The signals of one record (``capture``: its name when the file holds captures, of which
+    it has ``n_captures``). ``locate`` maps a data row (0-based) to
+    its line in the file (text files; None when rows are not lines). ``layout`` says how the file
+    was read (for the entry's metadata); ``skipped`` lists columns not kept, with why."""
+
+    source: Path
+    columns: list[Column]
+    capture: str = ""
+    n_captures: int = 1
+    layout: dict = field(default_factory=dict)
+    skipped: list[str] = field(default_factory=list)
+    locate: Callable[[int], int | None] | None = None
+    loader: Loader | None = None
+
+    def load(self, indices: list[int], required: set[int]) -> None:
+        """Make sure the values of ``indices`` are read; a column in ``required`` that holds
+        text is an error, another one is dropped (its values stay None, ``skipped`` says why)."""
+        missing = [k for k in indices if self.columns[k].values is None]
+        if missing and self.loader is not None:
+            self.loader(self, missing, required)
+
+    def line_of(self, row: int) -> int | None:
+        """The file line of data row ``row`` (0-based), or None when rows are not lines."""
+        return self.locate(row) if self.locate is not None else None
+
+    def place(self, k: int, capture: bool = True) -> str:
+        """Where column ``k`` is, for messages: ``column 3 (strain_ue)``, ``capture c1, Y(2)
+        (Model Root/amp/Out1)`` (``capture=False``: without the capture)."""
+        c = self.columns[k]
+        place = c.where if not c.label or c.label in c.where else f"{c.where} ({c.label})"
+        return f"capture {self.capture}, {place}" if self.capture and capture else place
+
+    def error(self, k: int | None, message: str, row: int | None = None) -> InputFileError:
+        """An error about column ``k`` (and data row ``row``) of this table."""
+        where = self.place(k) if k is not None else ""
+        if k is None and self.capture:
+            where = f"capture {self.capture}"
+        line = self.line_of(row) if row is not None else None
+        if row is not None and line is None:
+            where = f"{where}, sample {row + 1}" if where else f"sample {row + 1}"
+        return bad(self.source, message, line, where)

@@ -1,0 +1,203 @@
+"""Delimited text files (CSV, TSV, semicolon files with decimal commas, whitespace columns) into
+a :class:`~labrig.importers.table.Table`: the layout from :mod:`labrig.importers.sniff`, the
+numbers from pandas' C parser, read in blocks of :data:`~labrig.importers.limits.CHUNK_ROWS` rows
+and only for the columns an import uses, so that memory stays near the size of the values kept.
+
+Blank lines and ``#`` comments inside the data are skipped; a row with more fields than the data
+has columns, or a field that is not a number in a column the import needs, is an error naming
+the line. A column that holds text (a date, a comment) and is not needed is left out and said so.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from labrig.importers.limits import CHUNK_ROWS, MAX_COLUMNS, MAX_ROWS, SNIFF_BYTES
+from labrig.importers.sniff import Layout, LayoutError, find_layout
+from labrig.importers.table import Column, Table, bad
+
+
+def read_layout(
+    path: Path,
+    separator: str | None = None,
+    decimal: str | None = None,
+    encoding: str | None = None,
+) -> Layout:
+    """The layout of the text file ``path`` (raises InputFileError naming the file and line)."""
+    with path.open("rb") as f:
+        sample = f.read(SNIFF_BYTES)
+        at_eof = not f.read(1)
+    try:
+        layout = find_layout(sample, at_eof, separator, decimal, encoding)
+    except LayoutError as e:
+        raise bad(path, str(e), e.line) from None
+    except LookupError as e:  # an unknown --encoding
+        raise bad(path, f"unknown encoding: {e}") from None
+    if layout.width > MAX_COLUMNS:
+        raise bad(path, f"{layout.width} columns: at most {MAX_COLUMNS} are read")
+    return layout
+
+
+def text_table(path: Path, layout: Layout) -> Table:
+    """The table of a text file, its columns named by the header (values read on demand)."""
+    columns = []
+    for k in range(layout.width):
+        name = layout.names[k] if layout.names else ""
+        unit = layout.units[k] if layout.units else ""
+        raw = layout.raw_names[k] if layout.raw_names else ""
+        aliases = (raw,) if raw and raw != name else ()
+        columns.append(
+            Column(name, unit, f"column {k + 1}", bool(name), number=k + 1, aliases=aliases)
+        )
+    locator = _Locator(path, layout)
+    reader = _Reader(path, layout, locator)
+    return Table(path, columns, layout=layout.describe(), locate=locator.line, loader=reader.load)
+
+
+class _Locator:
+    """Data row -> file line: the first data line plus the row, corrected for comment lines
+    inside the data (pandas skips them; only counted when an error needs a line)."""
+
+    def __init__(self, path: Path, layout: Layout):
+        self.path, self.layout = path, layout
+        self.rows: NDArray[np.int64] | None = None  # pandas row of each kept row (blank dropped)
+
+    def line(self, row: int) -> int | None:
+        """The line of kept (non-blank) row ``row``."""
+        p = int(self.rows[row]) if self.rows is not None and row < self.rows.size else row
+        return self.parser_line(p)
+
+    def parser_line(self, p: int) -> int:
+        """The line of the parser's row ``p`` (blank rows counted, comment lines not)."""
+        first = self.layout.first_data_line
+        try:
+            with self.path.open(encoding=self.layout.encoding, errors="replace") as f:
+                seen = -1
+                for number, text in enumerate(f, start=1):
+                    if number < first or text.lstrip().startswith("#"):
+                        continue
+                    seen += 1
+                    if seen == p:
+                        return number
+        except OSError:
+            pass
+        return first + p
+
+
+class _Reader:
+    """Reads the values of some columns of a text file (see the module docstring)."""
+
+    def __init__(self, path: Path, layout: Layout, locator: _Locator):
+        self.path, self.layout, self.locator = path, layout, locator
+
+    def load(self, table: Table, indices: list[int], required: set[int]) -> None:
+        try:
+            self._load(table, indices, required, self.layout.encoding)
+        except UnicodeDecodeError:
+            if self.layout.encoding not in ("utf-8", "utf-8-sig"):
+                raise bad(self.path, f"not valid {self.layout.encoding} text") from None
+            self.layout.encoding = "cp1252"
+            table.layout["encoding"] = "cp1252"
+            table.layout["notes"].append("not UTF-8 throughout: read as cp1252")
+            self._load(table, indices, required, "cp1252")
+
+    def _chunks(self, encoding: str) -> pd.io.parsers.TextFileReader:
+        lay = self.layout
+        return pd.read_csv(
+            self.path,
+            sep=lay.pandas_sep,
+            decimal=lay.decimal,
+            header=None,
+            names=list(range(lay.width)),
+            index_col=False,
+            skiprows=lay.first_data_line - 1,
+            encoding=encoding,
+            comment="#",
+            skip_blank_lines=False,
+            chunksize=CHUNK_ROWS,
+            engine="c",
+        )
+
+    def _load(self, table: Table, indices: list[int], required: set[int], enc: str) -> None:
+        parts: dict[int, list[NDArray[np.float64]]] = {k: [] for k in indices}
+        kept_rows: list[NDArray[np.int64]] = []
+        text_columns: set[int] = set()
+        start = 0
+        try:
+            for chunk in self._chunks(enc):
+                blank = chunk.isna().all(axis=1).to_numpy()
+                keep = np.flatnonzero(~blank)
+                kept_rows.append(keep.astype(np.int64) + start)
+                for k in indices:
+                    if k in text_columns:
+                        continue
+                    col = chunk[k]
+                    values = _numbers(col, self.layout.decimal)
+                    if values is None:
+                        if k in required:
+                            raise self._not_a_number(table, col, k, start)
+                        text_columns.add(k)
+                        continue
+                    parts[k].append(values[keep])
+                start += len(chunk)
+                if start > MAX_ROWS:
+                    raise bad(self.path, f"more than {MAX_ROWS} data rows: too large to import")
+        except pd.errors.ParserError as e:
+            raise self._parser_error(e) from None
+        except pd.errors.EmptyDataError:
+            raise bad(self.path, "no data lines", self.layout.first_data_line) from None
+        self.locator.rows = np.concatenate(kept_rows) if kept_rows else np.zeros(0, np.int64)
+        for k in indices:
+            if k in text_columns:
+                table.skipped.append(f"{table.place(k)}: text, not numbers")
+                continue
+            table.columns[k].values = np.concatenate(parts[k]) if parts[k] else np.zeros(0)
+            table.columns[k].length = int(table.columns[k].values.size)
+
+    def _not_a_number(self, table: Table, col: pd.Series, k: int, start: int) -> Exception:
+        text = col.astype("string").str.strip()
+        numeric = pd.to_numeric(
+            text.str.replace(",", ".") if self.layout.decimal == "," else text, errors="coerce"
+        )
+        bad_rows = np.flatnonzero((numeric.isna() & text.notna() & (text != "")).to_numpy())
+        row = int(bad_rows[0]) if bad_rows.size else 0
+        cell = str(text.iloc[row]) if bad_rows.size else "?"
+        line = self.locator.parser_line(start + row)
+        expected = "a number" + (" with a decimal comma" if self.layout.decimal == "," else "")
+        return bad(
+            self.path, f"{cell[:40]!r} is not a number (expected {expected})", line, table.place(k)
+        )
+
+    def _parser_error(self, e: Exception) -> Exception:
+        m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", str(e))
+        if m:
+            return bad(
+                self.path,
+                f"{m.group(3)} fields, expected {m.group(1)} like the lines before",
+                int(m.group(2)),
+            )
+        return bad(self.path, f"cannot parse as delimited text: {str(e).strip()[:200]}")
+
+
+def _numbers(col: pd.Series, decimal: str) -> NDArray[np.float64] | None:
+    """The column as float64, or None if it holds text."""
+    if pd.api.types.is_bool_dtype(col) or not pd.api.types.is_numeric_dtype(col):
+        if col.isna().all():
+            return np.full(len(col), np.nan)
+        return None
+    return col.to_numpy(dtype=np.float64, na_value=np.nan)
+
+
+def read_text(
+    path: Path,
+    separator: str | None = None,
+    decimal: str | None = None,
+    encoding: str | None = None,
+) -> Table:
+    """A text file as a table (layout found now, values read when a column is loaded)."""
+    return text_table(path, read_layout(path, separator, decimal, encoding))

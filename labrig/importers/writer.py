@@ -1,0 +1,76 @@
+"""Imported entries into a run file, written beside the target and renamed over it only when
+complete: an existing file is replaced (with ``--overwrite``) by a whole new one or not at all.
+
+The new file is written as ``.<name>.<random>.partial/<name>`` in the target's folder (same file
+system, so the final :func:`os.replace` is atomic; the file records its own name) and the
+temporary folder is removed whatever happens.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+from labrig import __version__
+from labrig.importers.entry import ImportedEntry
+from labrig.store import Channel, RunWriter
+
+
+def _channels(e: ImportedEntry) -> list[Channel]:
+    chans = [
+        Channel("command_voltage", e.meta["channels"]["command_voltage"]["unit"],
+                "measured actuator voltage"),
+        Channel("strain", e.strain_unit, "strain"),
+    ]  # fmt: skip
+    for name, (_, unit) in e.aux.items():
+        source = e.meta["channels"][name]["from"]
+        chans.append(Channel(name, unit, f"{name} (imported from {source})"))
+    return chans
+
+
+def _write(path: Path, entries: list[ImportedEntry], description: dict) -> None:
+    with RunWriter(
+        path,
+        protocol_text=json.dumps(description, indent=2, default=str),
+        rig_text="",
+        instrument_description=description,
+        seed=None,
+        protocol_name="import",
+        protocol_file="",
+        planned_entries=[e.name for e in entries],
+    ) as w:
+        for e in entries:
+            ew = w.begin_entry(
+                e.name, e.meta, e.rate_hz, _channels(e), title=f"imported {e.source.name}"
+            )
+            block = {"time": e.time_s, "command_voltage": e.voltage_V, "strain": e.strain}
+            block.update({k: a for k, (a, _) in e.aux.items()})
+            ew.append(block)
+            ew.finish("complete")
+        w.finish("complete")
+
+
+def write_run(out: Path, entries: list[ImportedEntry], description: dict) -> None:
+    """Write ``entries`` to ``out`` (beside it first, then renamed over it)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    folder = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
+    try:
+        partial = folder / out.name
+        _write(partial, entries, description)
+        os.replace(partial, out)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def import_description(files: list[Path], options: dict) -> dict:
+    """What the run file records about the import (its ``protocol`` note and ``instrument``)."""
+    return {
+        "import": {
+            "software": f"labrig {__version__}",
+            "files": [str(f) for f in files],
+            "options": options,
+        }
+    }
