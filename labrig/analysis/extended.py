@@ -48,11 +48,12 @@ from labrig.analysis.simulate import (
     relaxor_output,
     score_segments,
 )
+from labrig.analysis.spectra import detect_mains_hz
 from labrig.blas import single_thread_blas
 from labrig.model import ModelParams, QuasiStaticHysteresis
 from labrig.model.effects import Context, Effect
 
-__all__ = ["LAM_GAP", "ExtendedProblem", "FitOutcome", "effect_context", "mains_hz_of"]
+__all__ = ["DEFAULT_MAINS_HZ", "LAM_GAP", "ExtendedProblem", "FitOutcome", "effect_context"]
 
 
 #: the relaxor realisation is discontinuous at lam = 1 (a single pole at 1, a modal bank with
@@ -72,36 +73,21 @@ def _z_to_lam(z: float) -> float:
     return float(z) if z <= 1.0 - LAM_GAP else float(z) + 2 * LAM_GAP
 
 
-def mains_hz_of(records: Sequence[Record]) -> float:
-    """50 or 60 Hz: whichever carries more residual-free strain power near it (a guess from the
-    measurement itself; mains lines are rarely drive harmonics at both)."""
-    p50 = p60 = 0.0
-    for r in records:
-        x = r.strain_ue - np.mean(r.strain_ue)
-        if x.size < 512:
-            continue
-        spec = np.abs(np.fft.rfft(x * np.hanning(x.size)))
-        f = np.fft.rfftfreq(x.size, 1 / r.rate_hz)
-        for fm in (50.0, 60.0):
-            band = np.abs(f - fm) < 1.0
-            if band.any():
-                val = float(spec[band].max()) / (float(np.median(spec)) + 1e-12)
-                if fm == 50.0:
-                    p50 += val
-                else:
-                    p60 += val
-    return 60.0 if p60 > 1.5 * p50 else 50.0
+#: the mains frequency assumed when none is given and the data show no mains line
+DEFAULT_MAINS_HZ = 50.0
 
 
 def effect_context(records: Sequence[Record], mains_hz: float | None = None) -> dict:
     """How the effect library is configured for ``records`` (the keyword arguments of
     :func:`labrig.model.effects.library`): whether every record has a temperature channel and
-    the amplifier's measured voltage, the mains frequency (:func:`mains_hz_of` unless given) and
-    the full-scale voltage (the largest ``|V|``, the reference of ``quadratic_term``)."""
+    the amplifier's measured voltage, the mains frequency (given, else the line the strain shows
+    at 50 or 60 Hz, :func:`~labrig.analysis.spectra.detect_mains_hz`, else
+    :data:`DEFAULT_MAINS_HZ`) and the full-scale voltage (the largest ``|V|``, the reference of
+    ``quadratic_term``)."""
     return {
         "temperature": all("temperature" in r.aux for r in records),
         "amplifier_voltage": all("amplifier_voltage" in r.aux for r in records),
-        "mains_hz": float(mains_hz or mains_hz_of(records)),
+        "mains_hz": float(mains_hz or detect_mains_hz(records) or DEFAULT_MAINS_HZ),
         "v_ref": max(float(np.max(np.abs(r.voltage_V))) for r in records),
     }
 

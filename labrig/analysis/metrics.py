@@ -19,7 +19,8 @@
   of the loop.
 
 The period comes from the drive frequency in ``record.meta`` (``frequency_hz``) or, when absent,
-from the voltage spectrum (:func:`estimate_frequency_hz`); it is rounded to whole samples.
+from the voltage (:func:`~labrig.analysis.spectra.estimate_frequency_hz`); it is rounded to
+whole samples.
 Loop metrics are ``None`` for entries that are not periodic (:func:`is_periodic`: at least two
 full periods at the end of the record that repeat).
 """
@@ -32,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from labrig.analysis.records import Record
+from labrig.analysis.spectra import drive_frequency_hz, estimate_frequency_hz
 
 __all__ = [
     "compare",
@@ -92,34 +94,6 @@ def max_error(measured: ArrayLike, predicted: ArrayLike) -> float:
 
 
 # -- periods -----------------------------------------------------------------------------------
-
-
-def estimate_frequency_hz(voltage: ArrayLike, rate_hz: float) -> float | None:
-    """Dominant frequency of the voltage (Hz): Hann-windowed spectrum peak, refined by a
-    parabola through the log magnitudes of the peak bin and its neighbours. ``None`` for a
-    constant signal or one shorter than 8 samples."""
-    v = np.asarray(voltage, dtype=float)
-    if v.size < 8 or not np.ptp(v) > 0:
-        return None
-    x = (v - v.mean()) * np.hanning(v.size)
-    mag = np.abs(np.fft.rfft(x))
-    mag[0] = 0.0
-    k = int(np.argmax(mag))
-    if k == 0:
-        return None
-    delta = 0.0
-    if 1 <= k < mag.size - 1 and np.all(mag[k - 1 : k + 2] > 0):
-        a, b, c = np.log(mag[k - 1 : k + 2])
-        den = a - 2 * b + c
-        if den < 0:
-            delta = 0.5 * (a - c) / den
-    return float((k + delta) * rate_hz / v.size)
-
-
-def drive_frequency_hz(record: Record) -> float | None:
-    """The record's drive frequency: ``record.meta`` if stated, else estimated from the voltage."""
-    f = record.frequency_hz
-    return f if f is not None else estimate_frequency_hz(record.voltage_V, record.rate_hz)
 
 
 def _period_samples(rate_hz: float, frequency_hz: float | None) -> int | None:

@@ -187,6 +187,8 @@ class SimSequence:
     hold: str
     voltage_V: NDArray[np.float64]
     entries: dict[str, slice]
+    #: the campaign's reference temperature (degC; the first record's first sample), or None
+    temperature_ref: float | None = None
 
     @property
     def n(self) -> int:
@@ -224,17 +226,23 @@ class SimSequence:
             dict(self.entries),
             aux.get("amplifier_voltage"),
             aux.get("temperature"),
+            self.temperature_ref if "temperature" in aux else None,
         )
 
 
 def build_sequences(records: Sequence[Record], chain: bool) -> list[SimSequence]:
     """The sequences to simulate for ``records`` (module docstring): one per record, or with
     ``chain`` one for all of them, in order, each followed by its ``meta["rest_after_s"]``.
+    When every record has a temperature channel, every sequence shares the campaign's reference
+    temperature (the first record's first sample).
 
     Raises ``ValueError`` when chained records differ in sample rate or hold."""
+    t_ref = None
+    if records and all("temperature" in r.aux and r.n for r in records):
+        t_ref = float(records[0].aux["temperature"][0])
     if not chain:
         return [
-            SimSequence((r,), r.rate_hz, r.hold, r.voltage_V, {r.name: slice(0, r.n)})
+            SimSequence((r,), r.rate_hz, r.hold, r.voltage_V, {r.name: slice(0, r.n)}, t_ref)
             for r in records
         ]
     rates = {r.rate_hz for r in records}
@@ -252,7 +260,7 @@ def build_sequences(records: Sequence[Record], chain: bool) -> list[SimSequence]
         if n_rest:
             parts.append(np.zeros(n_rest))
             pos += n_rest
-    return [SimSequence(tuple(records), rate, holds.pop(), np.concatenate(parts), entries)]
+    return [SimSequence(tuple(records), rate, holds.pop(), np.concatenate(parts), entries, t_ref)]
 
 
 def score_segments(seq: SimSequence, scored: Collection[str], warmup_s: float) -> list[Segment]:

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic
 from labrig.analysis.records import Record
 from labrig.analysis.signals import step_hold
+from labrig.analysis.spectra import spectral_lines
 from labrig.model import DynamicHysteresisModel, ModelParams
 from labrig.model.effects import Context, Effect
 
@@ -100,29 +101,17 @@ def _fourier(x: NDArray, rate: float, f: float) -> complex:
     return complex(2.0 / x.size * np.sum(x * np.exp(-2j * np.pi * f * t)))
 
 
-def _lines(res: NDArray, rate: float, f0: float | None) -> list[dict[str, float]]:
-    """Strongest spectral lines of the residual that are not harmonics of the drive."""
-    n = res.size
-    if n < 256:
-        return []
-    w = np.hanning(n)
-    spec = np.abs(np.fft.rfft((res - res.mean()) * w)) * 2 / w.sum()
-    freqs = np.fft.rfftfreq(n, 1 / rate)
-    med = float(np.median(spec[1:])) + 1e-12
-    out = []
-    order = np.argsort(spec)[::-1]
-    for i in order[:40]:
-        f = float(freqs[i])
-        if f < 2.0 or spec[i] < 6 * med:
-            continue
-        if f0 and abs(f / f0 - round(f / f0)) * f0 < 3 * rate / n:
-            continue
-        if any(abs(f - o["frequency_hz"]) < 3 * rate / n for o in out):
-            continue
-        out.append({"frequency_hz": f, "amplitude_ue": float(spec[i]), "snr": float(spec[i] / med)})
-        if len(out) >= 3:
-            break
-    return out
+def _lines(r: Record, res: NDArray, f0: float | None) -> list[dict[str, float]]:
+    """Strongest spectral lines of the residual that are not harmonics of the drive
+    (:func:`~labrig.analysis.spectra.spectral_lines`; the drive frequency known to 1e-4 when
+    stated, to half a bin of the record when estimated)."""
+    du = None
+    if f0 is not None:
+        du = 1e-4 * f0 if r.frequency_hz is not None else 0.5 * r.rate_hz / r.n
+    return [
+        {"frequency_hz": x["frequency_hz"], "amplitude_ue": x["amplitude"], "snr": x["snr"]}
+        for x in spectral_lines(res, r.rate_hz, f0, du)
+    ]
 
 
 def _harmonics(e: EntryEvidence, res: NDArray, m: NDArray, rate: float, period: int) -> None:
@@ -175,7 +164,7 @@ def _entry_evidence(r: Record, m: NDArray, p: NDArray) -> EntryEvidence:
         _harmonics(e, res, m, r.rate_hz, period)
     cc = _corr(res, np.arange(res.size).astype(float))
     e.trend_share = cc * cc
-    e.lines = _lines(res, r.rate_hz, f0 if per else None)
+    e.lines = _lines(r, res, f0)
     if "temperature" in r.aux:
         T = r.aux["temperature"]
         e.temperature_rise_K = float(np.median(T[-50:]) - np.median(T[:50]))
@@ -218,7 +207,8 @@ def _campaign_features(
     feats["mean_trend_share"] = float(np.mean([e.trend_share for e in ents]))
     if temps:
         rr = np.concatenate([a for a, _, _ in temps])
-        pt = np.concatenate([p * (T - T[0]) for _, p, T in temps])
+        t_ref = temps[0][2][0]  # the campaign's first temperature: hot and cool entries compare
+        pt = np.concatenate([p * (T - t_ref) for _, p, T in temps])
         feats["residual_vs_strain_x_temperature"] = _corr(rr, pt)
     return feats
 

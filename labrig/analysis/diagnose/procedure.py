@@ -53,6 +53,7 @@ from labrig.analysis.fit import PARAM_NAMES, FitResult, fit_model
 from labrig.analysis.metrics import drive_frequency_hz
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import build_sequences
+from labrig.analysis.spectra import detect_mains_hz
 from labrig.model import ModelParams
 from labrig.model.effects import CREEP_EFFECTS, EFFECT_NAMES, Effect, library
 
@@ -165,7 +166,8 @@ def diagnose(
       carries ``meta["rest_after_s"]``, i.e. comes from a ``labrig run`` file).
     - ``offset``: one free strain offset per entry in every model (sensors with no fixed zero).
     - ``effects``: the library names to consider (default all of :data:`EFFECT_NAMES`).
-    - ``mains_hz``: the mains frequency (default: guessed from the records).
+    - ``mains_hz``: the mains frequency (default: the line the strain shows at 50 or 60 Hz;
+      without one, ``mains_pickup`` is not tried).
     """
     t0 = time.perf_counter()
     if len(records) < 3:
@@ -239,6 +241,12 @@ class _Procedure:
         self.lib_context = effect_context(self.records, mains_hz)
         self.lib = library(**self.lib_context)
         self.names = [n for n in (effects or EFFECT_NAMES) if n in self.lib]
+        if mains_hz is None and "mains_pickup" in self.names and not detect_mains_hz(self.records):
+            self.names.remove("mains_pickup")
+            self.messages.append(
+                "no mains line at 50 or 60 Hz in the strain: mains_pickup not tried "
+                "(--mains-hz sets the frequency and tries it)"
+            )
         self.common = {
             "chain": self.chain,
             "shape": self.shape,

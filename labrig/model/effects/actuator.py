@@ -29,7 +29,9 @@ class ThermalDrift(Effect):
     at 40 Hz, full amplitude); the piezo coefficient rises with temperature (about 0.1-0.5 %/K).
     Acts on the operator's output (a slowly varying gain).
 
-    - With a temperature channel: ``theta = T - T(0)`` (K), one parameter ``k_per_K``.
+    - With a temperature channel: ``theta = T - T_ref`` (K), ``T_ref`` the campaign's first
+      temperature sample (:attr:`Context.temperature_ref`, common to all its sequences, so the
+      gain of a hot entry is compared with a cool one), one parameter ``k_per_K``.
     - Without: ``theta`` is a first-order thermal state driven by each entry's mean loss power
       ``P_e ~ mean |dV/dt (V - mean V)|`` (zero during rests), normalised to 1 for the most
       lossy entry: parameters ``k_rel`` (gain change at that entry's steady temperature) and
@@ -64,7 +66,8 @@ class ThermalDrift(Effect):
     def theta(self, ctx: Context, tau_s: float | None = None) -> NDArray:
         if self.temperature:
             T = ctx.temperature
-            return ctx.cached(("theta_T",), lambda: T - T[0])
+            ref = T[0] if ctx.temperature_ref is None else ctx.temperature_ref
+            return ctx.cached(("theta_T",), lambda: T - ref)
         a = float(np.exp(-1.0 / (ctx.rate_hz * tau_s)))
         return ctx.cached(
             ("theta_P", tau_s), lambda: signal.lfilter([0.0, 1.0 - a], [1.0, -a], _entry_power(ctx))

@@ -39,7 +39,8 @@ class Context:
 
     ``entries`` maps each entry name to its ``slice`` in the sequence; samples outside every
     entry are rests at 0 V. ``amplifier_voltage`` and ``temperature`` span the whole sequence
-    (``None`` when the run did not record them).
+    (``None`` when the run did not record them); ``temperature_ref`` is the campaign's
+    reference temperature (default: the sequence's first temperature sample).
     """
 
     rate_hz: float
@@ -47,6 +48,9 @@ class Context:
     entries: dict[str, slice]
     amplifier_voltage: NDArray[np.float64] | None = None
     temperature: NDArray[np.float64] | None = None
+    #: the campaign's reference temperature (degC): the same for every sequence of a campaign,
+    #: so a gain that follows the temperature compares a hot entry with a cool one
+    temperature_ref: float | None = None
     cache: dict = field(default_factory=dict, repr=False)
 
     @property

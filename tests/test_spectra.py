@@ -1,0 +1,124 @@
+"""Drive frequency, harmonics and lines on the records real benches make: a bias with a ramp to
+it, rests, growing and vanishing envelopes, bipolar drives (labrig.analysis.spectra)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from labrig.analysis.records import Record
+from labrig.analysis.spectra import (
+    detect_mains_hz,
+    estimate_frequency_hz,
+    is_harmonic,
+    spectral_lines,
+)
+
+RATE = 1000.0
+
+
+def _biased_growing(
+    f: float, seconds: float = 4.0, bias: float = -90.0, before_s: float = 0.0
+) -> np.ndarray:
+    """``before_s`` at 0 V, a 0.5 s raised-cosine ramp to the bias, 1 s held, then a sine whose
+    envelope grows from zero over the rest (the captures of the issue)."""
+    ramp = bias * 0.5 * (1 - np.cos(np.pi * np.arange(500) / 500))
+    hold = np.full(1000, bias)
+    t = np.arange(round(seconds * RATE)) / RATE
+    sine = bias + 60 * (t / t[-1]) * np.sin(2 * np.pi * f * t)
+    return np.concatenate([np.zeros(round(before_s * RATE)), ramp, hold, sine])
+
+
+@pytest.mark.parametrize("before_s", [0.0, 2.0])
+@pytest.mark.parametrize("f", [20.0, 40.0, 100.0])
+def test_drive_frequency_of_a_biased_growing_envelope(f: float, before_s: float) -> None:
+    """With the capture starting before the bias is applied, the step to the bias outweighs the
+    drive at the voltage spectrum's lowest bins; the drive is found all the same."""
+    v = _biased_growing(f, before_s=before_s)
+    assert estimate_frequency_hz(v, RATE) == pytest.approx(f, rel=5e-3)
+
+
+def test_drive_frequency_with_rests_and_bipolar_drives() -> None:
+    t = np.arange(3000) / RATE
+    rest = np.zeros(2000)
+    sine = 50 * (1 - np.cos(2 * np.pi * 5.0 * t))
+    assert estimate_frequency_hz(np.concatenate([rest, sine, rest]), RATE) == pytest.approx(
+        5.0, rel=5e-3
+    )
+    bipolar = 150 * np.sin(2 * np.pi * 1.0 * np.arange(5000) / RATE)
+    assert estimate_frequency_hz(bipolar, RATE) == pytest.approx(1.0, rel=5e-3)
+    vanishing = np.clip(1 - t / 2.5, 0, None) * sine
+    assert estimate_frequency_hz(vanishing, RATE) == pytest.approx(5.0, rel=1e-2)
+
+
+@pytest.mark.parametrize("f", [20.0, 40.0, 100.0])
+def test_a_harmonic_of_the_drive_is_never_a_line(f: float) -> None:
+    """A residual made only of drive harmonics (2nd to 6th, envelope-modulated like the drive,
+    with a little noise) has no line that is 'not a drive harmonic', whether the drive frequency
+    was stated or estimated from the voltage."""
+    v = _biased_growing(f)
+    u = (v - v[0]) / 60.0  # the drive's own shape, envelope included
+    rng = np.random.default_rng(1)
+    res = sum(0.3 / k * np.sign(u) * np.abs(u) ** k for k in range(2, 7))
+    res = res + 0.01 * rng.standard_normal(v.size)
+    f0 = estimate_frequency_hz(v, RATE)
+    for f_drive, du in ((f, 1e-4 * f), (f0, 0.5 * RATE / v.size)):
+        assert spectral_lines(res, RATE, f_drive, du) == []
+    # and a line that is not a harmonic is found
+    t = np.arange(v.size) / RATE
+    hum = res + 0.2 * np.sin(2 * np.pi * 1.5 * f * t)  # between the 1st and 2nd harmonics
+    lines = spectral_lines(hum, RATE, f0, 0.5 * RATE / v.size)
+    assert lines and lines[0]["frequency_hz"] == pytest.approx(1.5 * f, abs=0.5)
+
+
+def test_is_harmonic_tolerance_grows_with_the_order() -> None:
+    bin_hz = 0.1
+    assert is_harmonic(40.4, 20.2, bin_hz)
+    assert is_harmonic(10 * 20.21, 20.2, bin_hz)  # 10th harmonic of a drive known to 0.05 Hz
+    assert not is_harmonic(30.0, 20.2, bin_hz)
+    assert not is_harmonic(3.0, None, bin_hz)
+
+
+def _record(name: str, strain: np.ndarray, f: float | None = None) -> Record:
+    t = np.arange(strain.size) / RATE
+    v = 50 * (1 - np.cos(2 * np.pi * (f or 1.0) * t))
+    meta = {} if f is None else {"frequency_hz": f}
+    return Record(name, RATE, t, v, strain, {}, "zoh", meta)
+
+
+@pytest.mark.parametrize("mains", [50.0, 60.0])
+def test_mains_is_found_only_where_there_is_a_line(mains: float) -> None:
+    rng = np.random.default_rng(3)
+    t = np.arange(4000) / RATE
+    clean = [
+        _record(
+            f"e{f:g}", 8 * 50 * (1 - np.cos(2 * np.pi * f * t)) + 2 * rng.standard_normal(t.size), f
+        )
+        for f in (1.0, 10.0, 20.0)
+    ]
+    assert detect_mains_hz(clean) is None  # a clean run: no mains is claimed
+    hummed = [
+        Record(r.name, RATE, t, r.voltage_V, r.strain_ue + 3 * np.sin(2 * np.pi * mains * t + 1))
+        for r in clean
+    ]
+    for r, c in zip(hummed, clean, strict=True):
+        r.meta.update(c.meta)
+    assert detect_mains_hz(hummed) == mains
+
+
+def test_evidence_names_no_harmonic_as_a_line_on_a_biased_capture() -> None:
+    """Through the diagnosis's evidence (the records carry no stated frequency, and a growing
+    envelope is not periodic): the residual's drive harmonics are not reported as lines."""
+    from labrig.analysis.diagnose.evidence import collect_evidence
+
+    v = _biased_growing(40.0)
+    u = (v - v[0]) / 60.0
+    strain = 10 * v
+    pred = strain - sum(0.3 / k * np.sign(u) * np.abs(u) ** k for k in range(2, 6))
+    rec = Record.from_arrays("capture", RATE, v, strain)
+    ev = collect_evidence(
+        [rec, rec.with_strain(strain, "b"), rec.with_strain(strain, "c")],
+        {"capture": pred, "b": pred, "c": pred},
+    )
+    assert all(e.lines == [] for e in ev.entries.values())
+    assert not any("not a drive harmonic" in s for s in ev.sentences)
