@@ -107,18 +107,29 @@ def test_mains_is_found_only_where_there_is_a_line(mains: float) -> None:
 
 
 def test_evidence_names_no_harmonic_as_a_line_on_a_biased_capture() -> None:
-    """Through the diagnosis's evidence (the records carry no stated frequency, and a growing
-    envelope is not periodic): the residual's drive harmonics are not reported as lines."""
+    """Through the diagnosis's evidence, on captures with no stated frequency that are not
+    periodic (a bias, a fading envelope, a final hold): the residual's drive harmonics are not
+    reported as lines, a line between harmonics is."""
     from labrig.analysis.diagnose.evidence import collect_evidence
 
-    v = _biased_growing(40.0)
-    u = (v - v[0]) / 60.0
-    strain = 10 * v
-    pred = strain - sum(0.3 / k * np.sign(u) * np.abs(u) ** k for k in range(2, 6))
-    rec = Record.from_arrays("capture", RATE, v, strain)
-    ev = collect_evidence(
-        [rec, rec.with_strain(strain, "b"), rec.with_strain(strain, "c")],
-        {"capture": pred, "b": pred, "c": pred},
-    )
+    f = 40.0
+    ramp = -90.0 * 0.5 * (1 - np.cos(np.pi * np.arange(500) / 500))
+    t = np.arange(3000) / RATE
+    env = 1 - 0.3 * t / t[-1]
+    v = np.concatenate([ramp, np.full(500, -90.0), -90 + 60 * env * np.sin(2 * np.pi * f * t)])
+    v = np.concatenate([v, np.full(1000, -90.0)])
+    tt = np.arange(v.size) / RATE
+    on = (tt >= 1.0) & (tt < 4.0)
+    harm = on * sum(0.3 / k * np.cos(2 * np.pi * k * f * tt) for k in range(2, 6))
+    rng = np.random.default_rng(2)
+    strain = 10 * v + 0.02 * rng.standard_normal(v.size)
+    recs = [Record.from_arrays(n, RATE, v, strain) for n in "abc"]
+    ev = collect_evidence(recs, {n: strain - harm for n in "abc"})
     assert all(e.lines == [] for e in ev.entries.values())
     assert not any("not a drive harmonic" in s for s in ev.sentences)
+    hum = {n: strain - harm - on * 0.3 * np.sin(2 * np.pi * 1.5 * f * tt) for n in "abc"}
+    ev = collect_evidence(recs, hum)
+    assert all(
+        e.lines and e.lines[0]["frequency_hz"] == pytest.approx(60.0, abs=0.5)
+        for e in ev.entries.values()
+    )
