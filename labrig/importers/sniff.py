@@ -36,7 +36,7 @@ _NUMBER = {
 }
 _REAL = re.compile(r"\d")
 _COMMENT = ("#", "%", "//")
-_MAX_LINES = 2000
+_MAX_LINES = 400  # lines looked at: preamble and enough data to see its shape
 _CONTROL = re.compile(r"[\x00-\x08\x0e-\x1f]")
 
 

@@ -60,16 +60,19 @@ def text_table(path: Path, layout: Layout) -> Table:
 
 
 class _Locator:
-    """Data row -> file line: the first data line plus the row, corrected for comment lines
-    inside the data (pandas skips them; only counted when an error needs a line)."""
+    """Data row -> file line: the first data line plus the row, corrected for blank lines
+    (dropped from the data) and comment lines (skipped by pandas; counted only when an error
+    needs a line)."""
 
     def __init__(self, path: Path, layout: Layout):
         self.path, self.layout = path, layout
-        self.rows: NDArray[np.int64] | None = None  # pandas row of each kept row (blank dropped)
+        self.blank: NDArray[np.int64] = np.zeros(0, np.int64)  # parser rows that were blank
 
     def line(self, row: int) -> int | None:
         """The line of kept (non-blank) row ``row``."""
-        p = int(self.rows[row]) if self.rows is not None and row < self.rows.size else row
+        p = row
+        while (q := row + int(np.searchsorted(self.blank, p, side="right"))) != p:
+            p = q
         return self.parser_line(p)
 
     def parser_line(self, p: int) -> int:
@@ -87,6 +90,40 @@ class _Locator:
         except OSError:
             pass
         return first + p
+
+
+class _Growing:
+    """A float64 column filled block by block, allocated once for the rows expected (grown by
+    half when a file holds more): no list of blocks to join at the end."""
+
+    def __init__(self, capacity: int):
+        self.data = np.empty(max(capacity, 16))
+        self.n = 0
+
+    def add(self, values: NDArray[np.float64]) -> None:
+        end = self.n + values.size
+        if end > self.data.size:
+            grown = np.empty(max(end, self.data.size * 3 // 2))
+            grown[: self.n] = self.data[: self.n]
+            self.data = grown
+        self.data[self.n : end] = values
+        self.n = end
+
+    def result(self) -> NDArray[np.float64]:
+        return self.data[: self.n] if self.n > 0.9 * self.data.size else self.data[: self.n].copy()
+
+
+def _row_estimate(path: Path, layout: Layout) -> int:
+    """Rows a text file holds at most: its line count (8-bit encodings), else from its size."""
+    size = path.stat().st_size
+    if layout.encoding.startswith(("utf-16", "utf-32")):
+        return size // (2 if "16" in layout.encoding else 4) // 4
+    newlines = returns = 0
+    with path.open("rb") as f:
+        while block := f.read(1 << 20):
+            newlines += block.count(b"\n")
+            returns += block.count(b"\r")
+    return max(newlines, returns) + 1
 
 
 class _Reader:
@@ -124,26 +161,27 @@ class _Reader:
         )
 
     def _load(self, table: Table, indices: list[int], required: set[int], enc: str) -> None:
-        parts: dict[int, list[NDArray[np.float64]]] = {k: [] for k in indices}
-        kept_rows: list[NDArray[np.int64]] = []
+        capacity = _row_estimate(self.path, self.layout)
+        columns = {k: _Growing(capacity) for k in indices}
+        blank_rows: list[NDArray[np.int64]] = []
         text_columns: set[int] = set()
         start = 0
         try:
             for chunk in self._chunks(enc):
                 blank = chunk.isna().all(axis=1).to_numpy()
-                keep = np.flatnonzero(~blank)
-                kept_rows.append(keep.astype(np.int64) + start)
+                keep = np.flatnonzero(~blank) if blank.any() else None
+                if keep is not None:
+                    blank_rows.append(np.flatnonzero(blank) + start)
                 for k in indices:
                     if k in text_columns:
                         continue
-                    col = chunk[k]
-                    values = _numbers(col, self.layout.decimal)
+                    values = _numbers(chunk[k], self.layout.decimal)
                     if values is None:
                         if k in required:
-                            raise self._not_a_number(table, col, k, start)
+                            raise self._not_a_number(table, chunk[k], k, start)
                         text_columns.add(k)
                         continue
-                    parts[k].append(values[keep])
+                    columns[k].add(values if keep is None else values[keep])
                 start += len(chunk)
                 if start > MAX_ROWS:
                     raise bad(self.path, f"more than {MAX_ROWS} data rows: too large to import")
@@ -151,12 +189,12 @@ class _Reader:
             raise self._parser_error(e) from None
         except pd.errors.EmptyDataError:
             raise bad(self.path, "no data lines", self.layout.first_data_line) from None
-        self.locator.rows = np.concatenate(kept_rows) if kept_rows else np.zeros(0, np.int64)
+        self.locator.blank = np.concatenate(blank_rows) if blank_rows else np.zeros(0, np.int64)
         for k in indices:
             if k in text_columns:
                 table.skipped.append(f"{table.place(k)}: text, not numbers")
                 continue
-            table.columns[k].values = np.concatenate(parts[k]) if parts[k] else np.zeros(0)
+            table.columns[k].values = columns.pop(k).result()
             table.columns[k].length = int(table.columns[k].values.size)
 
     def _not_a_number(self, table: Table, col: pd.Series, k: int, start: int) -> Exception:
