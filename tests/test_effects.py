@@ -204,3 +204,23 @@ def test_kelvin_voigt_filter_inverse_is_stable_and_exact():
         x = np.random.default_rng(1).standard_normal(2000).cumsum()
         back = signal.lfilter(a, b, signal.lfilter(b, a, x))
         assert np.max(np.abs(back - x)) < 1e-9 * np.max(np.abs(x))
+
+
+def test_field_saturation_is_odd_monotone_and_loses_s_at_full_scale():
+    """The library's field saturation ``V (1 - s (V/V_ref)^2)``: odd about 0 V (a bipolar drive
+    loses gain at both ends), the small-signal gain kept, the slope at full scale
+    ``1 - 3 s`` (checked by a finite difference), monotone for the largest allowed ``s``."""
+    eff = library(v_ref=150.0)["field_saturation"]
+    assert "field_saturation" in EFFECT_NAMES
+    v = np.linspace(-150.0, 150.0, 3001)
+    ctx = _ctx(v)
+    y = eff.apply(v, ctx, {"s": 0.05})
+    np.testing.assert_allclose(y, -y[::-1], atol=1e-12)  # odd
+    assert y[-1] == pytest.approx(150.0 * 0.95, rel=1e-12)  # 5 % less at full scale
+    slope_end = (y[-1] - y[-2]) / (v[-1] - v[-2])
+    slope_mid = (y[1501] - y[1499]) / (v[1501] - v[1499])
+    assert slope_mid == pytest.approx(1.0, abs=1e-6)
+    assert slope_end == pytest.approx(1 - 3 * 0.05, abs=2e-3)
+    top = eff.params[0].hi
+    assert np.all(np.diff(eff.apply(v, ctx, {"s": top})) > 0)
+    np.testing.assert_array_equal(eff.apply(v, ctx, {"s": 0.0}), v)

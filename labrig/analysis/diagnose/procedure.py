@@ -50,14 +50,14 @@ from labrig.analysis.diagnose.verdict import (
 )
 from labrig.analysis.extended import LAM_GAP, ExtendedProblem, FitOutcome, effect_context
 from labrig.analysis.fit import PARAM_NAMES, FitResult, fit_model
-from labrig.analysis.metrics import drive_frequency_hz
+from labrig.analysis.metrics import drive_frequency_hz, is_periodic
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import build_sequences
 from labrig.analysis.spectra import detect_mains_hz
 from labrig.model import ModelParams
 from labrig.model.effects import CREEP_EFFECTS, EFFECT_NAMES, Effect, library
 
-__all__ = ["MAX_NFEV", "Diagnosis", "diagnose", "split_entries"]
+__all__ = ["MAX_NFEV", "Diagnosis", "diagnose", "slow_mode_identifiable", "split_entries"]
 
 #: evaluation limit of a candidate's full fit (its folds get half)
 MAX_NFEV = 60
@@ -143,6 +143,26 @@ def _default_chain(records: Sequence[Record]) -> bool:
         and len({r.rate_hz for r in records}) == 1
         and len({r.hold for r in records}) == 1
     )
+
+
+#: a slow mode (0.1-1 s) is identifiable from a record at least this long ...
+SLOW_MODE_RECORD_S = 1.0
+#: ... driven at or below this frequency, or not periodic (steps, holds, envelopes)
+SLOW_MODE_MAX_HZ = 2.0
+
+
+def slow_mode_identifiable(records: Sequence[Record]) -> bool:
+    """Whether a slow viscoelastic mode (time constant 0.1-1 s) can be told apart in
+    ``records``: some record is at least :data:`SLOW_MODE_RECORD_S` long and driven at or
+    below :data:`SLOW_MODE_MAX_HZ`, or is not periodic (a step, a hold, an envelope). A
+    campaign of fast sines only sees such a mode as a gain change."""
+    for r in records:
+        if r.duration_s < SLOW_MODE_RECORD_S:
+            continue
+        f = drive_frequency_hz(r)
+        if f is None or f <= SLOW_MODE_MAX_HZ or not is_periodic(r.voltage_V, r.rate_hz, f):
+            return True
+    return False
 
 
 def diagnose(
@@ -240,7 +260,14 @@ class _Procedure:
         self.span_s = max(s.duration_s for s in sequences)
         self.lib_context = effect_context(self.records, mains_hz)
         self.lib = library(**self.lib_context)
-        self.names = [n for n in (effects or EFFECT_NAMES) if n in self.lib]
+        self.names = [n for n in dict.fromkeys(effects or EFFECT_NAMES) if n in self.lib]
+        if "viscoelastic_creep" in self.names and not slow_mode_identifiable(self.records):
+            self.names.remove("viscoelastic_creep")
+            self.messages.append(
+                "no entry long and slow enough to identify a slow viscoelastic mode "
+                f"(at least {SLOW_MODE_RECORD_S:g} s at {SLOW_MODE_MAX_HZ:g} Hz or below, or a "
+                "step): viscoelastic_creep not tried"
+            )
         if mains_hz is None and "mains_pickup" in self.names and not detect_mains_hz(self.records):
             self.names.remove("mains_pickup")
             self.messages.append(
