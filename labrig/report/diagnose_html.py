@@ -22,10 +22,12 @@ from labrig.analysis.records import Record
 from labrig.report.html import CSS, img
 from labrig.report.plots import png
 
-__all__ = ["render_diagnosis", "write_diagnosis"]
+__all__ = ["render_diagnosis", "residual_figure", "write_diagnosis"]
 
 
-def _residual_figure(d: Diagnosis, records: list[Record]) -> bytes:
+def residual_figure(d: Diagnosis, records: list[Record]) -> Figure:
+    """One panel per entry: the residual (measured - model) in time before and after the added
+    effects, with its axes labelled."""
     recs = [r for r in records if r.name in d.predictions_before]
     n = len(recs)
     cols = 2
@@ -43,10 +45,11 @@ def _residual_figure(d: Diagnosis, records: list[Record]) -> bytes:
         ax.grid(True, alpha=0.3)
         if k == 0:
             ax.legend(fontsize=7, loc="upper right")
-        if k % cols == 0:
-            ax.set_ylabel("residual (ue)", fontsize=8)
+        unit = r.meta.get("strain_units", "ue") if isinstance(r.meta, dict) else "ue"
+        ax.set_ylabel(f"residual ({unit})", fontsize=8)
+        ax.set_xlabel("time (s)", fontsize=8)
     fig.tight_layout()
-    return png(fig)
+    return fig
 
 
 def _candidates_figure(d: Diagnosis) -> bytes | None:
@@ -140,7 +143,7 @@ def render_diagnosis(d: Diagnosis, records: list[Record], title: str = "labrig d
             f"<td class='num'>{_num(e.floor_pct)}</td><td>{escape(harm)}</td></tr>"
         )
     h.append("</table>")
-    h.append(f"<h2>Residuals</h2><figure>{img(_residual_figure(d, records), 'residuals')}")
+    h.append(f"<h2>Residuals</h2><figure>{img(png(residual_figure(d, records)), 'residuals')}")
     h.append(
         "<figcaption>Measured minus predicted strain, base model (grey) and with the added "
         "effects (red).</figcaption></figure>"
