@@ -39,7 +39,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 from labrig.errors import InputFileError, InputIssue
 from labrig.instruments import DriverInfo
 from labrig.limits import RigLimits
-from labrig.yamlio import _line_index, issues_from_validation, read_yaml
+from labrig.yamlio import issues_from_validation, line_index, read_yaml
 
 log = logging.getLogger("labrig.rigspec")
 
@@ -234,7 +234,7 @@ def _parse_text(text: str, name: str) -> tuple[Any, dict]:
         raise InputFileError([InputIssue(name, None, "", f"YAML error: {e}")]) from e
     finally:
         loader.dispose()
-    return data, (_line_index(node) if node is not None else {})
+    return data, (line_index(node) if node is not None else {})
 
 
 def load_rig(path: Path | str | None = None) -> RigSpec:

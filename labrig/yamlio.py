@@ -79,7 +79,7 @@ def duplicate_key_issues(root: yaml.Node, name: str) -> list[InputIssue]:
     return sorted(out, key=lambda i: i.line or 0)
 
 
-def _line_index(node: yaml.Node, path: tuple = (), out: dict | None = None) -> dict:
+def line_index(node: yaml.Node, path: tuple = (), out: dict | None = None) -> dict:
     """Map every key path in the YAML document to its 1-based line number."""
     out = {} if out is None else out
     out[path] = node.start_mark.line + 1
@@ -87,11 +87,11 @@ def _line_index(node: yaml.Node, path: tuple = (), out: dict | None = None) -> d
         for k, v in node.value:
             key = k.value if isinstance(k, yaml.ScalarNode) else str(k.value)
             out[(*path, key)] = k.start_mark.line + 1
-            _line_index(v, (*path, key), out)
+            line_index(v, (*path, key), out)
             out[(*path, key)] = k.start_mark.line + 1
     elif isinstance(node, yaml.SequenceNode):
         for i, v in enumerate(node.value):
-            _line_index(v, (*path, i), out)
+            line_index(v, (*path, i), out)
     return out
 
 
@@ -139,7 +139,7 @@ def read_yaml(path: Path | str) -> tuple[object, dict, str]:
         raise InputFileError([InputIssue(name, line, "", msg)]) from e
     except yaml.YAMLError as e:
         raise InputFileError([InputIssue(name, None, "", f"YAML error: {e}")]) from e
-    lines = _line_index(node) if node is not None else {}
+    lines = line_index(node) if node is not None else {}
     return data, lines, text
 
 

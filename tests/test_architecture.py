@@ -1,0 +1,132 @@
+"""The tree reads as the data flow: no import cycle anywhere in labrig/ (counting imports inside
+functions, a package's ``__init__`` importing its own submodules excepted) and no private name
+(``_x``) imported across modules, in the package, its tests and its benchmarks."""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def module_files() -> dict[str, Path]:
+    """Module name -> file, for labrig/ and drivers/ (installed as labrig.drivers)."""
+    out: dict[str, Path] = {}
+    for base, prefix in ((ROOT / "labrig", "labrig"), (ROOT / "drivers", "labrig.drivers")):
+        for f in base.rglob("*.py"):
+            parts = list(f.relative_to(base).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join([prefix, *parts])] = f
+    return out
+
+
+def imports_of(name: str, path: Path, known: set[str]) -> set[str]:
+    """labrig modules ``name`` imports anywhere in its file (resolved to known modules)."""
+    found: set[str] = set()
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1])
+                base = f"{base}.{node.module}" if node.module else base
+            targets = [f"{base}.{a.name}" for a in node.names] + [base]
+        else:
+            continue
+        for t in targets:
+            while t and t not in known:
+                t = t.rpartition(".")[0]
+            if t and t != name:
+                found.add(t)
+    return found
+
+
+def cycles(graph: dict[str, set[str]]) -> list[set[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on: set[str] = set()
+    out: list[set[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = set()
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.add(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(comp)
+
+    sys.setrecursionlimit(10_000)
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def _graph() -> dict[str, set[str]]:
+    files = module_files()
+    graph = {name: imports_of(name, path, set(files)) for name, path in files.items()}
+    # a package's __init__ importing its own submodules is not a cycle of interest
+    return {n: {t for t in ts if not t.startswith(n + ".")} for n, ts in graph.items()}
+
+
+def test_no_import_cycle():
+    assert not [sorted(c) for c in cycles(_graph())]
+
+
+def private_imports_in(text: str) -> list[str]:
+    """``from labrig.x import _name`` and ``labrig.x._name`` uses in the source ``text``."""
+    out = []
+    for node in ast.walk(ast.parse(text)):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("labrig"):
+            out += [f"{node.module}.{a.name}" for a in node.names if _private(a.name)]
+            out += [node.module] if any(_private(p) for p in node.module.split(".")) else []
+        elif (
+            isinstance(node, ast.Attribute)
+            and _private(node.attr)
+            and ast.unparse(node.value).startswith("labrig.")
+        ):
+            out.append(ast.unparse(node))
+    return out
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def test_no_private_import_across_modules():
+    files = [*ROOT.joinpath("labrig").rglob("*.py"), *ROOT.joinpath("drivers").rglob("*.py")]
+    files += [*ROOT.joinpath("tests").rglob("*.py"), *ROOT.joinpath("benchmarks").rglob("*.py")]
+    found = [
+        f"{f.relative_to(ROOT)}: {x}" for f in files for x in private_imports_in(f.read_text())
+    ]
+    assert not found, "\n".join(found)
+
+
+def test_the_checks_can_fail():
+    """A planted cycle and a planted private import are found."""
+    graph = _graph()
+    graph["labrig.limits"] = {*graph["labrig.limits"], "labrig.runner"}
+    assert any("labrig.limits" in c for c in cycles(graph))
+    assert private_imports_in("from labrig.analysis.fit import _fit_once\n")
+    assert private_imports_in("import labrig.analysis.fit\nlabrig.analysis.fit._fit_once()\n")
+    assert not private_imports_in("from labrig import __version__\n")
