@@ -5,6 +5,7 @@ functions, a package's ``__init__`` importing its own submodules excepted) and n
 from __future__ import annotations
 
 import ast
+import subprocess
 import sys
 from pathlib import Path
 
@@ -130,3 +131,15 @@ def test_the_checks_can_fail():
     assert private_imports_in("from labrig.analysis.fit import _fit_once\n")
     assert private_imports_in("import labrig.analysis.fit\nlabrig.analysis.fit._fit_once()\n")
     assert not private_imports_in("from labrig import __version__\n")
+
+
+def test_the_simulators_do_not_import_the_runner_or_rig_opening():
+    """``labrig sim serve`` loads the simulators without the runner: imports run one way
+    (``rigfile -> drivers.sim.serve -> rigspec``)."""
+    code = (
+        "import sys, labrig.drivers.sim.serve; "
+        "print(sorted(m for m in ('labrig.runner', 'labrig.rigfile') if m in sys.modules))"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "[]"
