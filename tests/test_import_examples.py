@@ -40,6 +40,7 @@ GOOD = [
     ("rows_v5.mat", ["--time", "data:1", "--voltage", "data:2", "--strain", "data:3"], {},
      "strain"),
     ("plain_v73.mat", ["--time", "t"], {}, "strain"),
+    ("controldesk_v73.mat", [], {}, "strain"),
 ]  # fmt: skip
 
 # broken file, options, what the message must contain (file is always checked)
@@ -68,6 +69,8 @@ BAD = [
                              "--stack-length-mm", "18"],
      ["controldesk_bad.mat:", "capture capture_1, Y(2)", "has 50 samples",
       "voltage (Y(1) (Model Root/Amplifier/Out1)) has 64"]),
+    ("controldesk_v73_bad.mat", [], ["controldesk_v73_bad.mat:", "capture capture_1, Y(2)",
+                                     "sample 41", "strain is needed"]),
 ]  # fmt: skip
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from labrig.errors import InputFileError
+from labrig.importers.aux import aux_channels
 from labrig.importers.options import Checked
 from labrig.importers.select import select
 from labrig.importers.table import Table
@@ -36,13 +37,17 @@ def _heading(table: Table) -> str:
 
 
 def _roles(table: Table, checked: Checked) -> tuple[dict[int, str], str]:
+    """Column -> the role it takes (``voltage``, ``aux temperature [degC]``), or a problem."""
     try:
         sel = select(table, checked)
+        roles = {k: r for r, k in sel.roles.items() if k is not None}
+        n = table.columns[sel.voltage].length or 0
+        _, meta, _ = aux_channels(table, sel, n)
     except InputFileError as e:
         return {}, f"  (roles: {e.issues[0].message})"
-    roles = {k: r for r, k in sel.roles.items() if k is not None}
-    roles.update({k: f"aux {req.name or ''}".strip() for req, k in sel.requested})
-    roles.update({k: "aux" for k in sel.candidates if k not in roles})
+    places = {table.place(k, False): k for k in range(len(table.columns))}
+    for name, m in meta.items():
+        roles[places[m["from"]]] = f"aux {name}" + (f" [{m['unit']}]" if m["unit"] else "")
     return roles, ""
 
 
@@ -50,7 +55,9 @@ def _count(values: np.ndarray | None) -> str:
     if values is None:
         return "text"
     finite = int(np.isfinite(values).sum())
-    return f"{values.size}" if finite == values.size else f"{values.size} ({finite} numbers)"
+    if finite == values.size:
+        return f"{values.size}"
+    return f"{values.size} (empty)" if finite == 0 else f"{values.size} ({finite} numbers)"
 
 
 def list_table(table: Table, checked: Checked) -> list[str]:

@@ -3,7 +3,8 @@
 A column is named by its 1-based number, its label (header cell, variable or channel name, with
 or without its unit: ``temperature`` or ``temperature_C``), a ControlDesk channel's short name,
 or its place (``Y(3)``, ``column 3``); case does not matter. Without an option, the time, voltage
-and strain are found by name (:data:`DEFAULT_NAMES`); a ControlDesk channel's time is its ``X``.
+and strain are found by name (:data:`DEFAULT_NAMES`), else the voltage and strain as the only
+column in a unit of theirs (:data:`UNIT_KINDS`); a ControlDesk channel's time is its ``X``.
 Every other column with a name of its own becomes an auxiliary channel.
 """
 
@@ -13,6 +14,7 @@ from dataclasses import dataclass
 
 from labrig.importers.options import AuxRequest, Checked
 from labrig.importers.table import Table
+from labrig.importers.units import parse_unit
 
 #: names (lower case, unit removed) that mark a core column when no option names it
 DEFAULT_NAMES = {
@@ -20,6 +22,8 @@ DEFAULT_NAMES = {
     "voltage": ("voltage", "v", "u", "command_voltage", "voltage_v", "v_v"),
     "strain": ("strain", "s", "strain_ue", "strain_microstrain"),
 }
+#: unit kinds that mark the voltage or the strain when no name does (the only such column)
+UNIT_KINDS = {"voltage": ("voltage",), "strain": ("strain", "length")}
 
 
 @dataclass
@@ -72,11 +76,15 @@ def find_column(table: Table, spec: str, what: str) -> int:
 
 
 def _default(table: Table, role: str, taken: set[int]) -> int | None:
+    """By name (:data:`DEFAULT_NAMES`), else the only free column in a unit of the role."""
+    free = [k for k, c in enumerate(table.columns) if k not in taken and not c.is_axis]
     for name in DEFAULT_NAMES[role]:
-        for k, c in enumerate(table.columns):
-            if k not in taken and not c.is_axis and name in _names(table, k):
+        for k in free:
+            if name in _names(table, k):
                 return k
-    return None
+    kinds = UNIT_KINDS.get(role, ())
+    by_unit = [k for k in free if parse_unit(table.columns[k].unit).kind in kinds]
+    return by_unit[0] if len(by_unit) == 1 else None
 
 
 def _role(table: Table, checked: Checked, role: str, taken: set[int]) -> int | None:

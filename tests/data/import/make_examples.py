@@ -107,6 +107,42 @@ def write_v73(path: Path, variables: dict[str, np.ndarray]) -> None:
         f.write(_v73_header().ljust(512, b"\x00"))
 
 
+def _v73_text(group: h5py.Group, name: str, text: str) -> h5py.Dataset:
+    ds = group.create_dataset(name, data=np.array([[ord(c)] for c in text], dtype=np.uint16))
+    ds.attrs["MATLAB_class"] = np.bytes_("char")
+    return ds
+
+
+def _v73_value(f: h5py.File, group: h5py.Group, name: str, value: object) -> h5py.Dataset:
+    if isinstance(value, str):
+        return _v73_text(group, name, value)
+    ds = group.create_dataset(name, data=np.atleast_2d(np.asarray(value, dtype=float)))
+    ds.attrs["MATLAB_class"] = np.bytes_("double")
+    return ds
+
+
+def write_v73_capture(path: Path, name: str, x: dict, channels: list[dict]) -> None:
+    """A ControlDesk capture saved as MATLAB v7.3: the struct ``name`` with ``X`` (a struct)
+    and ``Y`` (a 1 x n struct array: each field a column of references into ``#refs#``)."""
+    with h5py.File(path, "w", userblock_size=512, libver="earliest") as f:
+        refs = f.create_group("#refs#")
+        cap = f.create_group(name)
+        cap.attrs["MATLAB_class"] = np.bytes_("struct")
+        xg = cap.create_group("X")
+        xg.attrs["MATLAB_class"] = np.bytes_("struct")
+        for key, value in x.items():
+            _v73_value(f, xg, key, value)
+        yg = cap.create_group("Y")
+        yg.attrs["MATLAB_class"] = np.bytes_("struct")
+        for key in channels[0]:
+            targets = [
+                _v73_value(f, refs, f"{key}{i}", ch[key]).ref for i, ch in enumerate(channels)
+            ]
+            yg.create_dataset(key, data=np.array(targets, dtype=h5py.ref_dtype)[:, None])
+    with path.open("r+b") as fh:
+        fh.write(_v73_header().ljust(512, b"\x00"))
+
+
 def _capture(n: int, rate_hz: float, shift: float, short_sensor: bool = False) -> dict:
     sig = signals(n, rate_hz)
     names = ("Model Root/Amplifier/Out1", "Model Root/Sensor/Out1", "Model Root/Thermo/Out1")
@@ -151,6 +187,13 @@ def mat_examples() -> None:
     savemat(HERE / "controldesk.mat", two)
     bad = {"capture_1": _capture(N, RATE_HZ, 0.0, short_sensor=True)}
     savemat(HERE / "controldesk_bad.mat", bad)
+
+    x = {"Name": "Time", "Unit": "s", "Data": t}
+    amp = {"Name": "Model Root/Amplifier/Out1", "Unit": "mV", "Data": 1000.0 * v, "XIndex": 1.0}
+    gauge = {"Name": "Model Root/Gauge/Out1", "Unit": "ue", "Data": s, "XIndex": 1.0}
+    write_v73_capture(HERE / "controldesk_v73.mat", "capture_1", x, [amp, gauge])
+    gauge_bad = gauge | {"Data": np.where(np.arange(N) == 40, np.inf, s)}
+    write_v73_capture(HERE / "controldesk_v73_bad.mat", "capture_1", x, [amp, gauge_bad])
 
 
 if __name__ == "__main__":
