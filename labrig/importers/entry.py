@@ -67,7 +67,9 @@ def _column(table: Table, k: int, n: int, what: str, voltage: int) -> NDArray[np
     return c.values
 
 
-def _in_unit(table: Table, k: int, role: str, unit_text: str, checked: Checked) -> tuple:
+def _in_unit(
+    table: Table, k: int, role: str, unit_text: str, checked: Checked
+) -> tuple[NDArray[np.float64], str, str]:
     """(values, stored unit, conversion note) of a core column in its run-file unit."""
     values = table.columns[k].values
     assert values is not None
@@ -94,7 +96,9 @@ def _in_unit(table: Table, k: int, role: str, unit_text: str, checked: Checked) 
     return out, stored, note
 
 
-def _time_base(table: Table, sel: Selection, checked: Checked, n: int) -> tuple:
+def _time_base(
+    table: Table, sel: Selection, checked: Checked, n: int
+) -> tuple[NDArray[np.float64], float, dict]:
     """(time in s as read, rate in Hz, metadata) of the record."""
     lo, hi = RATE_RANGE_HZ
     rate_opt = checked.opt.rate_hz

@@ -43,7 +43,7 @@ _CONTROL = re.compile(r"[\x00-\x08\x0e-\x1f]")
 class LayoutError(Exception):
     """The file is not delimited text with numbers: message and line (1-based, or None)."""
 
-    def __init__(self, message: str, line: int | None = None):
+    def __init__(self, message: str, line: int | None = None) -> None:
         super().__init__(message)
         self.line = line
 

@@ -64,7 +64,7 @@ class _Locator:
     (dropped from the data) and comment lines (skipped by pandas; counted only when an error
     needs a line)."""
 
-    def __init__(self, path: Path, layout: Layout):
+    def __init__(self, path: Path, layout: Layout) -> None:
         self.path, self.layout = path, layout
         self.blank: NDArray[np.int64] = np.zeros(0, np.int64)  # parser rows that were blank
 
@@ -96,7 +96,7 @@ class _Growing:
     """A float64 column filled block by block, allocated once for the rows expected (grown by
     half when a file holds more): no list of blocks to join at the end."""
 
-    def __init__(self, capacity: int):
+    def __init__(self, capacity: int) -> None:
         self.data = np.empty(max(capacity, 16))
         self.n = 0
 
@@ -129,7 +129,7 @@ def _row_estimate(path: Path, layout: Layout) -> int:
 class _Reader:
     """Reads the values of some columns of a text file (see the module docstring)."""
 
-    def __init__(self, path: Path, layout: Layout, locator: _Locator):
+    def __init__(self, path: Path, layout: Layout, locator: _Locator) -> None:
         self.path, self.layout, self.locator = path, layout, locator
 
     def load(self, table: Table, indices: list[int], required: set[int]) -> None:
