@@ -14,6 +14,7 @@ import typer
 
 from labrig import __version__
 from labrig.cli import diagnose, files, fit, report, run
+from labrig.cli.batch import batch_app
 from labrig.cli.model import model_app
 from labrig.cli.sim import sim_app
 
@@ -58,3 +59,4 @@ app.command("report")(report.report)
 app.command("diagnose")(diagnose.diagnose)
 app.add_typer(model_app, name="model")
 app.add_typer(sim_app, name="sim")
+app.add_typer(batch_app, name="batch")

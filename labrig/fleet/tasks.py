@@ -1,0 +1,247 @@
+"""One run file's task, as a worker runs it: the same library calls as the one-by-one commands.
+
+- ``fit``: :func:`labrig.analysis.fit_run.fit_run_file` (``labrig fit RUN --json``);
+- ``diagnose``: the fit, then :func:`labrig.analysis.prepare.prepare_diagnosis` and
+  :func:`labrig.analysis.diagnose.diagnose` with the default candidates (``labrig diagnose
+  RUN --json --out D``);
+- ``report``: the fit, then :func:`labrig.report.build.build_run_report` (``labrig report RUN
+  --out report.html --json``).
+
+A task never raises: any failure (a file that is not a run file, a truncated one, a fit that
+fails) becomes a :class:`TaskResult` with ``ok=False`` and the error's text, so one bad run
+never stops the others. The documents the commands would write (``fit.json``,
+``diagnosis.json``, ``diagnosis.html``, ``report.html``, ``report.json``) come back as text and
+the client writes them (workers need not see the output directory).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import tempfile
+import time
+import traceback
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from labrig import __version__
+from labrig.errors import LabrigError
+
+#: the three batch commands
+COMMANDS = ("fit", "diagnose", "report")
+
+
+@dataclass(frozen=True)
+class TaskOptions:
+    """The analysis options of a batch (the same meaning as the one-by-one commands')."""
+
+    method: str = "global"
+    memory: str = "return_point"
+    heldout: bool = True
+    also: tuple[str, ...] = ()
+    max_effects: int = 2
+
+    def to_json(self) -> dict[str, Any]:
+        return {**asdict(self), "also": list(self.also)}
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """One task: the command, the run file (by path: workers read it from a filesystem they
+    share with the client) and its key (the folder of its outputs)."""
+
+    command: str
+    path: str
+    key: str
+    options: TaskOptions
+
+
+@dataclass
+class TaskResult:
+    """What a task sends back: the run's row of the table, its per-entry rows, the documents
+    the one-by-one commands write, and where and how long it ran."""
+
+    command: str
+    path: str
+    key: str
+    ok: bool
+    error: str = ""
+    input_sha256: str = ""
+    row: dict[str, Any] = field(default_factory=dict)
+    entries: list[dict[str, Any]] = field(default_factory=list)
+    documents: dict[str, str] = field(default_factory=dict)
+    elapsed_s: float = 0.0
+    worker: str = ""
+    labrig_version: str = __version__
+
+    def to_json(self) -> dict[str, Any]:
+        """Everything but the documents (stored beside them)."""
+        d = asdict(self)
+        d.pop("documents")
+        return d
+
+
+def file_sha256(path: Path | str, block: int = 1 << 20) -> str:
+    """SHA-256 of the file's bytes (hex)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while chunk := f.read(block):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def error_text(e: BaseException) -> str:
+    """A one-paragraph error for the table: the message of an expected failure, else the
+    exception's type, message and the innermost frame."""
+    if isinstance(e, LabrigError):
+        return str(e)
+    tb = traceback.extract_tb(e.__traceback__)
+    where = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
+    return f"{type(e).__name__}: {e}{where}"
+
+
+def dumps(doc: Any) -> str:
+    """A document as the commands write it (indented, strict JSON, final newline)."""
+    return json.dumps(doc, indent=2, allow_nan=False) + "\n"
+
+
+# -- the three commands ---------------------------------------------------------------------
+
+
+def fit_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
+    """``labrig fit RUN --json``: ``fit.json``, the parameters with uncertainties, NRMSE, and the
+    creep the fitted model describes (:func:`~labrig.analysis.diagnose.modelled_creep_per_decade`
+    after a step to the run's largest voltage)."""
+    from labrig.analysis.diagnose import modelled_creep_per_decade
+    from labrig.analysis.fit import PARAM_NAMES
+    from labrig.analysis.fit_run import fit_run_file
+    from labrig.jsonsafe import json_safe
+    from labrig.model import ModelParams
+
+    outcome = fit_run_file(path, method=opt.method, memory=opt.memory, heldout=opt.heldout)
+    doc = json_safe(outcome.result.to_json())
+    out.documents["fit.json"] = dumps(doc)
+    for name in PARAM_NAMES:
+        out.row[name] = doc["params"].get(name)
+        out.row[f"{name}_sd"] = doc["uncertainty"].get(name)
+    out.row["nrmse_pct"] = doc["nrmse_pct"]
+    out.row["heldout_nrmse_pct"] = doc["heldout_nrmse_pct"]
+    out.row["fit_method"] = doc["method"]
+    v_ref = max(float(np.max(np.abs(r.voltage_V))) for r in outcome.setup.scored_records)
+    creep = modelled_creep_per_decade(ModelParams(**doc["params"]), v_ref)
+    out.row["creep_pct_per_decade"] = 100 * creep if creep == creep else None
+    held = getattr(outcome.result, "heldout_per_entry", None)
+    for entry, v in doc["per_entry"].items():
+        out.entries.append(
+            {
+                "entry": entry,
+                "nrmse_pct": v,
+                "heldout_nrmse_pct": (held or {}).get(entry),
+            }
+        )
+
+
+def diagnose_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
+    """``labrig diagnose RUN --json --out D``: ``diagnosis.json`` and ``diagnosis.html``, the
+    effects added, the verdict and its class."""
+    from labrig.analysis.diagnose import diagnose
+    from labrig.analysis.prepare import prepare_diagnosis
+    from labrig.jsonsafe import json_safe
+    from labrig.model.effects import EFFECT_NAMES
+    from labrig.report.diagnose_html import write_diagnosis
+
+    notes: list[str] = []
+    setup = prepare_diagnosis(path, None, notes.append)
+    d = diagnose(
+        setup.records,
+        setup.start,
+        offset=setup.offset,
+        effects=EFFECT_NAMES + tuple(opt.also),
+        max_effects=opt.max_effects,
+    )
+    doc = json_safe(d.to_json())
+    with tempfile.TemporaryDirectory(prefix="labrig-fleet-") as tmp:
+        write_diagnosis(Path(tmp), doc, d, setup.records, f"labrig diagnose: {path.name}")
+        for f in sorted(Path(tmp).iterdir()):
+            out.documents[f.name] = f.read_text(encoding="utf-8")
+    r = out.row
+    r["effects"] = ",".join(e["effect"] for e in doc["effects_added"])
+    r["verdict_class"] = d.classification
+    r["verdict"] = doc["verdict"]
+    r["diag_nrmse_before_pct"] = doc["before"]["nrmse_pct"]
+    r["diag_heldout_before_pct"] = doc["before"]["heldout_nrmse_pct"]
+    r["diag_nrmse_after_pct"] = doc["after"]["nrmse_pct"]
+    r["diag_heldout_after_pct"] = doc["after"]["heldout_nrmse_pct"]
+    for key, attr in (("creep_before", "base"), ("creep_after", "after")):
+        v = getattr(d, f"{attr}_creep_pct_per_decade", None)
+        r[f"diag_{key}_pct_per_decade"] = None if v is None or v != v else float(v)
+    r["diag_elapsed_s"] = d.elapsed_s
+    before = doc["before"].get("per_entry") or {}
+    after = doc["after"].get("per_entry") or {}
+    by_entry = {e["entry"]: e for e in out.entries}
+    for entry in before:
+        row = by_entry.setdefault(entry, {"entry": entry})
+        row["diag_nrmse_before_pct"] = before.get(entry)
+        row["diag_nrmse_after_pct"] = after.get(entry)
+    out.entries[:] = list(by_entry.values())
+    if notes:
+        r["notes"] = "; ".join(notes)
+
+
+def report_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
+    """``labrig report RUN --out report.html --json``: the page, its metrics table, and each
+    model's mean NRMSE."""
+    from labrig.report.build import build_run_report
+
+    built = build_run_report(path, None, method=opt.method, heldout=opt.heldout)
+    out.documents["report.html"] = built.page
+    out.documents["report.json"] = dumps(built.metrics)
+    by_entry = {e["entry"]: e for e in out.entries}
+    sums: dict[str, list[float]] = {}
+    for entry, metrics in built.metrics.items():
+        row = by_entry.setdefault(entry, {"entry": entry})
+        for k, v in metrics.items():
+            if k.endswith("nrmse_pct") and not k.startswith("dynamic."):
+                col = "report_" + k.replace(".", "_")
+                row[col] = v
+                if v is not None:
+                    sums.setdefault(col, []).append(float(v))
+    out.entries[:] = list(by_entry.values())
+    for col, vals in sums.items():
+        out.row[col] = sum(vals) / len(vals)
+
+
+PARTS = {
+    "fit": (fit_part,),
+    "diagnose": (fit_part, diagnose_part),
+    "report": (fit_part, report_part),
+}
+
+
+def run_task(spec: TaskSpec) -> TaskResult:
+    """Run one task (module docstring); never raises."""
+    from labrig.blas import single_thread_blas
+    from labrig.fleet.identity import run_identity
+
+    t0 = time.perf_counter()
+    out = TaskResult(spec.command, spec.path, spec.key, ok=False)
+    out.worker = f"{socket.gethostname()}:{os.getpid()}"
+    path = Path(spec.path)
+    try:
+        out.input_sha256 = file_sha256(path)
+        out.row.update(run_identity(path))
+        with single_thread_blas():
+            for part in PARTS[spec.command]:
+                part(path, spec.options, out)
+        out.ok = True
+    except Exception as e:
+        out.error = error_text(e)
+        out.documents.clear()
+    out.elapsed_s = time.perf_counter() - t0
+    return out
