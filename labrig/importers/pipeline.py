@@ -17,7 +17,7 @@ from labrig.importers.dspace import capture_table, find_captures
 from labrig.importers.entry import ImportedEntry, build_entry
 from labrig.importers.labels import entry_name
 from labrig.importers.limits import MAX_FILE_BYTES
-from labrig.importers.mat_read import mat_version, read_tree
+from labrig.importers.mat_read import V5_MAGIC, V73_MAGIC, mat_version, read_tree
 from labrig.importers.mat_tables import plain_table
 from labrig.importers.options import Checked, ImportOptions, check_options
 from labrig.importers.table import Table, bad, option_error
@@ -26,11 +26,13 @@ from labrig.importers.writer import import_description, write_run
 
 
 def _looks_like_mat(path: Path) -> bool:
-    if path.suffix.lower() == ".mat":
-        with path.open("rb") as f:
-            head = f.read(512)
-        return mat_version(path) != "4" or b"\x00" in head
-    return mat_version(path) != "4"
+    """A MAT-file header, or a ``.mat`` name on binary content (v4 has no header); a ``.mat``
+    file of text (``save -ascii``) is text."""
+    with path.open("rb") as f:
+        head = f.read(512)
+    if head.startswith((V5_MAGIC, V73_MAGIC)):
+        return True
+    return path.suffix.lower() == ".mat" and (mat_version(path) != "4" or b"\x00" in head)
 
 
 def _pick_captures(path: Path, tables: list[Table], wanted: list[str]) -> list[Table]:
