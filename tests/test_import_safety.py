@@ -77,7 +77,7 @@ def test_failed_write_leaves_existing_file_and_no_partial(
         path.write_bytes(b"half a run file")
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(writer, "_write", failing_write)
+    monkeypatch.setattr(writer, "write_entries", failing_write)
     before = digest(precious)
     res = invoke("import", DATA / "bom.csv", "--out", precious, "--overwrite")
     assert res.exit_code != 0

@@ -31,7 +31,8 @@ def _channels(e: ImportedEntry) -> list[Channel]:
     return chans
 
 
-def _write(path: Path, entries: list[ImportedEntry], description: dict) -> None:
+def write_entries(path: Path, entries: list[ImportedEntry], description: dict) -> None:
+    """Write a run file of ``entries`` at ``path`` directly (write_run puts it beside first)."""
     with RunWriter(
         path,
         protocol_text=json.dumps(description, indent=2, default=str),
@@ -59,7 +60,7 @@ def write_run(out: Path, entries: list[ImportedEntry], description: dict) -> Non
     folder = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
     try:
         partial = folder / out.name
-        _write(partial, entries, description)
+        write_entries(partial, entries, description)
         os.replace(partial, out)
     finally:
         shutil.rmtree(folder, ignore_errors=True)
