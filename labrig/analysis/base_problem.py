@@ -28,6 +28,7 @@ from labrig.analysis.simulate import (
     LRUCache,
     OperatorFamily,
     Scored,
+    bounded_least_squares,
     relaxor_output,
 )
 from labrig.model import QuasiStaticHysteresis
@@ -236,15 +237,13 @@ def solve(
     tight: bool = True,
 ) -> optimize.OptimizeResult:
     """Bounded trust-region least squares from ``z0`` (``tight``: :data:`CONVERGED`)."""
-    return optimize.least_squares(
+    return bounded_least_squares(
         lambda z: problem.residuals(space.full(z)),
+        lambda z: problem.jacobian(space, z),
         z0,
-        jac=lambda z: problem.jacobian(space, z),
-        bounds=(space.lo, space.hi),
-        method="trf",
-        x_scale="jac",
-        max_nfev=max_nfev,
-        **(CONVERGED if tight else LOOSE),
+        (space.lo, space.hi),
+        max_nfev,
+        CONVERGED if tight else LOOSE,
     )
 
 

@@ -37,6 +37,11 @@ closed form and by halving the step in the tests). For ``n = 1``, ``h`` is propo
 by linear least squares inside a bounded ``least_squares`` over ``beta + gamma > 0`` (log) and
 ``(beta - gamma) / (beta + gamma) > -1`` (which keeps ``beta > 0``, so ``h`` stays bounded).
 
+SINDy
+-----
+``kind="sindy"``: a sparse ODE of the strain driven by the voltage, fitted with pysindy and
+scored in free run (:mod:`labrig.analysis.sindy`); unlike the two above it depends on the rate.
+
 Objective and scores are those of :mod:`labrig.analysis.fit`: residuals weighted per entry by
 ``1 / (strain span * sqrt(samples))``, NRMSE per entry and its mean, and the leave-one-entry-out
 held-out NRMSE.
@@ -52,7 +57,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import optimize
 
-from labrig.analysis.metrics import nrmse_pct, second_half_nrmse_pct
+from labrig.analysis.metrics import nrmse_pct, scores_json, second_half_nrmse_pct
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import (
     CONVERGED,
@@ -61,6 +66,7 @@ from labrig.analysis.simulate import (
     scored_names,
     scored_sequences,
 )
+from labrig.analysis.sindy import SindyBaseline, fit_sindy
 from labrig.blas import single_thread_blas
 from labrig.model.bouc_wen import bouc_wen_exact, monotone_runs
 
@@ -75,7 +81,7 @@ __all__ = [
     "play_operators",
 ]
 
-KINDS = ("prandtl_ishlinskii", "bouc_wen")
+KINDS = ("prandtl_ishlinskii", "bouc_wen", "sindy")
 
 
 def _with_rest(v: ArrayLike, rest_V: float = 0.0) -> NDArray:
@@ -310,7 +316,7 @@ class BaselineResult:
     """
 
     kind: str
-    model: PrandtlIshlinskii | BoucWen
+    model: PrandtlIshlinskii | BoucWen | SindyBaseline
     nrmse_pct: float
     per_entry: dict[str, float]
     heldout_nrmse_pct: float | None
@@ -341,13 +347,9 @@ class BaselineResult:
             "params": self.params,
             "uncertainty": {},
             "correlation": {},
-            "nrmse_pct": float(self.nrmse_pct),
-            "per_entry": {k: float(v) for k, v in self.per_entry.items()},
-            "heldout_nrmse_pct": (
-                None if self.heldout_nrmse_pct is None else float(self.heldout_nrmse_pct)
+            **scores_json(
+                self.nrmse_pct, self.per_entry, self.heldout_nrmse_pct, self.kind, self.entries
             ),
-            "method": self.kind,
-            "entries": list(self.entries),
         }
 
 
@@ -362,7 +364,7 @@ def fit_baseline(
     scored: Sequence[str] | None = None,
     offset: bool = False,
 ) -> BaselineResult:
-    """Fit a baseline (``"prandtl_ishlinskii"`` or ``"bouc_wen"``) on ``records``.
+    """Fit a baseline (``"prandtl_ishlinskii"``, ``"bouc_wen"`` or ``"sindy"``) on ``records``.
 
     ``n_ops``: number of play operators of the PI model. ``warmup_s``, ``chain`` and ``scored``
     as in :func:`~labrig.analysis.fit.fit_model` (a run's entries back to back, each followed by
@@ -379,9 +381,11 @@ def fit_baseline(
     ]
     everything: Items = [(q, list(q.segments)) for q in seqs]
 
-    def fit(items: Items, warm: PrandtlIshlinskii | BoucWen | None = None):
+    def fit(items: Items, warm: PrandtlIshlinskii | BoucWen | SindyBaseline | None = None):
         if kind == "prandtl_ishlinskii":
             return _fit_pi(items, n_ops, offset)
+        if kind == "sindy":
+            return fit_sindy([(q.seq, segs) for q, segs in items], offset)
         return _fit_bw(items, None if warm is None else (warm.beta, warm.gamma), offset)
 
     def predictions(model) -> dict[str, NDArray]:

@@ -29,7 +29,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import optimize
 
 from labrig.analysis.metrics import nrmse_pct, second_half_nrmse_pct
 from labrig.analysis.records import Record
@@ -43,6 +42,7 @@ from labrig.analysis.simulate import (
     OperatorFamily,
     Segment,
     SimSequence,
+    bounded_least_squares,
     build_sequences,
     pad_to_block,
     relaxor_output,
@@ -405,15 +405,13 @@ class ExtendedProblem:
         n0 = self.nfev
         with single_thread_blas(), np.errstate(over="ignore"):
             if z0.size:
-                res = optimize.least_squares(
+                res = bounded_least_squares(
                     lambda z: self.residual(z, base0),
+                    lambda z: self.jacobian(z, base0),
                     z0,
-                    jac=lambda z: self.jacobian(z, base0),
-                    bounds=(self.lo, self.hi),
-                    method="trf",
-                    x_scale="jac",
-                    max_nfev=max_nfev,
-                    **(EXTENDED_CONVERGED if tight else LOOSE),
+                    (self.lo, self.hi),
+                    max_nfev,
+                    EXTENDED_CONVERGED if tight else LOOSE,
                 )
                 z = res.x
             else:

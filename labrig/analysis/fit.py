@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from scipy import optimize
 
 from labrig.analysis.base_problem import BaseProblem, ParameterSpace, best_of
-from labrig.analysis.metrics import nrmse_pct, second_half_nrmse_pct
+from labrig.analysis.metrics import nrmse_pct, scores_json, second_half_nrmse_pct
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import (
     DEFAULT_BOUNDS,
@@ -106,13 +106,9 @@ class FitResult:
             "params": self.params.model_dump(),
             "uncertainty": dict(self.uncertainty),
             "correlation": {k: dict(v) for k, v in self.correlation.items()},
-            "nrmse_pct": float(self.nrmse_pct),
-            "per_entry": {k: float(v) for k, v in self.per_entry.items()},
-            "heldout_nrmse_pct": (
-                None if self.heldout_nrmse_pct is None else float(self.heldout_nrmse_pct)
+            **scores_json(
+                self.nrmse_pct, self.per_entry, self.heldout_nrmse_pct, self.method, self.entries
             ),
-            "method": self.method,
-            "entries": list(self.entries),
         }
 
     def predict(self, record: Record) -> NDArray[np.float64]:

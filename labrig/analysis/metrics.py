@@ -46,6 +46,7 @@ __all__ = [
     "max_error",
     "mean_nrmse_pct",
     "nrmse_pct",
+    "scores_json",
     "strain_at_zero_voltage",
 ]
 
@@ -78,6 +79,23 @@ def second_half_nrmse_pct(
     if fit_offset:
         p = p + float(np.mean(m[:half] - p[:half]))
     return nrmse_pct(m[half:], p[half:], span_ue=float(np.ptp(m)) if m.size else None)
+
+
+def scores_json(
+    nrmse: float,
+    per_entry: dict[str, float],
+    heldout: float | None,
+    method: str,
+    entries: list[str],
+) -> dict[str, Any]:
+    """The scores of a fitted model as ``labrig fit --json`` gives them (plain JSON types)."""
+    return {
+        "nrmse_pct": float(nrmse),
+        "per_entry": {k: float(v) for k, v in per_entry.items()},
+        "heldout_nrmse_pct": None if heldout is None else float(heldout),
+        "method": method,
+        "entries": list(entries),
+    }
 
 
 def mean_nrmse_pct(values: ArrayLike | dict[str, float]) -> float:

@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import optimize
 
 from labrig.analysis.records import Record
 from labrig.model import ModelParams, QuasiStaticHysteresis, Relaxor
@@ -58,6 +59,7 @@ __all__ = [
     "Scored",
     "Segment",
     "SimSequence",
+    "bounded_least_squares",
     "build_sequences",
     "fill_rests",
     "pad_to_block",
@@ -193,10 +195,6 @@ class SimSequence:
     @property
     def n(self) -> int:
         return int(self.voltage_V.size)
-
-    @property
-    def duration_s(self) -> float:
-        return self.n / self.rate_hz
 
     @property
     def rest_V(self) -> float:
@@ -354,3 +352,25 @@ class LRUCache:
         while len(self._items) > self.size:
             self._items.popitem(last=False)
         return value
+
+
+def bounded_least_squares(
+    residual: Callable[[NDArray], NDArray],
+    jacobian: Callable[[NDArray], NDArray],
+    z0: NDArray,
+    bounds: tuple[NDArray, NDArray],
+    max_nfev: int | None,
+    tolerances: dict[str, float],
+) -> Any:
+    """``scipy.optimize.least_squares`` as every fit here calls it: trust-region reflective
+    within ``bounds``, scaled by the Jacobian's columns."""
+    return optimize.least_squares(
+        residual,
+        z0,
+        jac=jacobian,
+        bounds=bounds,
+        method="trf",
+        x_scale="jac",
+        max_nfev=max_nfev,
+        **tolerances,
+    )

@@ -112,6 +112,22 @@ def _relaxor_gain(tau: float, lam: float, f_hz: float) -> float:
     return float(abs(Relaxor(tau, lam).frequency_response(f_hz)))
 
 
+def _start(
+    static: dict[str, float], g0: float, lam_t: float, tau_t: float, lam_d: float, tau_d: float
+) -> dict[str, float]:
+    """A start of the dynamic fit from a static fit: the apparent gains corrected by the
+    transient relaxor's gain ``g0`` at the static fit's frequency."""
+    return {
+        "alpha0_ue_per_V": static["alpha0_ue_per_V"] / g0,
+        "gamma_ue_per_V": static["gamma_ue_per_V"] / g0,
+        "vc_V": static["vc_V"] * g0,
+        "lam_t": lam_t,
+        "tau_t_s": tau_t,
+        "lam_d": lam_d,
+        "tau_d_s": tau_d,
+    }
+
+
 def _stage_problem_input(
     records: Sequence[Record],
     singles: Sequence[Scored],
@@ -136,18 +152,7 @@ def _transient_starts(static: dict[str, float], f_low: float, bounds) -> list[di
     starts = []
     for lam in (0.1, 0.25, 0.5):
         tau = float(np.clip(0.35 ** (1 / lam) / w_low, *bounds["tau_t_s"]))
-        g0 = _relaxor_gain(tau, lam, f_low)
-        starts.append(
-            {
-                "alpha0_ue_per_V": static["alpha0_ue_per_V"] / g0,
-                "gamma_ue_per_V": static["gamma_ue_per_V"] / g0,
-                "vc_V": static["vc_V"] * g0,
-                "lam_t": lam,
-                "tau_t_s": tau,
-                "lam_d": 1.0,
-                "tau_d_s": 1.0,
-            }
-        )
+        starts.append(_start(static, _relaxor_gain(tau, lam, f_low), lam, tau, 1.0, 1.0))
     return starts
 
 
@@ -232,16 +237,6 @@ def generic_starts(
     for lam_d in (0.8, 1.35):
         lam_t = 0.2
         tau_t = 0.35 ** (1 / lam_t) / (2 * np.pi * f_lo)
-        g0 = _relaxor_gain(tau_t, lam_t, f_lo)
-        out.append(
-            {
-                "alpha0_ue_per_V": static["alpha0_ue_per_V"] / g0,
-                "gamma_ue_per_V": static["gamma_ue_per_V"] / g0,
-                "vc_V": static["vc_V"] * g0,
-                "lam_t": lam_t,
-                "tau_t_s": tau_t,
-                "lam_d": lam_d,
-                "tau_d_s": 0.3 ** (1 / lam_d) / (2 * np.pi * f_hi),
-            }
-        )
+        tau_d = 0.3 ** (1 / lam_d) / (2 * np.pi * f_hi)
+        out.append(_start(static, _relaxor_gain(tau_t, lam_t, f_lo), lam_t, tau_t, lam_d, tau_d))
     return out

@@ -257,7 +257,7 @@ class _Procedure:
         self.messages += fr.messages
         base0 = _numeric(fr.params)
         sequences = build_sequences(self.records, self.chain)
-        self.span_s = max(s.duration_s for s in sequences)
+        self.span_s = max(s.n / s.rate_hz for s in sequences)
         self.lib_context = effect_context(self.records, mains_hz)
         self.lib = library(**self.lib_context)
         self.names = [n for n in dict.fromkeys(effects or EFFECT_NAMES) if n in self.lib]
