@@ -30,7 +30,7 @@ Run from the repository root (about 2-3 minutes on a loaded 2-core machine):
 Prints a report (stdout); nothing is written to benchmarks/RESULTS.md (owned by the model
 benchmarks). Sections:
 
-1. **Fit time of the seed's campaign**: ``experiments/paper.yaml`` (11 entries, 57.5 s recorded,
+1. **Fit time of the paper's campaign**: ``experiments/paper.yaml`` (11 entries, 57.5 s recorded,
    90.5 s simulated with the 3 s rests, 1 kHz) run on the simulated rig (``paper`` truth, 2 ue
    gauge noise), then :func:`labrig.analysis.fit.fit_model` as ``labrig fit`` calls it
    (``chain=True``, global): the fit alone (staged start + global least squares + Jacobian for
@@ -42,10 +42,10 @@ benchmarks). Sections:
    and the top functions by own time.
 3. **Recovery on the paper truth**: fitted parameters against PAPER_TABLE1, NRMSE against the
    noise floor (the configured gauge noise and ADC quantisation in the run file).
-4. **The hybrid truth** (seed section 4 reference plant; a copy of ``experiments/rigs/sim.yaml``
-   with ``truth.preset: hybrid``): NRMSE of our model and of both baselines, in-sample and
+4. **The hybrid truth** (the paper's section 4 reference plant; a copy of
+   ``experiments/rigs/sim.yaml`` with ``truth.preset: hybrid``): NRMSE of our model and of both baselines, in-sample and
    held-out (leave-one-entry-out).
-5. **Real data** (``../shared/data/real/yan9a-micromanipulator``, skipped when absent): the two
+5. **Real data** (``tests/data/real/yan9a-micromanipulator``): the two
    files imported with ``--voltage 1 --strain 5 --rate-hz 200``; NRMSE of ours and of the
    baselines, in-sample and held-out (each file predicted by a fit on the other).
 """
@@ -66,7 +66,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-REAL = ROOT.parent / "shared" / "data" / "real" / "yan9a-micromanipulator"
+REAL = ROOT / "tests" / "data" / "real" / "yan9a-micromanipulator"
 sys.path.insert(0, str(ROOT))
 
 from labrig.analysis.baselines import KINDS, fit_baseline  # noqa: E402
@@ -150,7 +150,7 @@ def nrmse_row(label: str, res) -> str:
 
 
 def section_timing(tmp: Path, repeats: int) -> Path:
-    print("## 1. Fit time of the seed's campaign (experiments/paper.yaml, simulated rig)\n")
+    print("## 1. Fit time of the paper's campaign (experiments/paper.yaml, simulated rig)\n")
     t_run, _ = cli("run", ROOT / "experiments" / "paper.yaml", "--seed", 7, "--out", tmp / "p.h5")
     run = tmp / "p.h5"
     recs = records_from_run(run)
@@ -238,7 +238,7 @@ def compare_models(recs, **kw) -> list[str]:
 
 
 def section_hybrid(tmp: Path) -> None:
-    print("## 4. Hybrid truth (seed section 4 reference plant) on the simulated rig\n")
+    print("## 4. Hybrid truth (the paper's section 4 reference plant) on the simulated rig\n")
     run = run_campaign(tmp, "hybrid", seed=7, rig=hybrid_rig(tmp))
     recs = records_from_run(run)
     floor = noise_floor(recs, read_run(run, load_data=False).instrument)

@@ -24,7 +24,7 @@ Run from the repository root (about 1 minute; ``--quick``: about 20 s, shorter r
 Prints a report (stdout); nothing is written to benchmarks/RESULTS.md (owned by the model
 benchmarks). What is measured:
 
-1. **The seed's campaign** (``experiments/paper.yaml``: 11 entries, 57.5 s recorded, 87.5 s
+1. **The paper's campaign** (``experiments/paper.yaml``: 11 entries, 57.5 s recorded, 87.5 s
    with the 3 s rests, 1 kHz) on the simulated rig, not paced: wall time of
    :func:`labrig.runner.execute` in-process (best and median of repeats; the rig is opened
    each time) and of a whole ``labrig run`` process (interpreter start and imports included),
@@ -297,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
     p("# labrig runner benchmarks\n")
     for k, v in info.items():
         p(f"- {k}: {v}")
-    p("\n## 1. the seed's campaign (experiments/paper.yaml) on the simulated rig, not paced\n")
+    p("\n## 1. the paper's campaign (experiments/paper.yaml) on the simulated rig, not paced\n")
     best, med = min(camp["walls"]), statistics.median(camp["walls"])
     p(
         f"- {camp['entries']} entries, {camp['samples']:,} samples, {camp['recorded_s']:.1f} s "
