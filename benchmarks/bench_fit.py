@@ -43,8 +43,8 @@ benchmarks). Sections:
 3. **Recovery on the paper truth**: fitted parameters against PAPER_TABLE1, NRMSE against the
    noise floor (the configured gauge noise and ADC quantisation in the run file).
 4. **The hybrid truth** (the paper's section 4 reference plant; a copy of
-   ``experiments/rigs/sim.yaml`` with ``truth.preset: hybrid``): NRMSE of our model and of both baselines, in-sample and
-   held-out (leave-one-entry-out).
+   ``experiments/rigs/sim.yaml`` with ``truth.preset: hybrid``): NRMSE of our model and of
+   both baselines, in-sample and held-out (leave-one-entry-out).
 5. **Real data** (``tests/data/real/yan9a-micromanipulator``): the two
    files imported with ``--voltage 1 --strain 5 --rate-hz 200``; NRMSE of ours and of the
    baselines, in-sample and held-out (each file predicted by a fit on the other).
