@@ -26,7 +26,11 @@ from labrig.analysis.prepare import AnalysisError, Setup, prepare
 Progress = Callable[[str, int, int], None]
 #: what ``fit --model`` accepts: our model, then the baselines
 MODELS: tuple[str, ...] = ("dynamic", *KINDS)
-BASELINE_LABELS = {"prandtl_ishlinskii": "Prandtl-Ishlinskii", "bouc_wen": "Bouc-Wen"}
+BASELINE_LABELS = {
+    "prandtl_ishlinskii": "Prandtl-Ishlinskii",
+    "bouc_wen": "Bouc-Wen",
+    "sindy": "SINDy",
+}
 
 
 class CommandUI(Protocol):

@@ -62,6 +62,7 @@ class Model(StrEnum):
     DYNAMIC = "dynamic"
     PRANDTL_ISHLINSKII = "prandtl_ishlinskii"
     BOUC_WEN = "bouc_wen"
+    SINDY = "sindy"
 
 
 class Memory(StrEnum):

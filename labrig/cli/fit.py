@@ -55,7 +55,8 @@ MODEL_OPTION = typer.Option(
     "--model",
     parser=choice(Model, "a model"),
     metavar="<model>",
-    help="dynamic (ours), prandtl_ishlinskii or bouc_wen.",
+    help="dynamic (ours), prandtl_ishlinskii, bouc_wen or sindy (a sparse ODE fitted with "
+    "pysindy, scored in free run; docs/sindy.md).",
 )
 EFFECT_OPTION = typer.Option(
     [],

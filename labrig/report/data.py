@@ -35,13 +35,19 @@ from labrig.analysis.records import Record
 from labrig.jsonsafe import json_safe
 
 #: models of a report, in display order: ours first, then the baselines
-MODEL_KEYS: tuple[str, ...] = ("dynamic", "prandtl_ishlinskii", "bouc_wen")
+MODEL_KEYS: tuple[str, ...] = ("dynamic", "prandtl_ishlinskii", "bouc_wen", "sindy")
 MODEL_LABELS: dict[str, str] = {
     "dynamic": "fractional-order model",
     "prandtl_ishlinskii": "Prandtl-Ishlinskii",
     "bouc_wen": "Bouc-Wen",
+    "sindy": "SINDy (sparse ODE)",
 }
-MODEL_SHORT: dict[str, str] = {"dynamic": "ours", "prandtl_ishlinskii": "PI", "bouc_wen": "BW"}
+MODEL_SHORT: dict[str, str] = {
+    "dynamic": "ours",
+    "prandtl_ishlinskii": "PI",
+    "bouc_wen": "BW",
+    "sindy": "SINDy",
+}
 
 #: the metrics table: key, heading, unit
 METRICS: tuple[tuple[str, str, str], ...] = (
@@ -233,9 +239,10 @@ def build_report(
 def metrics_json(data: ReportData) -> dict[str, dict[str, float | None]]:
     """The metrics table for scripts: entry name -> ``"<model>.<metric>"`` -> value.
 
-    ``<model>`` is ``dynamic`` (ours), ``prandtl_ishlinskii`` or ``bouc_wen``; ``<metric>`` one
-    of :data:`METRICS`; ``measured.loop_area_Vue`` and ``measured.strain_shift_ue`` give the
-    measured values the errors refer to, and ``frequency_hz`` / ``amplitude_V`` the drive.
+    ``<model>`` is ``dynamic`` (ours), ``prandtl_ishlinskii``, ``bouc_wen`` or ``sindy``;
+    ``<metric>`` one of :data:`METRICS`; ``measured.loop_area_Vue`` and
+    ``measured.strain_shift_ue`` give the measured values the errors refer to, and
+    ``frequency_hz`` / ``amplitude_V`` the drive.
     ``null`` where a metric is undefined (non-periodic entry, no held-out fit, model not fitted).
     """
     out: dict[str, dict[str, float | None]] = {}

@@ -200,11 +200,11 @@ def _metrics_table(data: ReportData) -> str:
     legend = ", ".join(f"{MODEL_SHORT.get(k, k)} = {MODEL_LABELS.get(k, k)}" for k in keys)
     return (
         f"<table><tr>{head1}</tr><tr>{head2}</tr>{''.join(body)}</table>"
-        f'<p class="small">{escape(legend)}. Bold: the best of the three. NRMSE = 100 RMS(measured '
-        "− predicted) / (max − min of measured), over the scored samples; held-out: predicted by a "
-        "fit without that entry (leave-one-entry-out). Loop area and strain at zero voltage over "
-        "the last full period; errors are predicted − measured (loop area relative to the "
-        "measured one; the mean row averages |error|).</p>"
+        f'<p class="small">{escape(legend)}. Bold: the best of the models. NRMSE = 100 '
+        "RMS(measured − predicted) / (max − min of measured), over the scored samples; held-out: "
+        "predicted by a fit without that entry (leave-one-entry-out). Loop area and strain at "
+        "zero voltage over the last full period; errors are predicted − measured (loop area "
+        "relative to the measured one; the mean row averages |error|).</p>"
     )
 
 
@@ -391,8 +391,9 @@ def render(
         freq = (
             f"<figure>{img(frequency_png, 'loop area and strain shift versus frequency')}"
             "<figcaption>Measured (circles) and predicted (lines) over the last full period of "
-            "each periodic entry, one colour per drive amplitude (cf. the paper's Fig. 10). The "
-            "baselines are rate-independent: their loops do not change with frequency."
+            "each periodic entry, one colour per drive amplitude (cf. the paper's Fig. 10). "
+            "Prandtl-Ishlinskii and Bouc-Wen are rate-independent: their loops do not change with "
+            "frequency; SINDy's sparse ODE does depend on the rate."
             "</figcaption></figure>"
         )
     else:
