@@ -7,7 +7,8 @@ simulated DAQ (in-process), the GCS responder (amplifier, over a socket) and the
     AO[n] --DAC(range, bits)--> amplifier: u = gain AO (OFFLINE) | SVA (ONLINE) | 0 (over-temp)
           --clip [max(out_min, VMI), min(out_max, VMA)]--> current limit |C_eff dv/dt| <= I
           --> v[n] (actuator voltage, held over interval n; also the amp_monitor channel)
-    v --truth (paper | hybrid)--> strain --[log_creep]--[self_heating gain]--> S[n] (ue)
+    v --[field_saturation]--[viscoelastic_mode]--> u --truth (paper | hybrid)--> strain
+          --[+ cubic_term]--[log_creep]--[self_heating gain]--> S[n] (ue)
     S + bridge offset [+ offset_drift] + noise (ue at the bridge)
           --x sensitivity (mV/ue, scaled by excitation) [conditioner_lowpass] [filter setting]
           --x gain - balance--> conditioner output (V, clipped at +-10.5 V) [+ mains_pickup]
@@ -44,14 +45,20 @@ from labrig.drivers.sim.effects import (
     ButterLowpass,
     ConditionerLowpass,
     Creep,
+    CubicTerm,
     Drift,
     Effect,
+    FieldSaturation,
     LogCreep,
     Mains,
     MainsPickup,
     OffsetDrift,
+    Retardation,
     SelfHeating,
     Thermal,
+    ViscoelasticMode,
+    cubic_strain,
+    saturated_drive,
 )
 from labrig.drivers.sim.hybrid import HybridParams
 from numpy.typing import NDArray
@@ -215,6 +222,7 @@ class _Chain:
     filt: ButterLowpass
     creep: Creep | None
     thermal: Thermal | None
+    retardation: Retardation | None = None
     extra: dict = field(default_factory=dict)
 
 
@@ -307,6 +315,7 @@ class VirtualBench:
                 truth = HybridPlant(c.truth.hybrid, rate_hz)
             lp = c.effect(ConditionerLowpass)
             creep = c.effect(LogCreep)
+            mode = c.effect(ViscoelasticMode)
             self._chain = _Chain(
                 rate_hz=float(rate_hz),
                 truth=truth,
@@ -314,6 +323,7 @@ class VirtualBench:
                 filt=ButterLowpass(self.cond.filter_hz, 2, rate_hz),
                 creep=Creep(creep, rate_hz) if creep else None,
                 thermal=Thermal(self._heat_cfg, rate_hz) if self._heat_cfg else None,
+                retardation=Retardation(mode, rate_hz) if mode else None,
             )
             if self._chain.thermal is not None and self.last.get("temperature_degC"):
                 self._chain.thermal.T = self.last["temperature_degC"]
@@ -403,6 +413,24 @@ class VirtualBench:
         a.i_avg, a.folded = ema, folded
         return out, limited, now
 
+    def _actuator(self, v: NDArray, v_before: float) -> NDArray:
+        """Strain (ue) for the actuator voltage ``v`` held over each sample interval (the
+        voltage before the block was ``v_before``), before creep and heating."""
+        c, ch = self.config, self._chain
+        u = v
+        sat = c.effect(FieldSaturation)
+        if sat is not None:
+            u = saturated_drive(u, sat)
+        if ch.retardation is not None:
+            u = ch.retardation.process(u)
+        s = ch.truth.process(u)
+        cubic = c.effect(CubicTerm)
+        if cubic is not None:
+            # the voltage on the actuator at each sampling instant: the one held over the
+            # interval before it (the strain sampled at n has seen v[0..n-1])
+            s = s + cubic_strain(np.concatenate(([v_before], v[:-1])), cubic)
+        return s
+
     def step(self, ao: NDArray) -> dict[str, NDArray]:
         """Advance the bench by ``len(ao)`` samples of analog output; all AI channels (V)."""
         with self.lock:
@@ -432,9 +460,9 @@ class VirtualBench:
         ok = not a.over_temperature
         a.overflow_latch |= ((bool(outside.any()) or limited) and ok) or a.forced_overload
         a.limiting = ((bool(outside[-1]) or limited_now) and ok) or a.forced_overload
+        v_before = a.v_out
         a.v_out, a.i_out = float(v[-1]), float(i[-1])
-        # actuator
-        s = ch.truth.process(v)
+        s = self._actuator(v, v_before)
         if ch.creep is not None:
             s = ch.creep.process(s)
         temp = None
