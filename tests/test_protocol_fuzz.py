@@ -181,6 +181,20 @@ valid_step = st.one_of(
             "shape": st.just("linear"),
         },
     ),
+    _step(
+        "offset_sine",
+        {
+            "offset_V": st.floats(0, 50),
+            "amplitude_V": st.floats(0.5, 20),
+            "frequency_hz": freq,
+            "cycles": st.floats(0.5, 3),
+        },
+        {
+            "envelope": st.sampled_from(["constant", "growing", "vanishing"]),
+            "ramp_s": st.one_of(st.just(0.0), st.floats(0.01, 0.3)),
+            "settle_s": st.one_of(st.just(0.0), st.floats(0.01, 0.3)),
+        },
+    ),
     _step("hold", {"voltage_V": st.floats(-20, 100), "duration_s": dur}),
     _step(
         "ramp",

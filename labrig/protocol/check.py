@@ -17,7 +17,7 @@ from rich.table import Table
 from labrig.errors import InputFileError, InputIssue
 from labrig.limits import RigLimits
 from labrig.protocol.expand import build_plan
-from labrig.protocol.plan import Plan, field_name, line_of
+from labrig.protocol.plan import Plan, PlannedStep, field_name, line_of
 from labrig.protocol.preflight import preflight_checks
 from labrig.protocol.schema import STEP_KINDS, Protocol
 from labrig.yamlio import read_yaml
@@ -127,6 +127,14 @@ def _fmt(x: float | None, spec: str = "g") -> str:
     return "-" if x is None else format(x, spec)
 
 
+def _volts(step: PlannedStep) -> str:
+    """The table's voltage column: the amplitude, or ``offset+-amplitude`` around a bias."""
+    offset = step.definition.get("offset_V") if step.kind == "offset_sine" else None
+    if offset is None:
+        return _fmt(step.amplitude_V)
+    return f"{offset:g}+-{step.amplitude_V:g}"
+
+
 def format_plan(plan: Plan) -> Table:
     """The plan summary: one row per entry (peak current once preflight has run)."""
     checks = {c.name: c for c in plan.checks or []}
@@ -135,8 +143,8 @@ def format_plan(plan: Plan) -> Table:
     table = Table(
         title=f"{escape(plan.name)}: {n} {'entry' if n == 1 else 'entries'} at {plan.rate_hz:g} Hz",
         caption=(
-            "V: amplitude; Hz: frequency; s: duration; peak A: peak current into the stack; "
-            "rest s: 0 V after the entry\n"
+            "V: amplitude (offset_sine: offset +- amplitude); Hz: frequency; s: duration; "
+            "peak A: peak current into the stack; rest s: 0 V after the entry\n"
             f"recorded {plan.recorded_duration_s:.1f} s, total with rests "
             f"{plan.total_duration_s:.1f} s"
             + (
@@ -158,7 +166,7 @@ def format_plan(plan: Plan) -> Table:
             str(s.index + 1),
             s.name,
             s.kind,
-            _fmt(s.amplitude_V),
+            _volts(s),
             _fmt(s.frequency_hz),
             f"{s.duration_s:.3f}",
             "-" if c is None else f"{c.peak_current_A:.3f}",

@@ -3,10 +3,10 @@
 Sweeps become one sine step per amplitude x frequency pair, ``repeat`` copies a step (a whole
 sweep is repeated as a block), rests become ``rest_after_s`` on the step before them. Every
 concrete step gets a unique entry name (the run file's NXentry name): the derived base name
-(``sine_100V_40Hz``, ``vanishing_100V_1Hz``, ``hold_50V_2s``, ``ramp_0V_to_100V``,
-``csv_<file stem>``, ``strain_sine_500ue_10Hz_compensated``; a step's ``name`` replaces it, or
-prefixes a sweep's names), then ``_2``, ``_3``, ... for later occurrences of the same name
-(repeats).
+(``sine_100V_40Hz``, ``offset_sine_m90V_60V_20Hz_growing``, ``vanishing_100V_1Hz``,
+``hold_50V_2s``, ``ramp_0V_to_100V``, ``csv_<file stem>``,
+``strain_sine_500ue_10Hz_compensated``; a step's ``name`` replaces it, or prefixes a sweep's
+names), then ``_2``, ``_3``, ... for later occurrences of the same name (repeats).
 
 Strain-command steps (``strain_sine``, ``strain_vanishing``, ``strain_csv``) compose their
 command in ue (edge ramps at ``edge_slew_V_per_s * alpha0``), compute the drive with
@@ -20,19 +20,21 @@ rig's limits: see :mod:`labrig.protocol.preflight`.
 from __future__ import annotations
 
 import math
-import re
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from labrig.errors import InputFileError, InputIssue
 from labrig.protocol import waveforms as wf
+from labrig.protocol.concrete import Concrete, intervals, num_tag, sanitize
 from labrig.protocol.csvsource import CsvError, load_csv, resolve_csv_path
+from labrig.protocol.numbers import fixed
+from labrig.protocol.offset_sine import offset_sine_name, offset_sine_parts
 from labrig.protocol.plan import Plan, PlannedStep, Where, field_name, line_of
 from labrig.protocol.schema import (
     CsvStep,
     HoldStep,
+    OffsetSineStep,
     Protocol,
     RampStep,
     SineStep,
@@ -53,39 +55,9 @@ MAX_TOTAL_S = 7 * 86400.0
 MAX_STRAIN_SAMPLES = 2_000_000
 
 
-def num_tag(x: float) -> str:
-    """Number for an entry name: 100 -> '100', 2.5 -> '2p5', -10 -> 'm10'."""
-    s = f"{x:.6g}"
-    return s.replace("-", "m").replace("+", "").replace(".", "p")
-
-
-def _sanitize(s: str) -> str:
-    s = re.sub(r"[^A-Za-z0-9_]+", "_", s).strip("_")
-    return s or "data"
-
-
-def _intervals(seconds: float, rate_hz: float) -> int:
-    """``round(seconds * rate_hz)`` without overflowing on absurd inputs."""
-    x = seconds * rate_hz
-    return round(x) if math.isfinite(x) and x < 2.0**62 else 2**62
-
-
 class _PlanError(Exception):
     def __init__(self, issues: list[InputIssue]):
         self.issues = issues
-
-
-@dataclass
-class _Concrete:
-    kind: str
-    base_name: str
-    pieces: list[wf.Segment]
-    definition: dict
-    where: dict[str, Where]
-    amplitude_V: float | None = None
-    frequency_hz: float | None = None
-    #: strain command (ue, one value per command sample) for strain-command steps
-    strain: np.ndarray | None = None
 
 
 class _Builder:
@@ -106,7 +78,7 @@ class _Builder:
 
     def n_of(self, seconds: float, w: Where, what: str) -> int | None:
         """Sample intervals for ``seconds`` at the protocol rate, or None (issue recorded)."""
-        n = _intervals(seconds, self.rate)
+        n = intervals(seconds, self.rate)
         if n > MAX_STEP_SAMPLES:
             self.issue(
                 w,
@@ -125,7 +97,7 @@ class _Builder:
 
     # --- one method per step kind: returns the concrete steps of one repetition ---
 
-    def sine(self, s: SineStep, base: tuple) -> list[_Concrete]:
+    def sine(self, s: SineStep, base: tuple) -> list[Concrete]:
         lw = self.where((*base, "cycles" if s.cycles is not None else "duration_s"))
         where = {
             "step": self.where(base),
@@ -140,7 +112,7 @@ class _Builder:
             c.base_name = s.name
         return [c]
 
-    def _sine(self, a, f, cycles, duration_s, min_duration_s, where) -> _Concrete | None:
+    def _sine(self, a, f, cycles, duration_s, min_duration_s, where) -> Concrete | None:
         if cycles is not None and min_duration_s is not None:
             need = min_duration_s * f
             cycles = max(cycles, math.ceil(need - 1e-9) if need < 2.0**62 else 2.0**62)
@@ -157,9 +129,42 @@ class _Builder:
         }
         seg = wf.sine_segment(a, f, n, "frequency_hz")
         name = f"sine_{num_tag(a)}V_{num_tag(f)}Hz"
-        return _Concrete("sine", name, [seg], definition, where, a, f)
+        return Concrete("sine", name, [seg], definition, where, a, f)
 
-    def sweep(self, s: SweepStep, base: tuple) -> list[_Concrete]:
+    def n_short(self, seconds: float, w: Where, key: str) -> int | None:
+        """Sample intervals of an optional piece (a ramp, a settle): 0 for 0 s, else at least
+        one, or None (issue recorded)."""
+        n = intervals(seconds, self.rate)
+        if seconds > 0 and n < 1:
+            self.issue(
+                w,
+                f"{key} {seconds:g} s is shorter than one sample at {self.rate:g} Hz: give 0 or "
+                f"at least {1 / self.rate:g} s",
+            )
+            return None
+        if n > MAX_STEP_SAMPLES:
+            return self.n_of(seconds, w, key)
+        return n
+
+    def offset_sine(self, s: OffsetSineStep, base: tuple) -> list[Concrete]:
+        keys = ("offset_V", "amplitude_V", "frequency_hz", "envelope", "ramp_s", "settle_s")
+        where = {k: self.where((*base, k)) for k in keys}
+        where["step"] = self.where(base)
+        where["length"] = self.where((*base, "cycles" if s.cycles is not None else "duration_s"))
+        seconds = s.cycles / s.frequency_hz if s.cycles is not None else s.duration_s
+        what = f"the {s.amplitude_V:g} V, {s.frequency_hz:g} Hz sine around {s.offset_V:g} V"
+        n = self.n_of(seconds, where["length"], what)
+        n_ramp = self.n_short(s.ramp_s, where["ramp_s"], "ramp_s")
+        n_settle = self.n_short(s.settle_s, where["settle_s"], "settle_s")
+        if n is None or n_ramp is None or n_settle is None:
+            return []
+        pieces, definition = offset_sine_parts(s, n, n_ramp, n_settle, self.rate)
+        name = s.name or offset_sine_name(s)
+        return [
+            Concrete("offset_sine", name, pieces, definition, where, s.amplitude_V, s.frequency_hz)
+        ]
+
+    def sweep(self, s: SweepStep, base: tuple) -> list[Concrete]:
         out = []
         lkey = "cycles" if s.cycles is not None else "duration_s"
         pairs = [
@@ -194,7 +199,7 @@ class _Builder:
             "hold_s": self.where((*base, "hold_s")),
         }
         n = self.n_of(0.5 / s.frequency_hz + s.decay_s, where["length"], "the envelope")
-        nh = _intervals(s.hold_s, self.rate)
+        nh = intervals(s.hold_s, self.rate)
         if nh > MAX_STEP_SAMPLES:
             self.n_of(s.hold_s, where["hold_s"], "the hold")
             return None
@@ -220,7 +225,7 @@ class _Builder:
         }
         return pieces, definition, where
 
-    def vanishing(self, s: VanishingStep, base: tuple) -> list[_Concrete]:
+    def vanishing(self, s: VanishingStep, base: tuple) -> list[Concrete]:
         env = self._envelope(s, base, "amplitude_V", s.amplitude_V)
         if env is None:
             return []
@@ -228,10 +233,10 @@ class _Builder:
         definition = {"kind": "vanishing", **definition}
         name = s.name or f"vanishing_{num_tag(s.amplitude_V)}V_{num_tag(s.frequency_hz)}Hz"
         return [
-            _Concrete("vanishing", name, pieces, definition, where, s.amplitude_V, s.frequency_hz)
+            Concrete("vanishing", name, pieces, definition, where, s.amplitude_V, s.frequency_hz)
         ]
 
-    def hold(self, s: HoldStep, base: tuple) -> list[_Concrete]:
+    def hold(self, s: HoldStep, base: tuple) -> list[Concrete]:
         where = {
             "step": self.where(base),
             "voltage_V": self.where((*base, "voltage_V")),
@@ -243,9 +248,9 @@ class _Builder:
         definition = {"kind": "hold", "voltage_V": s.voltage_V, "duration_s": n / self.rate}
         name = s.name or f"hold_{num_tag(s.voltage_V)}V_{num_tag(s.duration_s)}s"
         seg = wf.const_segment(s.voltage_V, n, "voltage_V")
-        return [_Concrete("hold", name, [seg], definition, where, abs(s.voltage_V))]
+        return [Concrete("hold", name, [seg], definition, where, abs(s.voltage_V))]
 
-    def ramp(self, s: RampStep, base: tuple) -> list[_Concrete]:
+    def ramp(self, s: RampStep, base: tuple) -> list[Concrete]:
         where = {
             "step": self.where(base),
             "from_V": self.where((*base, "from_V")),
@@ -264,9 +269,9 @@ class _Builder:
         name = s.name or f"ramp_{num_tag(s.from_V)}V_to_{num_tag(s.to_V)}V"
         seg = wf.ramp_segment(s.from_V, s.to_V, n, self.rate, "length")
         amp = max(abs(s.from_V), abs(s.to_V))
-        return [_Concrete("ramp", name, [seg], definition, where, amp)]
+        return [Concrete("ramp", name, [seg], definition, where, amp)]
 
-    def csv(self, s: CsvStep, base: tuple) -> list[_Concrete]:
+    def csv(self, s: CsvStep, base: tuple) -> list[Concrete]:
         where = {k: self.where((*base, k)) for k in ("path", "column", "time_column", "scale")}
         where["step"] = self.where(base)
         where["length"] = where["path"]
@@ -279,9 +284,9 @@ class _Builder:
             self.issue(where["path"], f"{v.size} samples; at most {MAX_STEP_SAMPLES} per entry")
             return []
         definition = {"kind": "csv", **info, "duration_s": (v.size - 1) / self.rate}
-        name = s.name or f"csv_{_sanitize(resolve_csv_path(s, self.base_dir).stem)}"[:60]
+        name = s.name or f"csv_{sanitize(resolve_csv_path(s, self.base_dir).stem)}"[:60]
         seg = wf.table_segment(v, self.rate, "path")
-        return [_Concrete("csv", name, [seg], definition, where, float(np.max(np.abs(v))))]
+        return [Concrete("csv", name, [seg], definition, where, float(np.max(np.abs(v))))]
 
     # --- strain-command steps: the command is a strain, the controller makes the voltage ---
 
@@ -318,7 +323,7 @@ class _Builder:
 
     def _strain(
         self, s, base: tuple, kind: str, name: str, pieces, definition, where, freq
-    ) -> list[_Concrete]:
+    ) -> list[Concrete]:
         """Compose the strain command, compute the drive, return the concrete step."""
         from labrig.control import compute_drive
 
@@ -379,13 +384,13 @@ class _Builder:
             "drive_max_V": float(np.max(drive)),
         }
         amp = round(float(np.max(np.abs(drive))), 2) if drive.size else 0.0
-        c = _Concrete(kind, f"{name}_{s.control}", [seg], definition, where, amp, freq)
+        c = Concrete(kind, f"{name}_{s.control}", [seg], definition, where, amp, freq)
         if s.name:
             c.base_name = s.name
         c.strain = strain
         return [c]
 
-    def strain_sine(self, s: StrainSineStep, base: tuple) -> list[_Concrete]:
+    def strain_sine(self, s: StrainSineStep, base: tuple) -> list[Concrete]:
         lw = self.where((*base, "cycles" if s.cycles is not None else "duration_s"))
         where = {
             "step": self.where(base),
@@ -408,7 +413,7 @@ class _Builder:
         name = f"strain_sine_{num_tag(a)}ue_{num_tag(f)}Hz"
         return self._strain(s, base, "strain_sine", name, pieces, definition, where, f)
 
-    def strain_vanishing(self, s: StrainVanishingStep, base: tuple) -> list[_Concrete]:
+    def strain_vanishing(self, s: StrainVanishingStep, base: tuple) -> list[Concrete]:
         env = self._envelope(s, base, "amplitude_ue", s.amplitude_ue)
         if env is None:
             return []
@@ -417,7 +422,7 @@ class _Builder:
         name = f"strain_vanishing_{num_tag(a)}ue_{num_tag(f)}Hz"
         return self._strain(s, base, "strain_vanishing", name, pieces, definition, where, f)
 
-    def strain_csv(self, s: StrainCsvStep, base: tuple) -> list[_Concrete]:
+    def strain_csv(self, s: StrainCsvStep, base: tuple) -> list[Concrete]:
         where = {k: self.where((*base, k)) for k in ("path", "column", "time_column", "scale")}
         where["step"] = self.where(base)
         where["length"] = where["path"]
@@ -433,7 +438,7 @@ class _Builder:
             )
             return []
         definition = {**info, "duration_s": (v.size - 1) / self.rate}
-        stem = _sanitize(resolve_csv_path(s, self.base_dir).stem)  # type: ignore[arg-type]
+        stem = sanitize(resolve_csv_path(s, self.base_dir).stem)  # type: ignore[arg-type]
         name = f"strain_csv_{stem}"[:48]
         pieces = [wf.table_segment(v, self.rate, "path")]
         return self._strain(s, base, "strain_csv", name, pieces, definition, where, None)
@@ -471,15 +476,16 @@ class _Builder:
         if total > MAX_TOTAL_S:
             self.issue(
                 self.where(("steps",)),
-                f"the protocol lasts {total / 3600:.1f} h; at most {MAX_TOTAL_S / 3600:.0f} h "
-                "are allowed in one run (split it into several protocols)",
+                f"the protocol lasts {fixed(total / 3600, 1)} h; at most "
+                f"{MAX_TOTAL_S / 3600:.0f} h are allowed in one run (split it into several "
+                "protocols)",
             )
         if self.issues:
             raise _PlanError(self.issues)
         return steps
 
     def entry(
-        self, c: _Concrete, name: str, index: int, si: int, repeat: int, rest: float
+        self, c: Concrete, name: str, index: int, si: int, repeat: int, rest: float
     ) -> PlannedStep | None:
         """Repetition ``repeat`` of the concrete step ``c`` of protocol step ``si`` as the plan's
         entry ``index``: its pieces joined by edge ramps, or None (issue recorded)."""

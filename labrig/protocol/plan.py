@@ -95,6 +95,12 @@ class PlannedStep:
         d = self.definition
         if self.kind == "sine":
             what = f"sine {d['amplitude_V']:g} V, {d['frequency_hz']:g} Hz, {d['cycles']:g} cycles"
+        elif self.kind == "offset_sine":
+            what = (
+                f"{d['envelope']} sine {d['offset_V']:g} V +- {d['amplitude_V']:g} V, "
+                f"{d['frequency_hz']:g} Hz, {d['cycles']:g} cycles, after a {d['ramp_s']:g} s "
+                f"ramp and {d['settle_s']:g} s settle"
+            )
         elif self.kind == "vanishing":
             what = (
                 f"vanishing envelope {d['amplitude_V']:g} V, {d['frequency_hz']:g} Hz carrier, "

@@ -3,7 +3,8 @@
 For each entry of a plan:
 
 - sample rate within the DAQ's ``rate_min_hz .. rate_max_hz`` (once, for the protocol);
-- at least :data:`MIN_SAMPLES_PER_CYCLE` samples per cycle of a sine or envelope carrier;
+- at least :data:`MIN_SAMPLES_PER_CYCLE` samples per cycle of a sine or envelope carrier (an
+  offset sine's too);
 - every command value within ``v_min_V .. v_max_V``;
 - peak current ``i = C_eff dV/dt`` (``C_eff = capacitance_F * large_signal_factor``) at most
   ``i_peak_A``;
@@ -16,7 +17,12 @@ The measurement is :func:`labrig.drive_load.measure_load` (shared with the contr
 so the preflight evaluates them there). For a unipolar sine of amplitude A and frequency f this
 gives ``i_peak = pi C_eff A f`` and a cycle-mean ``2 C_eff A f``, so the highest frequency at
 amplitude A is ``min(i_peak_A / (pi C_eff A), i_avg_A / (2 C_eff A))`` (56.2 Hz at 100 V on the
-default rig).
+default rig). A sine of amplitude A around a bias (``offset_sine``) gives ``i_peak = 2 pi C_eff A
+f`` and a cycle-mean ``4 C_eff A f`` (:func:`max_offset_sine_frequency_hz`); its raised-cosine
+ramps are measured with the rest, and their current scales as ``1 / ramp_s``.
+
+Numbers in the messages are printed by :mod:`labrig.protocol.numbers`: a value over a limit
+never prints as the limit, and a huge one never prints with hundreds of digits.
 
 Problems are collected for all entries and raised together as :class:`InputFileError`, each
 naming the protocol file, line and field that produced the step, and what would be valid.
@@ -38,6 +44,7 @@ from labrig.drive_load import (
 )
 from labrig.errors import InputFileError, InputIssue
 from labrig.limits import RigLimits
+from labrig.protocol.numbers import amps, at_least, at_most, beyond, exact, fixed
 from labrig.protocol.plan import Plan, PlannedStep, Where
 from labrig.protocol.schema import STRAIN_KINDS
 from labrig.protocol.step_check import StepCheck
@@ -47,6 +54,7 @@ __all__ = [
     "MIN_SAMPLES_PER_CYCLE",
     "OVERSAMPLE",
     "StepCheck",
+    "max_offset_sine_frequency_hz",
     "max_sine_amplitude_V",
     "max_sine_frequency_hz",
     "measure",
@@ -75,6 +83,16 @@ def max_sine_amplitude_V(frequency_hz: float, limits: RigLimits) -> float:
         limits.v_max_V,
         limits.i_peak_A / (math.pi * c * frequency_hz),
         limits.i_avg_A / (2.0 * c * frequency_hz),
+    )
+
+
+def max_offset_sine_frequency_hz(amplitude_V: float, limits: RigLimits) -> float:
+    """Highest frequency of a sine of amplitude ``amplitude_V`` around any offset (constant
+    envelope) within both current limits: ``min(i_peak / (2 pi C A), i_avg / (4 C A))``."""
+    c = limits.effective_capacitance_F
+    return min(
+        limits.i_peak_A / (2.0 * math.pi * c * amplitude_V),
+        limits.i_avg_A / (4.0 * c * amplitude_V),
     )
 
 
@@ -110,20 +128,6 @@ def measure(
     )
 
 
-def _amps(x: float, other: float | None = None) -> str:
-    """Current for a message; more digits when it would print the same as ``other``."""
-    for digits in (2, 3, 4, 6):
-        s = f"{x:.{digits}f}" if x >= 0.1 else f"{x:.{digits + 1}g}"
-        o = (
-            None
-            if other is None
-            else (f"{other:.{digits}f}" if other >= 0.1 else f"{other:.{digits + 1}g}")
-        )
-        if s != o:
-            return f"{s} A"
-    return f"{x:.6g} A"
-
-
 def _blame_segment(step: PlannedStep, t_s: float) -> tuple[Where, str]:
     seg = step.waveform.segment_at(t_s * step.rate_hz)
     if seg.role == "edge":
@@ -142,6 +146,15 @@ def _samples_per_cycle_issue(step: PlannedStep, f: float | None) -> tuple[Where,
         f"are needed: raise rate_hz to >= {MIN_SAMPLES_PER_CYCLE * f:g} or lower the "
         "frequency",
     )
+
+
+def _rig_range(lim: RigLimits) -> str:
+    return f"the rig allows {exact(lim.v_min_V)} to {exact(lim.v_max_V)} V"
+
+
+def _beyond_range(bad: float, too_high: bool, lim: RigLimits) -> str:
+    """The voltage out of range, printed so that it reads as out of range."""
+    return beyond(bad, lim.v_max_V if too_high else lim.v_min_V)
 
 
 def _outside_range(chk: StepCheck, lim: RigLimits) -> tuple[bool, float] | None:
@@ -184,8 +197,7 @@ def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tu
         out.append(
             (
                 step.blame(key),
-                f"{what} reaches {bad:.4g} V; the rig allows {lim.v_min_V:g} to "
-                f"{lim.v_max_V:g} V{why}; "
+                f"{what} reaches {_beyond_range(bad, hi, lim)} V; {_rig_range(lim)}{why}; "
                 + ("lower amplitude_ue" if key == "amplitude_ue" else "check the file"),
             )
         )
@@ -195,16 +207,16 @@ def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tu
         out.append(cycles)
     if _peak_too_high(chk, lim):
         where, seg = _blame_segment(step, chk.peak_time_s)
-        need = _amps(chk.peak_current_A, lim.i_peak_A)
+        need = amps(chk.peak_current_A, lim.i_peak_A)
         if seg == "edge":
             msg = (
                 f"the 0 V edge ramp at the end of {step.name} needs {need} peak; the amplifier "
-                f"gives {_amps(lim.i_peak_A)}; use edge_slew_V_per_s <= {lim.i_peak_A / c:.0f}"
+                f"gives {amps(lim.i_peak_A)}; use edge_slew_V_per_s <= {at_most(lim.i_peak_A / c)}"
             )
         else:
             msg = (
                 f"{what} needs {need} peak at t = {chk.peak_time_s:.4g} s; the amplifier "
-                f"gives {_amps(lim.i_peak_A)}; {lower}"
+                f"gives {amps(lim.i_peak_A)}; {lower}"
             )
         out.append((where, msg))
     if _mean_too_high(chk, lim):
@@ -213,9 +225,9 @@ def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tu
         out.append(
             (
                 where,
-                f"{what} draws {_amps(chk.mean_current_A, lim.i_avg_A)} on average over "
+                f"{what} draws {amps(chk.mean_current_A, lim.i_avg_A)} on average over "
                 f"{window} (around t = {chk.mean_time_s:.4g} s); the amplifier's average limit "
-                f"is {_amps(lim.i_avg_A)}; {lower}",
+                f"is {amps(lim.i_avg_A)}; {lower}",
             )
         )
     return out
@@ -238,13 +250,14 @@ def _voltage_range_issue(
         to = step.definition["to_V"]
         key = "to_V" if (to > lim.v_max_V or to < lim.v_min_V) else "from_V"
     if key == "amplitude_V":
-        hint = f"; use amplitude_V <= {lim.v_max_V:g}"
+        hint = f"; use amplitude_V <= {exact(lim.v_max_V)}"
     elif step.kind == "csv":
         hint = " (check column and scale)"
+    hi = outside[0]
     return (
         step.blame(key),
-        f"{what if what is not None else step.kind + ' ' + step.name} reaches {bad:.4g} V; "
-        f"the rig allows {lim.v_min_V:g} to {lim.v_max_V:g} V{hint}",
+        f"{what if what is not None else step.kind + ' ' + step.name} reaches "
+        f"{_beyond_range(bad, hi, lim)} V; {_rig_range(lim)}{hint}",
     )
 
 
@@ -255,12 +268,12 @@ def _peak_current_issue(
     c = lim.effective_capacitance_F
     a, f = step.amplitude_V, step.frequency_hz
     where, seg = _blame_segment(step, chk.peak_time_s)
-    need = _amps(chk.peak_current_A, lim.i_peak_A)
-    gives = f"the amplifier gives {_amps(lim.i_peak_A)}"
+    need = amps(chk.peak_current_A, lim.i_peak_A)
+    gives = f"the amplifier gives {amps(lim.i_peak_A)}"
     if seg == "edge":
         msg = (
             f"the 0 V edge ramps of {step.name} need {need} peak; {gives}; use "
-            f"edge_slew_V_per_s <= {lim.i_peak_A / c:.0f}"
+            f"edge_slew_V_per_s <= {at_most(lim.i_peak_A / c)}"
         )
     elif step.kind == "vanishing" and sine_currents_A(a, f, lim)[0] <= lim.i_peak_A:
         where = step.blame("length")
@@ -271,20 +284,20 @@ def _peak_current_issue(
     elif periodic:
         msg = (
             f"{what} needs {need} peak; {gives}; max frequency at {a:g} V is "
-            f"{max_sine_frequency_hz(a, lim):.1f} Hz (max amplitude at {f:g} Hz is "
-            f"{max_sine_amplitude_V(f, lim):.1f} V)"
+            f"{fixed(max_sine_frequency_hz(a, lim), 1)} Hz (max amplitude at {f:g} Hz is "
+            f"{fixed(max_sine_amplitude_V(f, lim), 1)} V)"
         )
     elif step.kind == "ramp":
         d = step.definition
         dv = abs(d["to_V"] - d["from_V"])
         msg = (
             f"the ramp {d['from_V']:g} -> {d['to_V']:g} V in {d['duration_s']:g} s needs "
-            f"{need}; {gives}; use duration_s >= {dv * c / lim.i_peak_A:.3g} s"
+            f"{need}; {gives}; use duration_s >= {at_least(dv * c / lim.i_peak_A)} s"
         )
     else:
         msg = (
             f"{step.kind} {step.name} needs {need} peak at t = {chk.peak_time_s:.4g} s; "
-            f"{gives}; its slope may be at most {lim.i_peak_A / c:.0f} V/s"
+            f"{gives}; its slope may be at most {at_most(lim.i_peak_A / c)} V/s"
         )
     return where, msg
 
@@ -294,22 +307,90 @@ def _mean_current_issue(
 ) -> tuple[Where, str]:
     """The message for a voltage step over the mean current."""
     where, _seg = _blame_segment(step, chk.mean_time_s)
-    draws = f"draws {_amps(chk.mean_current_A, lim.i_avg_A)} on average over"
+    draws = f"draws {amps(chk.mean_current_A, lim.i_avg_A)} on average over"
     if periodic:
         a = step.amplitude_V
         where = step.blame("frequency_hz")
         msg = (
             f"{what} {draws} a cycle; the "
-            f"amplifier's average limit is {_amps(lim.i_avg_A)}; max frequency at {a:g} V "
-            f"is {max_sine_frequency_hz(a, lim):.1f} Hz"
+            f"amplifier's average limit is {amps(lim.i_avg_A)}; max frequency at {a:g} V "
+            f"is {fixed(max_sine_frequency_hz(a, lim), 1)} Hz"
         )
     else:
         msg = (
             f"{step.kind} {step.name} {draws} "
             f"{chk.window_s:g} s (around t = {chk.mean_time_s:.4g} s); the amplifier's "
-            f"average limit is {_amps(lim.i_avg_A)}"
+            f"average limit is {amps(lim.i_avg_A)}"
         )
     return where, msg
+
+
+def _offset_sine_range_issue(
+    step: PlannedStep, chk: StepCheck, lim: RigLimits, what: str
+) -> tuple[Where, str] | None:
+    """An offset sine outside the rig's range: blamed on ``offset_V`` when the bias itself is
+    outside, else on ``amplitude_V`` with the largest amplitude around that bias."""
+    outside = _outside_range(chk, lim)
+    if outside is None:
+        return None
+    hi, bad = outside
+    v0 = step.definition["offset_V"]
+    if not lim.v_min_V <= v0 <= lim.v_max_V:
+        return step.blame("offset_V"), f"offset_V {exact(v0)} V is out of range: {_rig_range(lim)}"
+    room = min(lim.v_max_V - v0, v0 - lim.v_min_V)
+    return (
+        step.blame("amplitude_V"),
+        f"{what} reaches {_beyond_range(bad, hi, lim)} V; {_rig_range(lim)}; around "
+        f"offset_V {exact(v0)} use amplitude_V <= {at_most(room)}",
+    )
+
+
+def _offset_sine_current_issues(
+    step: PlannedStep, chk: StepCheck, lim: RigLimits, what: str
+) -> list[tuple[Where, str]]:
+    """An offset sine over the peak or mean current: its ramps (ramp_s), its edge ramps or the
+    sine itself (frequency_hz, with the highest frequency at its amplitude)."""
+    out: list[tuple[Where, str]] = []
+    a, ramp_s = step.amplitude_V, step.definition["ramp_s"]
+    f_max = fixed(max_offset_sine_frequency_hz(a, lim), 1)
+    gives = f"the amplifier gives {amps(lim.i_peak_A)}"
+    if _peak_too_high(chk, lim):
+        where, seg = _blame_segment(step, chk.peak_time_s)
+        need = amps(chk.peak_current_A, lim.i_peak_A)
+        if seg == "edge":
+            c = lim.effective_capacitance_F
+            msg = f"the 0 V edge ramps of {step.name} need {need} peak; {gives}; use "
+            msg += f"edge_slew_V_per_s <= {at_most(lim.i_peak_A / c)} (or ramp_s > 0)"
+        elif seg == "raised_cosine":
+            longer = at_least(ramp_s * chk.peak_current_A / lim.i_peak_A)
+            msg = f"the ramps of {what} need {need} peak; {gives}; use ramp_s >= {longer}"
+        else:
+            msg = f"{what} needs {need} peak; {gives}; max frequency at {a:g} V is {f_max} Hz"
+        out.append((where, msg))
+    if _mean_too_high(chk, lim):
+        where, seg = _blame_segment(step, chk.mean_time_s)
+        draws = f"draws {amps(chk.mean_current_A, lim.i_avg_A)} on average over a cycle"
+        limit = f"the amplifier's average limit is {amps(lim.i_avg_A)}"
+        if seg in ("raised_cosine", "edge"):
+            out.append((where, f"the ramps of {what} {draws}; {limit}; make them longer"))
+        else:
+            where = step.blame("frequency_hz")
+            msg = f"{what} {draws}; {limit}; max frequency at {a:g} V is {f_max} Hz"
+            out.append((where, msg))
+    return out
+
+
+def _offset_sine_issues(
+    step: PlannedStep, chk: StepCheck, lim: RigLimits
+) -> list[tuple[Where, str]]:
+    """Every limit an offset sine breaks (range, samples per cycle, currents)."""
+    d = step.definition
+    what = f"{step.amplitude_V:g} V at {step.frequency_hz:g} Hz around {d['offset_V']:g} V"
+    found = [
+        _offset_sine_range_issue(step, chk, lim, what),
+        _samples_per_cycle_issue(step, step.frequency_hz),
+    ]
+    return [x for x in found if x is not None] + _offset_sine_current_issues(step, chk, lim, what)
 
 
 def _step_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tuple[Where, str]]:
@@ -317,6 +398,8 @@ def _step_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tupl
     current, mean current."""
     if step.kind in STRAIN_KINDS:
         return _strain_issues(step, chk, lim)
+    if step.kind == "offset_sine":
+        return _offset_sine_issues(step, chk, lim)
     a, f = step.amplitude_V, step.frequency_hz
     periodic = step.kind in ("sine", "vanishing") and a is not None and f is not None
     what = f"{a:g} V at {f:g} Hz" if periodic else f"entry {step.name}"

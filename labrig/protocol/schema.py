@@ -24,6 +24,7 @@ ColumnRef = (
 
 STEP_KINDS = (
     "sine",
+    "offset_sine",
     "vanishing",
     "hold",
     "ramp",
@@ -77,6 +78,36 @@ class SineStep(_StepBase):
     frequency_hz: Positive
     cycles: Positive | None = Field(None, description="number of cycles (or give duration_s)")
     duration_s: Positive | None = Field(None, description="length in seconds (or give cycles)")
+
+    @model_validator(mode="after")
+    def _length(self):
+        _one_of_cycles_duration(self)
+        return self
+
+
+class OffsetSineStep(_StepBase):
+    """A sine around a bias with an envelope, reached by a recorded ramp and settle.
+
+    Recorded in order: a raised-cosine ramp from 0 V to ``offset_V`` over ``ramp_s``, a hold
+    at ``offset_V`` for ``settle_s``, the sine ``V = offset_V + e(t) A sin(2 pi f t)`` for
+    ``T`` = ``cycles / f`` or ``duration_s``, then a raised-cosine ramp back to 0 V over
+    ``ramp_s``. The envelope ``e``: ``constant`` 1, ``growing`` ``t/T`` (from zero),
+    ``vanishing`` ``1 - t/T`` (to zero).
+    """
+
+    kind: Literal["offset_sine"]
+    offset_V: Finite = Field(description="the bias the sine swings around (0: a bipolar sine)")
+    amplitude_V: Positive = Field(description="A: the sine swings offset_V - A .. offset_V + A")
+    frequency_hz: Positive
+    cycles: Positive | None = Field(None, description="number of cycles (or give duration_s)")
+    duration_s: Positive | None = Field(None, description="length in seconds (or give cycles)")
+    envelope: Literal["constant", "growing", "vanishing"] = Field(
+        "constant", description="constant: e = 1; growing: e = t/T; vanishing: e = 1 - t/T"
+    )
+    ramp_s: NonNegative = Field(
+        0.5, description="raised-cosine ramp 0 V -> offset_V before, and back after (0: none)"
+    )
+    settle_s: NonNegative = Field(1.0, description="hold at offset_V before the sine")
 
     @model_validator(mode="after")
     def _length(self):
@@ -248,6 +279,7 @@ class StrainCsvStep(_StrainStepBase):
 
 Step = Annotated[
     SineStep
+    | OffsetSineStep
     | VanishingStep
     | HoldStep
     | RampStep

@@ -20,6 +20,9 @@ Formulas (A amplitude, f frequency, t local time in s):
   peak reaches the full amplitude A), ``e(s) = 1`` for ``s <= 0`` and from 1 at s = 0 to 0 at
   s = T: linear ``1 - s/T`` or exponential ``(exp(-s/tau) - exp(-T/tau))/(1 - exp(-T/tau))``,
   0 for s >= T; the envelope part lasts ``t0 + T``;
+- offset sine: ``V = V0 + e(t) A sin(2 pi f t)`` on ``0 <= t <= T`` (the piece's length), with
+  ``e = 1`` (constant), ``t/T`` (growing) or ``1 - t/T`` (vanishing);
+- raised-cosine ramp: ``V = V0 + (V1 - V0) (1 - cos(pi t/D))/2``: zero slope at both ends;
 - ramp: ``V = V0 + (V1 - V0) t/D``; hold: ``V = V0``;
 - table (CSV): linear interpolation between the samples.
 """
@@ -102,6 +105,48 @@ def vanishing_segment(
         return e * unipolar_sine(t, amplitude_V, frequency_hz)
 
     return Segment("vanishing", n, f, field)
+
+
+#: the envelopes of an offset sine: e(t) on 0 <= t <= T, from its local time and length
+ENVELOPES: dict[str, Callable[[Array, float], Array]] = {
+    "constant": lambda t, T: np.ones(np.shape(t)),
+    "growing": lambda t, T: np.clip(t / T, 0.0, 1.0),
+    "vanishing": lambda t, T: np.clip(1.0 - t / T, 0.0, 1.0),
+}
+
+
+def offset_sine_segment(
+    offset_V: float,
+    amplitude_V: float,
+    frequency_hz: float,
+    envelope_name: str,
+    n: int,
+    rate_hz: float,
+    field: str = "",
+) -> Segment:
+    """``V = offset + e(t) A sin(2 pi f t)`` over ``n`` sample intervals (``T = n / rate_hz``)."""
+    length_s = n / rate_hz
+    e = ENVELOPES[envelope_name]
+
+    def f(t: Array) -> Array:
+        t = np.asarray(t, dtype=float)
+        return offset_V + e(t, length_s) * amplitude_V * np.sin(2.0 * np.pi * frequency_hz * t)
+
+    return Segment("offset_sine", n, f, field)
+
+
+def raised_cosine_segment(
+    from_V: float, to_V: float, n: int, rate_hz: float, field: str = ""
+) -> Segment:
+    """``V0 + (V1 - V0) (1 - cos(pi t/D))/2`` over ``n`` intervals (``D = n / rate_hz``): a
+    ramp that starts and ends with zero slope; its steepest slope is ``pi |V1 - V0| / (2 D)``."""
+    d = n / rate_hz
+
+    def f(t: Array) -> Array:
+        x = np.clip(np.asarray(t, dtype=float) / d, 0.0, 1.0)
+        return from_V + (to_V - from_V) * 0.5 * (1.0 - np.cos(np.pi * x))
+
+    return Segment("raised_cosine", n, f, field)
 
 
 def const_segment(voltage_V: float, n: int, field: str = "", kind: str = "hold") -> Segment:
