@@ -57,12 +57,12 @@ DEFAULT_RIG_NAME = "<built-in default rig: experiments/rigs/sim.yaml>"
 
 #: the default simulated rig (kept identical to experiments/rigs/sim.yaml; a test checks)
 DEFAULT_RIG_YAML = """\
-# The default simulated rig: the seed's bench on the virtual bench.
+# The default simulated rig: the paper's bench on the virtual bench.
 # A PI E-503 (gain 10) drives a P-888.51-class stack (6 uF, 0-100 V); a 120 ohm foil gauge on a
 # DH3840-class conditioner (1.085 mV/ue) feeds a 16-bit DAQ. The simulators start on 127.0.0.1
 # and the real drivers talk to them over their transports (address "sim").
 name: sim
-description: Virtual bench with the seed's instruments (paper truth, realistic noise)
+description: Virtual bench with the paper's instruments (paper truth, realistic noise)
 
 daq:
   driver: sim_daq
@@ -102,7 +102,7 @@ limits:
 
 bench:
   truth:
-    preset: paper            # paper (labrig.model with a preset) or hybrid (seed section 4)
+    preset: paper            # paper (labrig.model with a preset) or hybrid (the paper's section 4)
     paper_params: PAPER_TABLE1
   amplifier:
     gain_V_per_V: 10.0
