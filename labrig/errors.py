@@ -38,6 +38,10 @@ class InputFileError(LabrigError):
         self.issues = issues
         super().__init__("\n".join(str(i) for i in issues))
 
+    def __reduce__(self) -> tuple:
+        # pickled with its issues (a run file is read in a child process: labrig.store_isolated)
+        return (type(self), (self.issues,))
+
 
 class DeviceError(LabrigError):
     """An instrument failed or refused: names the device and the operation (exit code 3)."""

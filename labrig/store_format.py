@@ -1,13 +1,24 @@
 """The run file's vocabulary, shared by the writer and the reader: format version, statuses,
-standard channels and how timestamps are written (layout: :mod:`labrig.store`)."""
+standard channels, how timestamps are written and the metadata seals (layout:
+:mod:`labrig.store`).
+
+**Seals.** HDF5 checksums (Fletcher32) cover the stored samples, but not the metadata of the
+original file format: attribute values and text live in unchecksummed heaps, so a damaged byte
+there reads back as another unit, another status or a missing entry. Every group and dataset
+labrig writes carries :data:`SEAL_ATTR`, the CRC-32 (:func:`zlib.crc32`) of what a reader
+takes from it besides the samples (:func:`seal_of`); the writer renews the seals whenever it
+records metadata, the reader checks every seal it finds.
+"""
 
 from __future__ import annotations
 
+import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime
 
 import h5py
+import numpy as np
 
 #: 1: the layout of docs/runfile.md (Fletcher32 checksums on sample datasets since labrig 0.1:
 #: readers do not require them, so older files read the same)
@@ -53,3 +64,35 @@ def channel(spec: Channel | Sequence[str] | str) -> Channel:
         return Channel(spec, *STANDARD_CHANNELS[spec])
     name, units, long_name = spec
     return Channel(str(name), str(units), str(long_name))
+
+
+#: the attribute holding an object's seal (module docstring)
+SEAL_ATTR = "labrig_crc32"
+
+
+def _canonical(value: object) -> bytes:
+    """The bytes of an attribute's or a dataset's value as h5py reads it."""
+    if isinstance(value, str):
+        return b"s" + value.encode("utf-8", "surrogatepass")
+    if isinstance(value, bytes):
+        return b"b" + value
+    if isinstance(value, np.ndarray) and value.dtype.kind == "O":
+        return b"o" + b"\x1f".join(_canonical(v) for v in value.ravel())
+    if isinstance(value, np.ndarray | np.generic):
+        a = np.asarray(value)
+        return a.dtype.str.encode() + repr(a.shape).encode() + a.tobytes()
+    return b"r" + repr(value).encode()
+
+
+def seal_of(obj: h5py.Group | h5py.Dataset) -> int:
+    """CRC-32 of an object's attributes (but its seal), a group's member names and a
+    non-chunked dataset's value; chunked datasets (samples) are covered by Fletcher32."""
+    crc = 0
+    for name in sorted(obj.attrs):
+        if name != SEAL_ATTR:
+            crc = zlib.crc32(b"@" + name.encode() + b"=" + _canonical(obj.attrs[name]), crc)
+    if isinstance(obj, h5py.Group):
+        crc = zlib.crc32(b"/" + "\x1f".join(sorted(obj)).encode(), crc)
+    elif obj.chunks is None:
+        crc = zlib.crc32(b"=" + _canonical(obj[()]), crc)
+    return crc

@@ -31,10 +31,12 @@ from labrig.interrupts import reason_for, signum_of
 from labrig.store_format import (
     FINAL_STATUSES,
     FORMAT_VERSION,
+    SEAL_ATTR,
     STRING_DTYPE,
     Channel,
     channel,
     now_iso,
+    seal_of,
 )
 from labrig.store_space import (
     BLOCK_MARGIN_BYTES,
@@ -128,6 +130,29 @@ def _write_tree(group: h5py.Group, d: Mapping, nx_class: str = "NXcollection") -
         units = _units_from_key(name)
         if units and not isinstance(value, str):
             ds.attrs["units"] = units
+
+
+def _renew_seal(obj: h5py.Group | h5py.Dataset) -> None:
+    crc = seal_of(obj)
+    if obj.attrs.get(SEAL_ATTR) != crc:
+        obj.attrs[SEAL_ATTR] = np.uint32(crc)
+
+
+def seal_all(f: h5py.File) -> None:
+    """Renew the seal (:func:`labrig.store_format.seal_of`) of every object in ``f`` whose
+    seal no longer matches (new objects, changed metadata)."""
+    _renew_seal(f)
+    f.visititems(lambda _name, obj: _renew_seal(obj))
+
+
+def seal_groups(groups: Iterable[h5py.Group]) -> None:
+    """Renew the seals of ``groups`` and of the datasets directly in them (what the writer
+    changes when it begins or finishes an entry or the run)."""
+    for g in groups:
+        _renew_seal(g)
+        for obj in g.values():
+            if isinstance(obj, h5py.Dataset):
+                _renew_seal(obj)
 
 
 def _note(group: h5py.Group, name: str, text: str, file_name: str, description: str) -> h5py.Group:
@@ -232,7 +257,7 @@ class EntryWriter:
             _set_str(g, "status_reason", reason or "")
             _set_str(g, "status", status)
             self._run.entry_done()
-            self._run.flush()
+            self._run.seal_and_flush(self._run.root, g)
         except Exception as e:
             raise self._run.storage_error(f"finishing entry {self.name}", e) from None
         self.status = status
@@ -317,7 +342,7 @@ class RunWriter:
         self._entries: list[str] = []
         self._current: EntryWriter | None = None
         self.status = "running"
-        self.flush()
+        self.seal_and_flush()
 
     # -- context manager ------------------------------------------------------------------
     def __enter__(self) -> RunWriter:
@@ -337,9 +362,25 @@ class RunWriter:
         finally:
             self.close()
 
+    @property
+    def root(self) -> h5py.File:
+        """The open HDF5 file (its root group)."""
+        return self._f
+
     # -- writing --------------------------------------------------------------------------
     def flush(self) -> None:
+        """Write everything to disk (``H5Fflush``)."""
         self._f.flush()
+
+    def seal_and_flush(self, *changed: h5py.Group) -> None:
+        """After metadata changed in the groups ``changed`` (and the datasets directly in
+        them): renew their seals (:func:`seal_groups`; none given: every seal,
+        :func:`seal_all`), then :meth:`flush`."""
+        if changed:
+            seal_groups(changed)
+        else:
+            seal_all(self._f)
+        self.flush()
 
     def check_space(self, needed_bytes: int, operation: str) -> None:
         """Raise :class:`StorageError` (disk full) unless ``needed_bytes`` plus a margin are
@@ -383,7 +424,7 @@ class RunWriter:
             for key, val in {"units": units, "long_name": long_name, **attrs}.items():
                 if val != "":
                     ds.attrs[key] = val
-            self.flush()
+            self.seal_and_flush(run)
         except Exception as e:
             raise self.storage_error(f"recording /run/{name}", e) from None
 
@@ -413,7 +454,7 @@ class RunWriter:
                 )
                 ds.attrs["units"] = units
                 ds.attrs["long_name"] = long_name
-            self.flush()
+            self.seal_and_flush(self._g, g)
         except Exception as e:
             raise self.storage_error(f"recording /run/{name}", e) from None
 
@@ -488,7 +529,7 @@ class RunWriter:
             f.attrs["default"] = name
         self._entries.append(name)
         self._current = EntryWriter(self, g, rate_hz, chans)
-        self.flush()
+        self.seal_and_flush(f, g, data)
         return self._current
 
     def entry_done(self) -> None:
@@ -513,7 +554,7 @@ class RunWriter:
             _set_str(self._g, "status_reason", reason or "")
             _set_str(self._g, "status", status)
             self._f.attrs["file_update_time"] = now_iso()
-            self.flush()
+            self.seal_and_flush(self._f, self._g)
         except Exception as e:
             raise self.storage_error(f"recording the run's end ({status})", e) from None
         self.status = status

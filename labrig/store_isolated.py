@@ -1,0 +1,149 @@
+"""Reading a run file in a child process with limits on its CPU time and wall-clock time.
+
+libhdf5 is compiled code: some damaged files make it loop forever (a run file with 512 zeroed
+bytes in the fractal heap of the root's attributes spins at 100 % CPU inside ``H5Aread``), and
+a loop in C never returns to Python, so neither a Python exception nor Ctrl-C stops it. No check
+made before the call can rule that out for every damaged structure, so the reading happens in a
+forked child: the kernel stops it after :func:`cpu_limit_s` seconds of CPU time
+(``RLIMIT_CPU``; CPU time, so a busy machine does not make a sound file look damaged), the
+parent kills it after :func:`wall_limit_s` seconds of waiting, and a child that crashes
+(a segmentation fault in libhdf5) takes only itself down. The result comes back pickled
+through a pipe; the parent keeps answering Ctrl-C while it waits (and kills the child).
+
+Where ``os.fork`` does not exist the function is called in-process.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import faulthandler
+import math
+import os
+import pickle
+import resource
+import select
+import signal
+import time
+import traceback
+from collections.abc import Callable
+from typing import Any
+
+#: CPU seconds every read may take, plus :data:`CPU_BYTES_PER_S` per byte of the file (reading
+#: a sound run file, checksums included, takes well under 0.1 s per 10 MB)
+BASE_CPU_S = 2.0
+CPU_BYTES_PER_S = 20e6
+#: the wall-clock limit: this many seconds plus :data:`WALL_BYTES_PER_S` per byte (a slow disk)
+BASE_WALL_S = 30.0
+WALL_BYTES_PER_S = 2e6
+#: the child's exit code when it could not send its result back
+_NO_RESULT = 70
+
+
+class IsolatedReadError(Exception):
+    """The child did not return a result: it ran out of time, was killed or crashed
+    (the message says which, for a person)."""
+
+
+class IsolatedCallError(Exception):
+    """The function raised something the child could not send back: the traceback as text."""
+
+
+def cpu_limit_s(size_bytes: int) -> int:
+    """CPU seconds allowed for reading a file of ``size_bytes`` (a whole number, as
+    ``RLIMIT_CPU`` takes): ``ceil(BASE_CPU_S + size / CPU_BYTES_PER_S)``."""
+    return math.ceil(BASE_CPU_S + size_bytes / CPU_BYTES_PER_S)
+
+
+def wall_limit_s(size_bytes: int) -> float:
+    """Seconds of waiting allowed for reading a file of ``size_bytes``."""
+    return BASE_WALL_S + size_bytes / WALL_BYTES_PER_S
+
+
+def call_isolated(fn: Callable[..., Any], *args: Any, size_bytes: int) -> Any:
+    """``fn(*args)`` in a forked child (module docstring), with the limits for a file of
+    ``size_bytes``. Returns what ``fn`` returns, re-raises what it raises (when it can be
+    pickled; otherwise :class:`IsolatedCallError`), and raises :class:`IsolatedReadError` when the
+    child is stopped by a limit or dies."""
+    if not hasattr(os, "fork"):
+        return fn(*args)
+    cpu = cpu_limit_s(size_bytes)
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: never returns
+        os.close(read_fd)
+        _child(write_fd, cpu, fn, args)
+    os.close(write_fd)
+    reaped = False
+    try:
+        payload = _receive(read_fd, time.monotonic() + wall_limit_s(size_bytes))
+        if payload is None:
+            raise IsolatedReadError(
+                f"reading did not finish within {wall_limit_s(size_bytes):.0f} s (stopped)"
+            )
+        _, status = os.waitpid(pid, 0)
+        reaped = True
+        if not payload:
+            raise IsolatedReadError(_death(status, cpu))
+    finally:
+        os.close(read_fd)
+        if not reaped:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+    kind, value = pickle.loads(payload)
+    if kind == "ok":
+        return value
+    if kind == "raised":
+        raise value
+    raise IsolatedCallError(value)
+
+
+def _child(write_fd: int, cpu_s: int, fn: Callable[..., Any], args: tuple) -> None:
+    """Run ``fn`` under the CPU limit and write ``(kind, value)`` pickled to ``write_fd``."""
+    code = _NO_RESULT
+    try:
+        faulthandler.disable()  # a crash is reported by the parent, without the child's stack
+        signal.signal(signal.SIGINT, signal.SIG_DFL)  # Ctrl-C ends the child at once
+        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+        resource.setrlimit(resource.RLIMIT_CPU, (cpu_s, cpu_s + 1))
+        try:
+            result: tuple[str, Any] = ("ok", fn(*args))
+        except Exception as e:
+            result = ("raised", e)
+        try:
+            data = pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception as e:
+            what = result[1] if result[0] == "raised" else e
+            data = pickle.dumps(("bug", "".join(traceback.format_exception(what))))
+        with os.fdopen(write_fd, "wb") as out:
+            out.write(data)
+        code = 0
+    finally:
+        os._exit(code)
+
+
+def _receive(fd: int, deadline: float) -> bytes | None:
+    """Everything the child writes to ``fd`` until it closes it; ``None`` past ``deadline``."""
+    chunks = []
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            return None
+        ready, _, _ = select.select([fd], [], [], left)
+        if not ready:
+            continue
+        chunk = os.read(fd, 1 << 20)
+        if not chunk:
+            return b"".join(chunks)
+        chunks.append(chunk)
+
+
+def _death(status: int, cpu_s: int) -> str:
+    """Why a child ended without a result, from its wait status."""
+    if os.WIFSIGNALED(status):
+        sig = os.WTERMSIG(status)
+        if sig in (signal.SIGXCPU, signal.SIGKILL):
+            return f"reading used more than {cpu_s} s of CPU time (stopped)"
+        name = signal.Signals(sig).name if sig in signal.valid_signals() else str(sig)
+        return f"the HDF5 library crashed reading it ({name})"
+    return f"the reading process stopped without a result (exit code {os.WEXITSTATUS(status)})"

@@ -1,0 +1,360 @@
+"""Parsing an open run file into :class:`RunFile` with every check a reader owes its user: the
+metadata seals (:func:`labrig.store_format.seal_of`), the types and shapes labrig writes, sizes
+bounded by the file's size, Fletcher32 checksums of the samples; anything unexpected is an
+:class:`~labrig.errors.InputFileError` naming the file and the object (the HDF5 path). Run in a
+child process with a time limit by :func:`labrig.store_reader.read_run`."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from labrig.errors import InputFileError, InputIssue
+from labrig.jsonsafe import loads_bounded
+from labrig.store_format import SEAL_ATTR, STATUSES, seal_of
+
+
+@dataclass
+class RunEntry:
+    """One entry read back: arrays by channel name plus the entry's metadata."""
+
+    name: str
+    index: int
+    title: str
+    status: str
+    reason: str
+    start_time: str
+    end_time: str
+    rate_hz: float
+    step: dict
+    data: dict[str, np.ndarray]
+    units: dict[str, str]
+    long_names: dict[str, str]
+    signal: str = "strain"
+    #: True when the channels had different lengths (writer killed mid-block) and were trimmed
+    trimmed: bool = False
+
+    def __getitem__(self, channel_name: str) -> np.ndarray:
+        return self.data[channel_name]
+
+    @property
+    def channels(self) -> list[str]:
+        return list(self.data)
+
+    @property
+    def time(self) -> np.ndarray:
+        return self.data["time"]
+
+    @property
+    def n_samples(self) -> int:
+        return len(self.data["time"]) if "time" in self.data else 0
+
+    @property
+    def duration_s(self) -> float:
+        t = self.data.get("time")
+        return float(t[-1] - t[0]) if t is not None and len(t) > 1 else 0.0
+
+    @property
+    def complete(self) -> bool:
+        return self.status == "complete"
+
+
+@dataclass
+class RunFile:
+    """A run file read back (see :func:`read_run`)."""
+
+    path: Path
+    format_version: int
+    creator_version: str
+    file_time: str
+    status: str
+    reason: str
+    start_time: str
+    end_time: str
+    seed: int | None
+    software_version: str
+    protocol_name: str
+    protocol_text: str
+    rig_text: str
+    protocol_file: str
+    rig_file: str
+    instrument: dict
+    planned_entries: list[str]
+    entries: dict[str, RunEntry] = field(default_factory=dict)
+    #: the exit code ``labrig run`` ended with (None: not recorded, an older or unfinished file)
+    exit_code: int | None = None
+
+    def __getitem__(self, name: str) -> RunEntry:
+        return self.entries[name]
+
+    def __iter__(self):
+        return iter(self.entries.values())
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    @property
+    def incomplete(self) -> bool:
+        """True when the writer never finished the run (crash, kill, still running)."""
+        return self.status == "running"
+
+
+#: a sample dataset may claim at most this many times the file's size in bytes (labrig writes
+#: them uncompressed: a larger claim is a damaged shape, refused before anything is allocated)
+MAX_EXPANSION = 64
+#: ... and at least this many bytes whatever the file's size
+MIN_CLAIM_BYTES = 1 << 20
+
+
+def _first_line(e: BaseException) -> str:
+    text = (str(e).strip().splitlines() or [""])[0][:160]
+    return f"{type(e).__name__}: {text}" if text else type(e).__name__
+
+
+class _Reader:
+    """Reads one open run file and knows which object it is reading (:attr:`where`, the
+    HDF5 path without its leading ``/``): every problem is an :class:`InputFileError`
+    naming the file and that object."""
+
+    def __init__(self, path: Path | str, f: h5py.File, size_bytes: int):
+        self.path, self.f = str(path), f
+        self.max_bytes = max(MAX_EXPANSION * size_bytes, MIN_CLAIM_BYTES)
+        self.where = ""
+
+    def error(self, message: str, where: str | None = None) -> InputFileError:
+        return InputFileError(
+            [InputIssue(self.path, None, self.where if where is None else where, message)]
+        )
+
+    def at(self, obj: h5py.HLObject | h5py.AttributeManager, name: str = "") -> str:
+        base = obj.name if isinstance(obj, h5py.HLObject) else ""
+        self.where = f"{(base or '').strip('/')}/{name}".strip("/")
+        return self.where
+
+    def text(self, group: h5py.Group, name: str, default: str = "") -> str:
+        """A scalar text dataset (a scalar number reads as its text)."""
+        if name not in group:
+            return default
+        self.at(group, name)
+        ds = group[name]
+        if not isinstance(ds, h5py.Dataset) or ds.shape != ():
+            raise self.error("expected a text value (a scalar dataset)")
+        v = ds[()]
+        return v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
+
+    def number(self, group: h5py.Group, name: str) -> float | None:
+        """A scalar numeric dataset, or ``None`` when absent."""
+        if name not in group:
+            return None
+        self.at(group, name)
+        ds = group[name]
+        if not isinstance(ds, h5py.Dataset) or ds.shape != () or ds.dtype.kind not in "iuf":
+            raise self.error("expected a number (a scalar numeric dataset)")
+        return float(ds[()])
+
+    def integer(self, group: h5py.Group, name: str) -> int | None:
+        v = self.number(group, name)
+        if v is None:
+            return None
+        if not (math.isfinite(v) and v == int(v)):
+            raise self.error(f"expected a whole number, found {v:g}")
+        return int(v)
+
+    def attr(self, obj: h5py.HLObject, name: str, default: object = "") -> object:
+        """An attribute: text decoded, a text array as a list of texts, else as stored."""
+        self.at(obj, f"@{name}")
+        v = obj.attrs.get(name, default)
+        if isinstance(v, bytes):
+            return v.decode("utf-8", "replace")
+        if isinstance(v, np.ndarray) and v.dtype.kind in "OSU":
+            return [x.decode("utf-8", "replace") if isinstance(x, bytes) else str(x) for x in v]
+        return v
+
+    def status(self, group: h5py.Group) -> str:
+        """A run's or an entry's status: one of :data:`~labrig.store_format.STATUSES`."""
+        status = self.text(group, "status", "unknown")
+        if status not in (*STATUSES, "unknown"):
+            raise self.error(f"{status[:40]!r} is not a status ({', '.join(STATUSES)})")
+        return status
+
+    def json(self, group: h5py.Group, name: str, default: str, kind: type) -> object:
+        """A text dataset holding JSON of type ``kind`` (``default`` when absent)."""
+        text = self.text(group, name, default)
+        self.at(group, name)
+        try:
+            value = loads_bounded(text)
+        except ValueError as e:
+            raise self.error(f"not valid JSON ({e})") from None
+        if not isinstance(value, kind):
+            want = "an object" if kind is dict else "a list"
+            raise self.error(f"expected JSON {want}, found {type(value).__name__}")
+        return value
+
+    def samples(self, entry: str, name: str, ds: h5py.Dataset, load: bool) -> np.ndarray:
+        """A channel: a 1-D numeric dataset no larger than the file can hold. A chunk that
+        fails its Fletcher32 checksum (or cannot be read) is an error naming the channel."""
+        where = self.at(ds.parent, name)
+        if ds.ndim != 1 or ds.dtype.kind not in "iuf":
+            found = "a scalar" if ds.ndim == 0 else f"shape {ds.shape}, type {ds.dtype}"
+            raise self.error(f"expected a 1-D array of numbers (samples), found {found}")
+        if ds.size * ds.dtype.itemsize > self.max_bytes:
+            raise self.error(
+                f"claims {ds.size} samples, more than the file can hold: the file is damaged"
+            )
+        if not load:
+            return np.empty(0)
+        try:
+            return ds[()]
+        except (OSError, RuntimeError) as e:
+            text = str(e)
+            if ds.fletcher32 and ("Fletcher32" in text or "filter" in text):
+                why = "checksum mismatch: the stored samples are damaged"
+            else:
+                why = "unreadable: " + ((text.strip().splitlines() or [""])[0][:160])
+            raise self.error(why, where) from None
+
+    def entry(self, name: str, g: h5py.Group, load: bool) -> tuple[RunEntry, dict]:
+        """One entry and the shapes of its channels (the arrays are empty without ``load``)."""
+        data_g = g.get("data")
+        data: dict[str, np.ndarray] = {}
+        shapes: dict[str, tuple[int, ...]] = {}
+        units: dict[str, str] = {}
+        long_names: dict[str, str] = {}
+        if not isinstance(data_g, h5py.Group):
+            raise self.error("missing: the entry has no group of channels", f"{name}/data")
+        for cname, ds in data_g.items():
+            if not isinstance(ds, h5py.Dataset):
+                continue
+            units[cname] = str(self.attr(ds, "units"))
+            long_names[cname] = str(self.attr(ds, "long_name"))
+            data[cname] = self.samples(name, cname, ds, load)
+            shapes[cname] = ds.shape
+        signal = str(self.attr(data_g, "signal", "strain"))
+        self.where = f"{name}/data"
+        if "time" not in shapes:
+            raise self.error("no time channel")
+        if signal not in shapes:
+            raise self.error(f"@signal names {signal!r}, which is not one of its channels")
+        lengths = {c: shape[0] for c, shape in shapes.items()}
+        n = min(lengths.values(), default=0)
+        trimmed = any(m != n for m in lengths.values())
+        if trimmed:
+            data = {k: v[:n] for k, v in data.items()} if load else data
+            shapes = {k: (n,) for k in shapes}
+        index = self.integer(g, "entry_index")
+        if index is None:
+            raise self.error("missing", f"{name}/entry_index")
+        rate = self.number(g, "sample_rate")
+        if rate is None or not (math.isfinite(rate) and rate > 0):
+            found = "nothing" if rate is None else f"{rate:.6g}"
+            raise self.error(f"expected a positive sample rate (Hz), found {found}")
+        status = self.status(g)
+        entry = RunEntry(
+            name=name,
+            index=index,
+            title=self.text(g, "title", name),
+            status=status,
+            reason=self.text(g, "status_reason"),
+            start_time=self.text(g, "start_time"),
+            end_time=self.text(g, "end_time"),
+            rate_hz=rate,
+            step=dict(self.json(g, "step_definition", "{}", dict)),  # type: ignore[call-overload]
+            data=data,
+            units=units,
+            long_names=long_names,
+            signal=signal,
+            trimmed=trimmed,
+        )
+        return entry, shapes
+
+    def check_seals(self) -> None:
+        """Every seal in the file matches what its object holds
+        (:func:`labrig.store_format.seal_of`); files written before the seals have none."""
+
+        def check(obj: h5py.Group | h5py.Dataset) -> None:
+            self.where = (obj.name or "").strip("/")
+            stored = obj.attrs.get(SEAL_ATTR)
+            if stored is not None and stored != seal_of(obj):
+                raise self.error(
+                    "does not match its checksum (@labrig_crc32): the file's metadata is "
+                    "damaged, or another program changed it"
+                )
+
+        check(self.f)
+        self.f.visititems(lambda _name, obj: check(obj))
+
+    def run(self, load: bool) -> tuple[RunFile, dict[str, dict]]:
+        """The whole file (:func:`read_run`) and the shapes of every entry's channels."""
+        f = self.f
+        self.check_seals()
+        if self.attr(f, "creator") != "labrig" or not isinstance(f.get("run"), h5py.Group):
+            raise self.error("not a labrig run file (no /run group)", "")
+        run = f["run"]
+        inst = run.get("instrument")
+        instrument = (
+            self.json(inst, "description_json", "{}", dict) if isinstance(inst, h5py.Group) else {}
+        )
+        planned = self.json(run, "planned_entries", "[]", list)
+        seed = self.integer(run, "seed")
+        notes = {k: run[k] for k in ("protocol", "rig") if isinstance(run.get(k), h5py.Group)}
+        version = self.attr(f, "labrig_format", 0)
+        out = RunFile(
+            path=Path(self.path),
+            format_version=int(version) if isinstance(version, int | np.integer) else 0,
+            creator_version=str(self.attr(f, "creator_version")),
+            file_time=str(self.attr(f, "file_time")),
+            status=self.status(run),
+            reason=self.text(run, "status_reason"),
+            start_time=self.text(run, "start_time"),
+            end_time=self.text(run, "end_time"),
+            seed=None if seed is None or seed < 0 else seed,
+            software_version=self.text(run, "software_version"),
+            protocol_name=self.text(run, "protocol_name"),
+            protocol_text=self.text(notes["protocol"], "data") if "protocol" in notes else "",
+            rig_text=self.text(notes["rig"], "data") if "rig" in notes else "",
+            protocol_file=self.text(notes["protocol"], "file_name") if "protocol" in notes else "",
+            rig_file=self.text(notes["rig"], "file_name") if "rig" in notes else "",
+            instrument=dict(instrument),  # type: ignore[call-overload]
+            planned_entries=[str(x) for x in planned],  # type: ignore[union-attr]
+            exit_code=self.integer(run, "exit_code"),
+        )
+        entries, shapes = [], {}
+        for name, g in f.items():
+            if name == "run" or not isinstance(g, h5py.Group):
+                continue
+            nx_class = self.attr(g, "NX_class")
+            if nx_class != "NXentry":
+                raise self.error(f"not an entry (NX_class {nx_class!r}) but beside /run")
+            entry, shapes[name] = self.entry(name, g, load)
+            entries.append(entry)
+        self.where = ""
+        indices = sorted(e.index for e in entries)
+        if indices != list(range(len(entries))):
+            raise self.error(f"the entries are numbered {indices} (entry_index), not 0 to n-1")
+        entries.sort(key=lambda e: e.index)
+        out.entries = {e.name: e for e in entries}
+        return out, shapes
+
+
+def read_run_here(path: Path | str, load_data: bool = True) -> tuple[RunFile, dict]:
+    """:func:`read_run` in this process (no time limit) and the shapes of every entry's
+    channels; anything unexpected is an :class:`InputFileError` naming the object."""
+    size = Path(path).stat().st_size
+    try:
+        f = h5py.File(path, "r", locking=False)
+    except Exception as e:
+        raise InputFileError(
+            [InputIssue(str(path), None, "", f"not a readable HDF5 run file ({e})")]
+        ) from None
+    reader = _Reader(path, f, size)
+    try:
+        with f:
+            return reader.run(load_data)
+    except InputFileError:
+        raise
+    except Exception as e:  # the file is not as labrig writes it: say where
+        raise reader.error(f"damaged or not as labrig writes it ({_first_line(e)})") from None
