@@ -91,16 +91,18 @@ def fit(
     offset: bool | None = OFFSET_OPTION,
     effect: list[FitEffect] = EFFECT_OPTION,
     memory: Memory = MEMORY_OPTION,
+    overwrite: bool = flag(False, "--overwrite", help="Replace an existing --out file."),
 ) -> None:
     """Identify the model (or a baseline) from a run file; print parameters and NRMSE."""
     from labrig.analysis.fit_effects import EffectsFit
     from labrig.analysis.fit_run import fit_run_file
-    from labrig.analysis.prepare import AnalysisError, parse_entries
+    from labrig.analysis.prepare import parse_entries
     from labrig.cli.progress import RichUI
     from labrig.jsonsafe import json_safe
+    from labrig.outputs import check_writable, write_text_output
 
-    if out is not None and out.is_dir():
-        raise AnalysisError(f"--out {out} is a directory; give a file name such as params.json")
+    if out is not None:  # before the work: --out an input, an existing file, no place to write
+        check_writable([out], inputs=[run_file], overwrite=overwrite)
     ui = RichUI()
     outcome = fit_run_file(
         run_file,
@@ -117,8 +119,7 @@ def fit(
     res = outcome.result
     text = json.dumps(json_safe(res.to_json()), indent=2, allow_nan=False)
     if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(text + "\n", encoding="utf-8")
+        write_text_output(out, text + "\n", overwrite=overwrite)
     for m in getattr(res, "messages", []):
         ui.err.print(f"[yellow]note:[/] {escape(m)}")
     if as_json:

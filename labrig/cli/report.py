@@ -43,14 +43,16 @@ def report(
     warmup_s: float | None = WARMUP_OPTION,
     heldout: bool = HELDOUT_OPTION,
     offset: bool | None = OFFSET_OPTION,
+    overwrite: bool = flag(False, "--overwrite", help="Replace an existing --out file."),
 ) -> None:
     """Model versus measurement as one HTML file; baselines fitted on the same data."""
-    from labrig.analysis.prepare import AnalysisError, parse_entries
+    from labrig.analysis.prepare import parse_entries
     from labrig.cli.progress import RichUI
+    from labrig.outputs import check_writable, write_text_output
     from labrig.report.build import build_run_report
 
-    if out.is_dir():
-        raise AnalysisError(f"--out {out} is a directory; give a file name such as report.html")
+    # before the work: --out an input, a folder, an existing file, or no place to write
+    check_writable([out], inputs=[run_file, params], overwrite=overwrite)
     ui = RichUI()
     built = build_run_report(
         run_file,
@@ -62,8 +64,7 @@ def report(
         heldout=heldout,
         ui=ui,
     )
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(built.page, encoding="utf-8")
+    write_text_output(out, built.page, overwrite=overwrite)
     ui.err.print(f"wrote {escape(str(out))} ({len(built.page) / 1e6:.1f} MB)")
     if as_json:
         typer.echo(json.dumps(built.metrics, indent=2, allow_nan=False))
