@@ -67,8 +67,11 @@ def where_to_run(scheduler: str | None, workers: int | None, serial: bool, err: 
                 "--scheduler needs Dask: pip install 'labrig[fleet]' (dask[distributed])"
             )
         err.print(
-            "[yellow]note:[/] Dask is not installed (pip install 'labrig[fleet]'): the runs are "
-            "analysed one after another in this process"
+            "[yellow]note:[/] "
+            + escape(
+                "Dask is not installed (pip install 'labrig[fleet]'): the runs are analysed "
+                "one after another in this process"
+            )
         )
         return Where("serial")
     if scheduler:

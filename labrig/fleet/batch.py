@@ -27,7 +27,13 @@ from labrig.errors import InputFileError, InputIssue
 from labrig.fleet.cache import MANIFEST, cached_result, run_keys, store_result, write_atomic
 from labrig.fleet.outliers import flag_runs
 from labrig.fleet.schedule import ScheduleInfo, Where, run_tasks
-from labrig.fleet.table import ENTRY_COLUMNS, RUN_COLUMNS, outlier_columns, write_table
+from labrig.fleet.table import (
+    ENTRY_COLUMNS,
+    RUN_COLUMNS,
+    outlier_columns,
+    report_columns,
+    write_table,
+)
 from labrig.fleet.tasks import COMMANDS, TaskOptions, TaskResult, TaskSpec
 
 #: exit code of a batch in which some runs failed
@@ -188,9 +194,11 @@ def run_batch(
     rows = [row_of(*results[s.key]) for s in specs]
     entry_rows = [e for s in specs for e in entry_rows_of(results[s.key][0])]
     quantities = flag_runs(rows)
-    columns = RUN_COLUMNS + outlier_columns(quantities)
+    columns = RUN_COLUMNS + report_columns(rows) + outlier_columns(quantities)
     table = write_table(out / "fleet", rows, columns)
-    entries_table = write_table(out / "fleet_entries", entry_rows, ENTRY_COLUMNS)
+    entries_table = write_table(
+        out / "fleet_entries", entry_rows, ENTRY_COLUMNS + report_columns(entry_rows)
+    )
     from labrig.fleet.fleet_report import write_fleet_report
 
     report = write_fleet_report(out / "fleet.html", rows, quantities, info)

@@ -119,6 +119,7 @@ def _client(where: Where, stack: ExitStack):
             processes=True,
             host="127.0.0.1",
             dashboard_address=None,
+            worker_dashboard_address=None,
             silence_logs=logging.ERROR,
         )
     )

@@ -226,7 +226,6 @@ PARTS = {
 
 def run_task(spec: TaskSpec) -> TaskResult:
     """Run one task (module docstring); never raises."""
-    from labrig.blas import single_thread_blas
     from labrig.fleet.identity import run_identity
 
     t0 = time.perf_counter()
@@ -236,9 +235,8 @@ def run_task(spec: TaskSpec) -> TaskResult:
     try:
         out.input_sha256 = file_sha256(path)
         out.row.update(run_identity(path))
-        with single_thread_blas():
-            for part in PARTS[spec.command]:
-                part(path, spec.options, out)
+        for part in PARTS[spec.command]:
+            part(path, spec.options, out)
         out.ok = True
     except Exception as e:
         out.error = error_text(e)
