@@ -135,7 +135,7 @@ def test_free_run_against_solve_ivp_on_a_smooth_drive() -> None:
                                   method="DOP853", rtol=1e-11, atol=1e-9)  # fmt: skip
         got = free_run(NONLINEAR, V(t), rate, 0.0)
         errors.append(np.max(np.abs(got - sol.y[0])) / np.ptp(sol.y[0]))
-    assert errors[0] < 2e-3
+    assert errors[0] < 1e-4  # measured 2.9e-5 of the span at 1 kHz
     for coarse, fine in itertools.pairwise(errors):
         assert 3.0 < coarse / fine < 5.0
 
