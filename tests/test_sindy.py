@@ -254,3 +254,8 @@ def test_cli_fit_sindy_on_real_data(tmp_path: Path) -> None:
     assert set(j["per_entry"]) == {"Model_Vi_Do", "Test_Vi_Do_Di"}
     assert j["nrmse_pct"] < 1.0  # measured 0.78 % (ours 0.65 %)
     assert j["heldout_nrmse_pct"] > j["nrmse_pct"]
+    res = runner.invoke(app, ["fit", str(run), "--model", "sindy", "--no-heldout"],
+                        env={"COLUMNS": "200"})  # fmt: skip
+    assert res.exit_code == 0, res.stderr
+    assert "sindy parameters" in res.stdout and "dS/dt = " in res.stdout
+    assert "coefficient_units" in res.stdout and "1/s" in res.stdout

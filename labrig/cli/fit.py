@@ -184,7 +184,7 @@ def summary_tables(res: FitResult | BaselineResult | EffectsFit, model: str) -> 
     else:
         for name, v in j["params"].items():
             if isinstance(v, list):
-                v = ", ".join(number(x, 3) for x in v)
+                v = ", ".join(number(x, 3) if isinstance(x, int | float) else str(x) for x in v)
             elif isinstance(v, float):
                 v = number(v, 5)
             t.add_row(name, str(v))
