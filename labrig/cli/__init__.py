@@ -16,6 +16,7 @@ from labrig import __version__
 from labrig.cli import diagnose, files, fit, report, run
 from labrig.cli.batch import batch_app
 from labrig.cli.model import model_app
+from labrig.cli.runs import runs as runs_command
 from labrig.cli.sim import sim_app
 
 __all__ = ["app"]
@@ -52,6 +53,7 @@ def main(
 app.command("check")(run.check)
 app.command("run")(run.run)
 app.command("info")(files.info)
+app.command("runs")(runs_command)
 app.command("export")(files.export)
 app.command("import")(files.import_)
 app.command("fit")(fit.fit)

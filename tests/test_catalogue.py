@@ -1,0 +1,308 @@
+"""``labrig runs``: the catalogue lists run files with their metadata, filters them with
+``--where``, keeps its index in step with the folder, and lists damaged files as unreadable.
+
+The run files are written here with the store's writer; metadata groups are added in the
+layout docs/catalogue.md asks of run files (``/run/metadata``, NXsample ``sample`` and NXuser
+``user`` in each entry) and sealed as the writer seals. Expected selections come from the
+table of what each file holds, never from the catalogue's own code.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from labrig.catalogue import list_runs
+from labrig.catalogue_index import INDEX_NAME
+from labrig.catalogue_read import read_metadata_here
+from labrig.cli import app
+from labrig.store import RunWriter
+from labrig.store_writer import seal_all
+
+STEP_KEYS = {"sine": ("amplitude_V", "frequency_hz"), "hold": ("voltage_V",)}
+
+
+def write_run(
+    path: Path,
+    protocol: str,
+    steps: Sequence[tuple[str, float, float | None]],
+    *,
+    start: str | None = None,
+    run_metadata: Mapping[str, Any] | None = None,
+    sample: Mapping[str, Any] | None = None,
+    user: Mapping[str, Any] | None = None,
+    samples: int = 20,
+) -> Path:
+    """A small run file: one entry per ``(kind, volts, hz)`` (``hz`` None for a hold), each
+    ``samples`` long at 100 Hz, then the metadata groups (module docstring), sealed."""
+    with RunWriter(
+        path, f"name: {protocol}\n", "", {"name": "test"}, 1, protocol_name=protocol
+    ) as w:
+        for kind, volts, hz in steps:
+            step: dict[str, Any] = {"kind": kind}
+            if kind == "hold":
+                step["voltage_V"] = volts
+                name = f"hold_{volts:g}V"
+            else:
+                step.update(amplitude_V=volts, frequency_hz=hz)
+                name = f"{kind}_{volts:g}V_{hz:g}Hz"
+            e = w.begin_entry(name, step, 100.0, ["command_voltage", "strain"])
+            v = np.linspace(0.0, volts, samples)
+            e.append({"command_voltage": v, "strain": 10.0 * v})
+            e.finish()
+    with h5py.File(path, "a") as f:
+        if start is not None:
+            f["run/start_time"][()] = start
+        if run_metadata:
+            g = f["run"].create_group("metadata")
+            g.attrs["NX_class"] = "NXcollection"
+            for k, v in run_metadata.items():
+                g[k] = v
+        for name, obj in f.items():
+            if name == "run":
+                continue
+            for group, nx_class, values in (
+                ("sample", "NXsample", sample),
+                ("user", "NXuser", user),
+            ):
+                if values:
+                    g = obj.create_group(group)
+                    g.attrs["NX_class"] = nx_class
+                    for k, v in values.items():
+                        g[k] = v
+        seal_all(f)
+    return path
+
+
+#: what each file of the filter test holds; the expected selections below are read off this
+FILES: dict[str, dict[str, Any]] = {
+    "a.h5": dict(
+        protocol="paper sine sweep",
+        steps=[("sine", 100, 10), ("sine", 100, 40)],
+        start="2026-03-05T10:00:00.000+01:00",
+        sample={"name": "P-888 #3", "serial_number": "SN-3"},
+        user={"name": "alice"},
+    ),
+    "b.h5": dict(
+        protocol="sweep",
+        steps=[("sine", 100, 5)],
+        start="2026-02-20T09:00:00.000+01:00",
+        sample={"name": "P-888 #4"},
+        user={"name": "bob"},
+    ),
+    "c.h5": dict(
+        protocol="creep hold",
+        steps=[("hold", 80, None)],
+        start="2026-04-01T08:00:00.000+02:00",
+        sample={"name": "P-888 #3"},
+        run_metadata={"operator": "carol", "temperature_C": 23.5},
+    ),
+    "d.h5": dict(
+        protocol="paper sine sweep",
+        steps=[("sine", 50, 20), ("sine", 100, 40)],
+        start="2026-03-31T23:30:00.000+02:00",
+    ),
+}
+
+SELECTIONS: list[tuple[list[str], set[str]]] = [
+    (["sample=P-888#3"], {"a.h5", "c.h5"}),
+    (["sample=p-888 #3"], {"a.h5", "c.h5"}),
+    (["sample!=P-888#3"], {"b.h5", "d.h5"}),
+    (["sample~888"], {"a.h5", "b.h5", "c.h5"}),
+    (["serial_number=SN-3"], {"a.h5"}),
+    (["protocol~sweep"], {"a.h5", "b.h5", "d.h5"}),
+    (["protocol=sweep"], {"b.h5"}),
+    (["since=2026-03-01"], {"a.h5", "c.h5", "d.h5"}),
+    (["until=2026-03-31"], {"a.h5", "b.h5", "d.h5"}),
+    (["since=2026-03", "until=2026-03"], {"a.h5", "d.h5"}),
+    (["date<2026-03-01"], {"b.h5"}),
+    (["amplitude_V=100"], {"a.h5", "b.h5", "d.h5"}),
+    (["amplitude=50"], {"d.h5"}),
+    # one same entry must hold both: d has 50 V at 20 Hz and 100 V at 40 Hz only
+    (["amplitude_V=100", "frequency_hz<=20"], {"a.h5", "b.h5"}),
+    (["frequency_hz>30"], {"a.h5", "d.h5"}),
+    (["kind=hold"], {"c.h5"}),
+    (["voltage_V>=80"], {"c.h5"}),
+    (["entries=2"], {"a.h5", "d.h5"}),
+    (["operator=alice"], {"a.h5"}),
+    (["operator=carol"], {"c.h5"}),
+    (["temperature_C<30"], {"c.h5"}),
+    (["status=complete"], {"a.h5", "b.h5", "c.h5", "d.h5"}),
+    (
+        [
+            "sample=P-888#3",
+            "protocol~sweep",
+            "since=2026-03-01",
+            "amplitude_V=100",
+            "frequency_hz<=20",
+        ],
+        {"a.h5"},
+    ),
+]
+
+
+def cli(*args: str) -> Any:
+    return CliRunner().invoke(app, ["runs", *args])
+
+
+def listed(result: Any) -> set[str]:
+    assert result.exit_code == 0, result.output
+    return {Path(r["path"]).name for r in json.loads(result.stdout)["runs"]}
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    d = tmp_path_factory.mktemp("runs")
+    for name, spec in FILES.items():
+        write_run(d / name, **spec)
+    return d
+
+
+@pytest.mark.parametrize(("where", "expected"), SELECTIONS, ids=lambda x: str(x))
+def test_where_selects_the_right_files(folder: Path, where: list[str], expected: set[str]):
+    args = [str(folder), "--json"]
+    for w in where:
+        args += ["--where", w]
+    assert listed(cli(*args)) == expected
+
+
+def test_listing_shows_status_protocol_date_metadata_and_entries(folder: Path):
+    result = cli(str(folder))
+    assert result.exit_code == 0, result.output
+    lines = {line.split()[0].rsplit("/", 1)[-1]: line for line in result.stdout.splitlines()[1:]}
+    assert set(lines) == set(FILES)
+    a = lines["a.h5"]
+    for text in ("complete", "2026-03-05 10:00", "paper sine sweep", "2 sine", "100 V"):
+        assert text in a
+    assert "10, 40 Hz" in a and "sample=P-888 #3" in a and "user=alice" in a
+    assert "operator=carol" in lines["c.h5"] and "1 hold" in lines["c.h5"]
+    assert "4 runs" in result.stderr
+
+
+def test_json_has_the_metadata_and_the_entries(folder: Path):
+    runs = {Path(r["path"]).name: r for r in json.loads(cli(str(folder), "--json").stdout)["runs"]}
+    a = runs["a.h5"]
+    assert a["metadata"]["sample/name"] == "P-888 #3"
+    assert a["metadata"]["user/name"] == "alice"
+    assert a["metadata"]["instrument/name"] == "test"
+    assert a["summary"]["amplitudes_V"] == [100.0] and a["summary"]["frequencies_hz"] == [10, 40]
+    assert [e["samples"] for e in a["entries"]] == [20, 20]
+    assert runs["c.h5"]["metadata"]["metadata/temperature_C"] == 23.5
+
+
+def test_metadata_is_read_generically(tmp_path: Path):
+    """Any group under an entry or /run is indexed; entries that differ give a list; the
+    'null' of unset values and long texts are left out."""
+    p = write_run(
+        tmp_path / "m.h5",
+        "p",
+        [("sine", 10, 1), ("sine", 20, 1)],
+        run_metadata={"operator": "dora", "unset": "null", "note": "x" * 500},
+    )
+    with h5py.File(p, "a") as f:
+        for i, name in enumerate(("sine_10V_1Hz", "sine_20V_1Hz")):
+            g = f[name].create_group("sample")
+            g.attrs["NX_class"] = "NXsample"
+            g["name"] = f"stack {i}"
+            g["model"] = "P-888.51"
+            f[name]["definition"] = "NXlabrig"
+        seal_all(f)
+    meta, _ = read_metadata_here(p)
+    assert meta["metadata/operator"] == "dora"
+    assert meta["sample/name"] == ["stack 0", "stack 1"]
+    assert meta["sample/model"] == "P-888.51" and meta["definition"] == "NXlabrig"
+    assert "metadata/unset" not in meta and "metadata/note" not in meta
+
+
+def test_index_notices_changed_added_and_removed_files(tmp_path: Path):
+    d = tmp_path / "runs"
+    d.mkdir()
+    for name in ("x.h5", "y.h5", "z.h5"):
+        write_run(d / name, "first", [("sine", 10, 1)])
+    first = list_runs([d])
+    assert first.read == 3 and len(first.runs) == 3 and (d / INDEX_NAME).is_file()
+    again = list_runs([d])
+    assert again.read == 0 and len(again.runs) == 3
+
+    before = os.stat(d / "y.h5")
+    (d / "y.h5").unlink()
+    write_run(d / "y.h5", "second", [("sine", 10, 1)])
+    os.utime(d / "y.h5", ns=(before.st_atime_ns, before.st_mtime_ns + 1_000_000_000))
+    write_run(d / "new.h5", "third", [("sine", 10, 1)])
+    (d / "z.h5").unlink()
+    after = list_runs([d])
+    assert after.read == 2  # y changed, new added; x from the index
+    protocols = {r.path.name: r.record["protocol"] for r in after.runs}
+    assert protocols == {"x.h5": "first", "y.h5": "second", "new.h5": "third"}
+    assert {r.path.name for r in list_runs([d], ["protocol=first"]).runs} == {"x.h5"}
+
+
+def test_index_rebuilds_when_damaged(tmp_path: Path):
+    write_run(tmp_path / "x.h5", "first", [("sine", 10, 1)])
+    (tmp_path / INDEX_NAME).write_bytes(b"this is not SQLite" * 100)
+    listing = list_runs([tmp_path])
+    assert [r.path.name for r in listing.runs] == ["x.h5"]
+    assert any("rebuilt" in n for n in listing.notes)
+
+
+def test_damaged_files_are_listed_as_unreadable(tmp_path: Path):
+    good = write_run(tmp_path / "good.h5", "fine", [("sine", 10, 1)])
+    (tmp_path / "garbage.h5").write_bytes(b"\x89HDF\r\n\x1a\n" + os.urandom(4000))
+    data = good.read_bytes()
+    (tmp_path / "truncated.h5").write_bytes(data[: len(data) // 3])
+    seal = tmp_path / "tampered.h5"
+    shutil.copy(good, seal)
+    with h5py.File(seal, "a") as f:  # a change the file's seals do not cover
+        f["run/protocol_name"][()] = "changed behind labrig's back"
+    result = cli(str(tmp_path), "--json")
+    assert result.exit_code == 0, result.output
+    runs = {Path(r["path"]).name: r for r in json.loads(result.stdout)["runs"]}
+    assert runs["good.h5"]["status"] == "complete"
+    for bad in ("garbage.h5", "truncated.h5", "tampered.h5"):
+        assert runs[bad]["status"] == "unreadable" and runs[bad]["error"], bad
+        assert bad in result.stderr
+    assert "checksum" in runs["tampered.h5"]["error"]
+    assert "3 files unreadable" in result.stderr
+    text = cli(str(tmp_path))
+    assert text.exit_code == 0 and "unreadable" in text.stdout
+    assert list_runs([tmp_path]).read == 0  # remembered as unreadable, not read again
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        "sample",
+        "=P-888",
+        "amplitude_V=abc",
+        "frequency_hz<=",
+        "since>2026-03-01",
+        "date=yesterday",
+        "protocol<sweep",
+        "until=2026-13",
+    ],
+)
+def test_bad_where_exits_2_saying_what_is_valid(folder: Path, bad: str):
+    result = cli(str(folder), "--where", bad)
+    assert result.exit_code == 2, result.output
+    assert repr(bad) in result.stderr and "valid:" in result.stderr
+    assert "Traceback" not in result.output
+
+
+def test_missing_path_exits_2(tmp_path: Path):
+    result = cli(str(tmp_path / "nowhere"))
+    assert result.exit_code == 2 and "not found" in result.stderr
+
+
+def test_files_and_folders_together_are_listed_once(folder: Path):
+    result = cli(str(folder), str(folder / "a.h5"), "--json")
+    names = [Path(r["path"]).name for r in json.loads(result.stdout)["runs"]]
+    assert sorted(names) == sorted(FILES)
