@@ -1,0 +1,219 @@
+"""Fleet benchmarks (``labrig batch`` on Dask): scaling, per-task overhead, memory per worker,
+and the detection figures on a simulated fleet. Figures: ``benchmarks/RESULTS.md`` ("Fleet")
+and ``docs/fleet.md``.
+
+Run from the repository root (needs ``labrig[fleet]``)::
+
+    .venv/bin/python benchmarks/bench_fleet.py scaling --n 8        # ~5-15 min on 2 cores
+    .venv/bin/python benchmarks/bench_fleet.py detect --n 200 --out /tmp/fleet200   # hours
+
+``scaling``: a simulated fleet of ``n`` runs of the 3-entry campaign of the tests, ``batch fit``
+(with leave-one-out) serially, on a LocalCluster of 1 and of 2 worker processes, and on a
+scheduler and two workers started as separate processes on 127.0.0.1 reached by address.
+Per run: wall time, the tasks' own time (summed), overhead per task
+``(wall * workers - sum of task times) / n`` (scheduling, transfer, writing, start-up spread
+over the tasks), speed-up against one worker; the round trip of 200 empty tasks on the
+2-worker LocalCluster; peak RSS of each worker after the batch.
+
+``detect``: ``labrig sim fleet N`` (``experiments/paper.yaml``, seed 1, 5 % defects), then
+``labrig batch diagnose`` on a LocalCluster of 2 workers, scored against ``truth.json``
+(:func:`labrig.fleet.truth.score`); resumable (a rerun skips the runs already done).
+Every section prints the load average before and after.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from rich.console import Console
+
+from labrig.fleet.batch import run_batch
+from labrig.fleet.schedule import Where
+from labrig.fleet.simfleet import write_fleet
+from labrig.fleet.tasks import TaskOptions
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+SMALL = """\
+name: fleet benchmark campaign
+rate_hz: 1000
+rest_s: 0.5
+steps:
+  - kind: sweep
+    amplitudes_V: [100]
+    frequencies_hz: [1, 10, 40]
+    cycles: 2
+    min_duration_s: 1
+"""
+
+
+def load() -> str:
+    return " ".join(Path("/proc/loadavg").read_text().split()[:3])
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory (MB); run on each worker."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def noop(x: int) -> int:
+    return x
+
+
+def one_batch(label: str, runs: list[Path], out: Path, where: Where) -> dict:
+    quiet = Console(stderr=True, quiet=True)
+    o = run_batch("fit", [str(r) for r in runs], out, where, TaskOptions(), console=quiet)
+    assert not o.failed, o.failed
+    work = sum(r["elapsed_s"] for r in o.rows)
+    n, w = len(o.rows), o.schedule.n_workers
+    return {
+        "setup": label,
+        "workers": w,
+        "wall_s": o.schedule.wall_s,
+        "task_s_sum": work,
+        "task_s_mean": work / n,
+        "overhead_per_task_s": (o.schedule.wall_s * w - work) / n,
+    }
+
+
+def start_cluster(tmp: Path) -> tuple[str, list[subprocess.Popen]]:
+    sched = tmp / "scheduler.json"
+    dev = subprocess.DEVNULL
+    procs = [
+        subprocess.Popen(
+            [
+                str(BIN / "dask"),
+                "scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                "0",
+                "--scheduler-file",
+                str(sched),
+                "--no-dashboard",
+            ],
+            stdout=dev,
+            stderr=dev,
+        )
+    ]
+    while not sched.exists():
+        time.sleep(0.2)
+    addr = json.loads(sched.read_text())["address"]
+    for k in (1, 2):
+        procs.append(
+            subprocess.Popen(
+                [
+                    str(BIN / "dask"),
+                    "worker",
+                    addr,
+                    "--nthreads",
+                    "1",
+                    "--host",
+                    "127.0.0.1",
+                    "--name",
+                    f"w{k}",
+                    "--no-dashboard",
+                ],
+                stdout=dev,
+                stderr=dev,
+            )
+        )
+    from distributed import Client
+
+    with Client(addr) as c:
+        c.wait_for_workers(2, timeout=120)
+    return addr, procs
+
+
+def overhead_and_memory(addr: str) -> dict:
+    """Round trip of 200 empty tasks and each worker's peak RSS, on the cluster at ``addr``."""
+    from distributed import Client
+
+    with Client(addr) as c:
+        t0 = time.perf_counter()
+        c.gather(c.map(noop, range(200), pure=False))
+        empty = (time.perf_counter() - t0) / 200
+        rss = c.run(peak_rss_mb)
+    return {"empty_task_s": empty, "worker_peak_rss_mb": sorted(rss.values())}
+
+
+def scaling(n: int) -> None:
+    print(f"load average before: {load()}")
+    with tempfile.TemporaryDirectory(prefix="bench-fleet-") as d:
+        tmp = Path(d)
+        (tmp / "small.yaml").write_text(SMALL)
+        runs = write_fleet(n, tmp / "runs", tmp / "small.yaml", seed=3, defect_fraction=0.0)
+        results = [
+            one_batch("serial (this process)", runs, tmp / "serial", Where("serial")),
+            one_batch("LocalCluster, 1 worker", runs, tmp / "l1", Where("local", workers=1)),
+            one_batch("LocalCluster, 2 workers", runs, tmp / "l2", Where("local", workers=2)),
+        ]
+        addr, procs = start_cluster(tmp)
+        try:
+            where = Where("address", address=addr)
+            results.append(one_batch("scheduler + 2 workers by address", runs, tmp / "a", where))
+            extra = overhead_and_memory(addr)
+        finally:
+            for p in procs:
+                p.terminate()
+                p.wait(timeout=60)
+    one = results[1]["wall_s"]
+    for r in results:
+        r["speedup_vs_1_worker"] = one / r["wall_s"]
+    print(json.dumps({"n_runs": n, "results": results, **extra}, indent=2))
+    print(f"load average after: {load()}")
+
+
+def detect(n: int, out: Path, workers: int) -> None:
+    from labrig.fleet.truth import read_truth, score
+
+    print(f"load average before: {load()}")
+    t0 = time.perf_counter()
+    if not (out / "truth.json").exists():
+        write_fleet(n, out, ROOT / "experiments" / "paper.yaml", seed=1, defect_fraction=0.05)
+    sim_s = time.perf_counter() - t0
+    o = run_batch("diagnose", [str(out)], out / "batch", Where("local", workers=workers))
+    s = score(o.rows, read_truth(out / "truth.json"))
+    times = sorted(r["elapsed_s"] for r in o.rows if not r["skipped"])
+    print(
+        json.dumps(
+            {
+                "n": n,
+                "simulation_s": sim_s,
+                "batch_wall_s": o.schedule.wall_s,
+                "task_s_median": times[len(times) // 2] if times else None,
+                "skipped": o.n_skipped,
+                "score": s,
+            },
+            indent=2,
+        )
+    )
+    print(f"load average after: {load()}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="what", required=True)
+    sc = sub.add_parser("scaling")
+    sc.add_argument("--n", type=int, default=8)
+    de = sub.add_parser("detect")
+    de.add_argument("--n", type=int, default=200)
+    de.add_argument("--out", type=Path, required=True)
+    de.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    a = ap.parse_args()
+    if a.what == "scaling":
+        scaling(a.n)
+    else:
+        detect(a.n, a.out, a.workers)
+
+
+if __name__ == "__main__":
+    main()
