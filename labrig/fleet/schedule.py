@@ -118,7 +118,7 @@ def _client(where: Where, stack: ExitStack):
             threads_per_worker=1,
             processes=True,
             host="127.0.0.1",
-            dashboard_address=None,
+            dashboard_address="127.0.0.1:0",  # its HTTP server on a free port (no warning)
             worker_dashboard_address=None,
             silence_logs=logging.ERROR,
         )
