@@ -4,13 +4,18 @@ libhdf5 is compiled code: some damaged files make it loop forever (a run file wi
 bytes in the fractal heap of the root's attributes spins at 100 % CPU inside ``H5Aread``), and
 a loop in C never returns to Python, so neither a Python exception nor Ctrl-C stops it. No check
 made before the call can rule that out for every damaged structure, so the reading happens in a
-forked child: the kernel stops it after :func:`cpu_limit_s` seconds of CPU time
-(``RLIMIT_CPU``; CPU time, so a busy machine does not make a sound file look damaged), the
-parent kills it after :func:`wall_limit_s` seconds of waiting, and a child that crashes
-(a segmentation fault in libhdf5) takes only itself down. The result comes back pickled
-through a pipe; the parent keeps answering Ctrl-C while it waits (and kills the child).
+forked child:
 
-Where ``os.fork`` does not exist the function is called in-process.
+- the kernel stops the child when one step of the reading (the reader calls
+  :func:`allow_cpu` before each object it opens or reads) uses more than its CPU time
+  (``RLIMIT_CPU``, renewed at every step: CPU time, so a busy machine does not make a sound
+  file look damaged, and a file of many objects gets time for each);
+- the parent kills it after :func:`wall_limit_s` seconds of waiting (a child that waits on
+  something instead of computing);
+- a child that crashes (a segmentation fault in libhdf5) takes only itself down.
+
+The result comes back pickled through a pipe; the parent keeps answering Ctrl-C while it waits
+(and kills the child). Where ``os.fork`` does not exist the function is called in-process.
 """
 
 from __future__ import annotations
@@ -28,15 +33,18 @@ import traceback
 from collections.abc import Callable
 from typing import Any
 
-#: CPU seconds every read may take, plus :data:`CPU_BYTES_PER_S` per byte of the file (reading
-#: a sound run file, checksums included, takes well under 0.1 s per 10 MB)
-BASE_CPU_S = 2.0
+#: CPU seconds one step of a read may take (opening the file, one object), plus
+#: :data:`CPU_BYTES_PER_S` per byte it reads (a sound run file reads, checksums included,
+#: at well over 100 MB per CPU second; an object's metadata in under 10 ms)
+STEP_CPU_S = 1.0
 CPU_BYTES_PER_S = 20e6
 #: the wall-clock limit: this many seconds plus :data:`WALL_BYTES_PER_S` per byte (a slow disk)
 BASE_WALL_S = 30.0
 WALL_BYTES_PER_S = 2e6
 #: the child's exit code when it could not send its result back
 _NO_RESULT = 70
+#: True in a child of :func:`call_isolated` (where :func:`allow_cpu` sets limits)
+_in_child = False
 
 
 class IsolatedReadError(Exception):
@@ -48,10 +56,18 @@ class IsolatedCallError(Exception):
     """The function raised something the child could not send back: the traceback as text."""
 
 
-def cpu_limit_s(size_bytes: int) -> int:
-    """CPU seconds allowed for reading a file of ``size_bytes`` (a whole number, as
-    ``RLIMIT_CPU`` takes): ``ceil(BASE_CPU_S + size / CPU_BYTES_PER_S)``."""
-    return math.ceil(BASE_CPU_S + size_bytes / CPU_BYTES_PER_S)
+def allow_cpu(seconds: float = STEP_CPU_S, size_bytes: int = 0) -> None:
+    """In a child of :func:`call_isolated`: allow the next step ``seconds`` plus
+    ``size_bytes / CPU_BYTES_PER_S`` of CPU time from now (the kernel stops the child beyond
+    that: ``RLIMIT_CPU``, whole seconds, rounded up). Does nothing in any other process."""
+    if not _in_child:
+        return
+    use = resource.getrusage(resource.RUSAGE_SELF)
+    limit = math.ceil(use.ru_utime + use.ru_stime + seconds + size_bytes / CPU_BYTES_PER_S)
+    _, hard = resource.getrlimit(resource.RLIMIT_CPU)  # only the soft limit moves (SIGXCPU)
+    if hard != resource.RLIM_INFINITY:
+        limit = min(limit, hard)
+    resource.setrlimit(resource.RLIMIT_CPU, (limit, hard))
 
 
 def wall_limit_s(size_bytes: int) -> float:
@@ -66,12 +82,11 @@ def call_isolated(fn: Callable[..., Any], *args: Any, size_bytes: int) -> Any:
     child is stopped by a limit or dies."""
     if not hasattr(os, "fork"):
         return fn(*args)
-    cpu = cpu_limit_s(size_bytes)
     read_fd, write_fd = os.pipe()
     pid = os.fork()
     if pid == 0:  # the child: never returns
         os.close(read_fd)
-        _child(write_fd, cpu, fn, args)
+        _child(write_fd, size_bytes, fn, args)
     os.close(write_fd)
     reaped = False
     try:
@@ -83,7 +98,7 @@ def call_isolated(fn: Callable[..., Any], *args: Any, size_bytes: int) -> Any:
         _, status = os.waitpid(pid, 0)
         reaped = True
         if not payload:
-            raise IsolatedReadError(_death(status, cpu))
+            raise IsolatedReadError(_death(status))
     finally:
         os.close(read_fd)
         if not reaped:
@@ -98,18 +113,21 @@ def call_isolated(fn: Callable[..., Any], *args: Any, size_bytes: int) -> Any:
     raise IsolatedCallError(value)
 
 
-def _child(write_fd: int, cpu_s: int, fn: Callable[..., Any], args: tuple) -> None:
-    """Run ``fn`` under the CPU limit and write ``(kind, value)`` pickled to ``write_fd``."""
+def _child(write_fd: int, size_bytes: int, fn: Callable[..., Any], args: tuple) -> None:
+    """Run ``fn`` under CPU limits and write ``(kind, value)`` pickled to ``write_fd``."""
+    global _in_child
     code = _NO_RESULT
     try:
+        _in_child = True
         faulthandler.disable()  # a crash is reported by the parent, without the child's stack
         signal.signal(signal.SIGINT, signal.SIG_DFL)  # Ctrl-C ends the child at once
         resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
-        resource.setrlimit(resource.RLIMIT_CPU, (cpu_s, cpu_s + 1))
+        allow_cpu()
         try:
             result: tuple[str, Any] = ("ok", fn(*args))
         except Exception as e:
             result = ("raised", e)
+        allow_cpu(size_bytes=size_bytes)  # pickling what was read
         try:
             data = pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL)
         except Exception as e:
@@ -138,12 +156,12 @@ def _receive(fd: int, deadline: float) -> bytes | None:
         chunks.append(chunk)
 
 
-def _death(status: int, cpu_s: int) -> str:
+def _death(status: int) -> str:
     """Why a child ended without a result, from its wait status."""
     if os.WIFSIGNALED(status):
         sig = os.WTERMSIG(status)
         if sig in (signal.SIGXCPU, signal.SIGKILL):
-            return f"reading used more than {cpu_s} s of CPU time (stopped)"
+            return "the HDF5 library looped on it (stopped after its CPU time for one object)"
         name = signal.Signals(sig).name if sig in signal.valid_signals() else str(sig)
         return f"the HDF5 library crashed reading it ({name})"
     return f"the reading process stopped without a result (exit code {os.WEXITSTATUS(status)})"

@@ -16,6 +16,7 @@ import numpy as np
 from labrig.errors import InputFileError, InputIssue
 from labrig.jsonsafe import loads_bounded
 from labrig.store_format import SEAL_ATTR, STATUSES, seal_of
+from labrig.store_isolated import allow_cpu
 
 
 @dataclass
@@ -110,6 +111,11 @@ MAX_EXPANSION = 64
 MIN_CLAIM_BYTES = 1 << 20
 
 
+def _contiguous(obj: h5py.HLObject) -> bool:
+    """A dataset whose value its seal covers (not chunked samples)."""
+    return isinstance(obj, h5py.Dataset) and obj.chunks is None
+
+
 def _first_line(e: BaseException) -> str:
     text = (str(e).strip().splitlines() or [""])[0][:160]
     return f"{type(e).__name__}: {text}" if text else type(e).__name__
@@ -131,6 +137,8 @@ class _Reader:
         )
 
     def at(self, obj: h5py.HLObject | h5py.AttributeManager, name: str = "") -> str:
+        """Note the object about to be read (for messages) and give it its CPU time."""
+        allow_cpu()
         base = obj.name if isinstance(obj, h5py.HLObject) else ""
         self.where = f"{(base or '').strip('/')}/{name}".strip("/")
         return self.where
@@ -207,6 +215,7 @@ class _Reader:
             )
         if not load:
             return np.empty(0)
+        allow_cpu(size_bytes=ds.size * ds.dtype.itemsize)
         try:
             return ds[()]
         except (OSError, RuntimeError) as e:
@@ -276,6 +285,7 @@ class _Reader:
         (:func:`labrig.store_format.seal_of`); files written before the seals have none."""
 
         def check(obj: h5py.Group | h5py.Dataset) -> None:
+            allow_cpu(size_bytes=obj.size * obj.dtype.itemsize if _contiguous(obj) else 0)
             self.where = (obj.name or "").strip("/")
             stored = obj.attrs.get(SEAL_ATTR)
             if stored is not None and stored != seal_of(obj):
