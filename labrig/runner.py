@@ -36,6 +36,7 @@ from labrig.errors import DeviceError, InputFileError, InputIssue, LabrigError
 from labrig.instruments import Rig
 from labrig.interrupts import SignalGuard, exit_code_for, interrupt_once, reason_for, signum_of
 from labrig.limits import RigLimits
+from labrig.outputs import Staged, check_outputs, stage
 from labrig.protocol.check import load_plan
 from labrig.protocol.plan import Plan, PlannedStep
 from labrig.protocol.preflight import preflight as check_plan
@@ -296,7 +297,7 @@ def _prepare(rig: Rig, plan: Plan, realtime: bool) -> _Setup:
     return _Setup(ai, chans)
 
 
-def _check_disk(plan: Plan, rig: Rig, out: Path, chans: list[Channel], overwrite: bool) -> None:
+def _check_disk(plan: Plan, rig: Rig, out: Path, chans: list[Channel]) -> None:
     """Refuse (exit 2, before anything is energised) a run whose file cannot fit on the disk
     that holds ``out``: the estimated size plus the reserve against the free space."""
     entries = [
@@ -304,9 +305,7 @@ def _check_disk(plan: Plan, rig: Rig, out: Path, chans: list[Channel], overwrite
         for s in plan.steps
     ]
     need = estimate_run_bytes(entries, len(plan.text) + len(rig.rig_text)) + RESERVE_BYTES
-    free = free_bytes(out)
-    if overwrite and out.is_file():
-        free += out.stat().st_size
+    free = free_bytes(out)  # with --overwrite the old file stays until the new one is complete
     if free < need:
         samples = sum(e[0] for e in entries)
         raise InputFileError(
@@ -324,9 +323,16 @@ def _check_disk(plan: Plan, rig: Rig, out: Path, chans: list[Channel], overwrite
 
 
 def _open_writer(
-    plan: Plan, rig: Rig, rig_path: Path | None, out: Path, overwrite: bool, chans: list[Channel]
+    plan: Plan,
+    rig: Rig,
+    rig_path: Path | None,
+    out: Path,
+    overwrite: bool,
+    chans: list[Channel],
+    staged: Staged | None,
 ) -> RunWriter:
-    """The run file, once its place exists and has room for it (InputFileError otherwise)."""
+    """The run file, once its place exists and has room for it (InputFileError otherwise);
+    written at ``staged``'s place for ``out`` when it replaces an existing file."""
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -334,10 +340,10 @@ def _open_writer(
         raise InputFileError(
             [InputIssue(str(out), None, "--out", f"cannot create the run file: {why}")]
         ) from None
-    _check_disk(plan, rig, out, chans, overwrite)
+    _check_disk(plan, rig, out, chans)
     try:
         return RunWriter(
-            out,
+            staged.path(out) if staged is not None else out,
             plan.text,
             rig.rig_text,
             rig.describe(),
@@ -372,7 +378,46 @@ def _run_on(
     """The run proper, with stop signals deferred (checked between blocks)."""
     setup = _prepare(rig, plan, realtime)
     guard.check()  # a stop signal during the setup: nothing written, nothing energised
-    writer = _open_writer(plan, rig, rig_path, out, overwrite, setup.chans)
+    check_outputs([out], overwrite=overwrite)  # a directory; an existing file (no --overwrite)
+    # --overwrite: the new file is written beside the old one and replaces it once closed
+    staged = stage([out], overwrite=True) if overwrite and out.exists() else None
+    try:
+        writer = _open_writer(plan, rig, rig_path, out, overwrite, setup.chans, staged)
+        outcome = _record(rig, plan, writer, setup, out, progress, guard)
+    except BaseException:
+        if staged is not None:
+            staged.discard()
+        raise
+    if staged is not None:
+        _replace(staged, outcome)
+    return outcome
+
+
+def _replace(staged: Staged, outcome: RunOutcome) -> None:
+    """Put the new run file in place of the old one, whatever the outcome (it records what
+    the rig did); if that fails, keep it where it is and say so (exit 3 if it was 0)."""
+    try:
+        staged.commit()
+    except InputFileError as e:
+        kept = staged.path(outcome.path)
+        outcome.reason += f"; {e}; the new run file is {kept}"
+        outcome.path = kept
+        outcome.exit_code = outcome.exit_code or 3
+        return
+    staged.discard()
+
+
+def _record(
+    rig: Rig,
+    plan: Plan,
+    writer: RunWriter,
+    setup: _Setup,
+    out: Path,
+    progress: ProgressFn | None,
+    guard: SignalGuard,
+) -> RunOutcome:
+    """Energise, play every step into ``writer``, and end the same way on every path
+    (module docstring)."""
     outcome = RunOutcome(path=out, status="running", seed=rig.seed)
     with writer:
         try:

@@ -158,26 +158,32 @@ def _col_header(name: str, units: str) -> str:
     return f"{name}_{u}" if u else name
 
 
-def export_csv(path: Path | str, out_dir: Path | str) -> list[Path]:
+def export_csv(path: Path | str, out_dir: Path | str, overwrite: bool = False) -> list[Path]:
     """Write one CSV per entry (``<out_dir>/<entry>.csv``); returns the paths written.
 
     The header line names the columns with their units, e.g. ``time_s,command_voltage_V,
     amplifier_voltage_V,gauge_raw_V,strain_ue``; values use up to 10 significant digits.
+    Existing CSVs are refused unless ``overwrite`` (an :class:`InputFileError` naming them,
+    before anything is written); the files are written beside their targets and renamed into
+    place together (:mod:`labrig.outputs`).
     """
+    from labrig.outputs import staged_outputs
+
     run = read_run(path)
     out = Path(out_dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise InputFileError(
-            [InputIssue(str(out), None, "--csv", f"cannot create directory: {e.strerror}")]
-        ) from None
-    written = []
-    for e in run:
-        p = out / f"{e.name}.csv"
-        cols = e.channels
-        header = [_col_header(c, e.units.get(c, "")) for c in cols]
-        table = np.column_stack([e.data[c] for c in cols]) if cols else np.empty((0, 0))
-        np.savetxt(p, table, fmt="%.10g", delimiter=",", header=",".join(header), comments="")
-        written.append(p)
-    return written
+    if out.exists() and not out.is_dir():
+        raise InputFileError([InputIssue(str(out), None, "--csv", "is a file, not a directory")])
+    targets = [out / f"{e.name}.csv" for e in run]
+    with staged_outputs(targets, inputs=[Path(path)], overwrite=overwrite, option="--csv") as st:
+        for e, target in zip(run, targets, strict=True):
+            cols = e.channels
+            header = [_col_header(c, e.units.get(c, "")) for c in cols]
+            table = np.column_stack([e.data[c] for c in cols]) if cols else np.empty((0, 0))
+            try:
+                np.savetxt(
+                    st.path(target), table, fmt="%.10g", delimiter=",",
+                    header=",".join(header), comments="",
+                )  # fmt: skip
+            except OSError as err:
+                raise st.error(target, f"cannot write it: {err.strerror or err}") from None
+    return targets

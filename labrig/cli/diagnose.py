@@ -18,6 +18,7 @@ from rich.console import Console
 from rich.table import Table
 
 from labrig.cli.common import StructuralEffect, choice, flag, friendly, one_of
+from labrig.errors import InputFileError, InputIssue
 
 __all__ = ["diagnose", "diagnose_command"]
 
@@ -30,6 +31,9 @@ def diagnose(
     ),
     out: Path | None = typer.Option(
         None, "--out", help="Directory for diagnosis.json and diagnosis.html."
+    ),
+    overwrite: bool = flag(
+        False, "--overwrite", help="Replace diagnosis.json and diagnosis.html in --out."
     ),
     as_json: bool = flag(False, "--json", help="Print only the JSON on stdout."),
     also: list[StructuralEffect] = typer.Option(
@@ -48,7 +52,12 @@ def diagnose(
 ) -> None:
     """Find what the model misses: residual evidence, candidate effects, held-out before/after."""
     names = tuple(dict.fromkeys(a.value for a in also))
-    raise typer.Exit(diagnose_command(run_file, params, out, as_json, names, max_effects))
+    code = diagnose_command(run_file, params, out, as_json, names, max_effects, overwrite)
+    raise typer.Exit(code)
+
+
+#: what ``diagnose --out DIR`` writes in ``DIR``
+OUTPUT_NAMES = ("diagnosis.json", "diagnosis.html")
 
 
 def diagnose_command(
@@ -58,11 +67,35 @@ def diagnose_command(
     as_json: bool,
     also: tuple[str, ...] = (),
     max_effects: int = 2,
+    overwrite: bool = False,
 ) -> int:
     """Run the diagnosis of ``run_file`` and print / write it; returns the exit code.
 
     ``also``: structural effects to try beside the defaults; ``max_effects``: at most this
-    many effects are added."""
+    many effects are added. The files in ``out_dir`` are checked before the work (an input,
+    an existing file without ``overwrite``, an unwritable place) and written beside their
+    targets, then renamed into place (:mod:`labrig.outputs`)."""
+    from labrig.outputs import staged_outputs
+
+    if out_dir is None:
+        return _diagnose(run_file, params, None, as_json, also, max_effects)
+    targets = [out_dir / n for n in OUTPUT_NAMES]
+    with staged_outputs(targets, inputs=[run_file, params], overwrite=overwrite) as staged:
+        code = _diagnose(run_file, params, staged.folder(out_dir), as_json, also, max_effects)
+    if not as_json:
+        Console().print(f"wrote {targets[0]} and {targets[1]}")
+    return code
+
+
+def _diagnose(
+    run_file: Path,
+    params: Path | None,
+    write_dir: Path | None,
+    as_json: bool,
+    also: tuple[str, ...],
+    max_effects: int,
+) -> int:
+    """The diagnosis, printed, and written to ``write_dir`` (the staging folder) if given."""
     from labrig.analysis.diagnose import diagnose as run_diagnosis
     from labrig.analysis.prepare import prepare_diagnosis
     from labrig.jsonsafe import json_safe
@@ -91,16 +124,20 @@ def diagnose_command(
             + " ".join(f"--also {n}" for n in untried)
             + " --max-effects 3` tries them (slower)"
         )
-    if out_dir is not None:
+    if write_dir is not None:
         from labrig.report.diagnose_html import write_diagnosis
 
-        write_diagnosis(out_dir, doc, d, setup.records, f"labrig diagnose: {Path(run_file).name}")
+        title = f"labrig diagnose: {Path(run_file).name}"
+        try:
+            write_diagnosis(write_dir, doc, d, setup.records, title)
+        except OSError as e:
+            raise InputFileError(
+                [InputIssue(str(write_dir.parent), None, "--out", f"cannot write: {e}")]
+            ) from None
     if as_json:
         print(json.dumps(doc, indent=2))
         return 0
     print_diagnosis(doc, Path(run_file).name)
-    if out_dir is not None:
-        Console().print(f"wrote {out_dir / 'diagnosis.json'} and {out_dir / 'diagnosis.html'}")
     return 0
 
 

@@ -24,11 +24,12 @@ def info(run_file: Path = typer.Argument(..., help="Run file (HDF5).")) -> None:
 def export(
     run_file: Path = typer.Argument(..., help="Run file (HDF5)."),
     csv: Path = typer.Option(..., "--csv", help="Directory for one CSV file per entry."),
+    overwrite: bool = flag(False, "--overwrite", help="Replace CSV files of the same names."),
 ) -> None:
     """Export every entry of a run file to CSV (header: column names with units)."""
     from labrig.store import export_csv
 
-    for p in export_csv(run_file, csv):
+    for p in export_csv(run_file, csv, overwrite):
         typer.echo(str(p))
 
 
