@@ -8,12 +8,12 @@ configured with. ``diagnose`` also takes a bare ``ModelParams`` object. A baseli
 (``labrig fit --model prandtl_ishlinskii``) holds no model parameters and is refused.
 
 Every problem is an :class:`~labrig.errors.InputFileError` (exit code 2) naming the file, the
-field and what would be valid.
+field and what would be valid; the file is read within bounds (:data:`MAX_PARAMS_BYTES`,
+:func:`labrig.jsonsafe.loads_bounded`: nesting, digits).
 """
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -25,8 +25,12 @@ from pydantic import ValidationError
 from labrig.analysis.baselines import KINDS
 from labrig.analysis.records import Record
 from labrig.errors import InputFileError, InputIssue
+from labrig.jsonsafe import loads_bounded
 from labrig.model import ModelParams
 from labrig.model.effects import Effect
+
+#: the largest parameter file read (``labrig fit`` writes a few kB)
+MAX_PARAMS_BYTES = 10_000_000
 
 #: the types of ``effects_context`` (how the effects were configured when they were fitted)
 CONTEXT_TYPES: dict[str, type] = {
@@ -69,10 +73,14 @@ def read_params_file(path: Path, who: str, *, bare_ok: bool = False) -> ParamsFi
     ``bare_ok``: a bare ``ModelParams`` object is accepted too (else only ``labrig fit``
     output)."""
     try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
+        if path.stat().st_size > MAX_PARAMS_BYTES:
+            raise file_issue(
+                path, f"larger than {MAX_PARAMS_BYTES // 1_000_000} MB: not a parameter file"
+            )
+        raw = loads_bounded(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise file_issue(path, "parameter file not found") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+    except (OSError, UnicodeDecodeError, ValueError) as e:  # JSONDecodeError is a ValueError
         raise file_issue(path, f"not a JSON parameter file ({e})") from None
     if isinstance(raw, dict) and isinstance(raw.get("params"), dict):
         refuse_baseline(raw, path, who)

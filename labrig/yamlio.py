@@ -2,6 +2,12 @@
 
 PyYAML's composer keeps the line of every node, so each pydantic error location (a path of keys
 and indices) is mapped back to the line where that value (or its parent) was written.
+
+Bounds, checked before the parts of PyYAML that recurse or allocate: at most
+:data:`MAX_BYTES` of text, :data:`MAX_DEPTH` levels of nesting (counted on the parser's events,
+which do not recurse), :data:`MAX_EXPANDED_NODES` values once aliases are expanded, integers of
+at most :data:`MAX_INT_DIGITS` digits. YAML 1.1's base-60 numbers (``1:30`` read as 90) are
+refused with their line: write the number, or quote the text.
 """
 
 from __future__ import annotations
@@ -18,6 +24,64 @@ M = TypeVar("M", bound=BaseModel)
 MAX_BYTES = 5_000_000
 #: a document whose aliases expand to more YAML nodes than this is refused ("billion laughs")
 MAX_EXPANDED_NODES = 200_000
+#: the deepest nesting of mappings and lists read (PyYAML's composer recurses per level)
+MAX_DEPTH = 64
+#: the most digits an integer may have (Python refuses to convert more than 4300)
+MAX_INT_DIGITS = 100
+
+
+class BoundedLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, refusing base-60 numbers and integers of more than
+    :data:`MAX_INT_DIGITS` digits (a ``ConstructorError`` with the value's line)."""
+
+    def refuse_odd_number(self, node: yaml.ScalarNode) -> None:
+        """A base-60 number or an integer with too many digits: ``ConstructorError``."""
+        value = str(self.construct_scalar(node))
+        if ":" in value:
+            raise yaml.constructor.ConstructorError(
+                None,
+                None,
+                f"{value!r} is a base-60 number in YAML 1.1; write the number, "
+                "or quote it if it is text",
+                node.start_mark,
+            )
+        digits = sum(c.isdigit() for c in value)
+        if digits > MAX_INT_DIGITS:
+            raise yaml.constructor.ConstructorError(
+                None,
+                None,
+                f"a number with {digits} digits (at most {MAX_INT_DIGITS} are read)",
+                node.start_mark,
+            )
+
+    def construct_yaml_int(self, node: yaml.ScalarNode) -> int:
+        self.refuse_odd_number(node)
+        return super().construct_yaml_int(node)
+
+    def construct_yaml_float(self, node: yaml.ScalarNode) -> float:
+        if ":" in str(self.construct_scalar(node)):
+            self.refuse_odd_number(node)
+        return super().construct_yaml_float(node)
+
+
+BoundedLoader.add_constructor("tag:yaml.org,2002:int", BoundedLoader.construct_yaml_int)
+BoundedLoader.add_constructor("tag:yaml.org,2002:float", BoundedLoader.construct_yaml_float)
+
+
+def _depth_issue(text: str, name: str) -> InputIssue | None:
+    """Nesting deeper than :data:`MAX_DEPTH`, found on the parser's events (no recursion)."""
+    depth = 0
+    for event in yaml.parse(text, Loader=BoundedLoader):
+        if isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+            if depth > MAX_DEPTH:
+                line = event.start_mark.line + 1 if event.start_mark else None
+                return InputIssue(
+                    name, line, "", f"nested more than {MAX_DEPTH} levels deep (lists, mappings)"
+                )
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
+    return None
 
 
 def _expanded_size_issue(root: yaml.Node, name: str) -> InputIssue | None:
@@ -124,14 +188,24 @@ def read_yaml(path: Path | str) -> tuple[object, dict, str]:
         line = text[: text.index("\x00")].count("\n") + 1
         raise InputFileError([InputIssue(name, line, "", "binary data in a YAML file")])
     try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
-        bomb = _expanded_size_issue(node, name) if node is not None else None
-        if bomb is not None:
-            raise InputFileError([bomb])
-        dups = duplicate_key_issues(node, name) if node is not None else []
-        if dups:
-            raise InputFileError(dups)
-        data = yaml.safe_load(text)
+        deep = _depth_issue(text, name)
+        if deep is not None:
+            raise InputFileError([deep])
+        loader = BoundedLoader(text)
+        try:
+            node = loader.get_single_node()
+            bomb = _expanded_size_issue(node, name) if node is not None else None
+            if bomb is not None:
+                raise InputFileError([bomb])
+            dups = duplicate_key_issues(node, name) if node is not None else []
+            if dups:
+                raise InputFileError(dups)
+            data = loader.construct_document(node) if node is not None else None
+        finally:
+            loader.dispose()
+    except yaml.constructor.ConstructorError as e:
+        line = e.problem_mark.line + 1 if e.problem_mark else None
+        raise InputFileError([InputIssue(name, line, "", str(e.problem))]) from None
     except yaml.MarkedYAMLError as e:
         mark = e.problem_mark or e.context_mark
         line = mark.line + 1 if mark else None
@@ -139,6 +213,9 @@ def read_yaml(path: Path | str) -> tuple[object, dict, str]:
         raise InputFileError([InputIssue(name, line, "", msg)]) from e
     except yaml.YAMLError as e:
         raise InputFileError([InputIssue(name, None, "", f"YAML error: {e}")]) from e
+    except RecursionError:  # not expected past the depth check; a message all the same
+        msg = "nested too deeply to read"
+        raise InputFileError([InputIssue(name, None, "", msg)]) from None
     lines = line_index(node) if node is not None else {}
     return data, lines, text
 
