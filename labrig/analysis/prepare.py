@@ -17,6 +17,13 @@ How a run file's entries are treated (:func:`prepare`):
 
 ``--warmup-s`` and ``--offset/--no-offset`` override the automatic choices; every choice is
 stated in :attr:`Setup.notes` (the commands print them and the report shows them).
+
+Data that cannot be fitted is refused before any fit (:func:`check_records`, exit code 2,
+naming the entry and what would be valid): a sample rate outside :data:`RATE_RANGE_HZ`;
+a non-finite time, voltage or scored strain sample; a scored entry of fewer than
+:data:`MIN_SAMPLES` samples; a voltage that spans less than :data:`MIN_VOLTAGE_SPAN_V` over the
+scored entries (and over each entry simulated on its own); a scored strain that does not
+change; a step definition whose ``rest_after_s`` is not a number from 0 to :data:`MAX_REST_S`.
 """
 
 from __future__ import annotations
@@ -37,6 +44,14 @@ from labrig.store import RunFile, read_run
 
 #: fewest entries ``diagnose`` scores (leave-one-entry-out needs some left in)
 MIN_DIAGNOSE_ENTRIES = 3
+#: fewest samples in an entry that is scored
+MIN_SAMPLES = 20
+#: the least voltage span (V) over the scored entries, and over each entry simulated on its own
+MIN_VOLTAGE_SPAN_V = 1.0
+#: sample rates fitted (Hz): those ``labrig import`` accepts
+RATE_RANGE_HZ = (1e-3, 1e8)
+#: the longest rest after an entry (``rest_after_s``, s) simulated
+MAX_REST_S = 3600.0
 #: a run file of a single entry is cut into this many parts for ``diagnose``
 DIAGNOSE_SPLIT = 4
 
@@ -114,7 +129,7 @@ def prepare(
     offset: bool | None = None,
 ) -> Setup:
     """Read the run file and decide chain, warm-up and offset (module docstring)."""
-    run = read_run(path, load_data=False)
+    run = read_run(path)  # read once: records_from_run reads it again from the cache
     names = list(run.entries)
     if not names:
         raise _issue(path, "the run file has no entries")
@@ -157,12 +172,91 @@ def prepare(
             notes.append(f"not scored, simulated as history of the run: {', '.join(history)}")
     else:
         records = [by_name[n] for n in scored]
+    check_records(path, records, scored, alone=not chain)
     warmup = _warmup(path, records, chain, warmup_s, notes)
     offset = _offset(imported, offset, notes)
     short = [r.name for r in records if r.name in scored and r.duration_s <= warmup * 1.01]
     if short:
         raise _issue(path, f"the warm-up of {warmup:g} s leaves nothing of {short[0]!r} to score")
     return Setup(path, run, records, scored, chain, warmup, offset, imported, notes)
+
+
+def check_records(
+    path: Path, records: Sequence[Record], scored: Sequence[str], alone: bool
+) -> None:
+    """Refuse data that cannot be fitted (module docstring), every problem at once, each
+    naming the entry: ``records`` are simulated, ``scored`` of them fitted; ``alone``: each
+    record is simulated on its own (from rest), so each must move its voltage."""
+    keep = set(scored)
+    issues = []
+    for r in records:
+        issues += _record_issues(path, r, r.name in keep, alone)
+    fitted = [r for r in records if r.name in keep]
+    if fitted and not issues:
+        span = max(float(np.max(r.voltage_V)) for r in fitted) - min(
+            float(np.min(r.voltage_V)) for r in fitted
+        )
+        if span < MIN_VOLTAGE_SPAN_V:
+            issues.append(
+                InputIssue(
+                    str(path),
+                    None,
+                    "command_voltage",
+                    f"the voltage spans {span:.3g} V over the entries to fit; at least "
+                    f"{MIN_VOLTAGE_SPAN_V:g} V is needed (nothing drives the actuator)",
+                )
+            )
+    if issues:
+        raise InputFileError(issues)
+
+
+def _record_issues(path: Path, r: Record, scored: bool, alone: bool) -> list[InputIssue]:
+    """What makes one record unfit to simulate (and, when ``scored``, to fit)."""
+
+    def issue(fld: str, message: str) -> InputIssue:
+        return InputIssue(str(path), None, f"{r.name}/{fld}", message)
+
+    lo, hi = RATE_RANGE_HZ
+    if not lo <= r.rate_hz <= hi:
+        return [issue("sample_rate", f"{r.rate_hz:.4g} Hz is outside {lo:g} to {hi:g} Hz")]
+    out = []
+    channels = [("time", r.time_s), ("command_voltage", r.voltage_V)]
+    for name, x in [*channels, *([("strain", r.strain_ue)] if scored else [])]:
+        bad = np.flatnonzero(~np.isfinite(x))
+        if bad.size:
+            out.append(
+                issue(
+                    f"data/{name}",
+                    f"{bad.size} non-finite sample(s) (first at sample {bad[0]}: {x[bad[0]]}); "
+                    "every sample must be a finite number",
+                )
+            )
+    rest = r.meta.get("rest_after_s", 0.0)
+    if not (
+        isinstance(rest, int | float) and not isinstance(rest, bool) and 0 <= rest <= MAX_REST_S
+    ):
+        out.append(
+            issue(
+                "step_definition",
+                f"rest_after_s must be a number of seconds from 0 to {MAX_REST_S:g}, "
+                f"got {str(rest)[:40]!r}",
+            )
+        )
+    if out or not scored:
+        return out
+    if r.n < MIN_SAMPLES:
+        out.append(issue("data", f"{r.n} samples; an entry to fit needs at least {MIN_SAMPLES}"))
+    elif np.ptp(r.strain_ue) == 0:
+        out.append(issue("data/strain", f"the strain is constant ({r.strain_ue[0]:.4g})"))
+    elif alone and np.ptp(r.voltage_V) < MIN_VOLTAGE_SPAN_V:
+        out.append(
+            issue(
+                "data/command_voltage",
+                f"the voltage spans {np.ptp(r.voltage_V):.3g} V; an entry fitted on its own "
+                f"needs at least {MIN_VOLTAGE_SPAN_V:g} V",
+            )
+        )
+    return out
 
 
 def _check_entries(path: Path, names: list[str], entries: list[str] | None) -> None:
@@ -242,6 +336,8 @@ def prepare_diagnosis(
     if len(records) == 1 and records[0].duration_s > 0:
         records = split_entries(records, DIAGNOSE_SPLIT)
         say(f"one entry: cut into {len(records)} consecutive parts for leave-one-entry-out")
+    chained = all("rest_after_s" in r.meta for r in records)
+    check_records(path, records, [r.name for r in records], alone=not chained)
     offset = any(r.meta.get("kind") == "import" for r in records)
     if len(records) < MIN_DIAGNOSE_ENTRIES:
         raise _issue(
