@@ -146,11 +146,6 @@ def test_nothing_is_selected_without_a_planted_term() -> None:
     assert sel.terms == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="ExtendedProblem.jacobian applies output effects to the strain's derivative, which "
-    "holds for linear effects only; the fix propagates it through Effect.tangent when present",
-)
 def test_engine_jacobian_linearises_the_empirical_effect(cubic_campaign) -> None:
     records, fr, seqs, _, fo = cubic_campaign
     eff = empirical_effect(["V3", "S_absS"], TermScales.from_records(records))

@@ -290,6 +290,18 @@ class ExtendedProblem:
             out.append(y)
         return out
 
+    def _post_tangent(self, ys: list[NDArray], ds: list[NDArray], eff) -> list[NDArray]:
+        """The strain derivatives ``ds`` (at the strains ``ys``) carried through the output
+        effects (:meth:`~labrig.model.effects.Effect.tangent`)."""
+        out = []
+        for seq, y, d in zip(self.sequences, ys, ds, strict=True):
+            for e in self.out:
+                p = eff.get(e.name, {})
+                d = e.tangent(y, d, seq.context, p)
+                y = e.apply(y, seq.context, p)
+            out.append(d)
+        return out
+
     def _beside(self, x: NDArray, ctx: Context, eff) -> NDArray | float:
         """The operator effects' strain terms for the operator input ``x`` (0 without any)."""
         out: NDArray | float = 0.0
@@ -342,6 +354,9 @@ class ExtendedProblem:
         vol_names = {e.name for e in self.vol}
         ctxs = [seq.context for seq in self.sequences]
         beside0 = [self._beside(x, c, eff) for (x, _), c in zip(vd0, ctxs, strict=True)]
+        ys0 = [
+            op.apply(x, op.held_state(rest)) + b for (x, rest), b in zip(vd0, beside0, strict=True)
+        ]
         J = np.empty((r0.size, z.size))
         for j, (who, n) in enumerate(self.names):
             h = self._step[j] if self._step[j] is not None else 1e-6 * max(1.0, abs(z[j]))
@@ -361,7 +376,7 @@ class ExtendedProblem:
                 op.tangent(x, (xp - x) / h, rest) + (self._beside(xp, c, eff) - b0) / h
                 for (x, rest), (xp, _), c, b0 in zip(vd0, vdp, ctxs, beside0, strict=True)
             ]
-            J[:, j] = self._resid(self._post(ds, eff), subtract=False)
+            J[:, j] = self._resid(self._post_tangent(ys0, ds, eff), subtract=False)
         return J
 
     def _with_nuisance(self, g: Segment, p: NDArray) -> NDArray:

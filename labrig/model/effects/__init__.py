@@ -58,15 +58,18 @@ from labrig.model.effects.electronics import (
     measured_voltage,
     slew_limit,
 )
+from labrig.model.effects.empirical import EMPIRICAL_NOTE, EmpiricalTerms
 
 __all__ = [
     "CREEP_EFFECTS",
     "EFFECT_NAMES",
+    "EMPIRICAL_NOTE",
     "STRUCTURAL_EFFECT_NAMES",
     "AmplifierCurrentLimit",
     "Context",
     "Creep",
     "Effect",
+    "EmpiricalTerms",
     "FieldSaturation",
     "MainsPickup",
     "OffsetDrift",

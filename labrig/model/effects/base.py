@@ -88,6 +88,12 @@ class Effect:
         for ``"operator"``, the strain term (ue) it adds, ``x`` being the operator's input."""
         raise NotImplementedError
 
+    def tangent(self, x: NDArray, dx: NDArray, ctx: Context, p: Mapping[str, float]) -> NDArray:
+        """For an output effect, the change of ``apply(x)`` along ``dx`` (the strain's
+        derivative passed through the effect); the default is right for effects that are linear
+        in the strain they receive."""
+        return self.apply(dx, ctx, p)
+
     def columns(self, t: NDArray, rate_hz: float) -> NDArray:
         """Nuisance regressors of one entry (``len(t) x k``), ``t`` the entry's time (s)."""
         raise NotImplementedError
