@@ -357,3 +357,19 @@ def test_sim_fleet_refuses_to_overwrite(tmp_path):
     res = invoke("sim", "fleet", 1, "--out", out, "--protocol", proto, "--seed", 4)
     assert res.exit_code == 2 and "--overwrite" in res.output
     assert (out / "A0001.h5").read_bytes() == before
+
+
+def test_batch_report_equals_labrig_report(fleet, tmp_path):
+    run = sorted(fleet.glob("*.h5"))[0]
+    out = tmp_path / "out"
+    res = invoke("batch", "report", run, "--out", out, "--serial", "--no-heldout")
+    assert res.exit_code == 0, res.output
+    one = invoke("report", run, "--out", tmp_path / "one.html", "--no-heldout", "--json")
+    assert one.exit_code == 0, one.stderr
+    metrics = json.loads(one.stdout)
+    assert json.loads((out / "runs" / run.stem / "report.json").read_text()) == metrics
+    row = table(out)[0]
+    for model in ("prandtl_ishlinskii", "bouc_wen"):
+        mean = np.mean([m[f"{model}.nrmse_pct"] for m in metrics.values()])
+        assert row[f"report_{model}_nrmse_pct"] == pytest.approx(mean, rel=1e-12)
+    assert (out / "runs" / run.stem / "report.html").read_text().lower().startswith("<!doctype")
