@@ -206,3 +206,14 @@ def test_empirical_effect_from_keys() -> None:
         empirical_effect(["V4"], scales)
     with pytest.raises(ValueError, match="unknown terms"):
         empirical_effect(["T_S"], scales)  # the campaign has no temperature channel
+
+
+def test_odd_terms_read_by_their_sign():
+    """A negative V^3 or S|S| reads as field saturation; a positive one (a gain rising with
+    field) corresponds to no library effect."""
+    lib = term_library(TermScales(100.0, 1e4, 1000.0))
+    for key in ("V3", "S_absS"):
+        assert lib[key].reading(-1.0)[1] == "field_saturation"
+        physics, effect = lib[key].reading(+1.0)
+        assert effect == "" and "rising" in physics
+    assert lib["V2"].reading(+1.0)[1] == "quadratic_term"

@@ -20,9 +20,9 @@ term               scale             reads as                                  l
 ``dV/dt``          ``R_ref``         a time shift of the response (a delay)    time_delay
 ``|dV/dt|``        ``R_ref``         a rate-dependent offset
 ``S``              ``S_ref``         a gain change
-``S|S|``           ``S_ref^2``       saturation (when negative)                field_saturation
+``S|S|``           ``S_ref^2``       saturation if < 0, hardening if > 0       field_saturation
 ``V^2``            ``V_ref^2``       electrostriction (even in V)              quadratic_term
-``V^3``            ``V_ref^3``       saturation at high field (when negative)  field_saturation
+``V^3``            ``V_ref^3``       saturation if < 0, hardening if > 0       field_saturation
 ``|dV/dt| S``      ``R_ref S_ref``   Bouc-Wen-like rate memory
 ``V S``            ``V_ref S_ref``   a field-dependent gain (quadratic in V)   quadratic_term
 ``T - T_ref``      ``dT_ref``        thermal expansion
@@ -122,6 +122,14 @@ class Term:
     effect: str  # the library effect it corresponds to ("" for none)
     raw: Fn = field(repr=False, compare=False)
     dS: Fn | None = field(default=None, repr=False, compare=False)
+    #: ``(physics, effect)`` when the coefficient is negative, if that reads differently
+    if_negative: tuple[str, str] | None = None
+
+    def reading(self, coefficient: float) -> tuple[str, str]:
+        """``(what the term reads as, the library effect)`` for a coefficient of this sign."""
+        if coefficient < 0 and self.if_negative is not None:
+            return self.if_negative
+        return self.physics, self.effect
 
     @property
     def uses_strain(self) -> bool:
@@ -174,7 +182,8 @@ def term_library(scales: TermScales) -> dict[str, Term]:
     """The candidate terms for a campaign of these scales, by key (module docstring's table);
     the temperature terms only when the campaign has a temperature channel."""
     vr, rr, sr = scales.v_ref_V, scales.rate_ref_V_per_s, scales.strain_ref_ue
-    sat = "saturation (strain per volt falling at high field)"
+    sat = ("saturation (strain per volt falling at high field)", "field_saturation")
+    hard = "a gain rising at high field (hardening; not in the effect library)"
     terms = [
         Term("V", "V", "V", vr, "a direct feed-through of the voltage (a gain)", "",
              lambda s, c: c.v),
@@ -184,11 +193,11 @@ def term_library(scales: TermScales) -> dict[str, Term]:
              lambda s, c: np.abs(dvdt(c))),
         Term("S", "S", "ue", sr, "a gain change", "", lambda s, c: s,
              lambda s, c: np.ones_like(s)),
-        Term("S_absS", "S|S|", "ue^2", sr * sr, sat, "field_saturation",
-             lambda s, c: s * np.abs(s), lambda s, c: 2.0 * np.abs(s)),
+        Term("S_absS", "S|S|", "ue^2", sr * sr, hard, "",
+             lambda s, c: s * np.abs(s), lambda s, c: 2.0 * np.abs(s), sat),
         Term("V2", "V^2", "V^2", vr * vr, "electrostriction (even in V)", "quadratic_term",
              lambda s, c: c.v * c.v),
-        Term("V3", "V^3", "V^3", vr**3, sat, "field_saturation", lambda s, c: c.v**3),
+        Term("V3", "V^3", "V^3", vr**3, hard, "", lambda s, c: c.v**3, None, sat),
         Term("absdVdt_S", "|dV/dt| S", "V ue/s", rr * sr, "Bouc-Wen-like rate memory", "",
              lambda s, c: np.abs(dvdt(c)) * s, lambda s, c: np.abs(dvdt(c))),
         Term("V_S", "V S", "V ue", vr * sr, "a field-dependent gain (quadratic in V)",
@@ -445,7 +454,7 @@ def select_terms(
         chosen.append(
             SelectedTerm(
                 t.key, t.name, t.unit, c_ue, c_ue / t.scale, int(np.sign(c_ue)),
-                share - _share(X, y, drop), t.physics, t.effect,
+                share - _share(X, y, drop), *t.reading(c_ue),
             )
         )  # fmt: skip
     return TermSelection(chosen, share, best, absorbed, lam, named)

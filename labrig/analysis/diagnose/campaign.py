@@ -308,7 +308,7 @@ STUDY_DRIVES: dict[str, tuple[str, ...]] = {
     "none": ("short", "bipolar", "biased"),
     "field_saturation": ("bipolar", "biased"),
     "viscoelastic_creep": ("short", "bipolar"),
-    "cubic_term": ("short",),
+    "cubic_term": ("bipolar", "short"),
 }
 
 

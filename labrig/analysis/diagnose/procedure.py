@@ -41,8 +41,9 @@ from labrig.analysis.diagnose.evidence import (
     collect_evidence,
     modelled_creep_per_decade,
 )
-from labrig.analysis.diagnose.ranking import rank
+from labrig.analysis.diagnose.ranking import jacobian_basis, rank
 from labrig.analysis.diagnose.verdict import (
+    AT_FLOOR,
     creep_added_sentence,
     creep_sentence,
     signature_clause,
@@ -54,6 +55,14 @@ from labrig.analysis.metrics import drive_frequency_hz, is_periodic
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import build_sequences
 from labrig.analysis.spectra import detect_mains_hz
+from labrig.analysis.terms import (
+    TermScales,
+    empirical_effect,
+    regression_data,
+    select_terms,
+    term_library,
+)
+from labrig.blas import single_thread_blas
 from labrig.model import ModelParams
 from labrig.model.effects import CREEP_EFFECTS, EFFECT_NAMES, Effect, library
 
@@ -206,6 +215,7 @@ def diagnose(
     for rnd in range(max_effects):
         if not proc.next_round(rnd):
             break
+    proc.empirical_round(len(proc.rounds))
     d = proc.result()
     d.elapsed_s = time.perf_counter() - t0
     return d
@@ -340,9 +350,14 @@ class _Procedure:
         if not passed:
             return False
         best = min(passed, key=lambda c: c.heldout_nrmse_pct)
-        eff = self.lib[best.effect]
+        self._add(best, self.lib[best.effect], problems[best.effect])
+        return True
+
+    def _add(self, best: Candidate, eff: Effect, prob: ExtendedProblem) -> None:
+        """Extend the current model with the accepted candidate ``best``."""
+        self.lib.setdefault(eff.name, eff)
         self.current = [*self.current, eff]
-        self.cur_prob = problems[best.effect]
+        self.cur_prob = prob
         self.cur, self.cur_held = best.fit, best.heldout_per_entry
         self.added_cands.append(best)
         self.added.append(
@@ -352,7 +367,41 @@ class _Procedure:
                 "evidence": best.evidence,
             }
         )
-        return True
+
+    # -- when no named effect passes: terms found in the data --------------------------------
+    def empirical_round(self, rnd: int) -> None:
+        """Sparse regression of the residual over physically readable terms
+        (:mod:`labrig.analysis.terms`) when the model is not yet within the noise; the selected
+        terms, as one empirical effect, are refitted, cross-validated and judged by the same
+        acceptance rule as a named effect. Empirical, never a physical attribution."""
+        ev = self._evidence()
+        if ev.ratio <= AT_FLOOR:
+            return
+        self.say(f"round {rnd + 1}: sparse regression of the residual")
+        scales = TermScales.from_records(self.records)
+        terms = list(term_library(scales).values())
+        with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
+            data = regression_data(self.cur_prob, self.cur.base, self.cur.effects, terms)
+            r = self.cur_prob.residual(self.cur.z, self.cur.base)
+            B = jacobian_basis(self.cur_prob.jacobian(self.cur.z, self.cur.base, r))
+        sel = select_terms(data.residual, data.columns, terms, data.weights, B)
+        if not sel.terms:
+            self.messages.append(
+                "sparse regression of the residual selected no term "
+                f"(the best explains {100 * sel.share:.1f} % of it)"
+            )
+            return
+        eff = empirical_effect(sel.keys, scales)
+        c = Candidate(eff.name, rnd, sel.share)
+        found = ", ".join(f"{t.name} ({t.coefficient_ue:+.3g} ue at full scale)" for t in sel.terms)
+        prob = self._try(c, eff, sel.start(), ev, rnd)
+        c.evidence = (
+            f"sparse regression of the residual selects {found} "
+            f"({100 * sel.share:.0f} % of the residual); " + c.evidence
+        )
+        self.rounds.append([c])
+        if c.accepted:
+            self._add(c, eff, prob)
 
     def _start(self, prob: ExtendedProblem, eff: Effect, probe: dict[str, float]):
         """The base start of a refit: the current base or, for a voltage effect, the staged fit

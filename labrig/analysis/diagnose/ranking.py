@@ -23,10 +23,12 @@ from labrig.analysis.records import Record
 from labrig.blas import single_thread_blas
 from labrig.model.effects import Effect
 
-__all__ = ["nuisance_directions", "rank"]
+__all__ = ["jacobian_basis", "nuisance_directions", "rank"]
 
 
-def _basis(J: NDArray) -> NDArray:
+def jacobian_basis(J: NDArray) -> NDArray:
+    """An orthonormal basis of the (column-scaled) Jacobian ``J``: the directions the model can
+    absorb by moving its own parameters."""
     if J.shape[1] == 0:
         return np.zeros((J.shape[0], 0))
     scale = np.linalg.norm(J, axis=0)
@@ -67,7 +69,7 @@ def rank(
     """(effect, explained share, best probe) for each candidate, best first."""
     with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
         r = cur_prob.residual(cur.z, cur.base)
-        B = _basis(cur_prob.jacobian(cur.z, cur.base, r))
+        B = jacobian_basis(cur_prob.jacobian(cur.z, cur.base, r))
         rr = float(r @ r)
         out = []
         for eff in candidates:

@@ -46,6 +46,8 @@ class TermLike(Protocol):
 
     def slope(self, S: NDArray, ctx: Context) -> NDArray | float: ...
 
+    def reading(self, coefficient: float) -> tuple[str, str]: ...
+
 
 class EmpiricalTerms(Effect):
     """``S -> S + sum_k c_k theta_k(S, ctx)`` for the given terms (module docstring);
@@ -101,7 +103,12 @@ class EmpiricalTerms(Effect):
 
     def correspondences(self) -> list[tuple[str, str, str]]:
         """``(term, what it reads as, library effect)`` for each term that corresponds to one."""
-        return [(t.name, t.physics, t.effect) for t in self.terms if t.effect]
+        out = []
+        for t in self.terms:
+            for phys, eff in {t.reading(1.0), t.reading(-1.0)}:
+                if eff:
+                    out.append((t.name, phys, eff))
+        return out
 
     def caveats(self, p: Mapping[str, float], span_s: float) -> list[str]:
         return [
@@ -125,9 +132,10 @@ class EmpiricalTerms(Effect):
                     f"{t.name}: {fmt3(c)}{pm} ue at full scale "
                     f"({fmt3(c / t.scale)} ue per {t.unit})"
                 )
-            if t.effect:
-                text += f", reads as {t.physics} (cf. {t.effect})"
-            elif t.physics:
-                text += f", reads as {t.physics}"
+            physics, effect = t.reading(c if c is not None else 1.0)
+            if effect:
+                text += f", reads as {physics} (cf. {effect})"
+            elif physics:
+                text += f", reads as {physics}"
             parts.append(text)
         return f"{EMPIRICAL_NOTE}: " + "; ".join(parts)
