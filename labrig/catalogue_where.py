@@ -97,8 +97,8 @@ class Condition:
 
     @property
     def scope(self) -> str:
-        """``run``, ``date``, ``entry`` or ``metadata`` (``entry`` also for unknown keys that
-        may be step keys: :func:`matches` decides per run)."""
+        """``run``, ``date`` or ``entry-or-metadata`` (an entry key when it is a built-in entry
+        key or a key of a step of the run, else metadata: :func:`matches` decides per run)."""
         if self.key in RUN_KEYS:
             return "run"
         if self.key in DATE_KEYS:
@@ -180,7 +180,7 @@ def _as_time(value: Any) -> datetime | None:
 
 def _compare_times(t: datetime, c: Condition) -> bool:
     """``t`` against a date condition: on the run's own wall clock unless the value has an
-    offset (then as instants; a run time without offset is taken as UTC)."""
+    offset (then as instants; a run time without offset is taken in the value's offset)."""
     assert c.span is not None
     start, end = c.span
     if start.tzinfo is None:

@@ -125,6 +125,10 @@ SELECTIONS: list[tuple[list[str], set[str]]] = [
     (["until=2026-03-31"], {"a.h5", "b.h5", "d.h5"}),
     (["since=2026-03", "until=2026-03"], {"a.h5", "d.h5"}),
     (["date<2026-03-01"], {"b.h5"}),
+    (["date~2026-03"], {"a.h5", "d.h5"}),
+    # with an offset, as instants: d began 21:30 UTC on March 31st
+    (["since=2026-03-31T21:00+00:00"], {"c.h5", "d.h5"}),
+    (["since=2026-03-31T22:00+00:00"], {"c.h5"}),
     (["amplitude_V=100"], {"a.h5", "b.h5", "d.h5"}),
     (["amplitude=50"], {"d.h5"}),
     # one same entry must hold both: d has 50 V at 20 Hz and 100 V at 40 Hz only
@@ -306,3 +310,11 @@ def test_files_and_folders_together_are_listed_once(folder: Path):
     result = cli(str(folder), str(folder / "a.h5"), "--json")
     names = [Path(r["path"]).name for r in json.loads(result.stdout)["runs"]]
     assert sorted(names) == sorted(FILES)
+
+
+def test_without_a_path_lists_runs_here(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    monkeypatch.chdir(tmp_path)
+    result = cli()
+    assert result.exit_code == 2 and "runs/" in result.stderr
+    write_run(tmp_path / "runs" / "x.h5", "here", [("sine", 10, 1)])
+    assert listed(cli("--json")) == {"x.h5"}

@@ -38,7 +38,9 @@ WHERE_HELP = (
 @friendly
 def runs(
     paths: list[Path] = typer.Argument(
-        None, help="Folders (searched recursively) or run files (default: runs/)."
+        None,
+        help="Folders (searched recursively) or run files (default: runs/).",
+        show_default=False,
     ),
     where: list[str] = typer.Option([], "--where", metavar="EXPR", help=WHERE_HELP),
     as_json: bool = flag(False, "--json", help="Print the runs as JSON on stdout."),
