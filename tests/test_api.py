@@ -176,13 +176,23 @@ def test_ctrl_c_during_run_ramps_to_0V_then_raises(tmp_path: Path):
     abort; then the API raises KeyboardInterrupt."""
     (tmp_path / "p.yaml").write_text(PROTOCOL.replace("cycles: 2", "cycles: 20"))
     out = tmp_path / "run.h5"
-    timer = threading.Timer(1.5, os.kill, (os.getpid(), signal.SIGINT))
-    timer.start()
+    stop = threading.Event()
+
+    def ctrl_c_once_writing() -> None:
+        for _ in range(600):  # the run file exists once the rig is open and energised
+            if stop.wait(0.05) or out.exists():
+                break
+        if not stop.wait(0.5):
+            os.kill(os.getpid(), signal.SIGINT)
+
+    thread = threading.Thread(target=ctrl_c_once_writing)
+    thread.start()
     try:
         with pytest.raises(KeyboardInterrupt):
             labrig.run(tmp_path / "p.yaml", out=out, seed=1, progress=False, realtime=True)
     finally:
-        timer.cancel()
+        stop.set()
+        thread.join()
     run = labrig.open(out)
     assert run.status == "aborted"
     with h5py.File(out) as f:
