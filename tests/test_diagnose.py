@@ -504,12 +504,14 @@ def test_also_adds_the_structural_effect_to_the_candidates(tmp_path, monkeypatch
     monkeypatch.setattr(load, "records_from_run", lambda path, entries=None: recs)
     assert diagnose_command(tmp_path / "run.h5", None, None, True, (), 1) == 0
     out = capsys.readouterr()
-    assert "viscoelastic_creep" not in {c["effect"] for c in json.loads(out.out)["candidates"]}
-    assert "--also viscoelastic_creep" in out.err  # the hint: not explained, not tried
-    code = diagnose_command(tmp_path / "run.h5", None, None, True, ("viscoelastic_creep",), 1)
+    cands = {c["effect"] for c in json.loads(out.out)["candidates"]}
+    assert "remanence" not in cands and "viscoelastic_creep" in cands  # a default where slow
+    assert "--also remanence" in out.err  # the hint: not explained, not tried
+    assert "--also viscoelastic_creep" not in out.err
+    code = diagnose_command(tmp_path / "run.h5", None, None, True, ("remanence",), 1)
     assert code == 0
     doc = json.loads(capsys.readouterr().out)
-    assert "viscoelastic_creep" in {c["effect"] for c in doc["candidates"]}
+    assert "remanence" in {c["effect"] for c in doc["candidates"]}
     assert len(doc["effects_added"]) <= 1
 
 

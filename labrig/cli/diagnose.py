@@ -116,7 +116,7 @@ def _diagnose(
         progress=progress,
     )
     doc = json_safe(d.to_json())
-    untried = [n for n in STRUCTURAL_EFFECT_NAMES if n not in also]
+    untried = [n for n in STRUCTURAL_EFFECT_NAMES if n not in also and n not in EFFECT_NAMES]
     if untried and d.classification in ("unexplained", "partially_explained"):
         err.print(
             f"hint: the structural effects {', '.join(untried)} were not tried; "
