@@ -68,10 +68,11 @@ BoundedLoader.add_constructor("tag:yaml.org,2002:int", BoundedLoader.construct_y
 BoundedLoader.add_constructor("tag:yaml.org,2002:float", BoundedLoader.construct_yaml_float)
 
 
-def _depth_issue(text: str, name: str) -> InputIssue | None:
+def _depth_issue(loader: BoundedLoader, name: str) -> InputIssue | None:
     """Nesting deeper than :data:`MAX_DEPTH`, found on the parser's events (no recursion)."""
     depth = 0
-    for event in yaml.parse(text, Loader=BoundedLoader):
+    while loader.check_event():
+        event = loader.get_event()
         if isinstance(event, yaml.CollectionStartEvent):
             depth += 1
             if depth > MAX_DEPTH:
@@ -82,6 +83,40 @@ def _depth_issue(text: str, name: str) -> InputIssue | None:
         elif isinstance(event, yaml.CollectionEndEvent):
             depth -= 1
     return None
+
+
+def _compose(text: str, name: str) -> tuple[yaml.Node | None, object]:
+    """The document's node tree and data, each bound checked before the step it protects
+    (module docstring); PyYAML's own errors propagate as ``YAMLError``."""
+    loader = BoundedLoader(text)
+    try:
+        deep = _depth_issue(loader, name)
+    except (ValueError, OverflowError) as e:  # PyYAML's scanner on odd escapes ("\U9999...")
+        raise _unreadable(name, loader, e) from None
+    finally:
+        loader.dispose()
+    if deep is not None:
+        raise InputFileError([deep])
+    loader = BoundedLoader(text)
+    try:
+        node = loader.get_single_node()
+        bomb = _expanded_size_issue(node, name) if node is not None else None
+        if bomb is not None:
+            raise InputFileError([bomb])
+        dups = duplicate_key_issues(node, name) if node is not None else []
+        if dups:
+            raise InputFileError(dups)
+        data = loader.construct_document(node) if node is not None else None
+    except (ValueError, OverflowError) as e:
+        raise _unreadable(name, loader, e) from None
+    finally:
+        loader.dispose()
+    return node, data
+
+
+def _unreadable(name: str, loader: BoundedLoader, e: Exception) -> InputFileError:
+    line = loader.get_mark().line + 1
+    return InputFileError([InputIssue(name, line, "", f"YAML error: cannot read this ({e})")])
 
 
 def _expanded_size_issue(root: yaml.Node, name: str) -> InputIssue | None:
@@ -188,21 +223,7 @@ def read_yaml(path: Path | str) -> tuple[object, dict, str]:
         line = text[: text.index("\x00")].count("\n") + 1
         raise InputFileError([InputIssue(name, line, "", "binary data in a YAML file")])
     try:
-        deep = _depth_issue(text, name)
-        if deep is not None:
-            raise InputFileError([deep])
-        loader = BoundedLoader(text)
-        try:
-            node = loader.get_single_node()
-            bomb = _expanded_size_issue(node, name) if node is not None else None
-            if bomb is not None:
-                raise InputFileError([bomb])
-            dups = duplicate_key_issues(node, name) if node is not None else []
-            if dups:
-                raise InputFileError(dups)
-            data = loader.construct_document(node) if node is not None else None
-        finally:
-            loader.dispose()
+        node, data = _compose(text, name)
     except yaml.constructor.ConstructorError as e:
         line = e.problem_mark.line + 1 if e.problem_mark else None
         raise InputFileError([InputIssue(name, line, "", str(e.problem))]) from None
