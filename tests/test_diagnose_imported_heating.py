@@ -1,6 +1,6 @@
 """A self-heated campaign measured elsewhere: CSV files with a temperature column, imported with
-no options, diagnosed. ``thermal_drift`` references the campaign's first temperature (not each
-entry's), so the gain of a hot entry is compared with a cool one.
+no options (the temperature column is kept as ``temperature``, degC), diagnosed: thermal_drift
+is named first with its coefficient, and the model is left at the noise floor.
 
 The bench: +0.5 %/K of strain per kelvin, the stack heating by up to 20 K over the campaign
 (loss factor 0.1, 0.04 J/K, 300 K/W)."""

@@ -224,3 +224,24 @@ def test_field_saturation_is_odd_monotone_and_loses_s_at_full_scale():
     top = eff.params[0].hi
     assert np.all(np.diff(eff.apply(v, ctx, {"s": top})) > 0)
     np.testing.assert_array_equal(eff.apply(v, ctx, {"s": 0.0}), v)
+
+
+def test_thermal_drift_compares_entries_against_one_campaign_reference():
+    """Unchained entries held at different temperatures (an oven series: each entry isothermal)
+    show a gain difference only against a common reference: every sequence of a campaign gets
+    the first record's first temperature (labrig.analysis.simulate.build_sequences)."""
+    from labrig.analysis.records import Record
+    from labrig.analysis.simulate import build_sequences
+
+    v = _sine(1.0, 100.0, 2000)
+    recs = [
+        Record("cool", FS, None, v, 10 * v, {"temperature": np.full(v.size, 25.0)}),
+        Record("hot", FS, None, v, 10 * v, {"temperature": np.full(v.size, 45.0)}),
+    ]
+    seqs = build_sequences(recs, chain=False)
+    assert [s.context.temperature_ref for s in seqs] == [25.0, 25.0]
+    eff = library(temperature=True)["thermal_drift"]
+    x = 10 * v
+    cool, hot = (eff.apply(x, s.context, {"k_per_K": 0.005}) for s in seqs)
+    np.testing.assert_allclose(cool, x)
+    np.testing.assert_allclose(hot, x * (1 + 0.005 * 20.0))
