@@ -225,6 +225,7 @@ class SimSequence:
             aux.get("amplifier_voltage"),
             aux.get("temperature"),
             self.temperature_ref if "temperature" in aux else None,
+            hold=self.hold,
         )
 
 

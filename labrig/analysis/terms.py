@@ -8,7 +8,9 @@ comparable sizes, with sequentially thresholded least squares (STLSQ, the optimi
 Terms
 -----
 Each :class:`Term` is computed over one simulated sequence (a record, or a chained run with its
-rests) from the driving voltage ``V`` (V), its rate ``dV/dt`` (V/s, central differences), the
+rests) from the voltage acting on the actuator ``V`` (V; with a zero-order hold the sample held
+over the interval that ends at each sample time, :meth:`~labrig.model.effects.Context.
+acting_voltage`), its rate ``dV/dt`` (V/s, central differences), the
 model's strain ``S`` (ue) and, when every record has one, the temperature ``T`` (degC). Its
 values are divided by its *scale* (its size at full scale, :class:`TermScales`), so a
 coefficient is the strain (ue) the term adds at full scale, whatever the term's unit:
@@ -95,10 +97,11 @@ Fn = Callable[[NDArray, Context], NDArray]
 
 
 def dvdt(ctx: Context) -> NDArray[np.float64]:
-    """``dV/dt`` (V/s) of the context's voltage by central differences (cached)."""
+    """``dV/dt`` (V/s) of the voltage acting on the actuator (:meth:`Context.acting_voltage`)
+    by central differences (cached)."""
     return ctx.cached(
         ("dvdt",),
-        lambda: np.gradient(ctx.v) * ctx.rate_hz if ctx.n > 1 else np.zeros(ctx.n),
+        lambda: np.gradient(ctx.acting_voltage()) * ctx.rate_hz if ctx.n > 1 else np.zeros(ctx.n),
     )
 
 
@@ -186,7 +189,7 @@ def term_library(scales: TermScales) -> dict[str, Term]:
     hard = "a gain rising at high field (hardening; not in the effect library)"
     terms = [
         Term("V", "V", "V", vr, "a direct feed-through of the voltage (a gain)", "",
-             lambda s, c: c.v),
+             lambda s, c: c.acting_voltage()),
         Term("dVdt", "dV/dt", "V/s", rr, "a time shift of the response (a delay or a lag)",
              "time_delay", lambda s, c: dvdt(c)),
         Term("absdVdt", "|dV/dt|", "V/s", rr, "a rate-dependent offset", "",
@@ -196,12 +199,14 @@ def term_library(scales: TermScales) -> dict[str, Term]:
         Term("S_absS", "S|S|", "ue^2", sr * sr, hard, "",
              lambda s, c: s * np.abs(s), lambda s, c: 2.0 * np.abs(s), sat),
         Term("V2", "V^2", "V^2", vr * vr, "electrostriction (even in V)", "quadratic_term",
-             lambda s, c: c.v * c.v),
-        Term("V3", "V^3", "V^3", vr**3, hard, "", lambda s, c: c.v**3, None, sat),
+             lambda s, c: c.acting_voltage() ** 2),
+        Term("V3", "V^3", "V^3", vr**3, hard, "", lambda s, c: c.acting_voltage() ** 3, None,
+             sat),
         Term("absdVdt_S", "|dV/dt| S", "V ue/s", rr * sr, "Bouc-Wen-like rate memory", "",
              lambda s, c: np.abs(dvdt(c)) * s, lambda s, c: np.abs(dvdt(c))),
         Term("V_S", "V S", "V ue", vr * sr, "a field-dependent gain (quadratic in V)",
-             "quadratic_term", lambda s, c: c.v * s, lambda s, c: c.v),
+             "quadratic_term", lambda s, c: c.acting_voltage() * s,
+             lambda s, c: c.acting_voltage()),
     ]  # fmt: skip
     if scales.t_ref_C is not None and scales.dt_ref_K is not None:
         t0, dt = scales.t_ref_C, scales.dt_ref_K

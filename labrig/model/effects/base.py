@@ -52,6 +52,18 @@ class Context:
     #: so a gain that follows the temperature compares a hot entry with a cool one
     temperature_ref: float | None = None
     cache: dict = field(default_factory=dict, repr=False)
+    #: how the voltage behaves between samples: ``"zoh"`` (a DAQ holds each sample over the
+    #: interval after it) or ``"linear"`` (a measured, smooth voltage)
+    hold: str = "zoh"
+
+    def acting_voltage(self) -> NDArray[np.float64]:
+        """The voltage acting on the actuator at each sample time (V): with a zero-order hold the
+        sample before (held over the interval that ends there; the first sample at rest), else
+        the sample itself. The convention of the model's relaxors (their output at ``t_n`` sees
+        the inputs before ``t_n``)."""
+        if self.hold != "zoh" or self.n < 2:
+            return self.v
+        return self.cached(("acting_voltage",), lambda: np.r_[self.v[0], self.v[:-1]])
 
     @property
     def n(self) -> int:
