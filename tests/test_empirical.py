@@ -44,10 +44,12 @@ def test_apply_adds_each_term_at_its_full_scale() -> None:
     ctx, s = context()
     eff = empirical_effect(["V3", "S_absS", "absdVdt_S"], SCALES)
     p = {"c_V3": -50.0, "c_S_absS": 20.0, "c_absdVdt_S": 7.0}
-    dv = np.gradient(ctx.v) * ctx.rate_hz
+    # a DAQ-held (zero-order hold) drive acts at t_n with the sample held since t_(n-1)
+    v_act = np.r_[ctx.v[0], ctx.v[:-1]]
+    dv = np.gradient(v_act) * ctx.rate_hz
     want = (
         s
-        - 50.0 * (ctx.v / 100.0) ** 3
+        - 50.0 * (v_act / 100.0) ** 3
         + 20.0 * s * np.abs(s) / 1000.0**2
         + 7.0 * np.abs(dv) * s / (2e4 * 1000.0)
     )

@@ -141,7 +141,7 @@ def test_terms_against_their_formulas() -> None:
     assert scales.strain_ref_ue == pytest.approx(np.ptp(s))
     lib = term_library(scales)
     assert tuple(lib) == TERM_KEYS
-    ctx = Context(rate, v, {"a": slice(0, v.size)}, None, temp)
+    ctx = Context(rate, v, {"a": slice(0, v.size)}, None, temp, hold="linear")  # smooth V
     dv = 60 * 2 * np.pi * 3 * np.cos(2 * np.pi * 3 * t)  # analytic dV/dt
     inner = slice(1, -1)  # central differences: O(h^2) = 2e-4 relative inside
     expected = {
