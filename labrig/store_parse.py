@@ -182,6 +182,13 @@ class _Reader:
             return [x.decode("utf-8", "replace") if isinstance(x, bytes) else str(x) for x in v]
         return v
 
+    def label(self, obj: h5py.HLObject, name: str) -> str:
+        """A text attribute (``units``, ``long_name``): text or absent."""
+        value = self.attr(obj, name)
+        if not isinstance(value, str):
+            raise self.error(f"expected text, found {type(value).__name__}")
+        return value
+
     def status(self, group: h5py.Group) -> str:
         """A run's or an entry's status: one of :data:`~labrig.store_format.STATUSES`."""
         status = self.text(group, "status", "unknown")
@@ -238,8 +245,8 @@ class _Reader:
         for cname, ds in data_g.items():
             if not isinstance(ds, h5py.Dataset):
                 continue
-            units[cname] = str(self.attr(ds, "units"))
-            long_names[cname] = str(self.attr(ds, "long_name"))
+            units[cname] = self.label(ds, "units")
+            long_names[cname] = self.label(ds, "long_name")
             data[cname] = self.samples(name, cname, ds, load)
             shapes[cname] = ds.shape
         signal = str(self.attr(data_g, "signal", "strain"))
@@ -248,9 +255,14 @@ class _Reader:
             raise self.error("no time channel")
         if signal not in shapes:
             raise self.error(f"@signal names {signal!r}, which is not one of its channels")
+        status = self.status(g)
         lengths = {c: shape[0] for c, shape in shapes.items()}
         n = min(lengths.values(), default=0)
         trimmed = any(m != n for m in lengths.values())
+        if trimmed and status == "complete":  # only a writer killed mid-block leaves this
+            raise self.error(
+                f"the channels of a complete entry differ in length: {lengths}", f"{name}/data"
+            )
         if trimmed:
             data = {k: v[:n] for k, v in data.items()} if load else data
             shapes = {k: (n,) for k in shapes}
@@ -261,7 +273,6 @@ class _Reader:
         if rate is None or not (math.isfinite(rate) and rate > 0):
             found = "nothing" if rate is None else f"{rate:.6g}"
             raise self.error(f"expected a positive sample rate (Hz), found {found}")
-        status = self.status(g)
         entry = RunEntry(
             name=name,
             index=index,
@@ -281,14 +292,17 @@ class _Reader:
         return entry, shapes
 
     def check_seals(self) -> None:
-        """Every seal in the file matches what its object holds
-        (:func:`labrig.store_format.seal_of`); files written before the seals have none."""
+        """Every object's attributes and values read back, and every seal in the file matches
+        what its object holds (:func:`labrig.store_format.seal_of`); files written before the
+        seals have none."""
 
         def check(obj: h5py.Group | h5py.Dataset) -> None:
             allow_cpu(size_bytes=obj.size * obj.dtype.itemsize if _contiguous(obj) else 0)
             self.where = (obj.name or "").strip("/")
-            stored = obj.attrs.get(SEAL_ATTR)
-            if stored is not None and stored != seal_of(obj):
+            # every attribute and value is read, sealed or not: damage raises here (a lookup
+            # by name, attrs.get, would take an attribute it cannot find as absent)
+            crc = seal_of(obj)
+            if SEAL_ATTR in set(obj.attrs) and obj.attrs[SEAL_ATTR] != crc:
                 raise self.error(
                     "does not match its checksum (@labrig_crc32): the file's metadata is "
                     "damaged, or another program changed it"
