@@ -1,0 +1,95 @@
+"""The acceptance rule of ``labrig diagnose`` at its boundaries (labrig.analysis.diagnose.accept).
+
+Constructed inputs, no fitting: a candidate's held-out NRMSE per fold against the current
+model's. The rule (docs/diagnose.md): a mean held-out gain of at least 15 %; better (by more
+than 2 %) in at least two folds and in at least twice as many folds as worse; no physical
+parameter on a bound or on the wrong side of its null value. Each boundary is checked from both
+sides: 14 % refused and 16 % accepted; 1 win refused and 2 accepted; 2 wins to 1 loss accepted,
+3 to 2 refused, 4 to 2 accepted; a fold changed by 1.9 % is neither better nor worse, by 2.1 %
+it is.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from labrig.analysis.diagnose import FOLD_TOL, MIN_GAIN, accept
+from labrig.analysis.extended import FitOutcome
+from labrig.model.effects import library
+
+EFFECT = library()["time_delay"]  # one parameter, delay_s: > 0 is physical, bounded
+
+
+def outcome(delay_s: float = 1e-3, at_bound: bool = False) -> FitOutcome:
+    return FitOutcome(
+        base={},
+        effects={EFFECT.name: {"delay_s": delay_s}},
+        sd={EFFECT.name: {"delay_s": delay_s / 10}},
+        base_sd={},
+        per_entry={},
+        cost=0.0,
+        at_bound={EFFECT.name: ["delay_s"]} if at_bound else {},
+    )
+
+
+def folds(ratios: list[float], ref: float = 2.0) -> tuple[dict[str, float], dict[str, float]]:
+    """Held-out NRMSE per fold: the candidate's ``ratio * ref`` against ``ref``."""
+    names = [f"e{k}" for k in range(len(ratios))]
+    return {n: r * ref for n, r in zip(names, ratios, strict=True)}, dict.fromkeys(names, ref)
+
+
+def test_the_constants_are_the_documented_ones():
+    assert MIN_GAIN == 0.15 and FOLD_TOL == 0.02
+
+
+@pytest.mark.parametrize(("gain", "accepted"), [(0.14, False), (0.16, True)])
+def test_the_minimum_gain(gain: float, accepted: bool):
+    held, ref = folds([1 - gain] * 5)  # every fold better by the same share
+    a = accept(EFFECT, outcome(), held, ref)
+    assert a.gain == pytest.approx(gain)
+    assert (a.wins, a.losses) == (5, 0)
+    assert a.accepted is accepted
+    assert any("below the 15 % minimum" in r for r in a.reasons) is not accepted
+
+
+@pytest.mark.parametrize(
+    ("wins", "losses", "others", "accepted"),
+    [
+        (1, 0, 4, False),  # better in one fold only
+        (2, 0, 3, True),  # at least two
+        (2, 1, 2, True),  # twice as many better as worse
+        (3, 2, 0, False),  # fewer than twice as many
+        (4, 2, 0, True),
+        (3, 1, 1, True),
+    ],
+)
+def test_the_fold_counts(wins: int, losses: int, others: int, accepted: bool):
+    # winners much better so that the mean gain stays above the minimum on both sides
+    held, ref = folds([0.1] * wins + [1.1] * losses + [1.0] * others)
+    a = accept(EFFECT, outcome(), held, ref)
+    assert a.gain >= 0.16, "the gain must not be what decides here"
+    assert (a.wins, a.losses) == (wins, losses)
+    assert a.accepted is accepted, a.reasons
+    assert any("folds" in r for r in a.reasons) is not accepted
+
+
+@pytest.mark.parametrize(("change", "counted"), [(0.019, False), (0.021, True)])
+def test_the_fold_tolerance(change: float, counted: bool):
+    held, ref = folds([0.5, 0.5, 1 + change, 1 - change])
+    a = accept(EFFECT, outcome(), held, ref)
+    assert (a.wins, a.losses) == ((3, 1) if counted else (2, 0))
+
+
+@pytest.mark.parametrize(
+    ("fo", "reason"),
+    [
+        (outcome(at_bound=True), "ends on its bound"),
+        (outcome(delay_s=-1e-3), "unphysical sign"),
+        (outcome(delay_s=0.0), "unphysical sign"),
+    ],
+)
+def test_unphysical_parameters_refuse_an_otherwise_winning_effect(fo: FitOutcome, reason: str):
+    held, ref = folds([0.5] * 5)
+    a = accept(EFFECT, fo, held, ref)
+    assert not a.accepted and any(reason in r for r in a.reasons), a.reasons
+    assert accept(EFFECT, outcome(), held, ref).accepted
