@@ -1,0 +1,183 @@
+"""Diagnosis on the drives and effects other labs' data show, beside the data-driven peers
+(issue "close the loop on measured data from other labs").
+
+Writes a markdown report on stdout (``python benchmarks/study_real_drives.py [table|nulls|effects|
+timing|all]``); the figures are copied into docs/diagnose.md and the README.
+
+- ``table``: held-out NRMSE per dataset: ours before and after diagnose's effects (diagnose's
+  scoring: each left-out entry's second half, in % of its span), Prandtl-Ishlinskii, Bouc-Wen and
+  SINDy (leave-one-entry-out over whole entries), and the noise floor; the real micromanipulator
+  records (each cut into 4 parts, as ``labrig diagnose`` does with one entry) and every simulated
+  campaign of the study.
+- ``nulls``: no effect on the bench, 10 seeds on each drive (short sines, bipolar, biased growing
+  envelopes): how often diagnose adds something.
+- ``effects``: each bench effect on its drives, seeds 1-3: the first effect named, the held-out
+  ratio, the fitted size against the bench's.
+- ``timing``: diagnose on the real 14 155-sample record and on a 50 000-sample simulated record.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from labrig.analysis.baselines import fit_baseline  # noqa: E402
+from labrig.analysis.diagnose import diagnose, split_entries  # noqa: E402
+from labrig.analysis.diagnose.campaign import study_campaign  # noqa: E402
+from labrig.analysis.records import Record  # noqa: E402
+
+REAL = ROOT / "tests" / "data" / "real" / "yan9a-micromanipulator"
+
+#: the simulated datasets of the table: (label, study case, drive)
+SIMULATED = (
+    ("paper truth, no effect, short sines", "none", "short"),
+    ("paper truth, no effect, bipolar +-150 V", "none", "bipolar"),
+    ("paper truth, no effect, biased envelopes", "none", "biased"),
+    ("field saturation, bipolar", "field_saturation", "bipolar"),
+    ("field saturation, biased envelopes", "field_saturation", "biased"),
+    ("slow viscoelastic mode, short sines", "viscoelastic_creep", "short"),
+    ("gain rising with field (cubic, outside the library), bipolar", "cubic_term", "bipolar"),
+)
+
+
+def real_records(name: str) -> list[Record]:
+    """A real record as ``labrig import FILE --voltage 1 --strain 5 --rate-hz 200`` reads it,
+    cut into 4 chained parts (what diagnose does with one entry)."""
+    data = np.loadtxt(REAL / name)
+    rec = Record.from_arrays(name.split(".")[0], 200.0, data[:, 0], data[:, 4], hold="linear")
+    rec.meta["kind"] = "import"
+    return split_entries([rec], 4)
+
+
+def peers(records: list[Record], offset: bool) -> dict[str, float | None]:
+    out = {}
+    for kind in ("prandtl_ishlinskii", "bouc_wen", "sindy"):
+        try:
+            res = fit_baseline(records, kind, heldout=True, chain=True, offset=offset)
+            out[kind] = res.heldout_nrmse_pct
+        except Exception as exc:  # a peer that fails is reported, not fatal
+            print(f"    ({kind} failed: {exc})", file=sys.stderr)
+            out[kind] = None
+    return out
+
+
+def row(label: str, records: list[Record], offset: bool) -> str:
+    t0 = time.perf_counter()
+    d = diagnose(records, offset=offset)
+    dt = time.perf_counter() - t0
+    p = peers(records, offset)
+    added = ", ".join(e["effect"] for e in d.effects_added) or "none"
+
+    def f(x: float | None) -> str:
+        return "-" if x is None else f"{x:.3g}"
+
+    return (
+        f"| {label} | {f(d.before['heldout_nrmse_pct'])} | {f(d.after['heldout_nrmse_pct'])} "
+        f"({added}) | {f(p['prandtl_ishlinskii'])} | {f(p['bouc_wen'])} | {f(p['sindy'])} | "
+        f"{f(d.evidence_before.floor_pct)} | {d.classification} | {dt:.0f} s |"
+    )
+
+
+def table() -> None:
+    print("## Held-out NRMSE (%) per dataset\n")
+    print(
+        "| dataset | ours | ours + effects found | PI | Bouc-Wen | SINDy | noise floor | verdict "
+        "| diagnose time |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name in ("Model_Vi_Do.dat", "Test_Vi_Do_Di.dat"):
+        print(row(f"real: {name} (4 parts)", real_records(name), offset=True), flush=True)
+    for label, case, drive in SIMULATED:
+        print(row(label + " (seed 1)", study_campaign(case, 1, drive=drive), False), flush=True)
+
+
+def nulls(seeds: range = range(1, 11)) -> None:
+    print("\n## Nulls: no effect on the bench\n")
+    print("| drive | seeds | something added | what | time per seed |")
+    print("|---|---|---|---|---|")
+    for drive in ("short", "bipolar", "biased"):
+        added, t0 = [], time.perf_counter()
+        for s in seeds:
+            d = diagnose(study_campaign("none", s, drive=drive))
+            if d.effects_added:
+                added.append(f"seed {s}: " + ", ".join(e["effect"] for e in d.effects_added))
+        per = (time.perf_counter() - t0) / len(seeds)
+        what = "; ".join(added) or "-"
+        print(f"| {drive} | {len(seeds)} | {len(added)} | {what} | {per:.0f} s |", flush=True)
+
+
+#: bench size of each case, and the fitted parameter that measures it
+SIZES = {
+    "field_saturation": ("s", 0.0500, "gain loss at full scale"),
+    "viscoelastic_creep": ("c", 0.06, "fraction c"),
+}
+
+
+def effects(seeds: range = range(1, 4)) -> None:
+    print("\n## Effects: named first, held-out, size\n")
+    print("| case | drive | seed | first added | held-out before -> after | fitted (bench) |")
+    print("|---|---|---|---|---|---|")
+    for case in ("field_saturation", "viscoelastic_creep", "cubic_term"):
+        drives = {"field_saturation": ("bipolar", "biased"), "cubic_term": ("bipolar",)}
+        for drive in drives.get(case, ("short",)):
+            for s in seeds:
+                d = diagnose(study_campaign(case, s, drive=drive))
+                first = d.effects_added[0] if d.effects_added else None
+                size = "-"
+                if first and case in SIZES and first["effect"] == case:
+                    key, bench, _what = SIZES[case]
+                    size = f"{first['params'][key]:.4g} ({bench:g})"
+                if first and case == "cubic_term":
+                    size = f"V^3 {first['params'].get('c_V3', float('nan')):.3g} ue"
+                print(
+                    f"| {case} | {drive} | {s} | {first['effect'] if first else 'none'} | "
+                    f"{d.before['heldout_nrmse_pct']:.3g} -> {d.after['heldout_nrmse_pct']:.3g} | "
+                    f"{size} |",
+                    flush=True,
+                )
+
+
+def timing() -> None:
+    print("\n## Diagnose time on long records\n")
+    data = np.loadtxt(REAL / "Test_Vi_Do_Di.dat")
+    rec = Record.from_arrays("Test_Vi_Do_Di", 200.0, data[:, 0], data[:, 4], hold="linear")
+    rec.meta["kind"] = "import"
+    t0 = time.perf_counter()
+    diagnose(split_entries([rec], 4), offset=True)
+    print(f"- real record, {rec.n} samples: {time.perf_counter() - t0:.0f} s")
+    recs = study_campaign("none", 1, drive="biased")
+    v = np.concatenate([r.voltage_V for r in recs])
+    s = np.concatenate([r.strain_ue for r in recs])
+    n = 50_000
+    reps = -(-n // v.size)
+    long = Record.from_arrays("long", recs[0].rate_hz, np.tile(v, reps)[:n], np.tile(s, reps)[:n])
+    t0 = time.perf_counter()
+    diagnose(split_entries([long], 4))
+    print(f"- simulated single record, {n} samples: {time.perf_counter() - t0:.0f} s")
+
+
+def main() -> None:
+    what = sys.argv[1] if len(sys.argv) > 1 else "all"
+    load = os.getloadavg()
+    print(
+        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"Python {platform.python_version()}; {datetime.now(UTC):%Y-%m-%d %H:%M} UTC; "
+        f"load average at start {load[0]:.1f}\n"
+    )
+    for name, fn in (("table", table), ("nulls", nulls), ("effects", effects), ("timing", timing)):
+        if what in (name, "all"):
+            fn()
+    print(f"\nload average at end {os.getloadavg()[0]:.1f}")
+
+
+if __name__ == "__main__":
+    main()
