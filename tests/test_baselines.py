@@ -158,7 +158,7 @@ def test_bouc_wen_fit_recovers_its_parameters() -> None:
 
 
 def test_unknown_kind_is_refused() -> None:
-    assert KINDS == ("prandtl_ishlinskii", "bouc_wen")
+    assert KINDS == ("prandtl_ishlinskii", "bouc_wen", "sindy")
     with pytest.raises(ValueError, match="kind"):
         fit_baseline(records_from(BW.predict), "preisach")
 

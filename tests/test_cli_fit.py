@@ -138,7 +138,15 @@ def test_fit_with_an_effect_the_rig_does_not_have(small_run: Path, tmp_path: Pat
     assert e["effect"] == "viscoelastic_creep" and "tau" in e["description"]
     assert abs(e["params"]["c"]) < 0.01, e
     check_must_show(j["params"], j["nrmse_pct"], small_run)
-    assert j["nrmse_pct"] <= j["without_effects"]["nrmse_pct"] + 1e-6
+    # the fit minimises the sum of squared per-entry NRMSE, not their mean: the nested model
+    # (the effect's null is the base) is never worse in that objective
+    base = json.loads(invoke("fit", small_run, "--no-heldout", "--json").stdout)
+
+    def objective(per_entry: dict[str, float]) -> float:
+        return float(np.sum(np.square(list(per_entry.values()))))
+
+    assert objective(j["per_entry"]) <= objective(base["per_entry"]) * (1 + 1e-9)
+    assert j["nrmse_pct"] == pytest.approx(j["without_effects"]["nrmse_pct"], abs=1e-3)
     assert j["heldout_nrmse_pct"] is None
 
 
