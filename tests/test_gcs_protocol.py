@@ -253,3 +253,21 @@ def test_connections_are_bounded(gcs):
     finally:
         for c in extra:
             c.close()
+
+
+def test_a_line_without_end_is_bounded(gcs):
+    """A client that sends more than MAX_LINE bytes without a line end is disconnected (the
+    simulator does not buffer without limit); the other clients keep working."""
+    from labrig.drivers.sim.gcs_server import MAX_LINE
+
+    srv, s, _ = gcs
+    c = socket.create_connection(("127.0.0.1", srv.port), timeout=2.0)
+    with c:
+        try:
+            for _ in range(2 * MAX_LINE // 1024 + 2):
+                c.sendall(b"X" * 1024)
+            reply = c.recv(100)
+        except (ConnectionResetError, BrokenPipeError):
+            reply = b""
+        assert reply == b""  # closed by the server
+    assert ask(s, b"ERR?\n") == b"0\n"

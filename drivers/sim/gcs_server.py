@@ -10,7 +10,8 @@ Limits: VMI/VMA start at the rig's voltage limits and can be set only within the
 beyond), so ``SVA`` beyond the rig's range is refused from the first command. Numbers are plain
 decimals (``[+-]digits[.digits][e[+-]digits]``; ``1_0``, ``nan`` or ``0x10`` are syntax errors,
 error 1). At most ``MAX_CONNECTIONS`` clients are served at once; a further client is
-disconnected at once.
+disconnected at once, and so is a client that sends more than ``MAX_LINE`` bytes without a
+line end.
 
 Faults for tests (:meth:`GCSServer.inject`), each for the next ``count`` matching commands:
 ``drop`` (close the connection after the command arrives, without executing it: a link dropped
@@ -32,6 +33,9 @@ log = logging.getLogger("labrig.sim.gcs")
 
 #: clients served at once (one thread each); a further connection is closed at once
 MAX_CONNECTIONS = 16
+#: the longest command line (bytes) the simulator buffers; a client sending more without a line
+#: end is disconnected (no GCS command is longer than a few dozen bytes)
+MAX_LINE = 4096
 #: a GCS number: plain decimal with an optional exponent (no underscores, nan, inf or hex)
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 
@@ -187,6 +191,9 @@ class GCSServer:
                 if not data:
                     return
                 buf += data
+                if b"\n" not in buf and len(buf) > MAX_LINE:
+                    log.warning("dropping a client: %d bytes without a line end", len(buf))
+                    return
                 while b"\n" in buf:
                     line, buf = buf.split(b"\n", 1)
                     self.received.append(line + b"\n")
