@@ -1,25 +1,71 @@
-"""NI-DAQmx backend for the DAQ role (optional: needs ``pip install nidaqmx`` and NI's driver).
+"""NI-DAQmx backend for the DAQ role (optional: ``pip install 'labrig[nidaq]'`` for the
+``nidaqmx`` package, and NI's NI-DAQmx driver from ni.com, the runtime the package calls).
 
 One AO channel drives the amplifier's analog input; the AI channels are sampled on the AO
 sample clock (``/<dev>/ao/SampleClock``), so AI sample ``n`` is taken with AO sample ``n``. The
 whole waveform is written to the device buffer (finite generation) and the AI is read back block
 by block. ``stop()`` aborts both tasks and writes 0 V with an on-demand AO task.
 
-Not exercised in CI (no hardware); the simulated DAQ (:mod:`labrig.drivers.sim.daq`) has the same
-methods. Channel names map to physical channels in the rig file (``ai: {gauge: Dev1/ai0, ...}``).
+Opening the driver checks what the rig needs before anything is energised: the package (its
+absence: exit 3, "pip install 'labrig[nidaq]'"), NI's runtime (the package installed without
+it raises ``DaqNotFoundError`` on its first call) and the device named in the rig file (among
+the devices the runtime lists). Every failure of the package, whatever its class, becomes a
+:class:`~labrig.errors.DeviceError` naming the device and the operation, in words
+(:func:`failure_text`).
+
+Not exercised on hardware in CI; tests/data/fake_nidaqmx stands in for the package (its calls
+fail as without NI's runtime or without the device). The simulated DAQ
+(:mod:`labrig.drivers.sim.daq`) has the same methods. Channel names map to physical channels in
+the rig file (``ai: {gauge: ai0, ...}`` on ``device: Dev1``).
 """
 
 from __future__ import annotations
 
 import contextlib
 from collections.abc import Iterator
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
 from labrig.errors import DeviceError
-from labrig.instruments import AcquiredBlock, DriverContext, DriverInfo
+from labrig.instruments import AcquiredBlock, DriverContext, DriverInfo, Package
+
+#: the package the driver needs and how to install it
+PACKAGE = Package("nidaqmx", "nidaqmx", "pip install 'labrig[nidaq]'")
+#: what the package itself needs
+RUNTIME = "NI's NI-DAQmx driver from ni.com (checked when the device is opened)"
+
+
+def import_nidaqmx(device: str, operation: str) -> ModuleType:
+    """The ``nidaqmx`` package, or a :class:`DeviceError` saying how to install it."""
+    try:
+        import nidaqmx
+        import nidaqmx.constants
+        import nidaqmx.errors
+        import nidaqmx.system
+    except ImportError as e:
+        raise DeviceError(
+            device, operation, f"the nidaqmx package is not installed ({PACKAGE.install})"
+        ) from e
+    return nidaqmx
+
+
+def failure_text(e: Exception, nidaqmx: ModuleType) -> str:
+    """What went wrong, in words (no exception class names): NI's runtime missing, else the
+    driver's message (its first line) with its DAQmx status code."""
+    errors = getattr(nidaqmx, "errors", None)
+    not_found = getattr(errors, "DaqNotFoundError", ())
+    if not_found and isinstance(e, not_found):
+        return (
+            "NI's NI-DAQmx runtime is not installed (the nidaqmx package is, but it needs NI's "
+            "driver: install NI-DAQmx from ni.com)"
+        )
+    lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+    head = lines[0] if lines else "the NI-DAQmx driver failed without a message"
+    code = getattr(e, "error_code", None)
+    return f"{head} (DAQmx status {code})" if code is not None else head
 
 
 class NIDAQmxSettings(BaseModel):
@@ -44,29 +90,39 @@ class NIDAQmx:
     """The :class:`~labrig.instruments.DAQ` role on an NI multifunction device."""
 
     def __init__(self, settings: NIDAQmxSettings):
-        try:
-            import nidaqmx  # noqa: F401
-        except ImportError as e:
-            raise DeviceError(
-                "daq (NI-DAQmx)",
-                "open",
-                "the nidaqmx package is not installed (pip install nidaqmx)",
-            ) from e
         self.s = settings
         self.device = f"daq (NI-DAQmx {settings.device})"
+        self.nidaqmx = import_nidaqmx(self.device, "open")
         self.rate_hz = 1000.0
         self.channels = list(settings.ai)
         self._tasks: list = []
         self._ao_last = 0.0  # AO volts last output (sample of the latest block read, or static)
+        self.check_device()
+
+    def _error(self, operation: str, e: Exception) -> DeviceError:
+        return DeviceError(self.device, operation, failure_text(e, self.nidaqmx))
+
+    def check_device(self) -> None:
+        """The runtime answers and lists the rig file's device (else a DeviceError)."""
+        try:
+            names = [d.name for d in self.nidaqmx.system.System.local().devices]
+        except Exception as e:  # any failure of the package is the device's
+            raise self._error("open", e) from None
+        if self.s.device not in names:
+            found = ", ".join(names) or "none"
+            raise DeviceError(
+                self.device, "open", f"device {self.s.device!r} not found (devices: {found})"
+            )
 
     def _phys(self, ch: str) -> str:
         return f"{self.s.device}/{ch}"
 
     def identify(self) -> str:
-        import nidaqmx.system
-
-        dev = nidaqmx.system.Device(self.s.device)
-        return f"NI {dev.product_type}, SN {dev.dev_serial_num:X}"
+        try:
+            dev = self.nidaqmx.system.Device(self.s.device)
+            return f"NI {dev.product_type}, SN {dev.dev_serial_num:X}"
+        except Exception as e:
+            raise self._error("identify", e) from None
 
     def ai_channel_names(self) -> list[str]:
         return list(self.s.ai)
@@ -84,8 +140,9 @@ class NIDAQmx:
         return self._play(ao, int(block_size))
 
     def _play(self, ao: NDArray, block_size: int) -> Iterator[AcquiredBlock]:
-        import nidaqmx
-        from nidaqmx.constants import AcquisitionType, TerminalConfiguration
+        nidaqmx = self.nidaqmx
+        AcquisitionType = nidaqmx.constants.AcquisitionType
+        TerminalConfiguration = nidaqmx.constants.TerminalConfiguration
 
         n = ao.size
         try:
@@ -121,8 +178,8 @@ class NIDAQmx:
                 ).reshape(len(self.channels), m)
                 self._ao_last = float(ao[start + m - 1])
                 yield AcquiredBlock(start, dict(zip(self.channels, data, strict=True)))
-        except nidaqmx.DaqError as e:
-            raise DeviceError(self.device, "play", str(e)) from e
+        except Exception as e:  # any failure of the package is the device's
+            raise self._error("play", e) from None
         finally:
             self._close_tasks()
 
@@ -135,17 +192,15 @@ class NIDAQmx:
         self._tasks = []
 
     def write_static(self, volts: float) -> None:
-        import nidaqmx
-
         if abs(volts) > self.s.ao_range_V:
             raise DeviceError(self.device, "write_static", f"{volts} V outside the output range")
         try:
-            with nidaqmx.Task() as t:
+            with self.nidaqmx.Task() as t:
                 r = self.s.ao_range_V
                 t.ao_channels.add_ao_voltage_chan(self._phys(self.s.ao), min_val=-r, max_val=r)
                 t.write(float(volts), auto_start=True)
-        except nidaqmx.DaqError as e:
-            raise DeviceError(self.device, "write_static", str(e)) from e
+        except Exception as e:  # any failure of the package is the device's
+            raise self._error(f"write {volts:g} V", e) from None
         self._ao_last = float(volts)
 
     def ao_level(self) -> float:
@@ -177,5 +232,7 @@ DRIVER = DriverInfo(
     role="daq",
     settings=NIDAQmxSettings,
     create=create,
-    summary="NI-DAQmx multifunction device (optional extra: nidaqmx); AI on the AO clock",
+    summary="NI-DAQmx multifunction device; AI on the AO clock",
+    packages=(PACKAGE,),
+    runtime=RUNTIME,
 )

@@ -35,7 +35,7 @@ import serial
 from pydantic import BaseModel, ConfigDict, Field
 
 from labrig.errors import DeviceError
-from labrig.instruments import AmplifierStatus, DriverContext, DriverInfo
+from labrig.instruments import AmplifierStatus, DriverContext, DriverInfo, Package
 
 log = logging.getLogger("labrig.drivers.pi_e503")
 
@@ -335,4 +335,5 @@ DRIVER = DriverInfo(
     settings=E503Settings,
     create=create,
     summary="PI E-503 amplifier, E-517-style GCS 2.0 interface over a pyserial URL",
+    packages=(Package("serial", "pyserial", "pip install pyserial"),),
 )

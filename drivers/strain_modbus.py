@@ -22,7 +22,7 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
 from labrig.errors import DeviceError
-from labrig.instruments import ConditionerStatus, DriverContext, DriverInfo
+from labrig.instruments import ConditionerStatus, DriverContext, DriverInfo, Package
 
 log = logging.getLogger("labrig.drivers.strain_modbus")
 # pymodbus logs frame dumps on every failure; ours are reported as DeviceError instead
@@ -258,4 +258,5 @@ DRIVER = DriverInfo(
     settings=StrainModbusSettings,
     create=create,
     summary="strain-gauge conditioner (DH3840-class), labrig register map, Modbus TCP or RTU",
+    packages=(Package("pymodbus", "pymodbus", "pip install 'pymodbus>=3.16,<3.17'"),),
 )

@@ -192,14 +192,29 @@ class DriverContext:
 
 
 @dataclass(frozen=True)
+class Package:
+    """A Python package a driver needs: the name it is imported as, the distribution that
+    provides it (what ``pip`` installs) and the command that installs it."""
+
+    module: str
+    distribution: str
+    install: str
+
+
+@dataclass(frozen=True)
 class DriverInfo:
-    """A driver as registered under the ``labrig.drivers`` entry-point group."""
+    """A driver as registered under the ``labrig.drivers`` entry-point group: its role, the
+    pydantic model of its rig-file section, its factory, a one-line summary, the Python
+    packages it needs and, in words, what else it needs that only opening it can check (a
+    vendor's runtime)."""
 
     name: str
     role: Role
     settings: type[BaseModel]
     create: Callable[[Any, DriverContext], Any]
     summary: str = ""
+    packages: tuple[Package, ...] = ()
+    runtime: str = ""
 
 
 # -- the rig ------------------------------------------------------------------------------------
@@ -235,6 +250,7 @@ class Rig:
     sim: Any = None
     closers: list[Callable[[], None]] = field(default_factory=list)
     _closed: bool = field(default=False, repr=False)
+    _said: set[str] = field(default_factory=set, repr=False)
 
     # -- calibrations --------------------------------------------------------------------------
     def volts_to_ao(self, v_actuator: ArrayLike) -> NDArray[np.float64]:
@@ -319,7 +335,7 @@ class Rig:
             if math.isfinite(v):
                 return v, "amplifier read-back"
         except Exception as e:
-            log.error("ramp: cannot read the amplifier's output voltage: %s", e)
+            self._error_once(f"ramp: cannot read the amplifier's output voltage: {e}")
         level = getattr(self.daq, "ao_level", None)
         if callable(level):
             try:
@@ -327,7 +343,7 @@ class Rig:
                 if math.isfinite(v):
                     return v, "DAQ output level"
             except Exception as e:
-                log.error("ramp: cannot read the DAQ's output level: %s", e)
+                self._error_once(f"ramp: cannot read the DAQ's output level: {e}")
         return 0.0, "unknown"
 
     def ramp_to_zero(self) -> RampRecord:
@@ -339,7 +355,7 @@ class Rig:
             try:
                 abort()
             except Exception as e:
-                log.error("ramp: ending the DAQ playback failed: %s", e)
+                self._error_once(f"ramp: ending the DAQ playback failed: {e}")
         start, source = self.output_now()
         rec = RampRecord(start, source, ramp_rate_V_per_s(self.limits))
         try:
@@ -347,7 +363,7 @@ class Rig:
             rec.path = "daq"
         except Exception as e:
             rec.errors.append(f"DAQ: {e}")
-            log.error("ramp: the DAQ failed (%s); ramping the amplifier's setpoint", e)
+            self._error_once(f"ramp: the DAQ failed ({e}); ramping the amplifier's setpoint")
             self._ramp_setpoint(rec)
         self._hold_zero()
         return rec
@@ -365,7 +381,7 @@ class Rig:
         try:
             start = float(self.amplifier.read_voltage())
         except Exception as e:
-            log.error("ramp: no read-back before the setpoint ramp: %s", e)
+            self._error_once(f"ramp: no read-back before the setpoint ramp: {e}")
         if rec.volts:  # the record keeps the ramp that brought the output down
             rec.errors.append(f"DAQ ramp stopped after {len(rec.volts)} writes at {start:g} V")
             rec.times_s.clear()
@@ -376,17 +392,24 @@ class Rig:
             rec.path = "amplifier setpoint"
         except Exception as e:
             rec.errors.append(f"amplifier: {e}")
-            log.error("ramp: the amplifier setpoint ramp failed: %s", e)
+            self._error_once(f"ramp: the amplifier setpoint ramp failed: {e}")
+
+    def _error_once(self, message: str) -> None:
+        """Log ``message`` as an error unless this rig logged it already (a failing device
+        fails the same way at every ramp: the run's end and the close)."""
+        if message not in self._said:
+            self._said.add(message)
+            log.error("%s", message)
 
     def _hold_zero(self) -> None:
         try:
             self.daq.stop()
         except Exception as e:
-            log.error("safe_zero: DAQ stop failed: %s", e)
+            self._error_once(f"safe_zero: DAQ stop failed: {e}")
         try:
             self.amplifier.safe_zero()
         except Exception as e:  # safe_zero must not raise, but be sure
-            log.error("safe_zero: amplifier safe_zero failed: %s", e)
+            self._error_once(f"safe_zero: amplifier safe_zero failed: {e}")
 
     def safe_zero(self) -> None:
         """Ramp to 0 V and hold it there (:meth:`ramp_to_zero`); best effort, never raises."""

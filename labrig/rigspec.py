@@ -36,7 +36,7 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 
-from labrig.errors import InputFileError, InputIssue
+from labrig.errors import DeviceError, InputFileError, InputIssue
 from labrig.instruments import DriverInfo
 from labrig.limits import RigLimits
 from labrig.yamlio import issues_from_validation, line_index, read_yaml
@@ -51,6 +51,14 @@ BUILTIN_DRIVERS = {
     "pi_e503": "labrig.drivers.pi_e503:DRIVER",
     "strain_modbus": "labrig.drivers.strain_modbus:DRIVER",
     "nidaqmx": "labrig.drivers.ni_daqmx:DRIVER",
+}
+
+#: how to install the packages the built-in drivers import when they are loaded (a driver whose
+#: package is missing cannot say so itself: its module does not import)
+INSTALL_HINTS = {
+    "serial": "pip install pyserial",
+    "pymodbus": "pip install 'pymodbus>=3.16,<3.17'",
+    "nidaqmx": "pip install 'labrig[nidaq]'",
 }
 
 DEFAULT_RIG_NAME = "<built-in default rig: experiments/rigs/sim.yaml>"
@@ -180,8 +188,22 @@ def driver_names() -> dict[str, str]:
     return names
 
 
+def missing_package(role: str, driver: str, e: ModuleNotFoundError) -> DeviceError:
+    """The device fault (exit 3) of a driver whose module needs a package that is not
+    installed: the role and driver, the operation (loading it), the package and how to
+    install it."""
+    module = (e.name or "").split(".")[0] or "?"
+    hint = INSTALL_HINTS.get(module, f"install the package that provides {module!r}")
+    return DeviceError(
+        f"{role} ({driver} driver)",
+        "load driver",
+        f"the Python package {module!r} is not installed ({hint})",
+    )
+
+
 def get_driver(name: str, names: dict[str, str] | None = None) -> DriverInfo:
-    """The :class:`DriverInfo` registered as ``name`` (KeyError if there is none)."""
+    """The :class:`DriverInfo` registered as ``name`` (KeyError if there is none; the
+    ``ModuleNotFoundError`` of a package its module needs)."""
     ref = (names or driver_names()).get(name)
     if ref is None:
         raise KeyError(name)
@@ -271,6 +293,8 @@ def load_rig(path: Path | str | None = None) -> RigSpec:
                 )
             )
             continue
+        except ModuleNotFoundError as e:  # a package the driver needs: a device fault, exit 3
+            raise missing_package(role, drv, e) from None
         except Exception as e:
             issues.append(InputIssue(name, line, f"{role}.driver", f"driver {drv!r} fails: {e}"))
             continue
