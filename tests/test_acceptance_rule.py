@@ -93,3 +93,14 @@ def test_unphysical_parameters_refuse_an_otherwise_winning_effect(fo: FitOutcome
     a = accept(EFFECT, fo, held, ref)
     assert not a.accepted and any(reason in r for r in a.reasons), a.reasons
     assert accept(EFFECT, outcome(), held, ref).accepted
+
+
+def test_a_gain_within_rounding_is_no_gain():
+    """On noise-free data the model reproduces the strain to 1e-13 %: a 'gain' from 1e-12 % to
+    5e-13 % is 50 % relative and would pass the relative rule; it is rounding, not physics."""
+    held, ref = folds([0.5] * 6, ref=1e-12)
+    verdict = accept(library()["time_delay"], outcome(), held, ref)
+    assert not verdict.accepted
+    assert any("numerical precision" in r for r in verdict.reasons)
+    held, ref = folds([0.5] * 6, ref=2e-3)  # 1e-3 % is a real gain
+    assert accept(library()["time_delay"], outcome(), held, ref).accepted

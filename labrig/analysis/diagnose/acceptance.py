@@ -4,7 +4,7 @@ A candidate is added when, on held-out data (leave-one-entry-out, scored on the 
 each held-out entry):
 
 - the mean held-out NRMSE drops by at least :data:`MIN_GAIN` (15 %) relative to the current
-  model;
+  model, and by more than rounding (:data:`NUMERICAL_PCT`, for noise-free data);
 - it is better (by more than :data:`FOLD_TOL`, 2 %) in at least two folds and in at least twice
   as many folds as it is worse;
 - none of its physical parameters ends on a bound or on the wrong side of its null value.
@@ -22,12 +22,14 @@ import numpy as np
 from labrig.analysis.extended import FitOutcome
 from labrig.model.effects import Effect
 
-__all__ = ["FOLD_TOL", "MIN_GAIN", "Acceptance", "Candidate", "accept"]
+__all__ = ["FOLD_TOL", "MIN_GAIN", "NUMERICAL_PCT", "Acceptance", "Candidate", "accept"]
 
 #: minimum relative held-out gain for an effect to be added
 MIN_GAIN = 0.15
 #: a fold counts as better / worse when it changes by more than this (relative)
 FOLD_TOL = 0.02
+#: a held-out gain smaller than this (NRMSE %) is rounding, not a gain (noise-free data)
+NUMERICAL_PCT = 1e-6
 
 
 @dataclass
@@ -60,7 +62,12 @@ def accept(
     wins = int(np.sum(c < b * (1 - FOLD_TOL)))
     losses = int(np.sum(c > b * (1 + FOLD_TOL)))
     reasons, suspicious = [], []
-    if gain < min_gain:
+    if float(b.mean()) - float(c.mean()) < NUMERICAL_PCT:
+        reasons.append(
+            f"held-out gain below numerical precision ({NUMERICAL_PCT:g} % of NRMSE): the "
+            "model already reproduces the data"
+        )
+    elif gain < min_gain:
         reasons.append(
             f"held-out gain {100 * gain:.0f} % is below the {100 * min_gain:.0f} % minimum"
         )
