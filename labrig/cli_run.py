@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import typer
@@ -17,9 +18,22 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
+from labrig.cli.common import plural
 from labrig.interrupts import Interrupted, interrupt_once
+from labrig.metadata import RunMetadata
 from labrig.protocol.plan import Plan
 from labrig.runner import RunOutcome, execute, preflight
+
+
+@dataclass
+class RunExtras:
+    """What ``labrig run`` does besides the run itself: metadata, a resume, the live view."""
+
+    metadata: RunMetadata | None = None
+    resume: Path | None = None
+    live: bool = False
+    live_port: int = 0
+    params: Path | None = None
 
 
 def run_with_progress(
@@ -29,9 +43,20 @@ def run_with_progress(
     seed: int | None,
     realtime: bool,
     overwrite: bool,
+    extras: RunExtras | None = None,
 ) -> int:
     console = Console(stderr=True)
+    extras = extras or RunExtras()
     plan, rig_path = preflight(protocol, rig)
+    if extras.resume is not None:
+        if out is not None or overwrite:
+            typer.echo(
+                "error: --resume continues FILE in place: give no --out or --overwrite", err=True
+            )
+            return 2
+        if not extras.resume.is_file():
+            typer.echo(f"error: --resume {extras.resume}: run file not found", err=True)
+            return 2
     if out is not None and out.is_dir():
         example = out / "run.h5"
         typer.echo(
@@ -43,26 +68,47 @@ def run_with_progress(
         return 2
     where = escape(f"rig {rig_path}") if rig_path else "the simulated rig"
     console.print(
-        f"[bold]{escape(plan.name)}[/]: {len(plan.steps)} entries, "
+        f"[bold]{escape(plan.name)}[/]: {plural(len(plan.steps), 'entry')}, "
         f"{plan.total_duration_s:.1f} s of protocol time on {where}"
     )
+    live = _start_live(console, extras)
     # SIGINT, SIGTERM, SIGHUP and SIGQUIT stop the run once (ramp to 0 V, file closed);
     # repeats, and a first signal after the run ended, are ignored until the outcome is printed
     with interrupt_once() as guard:
+        outcome = None
         try:
-            outcome = _execute_with_bar(console, plan, rig_path, out, seed, realtime, overwrite)
+            outcome = _execute_with_bar(
+                console, plan, rig_path, out, seed, realtime, overwrite, extras, live
+            )
         except Interrupted as e:  # before the run file existed: nothing energised or written
             _say(console, f"[red]stopped before the run began[/]: {escape(e.reason)}")
             return e.exit_code
+        finally:
+            if live is not None:
+                with guard.defer():
+                    live.end(outcome.path if outcome is not None else None)
         with guard.defer():
             _report(console, outcome)
     return outcome.exit_code
 
 
+def _start_live(console: Console, extras: RunExtras):
+    """The live view's server (``--live``), started before the run: its address is printed
+    before anything is energised; a bad ``--params`` or a port in use is bad input (exit 2)."""
+    if not extras.live:
+        return None
+    from labrig.live.launch import LiveProcess
+
+    live = LiveProcess(extras.live_port, extras.params)
+    console.print(f"live view: {live.url}")
+    return live
+
+
 def _report(console: Console, outcome: RunOutcome) -> None:
     """The outcome in one line and the run file's path (the last line of stdout)."""
     if outcome.status == "complete":
-        _say(console, f"run complete: {len(outcome.entries)} entries (seed {outcome.seed})")
+        done = plural(len(outcome.entries), "entry")
+        _say(console, f"run complete: {done} (seed {outcome.seed})")
     else:
         _say(console, f"[red]run {outcome.status}[/]: {escape(outcome.reason)}")
     try:
@@ -98,6 +144,8 @@ def _execute_with_bar(
     seed: int | None,
     realtime: bool,
     overwrite: bool,
+    extras: RunExtras,
+    live,
 ) -> RunOutcome:
     """``execute`` under a progress bar; a terminal that disappears during the run (the bar's
     last redraw fails), or a stop signal while the bar closes, does not lose the outcome."""
@@ -112,16 +160,26 @@ def _execute_with_bar(
             transient=False,
         ) as bar:
             task = bar.add_task("", total=plan.total_duration_s, step="")
+            started: list[float] = []
 
             def progress(k: int, n: int, name: str, frac: float, left: float) -> None:
+                if not started:  # a resume plays only the entries it has left
+                    started.append(left)
+                    bar.update(task, total=left)
                 bar.update(
                     task,
-                    completed=plan.total_duration_s - left,
+                    completed=started[0] - left,
                     step=f"step {k + 1}/{n}",
                     description=escape(name),
                 )
 
-            done.append(execute(plan, rig_path, out, seed, realtime, progress, overwrite))
+            done.append(
+                execute(
+                    plan, rig_path, out, seed, realtime, progress, overwrite,
+                    metadata=extras.metadata, resume=extras.resume,
+                    on_file=live.follow if live is not None else None,
+                )
+            )  # fmt: skip
     except OSError:
         if not done:
             raise

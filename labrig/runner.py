@@ -24,6 +24,8 @@ second signal never interrupts the ramp or the closing of the file.
 from __future__ import annotations
 
 import contextlib
+import os
+import shutil
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -36,6 +38,7 @@ from labrig.errors import DeviceError, InputFileError, InputIssue, LabrigError
 from labrig.instruments import Rig
 from labrig.interrupts import SignalGuard, exit_code_for, interrupt_once, reason_for, signum_of
 from labrig.limits import RigLimits
+from labrig.metadata import RunMetadata, combine
 from labrig.outputs import Staged, check_outputs, stage
 from labrig.protocol.check import load_plan
 from labrig.protocol.plan import Plan, PlannedStep
@@ -44,6 +47,7 @@ from labrig.ramp import RAMP_CURRENT_FRACTION, RampRecord
 from labrig.rigfile import load_rig, open_rig
 from labrig.run_record import record_end
 from labrig.store import Channel, RunWriter, estimate_run_bytes, free_bytes
+from labrig.store_resume import ResumePlan, check_resume, check_same_rig, record_resume
 from labrig.store_space import RESERVE_BYTES
 
 #: acquisition block length (s): the most a crash can lose
@@ -218,6 +222,7 @@ def _close_playback(gen) -> None:
 def _rest(
     rig: Rig,
     step: PlannedStep,
+    writer: RunWriter,
     progress: ProgressFn | None,
     k: int,
     n_steps: int,
@@ -240,6 +245,7 @@ def _rest(
     gen = rig.daq.play(np.zeros(n), block)
     try:
         for j, blk in enumerate(gen, start=1):
+            writer.heartbeat()  # the file is still being written (labrig.store_writing)
             if progress:
                 frac = (blk.start + len(blk)) / n
                 progress(k, n_steps, where, frac, left - frac * step.rest_after_s)
@@ -258,10 +264,20 @@ def execute(
     realtime: bool = False,
     progress: ProgressFn | None = None,
     overwrite: bool = False,
+    *,
+    metadata: RunMetadata | None = None,
+    resume: Path | None = None,
+    on_file: Callable[[Path], None] | None = None,
 ) -> RunOutcome:
     """Run a preflighted plan on the rig and log it; returns the outcome (never raises for
     device faults, a full disk or stop signals once the run file exists: those are recorded
     in the file and in the outcome).
+
+    ``metadata``: the options' metadata (``--meta``, ``--operator``, ``--sample``), put over
+    the protocol's ``metadata:`` (:mod:`labrig.metadata`). ``resume``: continue that run file
+    with the planned entries it does not hold complete (:mod:`labrig.store_resume`; ``out`` is
+    then ignored). ``on_file(path)`` is called once the run file exists, with the path being
+    written (a copy beside the target with ``overwrite`` or ``resume``).
 
     Called from the main thread, SIGINT, SIGTERM, SIGHUP and SIGQUIT stop the run once:
     repeats are ignored until the output is at 0 V and the file is closed (see
@@ -269,15 +285,46 @@ def execute(
     propagates as :class:`labrig.interrupts.Interrupted`, and bad input as
     :class:`~labrig.errors.InputFileError` (nothing energised).
     """
+    job = _Job(plan, rig_path, realtime, progress, overwrite, on_file)
+    if resume is not None:
+        job.resume = check_resume(resume, plan.text, [s.name for s in plan.steps], plan.file)
+        job.metadata = (metadata or RunMetadata()).over(RunMetadata(job.resume.metadata))
+        job.options = metadata or RunMetadata()
+        out = resume
+    else:
+        job.metadata = combine(getattr(plan.protocol, "metadata", None), metadata)
     with interrupt_once() as guard:
         out = out or default_out_path(plan)
         rig = open_rig(rig_path, seed)  # a stop signal here: open_rig closes what it opened
         try:
             with guard.defer():
-                return _run_on(rig, plan, rig_path, out, realtime, progress, overwrite, guard)
+                return _run_on(rig, job, out, guard)
         finally:
             with guard.defer():
                 rig.close()
+
+
+@dataclass
+class _Job:
+    """What :func:`execute` was asked to do."""
+
+    plan: Plan
+    rig_path: Path | None
+    realtime: bool
+    progress: ProgressFn | None
+    overwrite: bool
+    on_file: Callable[[Path], None] | None
+    metadata: RunMetadata = field(default_factory=RunMetadata)
+    resume: ResumePlan | None = None
+    #: the options given to a resume (recorded with it)
+    options: RunMetadata = field(default_factory=RunMetadata)
+
+    @property
+    def steps(self) -> list[PlannedStep]:
+        """The steps to play: all, or a resume's remaining ones."""
+        if self.resume is None:
+            return list(self.plan.steps)
+        return [self.plan.step(n) for n in self.resume.to_run]
 
 
 @dataclass
@@ -297,14 +344,17 @@ def _prepare(rig: Rig, plan: Plan, realtime: bool) -> _Setup:
     return _Setup(ai, chans)
 
 
-def _check_disk(plan: Plan, rig: Rig, out: Path, chans: list[Channel]) -> None:
+def _check_disk(job: _Job, rig: Rig, out: Path, chans: list[Channel]) -> None:
     """Refuse (exit 2, before anything is energised) a run whose file cannot fit on the disk
-    that holds ``out``: the estimated size plus the reserve against the free space."""
+    that holds ``out``: the estimated size plus the reserve (plus the copy a resume writes)
+    against the free space."""
     entries = [
         (s.n_samples, s.rate_hz, 1 + len(chans) + len(getattr(s, "aux", None) or {}))
-        for s in plan.steps
+        for s in job.steps
     ]
-    need = estimate_run_bytes(entries, len(plan.text) + len(rig.rig_text)) + RESERVE_BYTES
+    need = estimate_run_bytes(entries, len(job.plan.text) + len(rig.rig_text)) + RESERVE_BYTES
+    if job.resume is not None:
+        need += job.resume.size_bytes
     free = free_bytes(out)  # with --overwrite the old file stays until the new one is complete
     if free < need:
         samples = sum(e[0] for e in entries)
@@ -322,68 +372,104 @@ def _check_disk(plan: Plan, rig: Rig, out: Path, chans: list[Channel]) -> None:
         )
 
 
+def instrument_description(rig: Rig) -> dict:
+    """The rig's description with every device's identity (``*IDN?``, the conditioner's
+    identity registers, the DAQ's name), asked of a device whose description lacks it."""
+    desc = rig.describe()
+    for role in ("daq", "amplifier", "conditioner"):
+        dev = desc.get(role)
+        if isinstance(dev, dict) and not dev.get("identity"):
+            try:
+                dev["identity"] = str(getattr(rig, role).identify())
+            except Exception as e:  # describing must never stop a run
+                dev["identity_error"] = str(e) or type(e).__name__
+    return desc
+
+
+def _cannot_create(out: Path, e: OSError, option: str = "--out") -> InputFileError:
+    why = e.strerror or str(e)
+    return InputFileError(
+        [InputIssue(str(out), None, option, f"cannot create the run file: {why}")]
+    )
+
+
 def _open_writer(
-    plan: Plan,
-    rig: Rig,
-    rig_path: Path | None,
-    out: Path,
-    overwrite: bool,
-    chans: list[Channel],
-    staged: Staged | None,
+    job: _Job, rig: Rig, out: Path, chans: list[Channel], staged: Staged | None
 ) -> RunWriter:
     """The run file, once its place exists and has room for it (InputFileError otherwise);
     written at ``staged``'s place for ``out`` when it replaces an existing file."""
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        why = e.strerror or str(e)
-        raise InputFileError(
-            [InputIssue(str(out), None, "--out", f"cannot create the run file: {why}")]
-        ) from None
-    _check_disk(plan, rig, out, chans)
+        raise _cannot_create(out, e) from None
+    _check_disk(job, rig, out, chans)
+    plan = job.plan
     try:
         return RunWriter(
             staged.path(out) if staged is not None else out,
             plan.text,
             rig.rig_text,
-            rig.describe(),
+            instrument_description(rig),
             rig.seed,
             __version__,
             protocol_name=plan.name,
             protocol_file=str(plan.path),
-            rig_file=str(rig_path or ""),
+            rig_file=str(job.rig_path or ""),
             planned_entries=[s.name for s in plan.steps],
-            overwrite=overwrite,
+            overwrite=job.overwrite,
             reserve_bytes=RESERVE_BYTES,
+            metadata=job.metadata,
         )
     except FileExistsError:
         raise
     except OSError as e:  # unwritable --out (a directory, no permission, no such place)
-        why = e.strerror or str(e)
-        raise InputFileError(
-            [InputIssue(str(out), None, "--out", f"cannot create the run file: {why}")]
-        ) from None
+        raise _cannot_create(out, e) from None
 
 
-def _run_on(
-    rig: Rig,
-    plan: Plan,
-    rig_path: Path | None,
-    out: Path,
-    realtime: bool,
-    progress: ProgressFn | None,
-    overwrite: bool,
-    guard: SignalGuard,
-) -> RunOutcome:
-    """The run proper, with stop signals deferred (checked between blocks)."""
-    setup = _prepare(rig, plan, realtime)
-    guard.check()  # a stop signal during the setup: nothing written, nothing energised
-    check_outputs([out], overwrite=overwrite)  # a directory; an existing file (no --overwrite)
-    # --overwrite: the new file is written beside the old one and replaces it once closed
-    staged = stage([out], overwrite=True) if overwrite and out.exists() else None
+def _reopen_writer(
+    job: _Job, rig: Rig, out: Path, chans: list[Channel], staged: Staged
+) -> RunWriter:
+    """A resume's writer: ``out`` copied beside itself, the copy reopened and the resume
+    recorded in it (:mod:`labrig.store_resume`)."""
+    assert job.resume is not None
+    _check_disk(job, rig, out, chans)
+    copy = staged.path(out)
     try:
-        writer = _open_writer(plan, rig, rig_path, out, overwrite, setup.chans, staged)
-        outcome = _record(rig, plan, writer, setup, out, progress, guard)
+        shutil.copyfile(out, copy)
+        writer = RunWriter.reopen(copy, job.metadata, reserve_bytes=RESERVE_BYTES)
+    except OSError as e:
+        raise _cannot_create(out, e, "--resume") from None
+    try:
+        desc = instrument_description(rig)
+        record_resume(
+            writer.root, job.resume, rig.seed, __version__, os.getpid(), desc, job.options
+        )
+        writer.seal_and_flush()
+    except BaseException:
+        writer.close()
+        raise
+    return writer
+
+
+def _run_on(rig: Rig, job: _Job, out: Path, guard: SignalGuard) -> RunOutcome:
+    """The run proper, with stop signals deferred (checked between blocks)."""
+    setup = _prepare(rig, job.plan, job.realtime)
+    guard.check()  # a stop signal during the setup: nothing written, nothing energised
+    if job.resume is not None:
+        check_same_rig(job.resume, rig.rig_text, str(job.rig_path or ""))
+        staged: Staged | None = stage([out], overwrite=True, option="--resume")
+    else:
+        check_outputs([out], overwrite=job.overwrite)  # a directory; an existing file
+        # --overwrite: the new file is written beside the old one and replaces it once closed
+        staged = stage([out], overwrite=True) if job.overwrite and out.exists() else None
+    try:
+        if job.resume is not None and staged is not None:
+            writer = _reopen_writer(job, rig, out, setup.chans, staged)
+        else:
+            writer = _open_writer(job, rig, out, setup.chans, staged)
+        if job.on_file is not None:
+            job.on_file(writer.path)
+        outcome = _record(rig, job, writer, setup, out, guard)
     except BaseException:
         if staged is not None:
             staged.discard()
@@ -408,30 +494,25 @@ def _replace(staged: Staged, outcome: RunOutcome) -> None:
 
 
 def _record(
-    rig: Rig,
-    plan: Plan,
-    writer: RunWriter,
-    setup: _Setup,
-    out: Path,
-    progress: ProgressFn | None,
-    guard: SignalGuard,
+    rig: Rig, job: _Job, writer: RunWriter, setup: _Setup, out: Path, guard: SignalGuard
 ) -> RunOutcome:
     """Energise, play every step into ``writer``, and end the same way on every path
     (module docstring)."""
     outcome = RunOutcome(path=out, status="running", seed=rig.seed)
+    steps = job.steps
     with writer:
         try:
             guard.check()
             rig.amplifier.enable()
-            left = plan.total_duration_s
-            n = len(plan.steps)
-            for k, step in enumerate(plan.steps):
+            left = sum(s.duration_s + s.rest_after_s for s in steps)
+            n = len(steps)
+            for k, step in enumerate(steps):
                 guard.check()
-                _run_step(rig, writer, step, setup.ai, setup.chans, progress, k, n, left, guard)
+                _run_step(rig, writer, step, setup.ai, setup.chans, job.progress, k, n, left, guard)
                 outcome.entries.append(step.name)
                 left -= step.duration_s
                 if step.rest_after_s > 0:
-                    _rest(rig, step, progress, k, n, left, guard)
+                    _rest(rig, step, writer, job.progress, k, n, left, guard)
                     left -= step.rest_after_s
             status, reason, code = "complete", "", 0
         except KeyboardInterrupt as e:

@@ -26,15 +26,62 @@ FORMAT_VERSION = 1
 STATUSES = ("running", "complete", "aborted", "failed")
 FINAL_STATUSES = ("complete", "aborted", "failed")
 
-#: units and long names of the standard channels (``time`` is always present)
+#: what labrig calls microstrain in memory (``RunEntry.units``, CSV headers, the analysis)
+MICROSTRAIN = "ue"
+#: microstrain as new run files store it: a unit text that pint (every version) and UDUNITS-2
+#: read out of the box (micrometre per metre); older files stored ``ue``, which neither reads
+#: (pint takes it for micro-elementary-charge)
+STORED_MICROSTRAIN = "um/m"
+#: the spellings of microstrain a reader accepts as :data:`MICROSTRAIN`
+MICROSTRAIN_SPELLINGS = frozenset(
+    {"ue", "um/m", "µm/m", "μm/m", "microstrain", "µε", "με", "ustrain", "ppm strain"}
+)
+
+#: units (as in memory) and long names of the standard channels (``time`` is always present)
 STANDARD_CHANNELS: dict[str, tuple[str, str]] = {
     "time": ("s", "time since the start of the entry"),
     "command_voltage": ("V", "commanded actuator voltage"),
     "amplifier_voltage": ("V", "amplifier output voltage (monitor)"),
     "gauge_raw": ("V", "strain-gauge conditioner output"),
-    "strain": ("ue", "strain"),
+    "strain": (MICROSTRAIN, "strain"),
     "temperature": ("degC", "temperature"),
 }
+
+
+def stored_units(units: str) -> str:
+    """The unit text written to a file for ``units`` as labrig names it in memory: microstrain
+    (``ue``) as :data:`STORED_MICROSTRAIN`, also inside a ratio (``mV/ue`` -> ``mV/(um/m)``);
+    anything else unchanged."""
+    if units in MICROSTRAIN_SPELLINGS:
+        return STORED_MICROSTRAIN
+    parts = units.split("/")
+    if len(parts) == 2 and MICROSTRAIN in parts:
+        return "/".join(f"({STORED_MICROSTRAIN})" if p == MICROSTRAIN else p for p in parts)
+    return units
+
+
+def memory_units(units: str) -> str:
+    """The unit as labrig names it in memory for a unit text read from a file: every spelling
+    of microstrain (:data:`MICROSTRAIN_SPELLINGS`, older files' ``ue`` included) is ``ue``,
+    also inside a ratio written by :func:`stored_units`; anything else unchanged."""
+    if units.strip() in MICROSTRAIN_SPELLINGS:
+        return MICROSTRAIN
+    return units.replace(f"({STORED_MICROSTRAIN})", MICROSTRAIN)
+
+
+def stored_long_name(units: str, long_name: str) -> str:
+    """A channel's long name as written: microstrain named in words (its stored unit text,
+    ``um/m``, is exact but does not say *strain*)."""
+    if units in MICROSTRAIN_SPELLINGS and "microstrain" not in long_name:
+        return f"{long_name} (microstrain)"
+    return long_name
+
+
+def memory_long_name(long_name: str) -> str:
+    """A long name as read: without the ``(microstrain)`` :func:`stored_long_name` adds, so old
+    and new files read the same."""
+    return long_name.removesuffix(" (microstrain)")
+
 
 #: HDF5 variable-length UTF-8 string type of every text dataset
 STRING_DTYPE = h5py.string_dtype()

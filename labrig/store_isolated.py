@@ -75,13 +75,17 @@ def wall_limit_s(size_bytes: int) -> float:
     return BASE_WALL_S + size_bytes / WALL_BYTES_PER_S
 
 
-def call_isolated(fn: Callable[..., Any], *args: Any, size_bytes: int) -> Any:
+def call_isolated(
+    fn: Callable[..., Any], *args: Any, size_bytes: int, wall_s: float | None = None
+) -> Any:
     """``fn(*args)`` in a forked child (module docstring), with the limits for a file of
-    ``size_bytes``. Returns what ``fn`` returns, re-raises what it raises (when it can be
-    pickled; otherwise :class:`IsolatedCallError`), and raises :class:`IsolatedReadError` when the
-    child is stopped by a limit or dies."""
+    ``size_bytes`` (``wall_s``: a shorter wall-clock limit, for a reader that would rather
+    skip a read than wait: the live view). Returns what ``fn`` returns, re-raises what it
+    raises (when it can be pickled; otherwise :class:`IsolatedCallError`), and raises
+    :class:`IsolatedReadError` when the child is stopped by a limit or dies."""
     if not hasattr(os, "fork"):
         return fn(*args)
+    wall = wall_limit_s(size_bytes) if wall_s is None else wall_s
     read_fd, write_fd = os.pipe()
     pid = os.fork()
     if pid == 0:  # the child: never returns
@@ -90,11 +94,9 @@ def call_isolated(fn: Callable[..., Any], *args: Any, size_bytes: int) -> Any:
     os.close(write_fd)
     reaped = False
     try:
-        payload = _receive(read_fd, time.monotonic() + wall_limit_s(size_bytes))
+        payload = _receive(read_fd, time.monotonic() + wall)
         if payload is None:
-            raise IsolatedReadError(
-                f"reading did not finish within {wall_limit_s(size_bytes):.0f} s (stopped)"
-            )
+            raise IsolatedReadError(f"reading did not finish within {wall:.3g} s (stopped)")
         _, status = os.waitpid(pid, 0)
         reaped = True
         if not payload:

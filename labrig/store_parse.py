@@ -15,7 +15,7 @@ import numpy as np
 
 from labrig.errors import InputFileError, InputIssue
 from labrig.jsonsafe import loads_bounded
-from labrig.store_format import SEAL_ATTR, STATUSES, seal_of
+from labrig.store_format import SEAL_ATTR, STATUSES, memory_long_name, memory_units, seal_of
 from labrig.store_isolated import allow_cpu
 
 
@@ -38,6 +38,9 @@ class RunEntry:
     signal: str = "strain"
     #: True when the channels had different lengths (writer killed mid-block) and were trimmed
     trimmed: bool = False
+    #: the entry's NXuser and NXsample fields (``{"name": "alice"}``; empty when absent)
+    user: dict[str, str] = field(default_factory=dict)
+    sample: dict[str, str] = field(default_factory=dict)
 
     def __getitem__(self, channel_name: str) -> np.ndarray:
         return self.data[channel_name]
@@ -88,6 +91,17 @@ class RunFile:
     entries: dict[str, RunEntry] = field(default_factory=dict)
     #: the exit code ``labrig run`` ended with (None: not recorded, an older or unfinished file)
     exit_code: int | None = None
+    #: ``/run/metadata``: every key of the protocol's ``metadata:`` and of ``--meta``
+    metadata: dict[str, str | int | float | bool] = field(default_factory=dict)
+    #: every ``labrig run --resume`` of the file, oldest first (``/run/resumes``)
+    resumes: list[dict] = field(default_factory=list)
+    #: the process that writes (or wrote) the file: its id (None: not recorded) and host
+    writer_pid: int | None = None
+    writer_host: str = ""
+    #: the writer is writing the file now (set by :func:`labrig.store_reader.read_run`:
+    #: :mod:`labrig.store_writing`); ``writer`` says who and when it last wrote
+    being_written: bool = False
+    writer: str = ""
 
     def __getitem__(self, name: str) -> RunEntry:
         return self.entries[name]
@@ -100,7 +114,8 @@ class RunFile:
 
     @property
     def incomplete(self) -> bool:
-        """True when the writer never finished the run (crash, kill, still running)."""
+        """True when the writer has not finished the run (crash, kill, or still writing it:
+        :attr:`being_written`)."""
         return self.status == "running"
 
 
@@ -114,6 +129,10 @@ MIN_CLAIM_BYTES = 1 << 20
 def _contiguous(obj: h5py.HLObject) -> bool:
     """A dataset whose value its seal covers (not chunked samples)."""
     return isinstance(obj, h5py.Dataset) and obj.chunks is None
+
+
+def _int_or_none(value: object) -> int | None:
+    return int(value) if isinstance(value, int | np.integer) else None
 
 
 def _first_line(e: BaseException) -> str:
@@ -245,8 +264,8 @@ class _Reader:
         for cname, ds in data_g.items():
             if not isinstance(ds, h5py.Dataset):
                 continue
-            units[cname] = self.label(ds, "units")
-            long_names[cname] = self.label(ds, "long_name")
+            units[cname] = memory_units(self.label(ds, "units"))
+            long_names[cname] = memory_long_name(self.label(ds, "long_name"))
             data[cname] = self.samples(name, cname, ds, load)
             shapes[cname] = ds.shape
         signal = str(self.attr(data_g, "signal", "strain"))
@@ -288,8 +307,48 @@ class _Reader:
             long_names=long_names,
             signal=signal,
             trimmed=trimmed,
+            user={k: str(v) for k, v in self.scalars(g, "user", "NXuser").items()},
+            sample={k: str(v) for k, v in self.scalars(g, "sample", "NXsample").items()},
         )
         return entry, shapes
+
+    def scalars(self, parent: h5py.Group, name: str, nx_class: str) -> dict:
+        """The scalar datasets of the group ``parent/name`` of class ``nx_class`` (text,
+        numbers, booleans) by name; empty when there is no such group."""
+        g = parent.get(name)
+        if not isinstance(g, h5py.Group) or self.attr(g, "NX_class") != nx_class:
+            return {}
+        out: dict[str, str | int | float | bool] = {}
+        for key, ds in g.items():
+            if not isinstance(ds, h5py.Dataset) or ds.shape != ():
+                continue
+            self.at(g, key)
+            v = ds[()]
+            if isinstance(v, bytes):
+                out[key] = v.decode("utf-8", "replace")
+            elif isinstance(v, np.bool_ | bool):
+                out[key] = bool(v)
+            elif isinstance(v, np.integer):
+                out[key] = int(v)
+            elif isinstance(v, np.floating):
+                out[key] = float(v)
+        return out
+
+    def resumes(self, run: h5py.Group) -> list[dict]:
+        """``/run/resumes``: one record per resume, in order (:mod:`labrig.store_resume`)."""
+        g = run.get("resumes")
+        if not isinstance(g, h5py.Group):
+            return []
+        out = []
+        for name in g:
+            record = dict(self.scalars(g, name, "NXcollection"))
+            for key in ("entries", "superseded"):
+                if key in record:
+                    kind = dict if key == "superseded" else list
+                    record[key] = self.json(g[name], key, "null", kind)
+            record["name"] = name
+            out.append(record)
+        return sorted(out, key=lambda r: int(r.get("number", 0)))
 
     def check_seals(self) -> None:
         """Every object's attributes and values read back, and every seal in the file matches
@@ -345,6 +404,10 @@ class _Reader:
             instrument=dict(instrument),  # type: ignore[call-overload]
             planned_entries=[str(x) for x in planned],  # type: ignore[union-attr]
             exit_code=self.integer(run, "exit_code"),
+            metadata=self.scalars(run, "metadata", "NXcollection"),
+            resumes=self.resumes(run),
+            writer_pid=_int_or_none(self.attr(f, "writer_pid", None)),
+            writer_host=str(self.attr(f, "writer_host", "")),
         )
         entries, shapes = [], {}
         for name, g in f.items():

@@ -11,7 +11,9 @@ and, where known, the object.
 from __future__ import annotations
 
 import copy
+import os
 import re
+import time
 from pathlib import Path
 
 import numpy as np
@@ -19,9 +21,15 @@ import numpy as np
 from labrig.errors import InputFileError, InputIssue
 from labrig.store_isolated import IsolatedReadError, call_isolated
 from labrig.store_parse import RunEntry, RunFile, read_run_here
+from labrig.store_writing import writer_of
 
 __all__ = ["RunEntry", "RunFile", "export_csv", "read_run", "run_info", "run_summary"]
 
+
+#: a file being written may be caught between two of its writer's writes: it is read again
+#: this many times, this long apart, before it is reported as damaged
+RETRIES_WHILE_WRITTEN = 5
+RETRY_PAUSE_S = 0.15
 
 #: the last file read: (key, whether its samples were read, the run, the channels' shapes), the
 #: key being the path and the file's identity and change times; a command that reads one file
@@ -41,22 +49,49 @@ def read_run(path: Path | str, load_data: bool = True) -> RunFile:
     p = Path(path)
     if not p.is_file():
         raise InputFileError([InputIssue(str(path), None, "", "run file not found")])
-    st = p.stat()
-    key = (str(p.resolve()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
-    if _last is None or _last[0] != key or (load_data and not _last[1]):
+    for attempt in range(RETRIES_WHILE_WRITTEN + 1):
+        st = p.stat()
+        key = (str(p.resolve()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+        if _last is not None and _last[0] == key and (_last[1] or not load_data):
+            break
         try:
-            run, shapes = call_isolated(read_run_here, p, load_data, size_bytes=st.st_size)
-        except IsolatedReadError as e:
-            raise InputFileError(
-                [InputIssue(str(path), None, "", f"{e}: the file is damaged")]
-            ) from None
+            run, shapes = _read_isolated(p, load_data, st.st_size)
+        except InputFileError:
+            if attempt == RETRIES_WHILE_WRITTEN or not _changing(p, st):
+                raise
+            continue  # caught between two writes of a live writer: read it again
         _last = (key, load_data, run, shapes)
+        break
     run, shapes = copy.deepcopy(_last[2:])
     run.path = Path(path)
+    if run.status == "running":
+        w = writer_of(p, run.writer_pid, run.writer_host)
+        run.being_written, run.writer = w.alive, w.describe()
     if not load_data:
         for e in run:
             e.data = {c: np.empty(shapes[e.name][c]) for c in e.data}
     return run
+
+
+def _read_isolated(p: Path, load_data: bool, size: int) -> tuple[RunFile, dict]:
+    try:
+        return call_isolated(read_run_here, p, load_data, size_bytes=size)
+    except IsolatedReadError as e:
+        raise InputFileError([InputIssue(str(p), None, "", f"{e}: the file is damaged")]) from None
+
+
+def _changing(p: Path, before: os.stat_result) -> bool:
+    """The file is being changed (by a writer at work on it): modified within the last
+    seconds, and again within :data:`RETRY_PAUSE_S` of ``before`` (a writer flushes a block
+    or touches the file every 0.1 s). A file that does not change is not read again."""
+    try:
+        if not writer_of(p, None, "").alive:
+            return False
+        time.sleep(RETRY_PAUSE_S)
+        now = p.stat()
+    except OSError:
+        return False
+    return (now.st_size, now.st_mtime_ns) != (before.st_size, before.st_mtime_ns)
 
 
 def run_summary(path: Path | str) -> dict:
@@ -74,6 +109,10 @@ def run_summary(path: Path | str) -> dict:
         "status": run.status,
         "reason": run.reason,
         "incomplete": run.incomplete,
+        "being_written": run.being_written,
+        "writer": run.writer,
+        "metadata": dict(run.metadata),
+        "resumes": [dict(r) for r in run.resumes],
         "start_time": run.start_time,
         "end_time": run.end_time,
         "seed": run.seed,
@@ -105,7 +144,9 @@ def run_info(path: Path | str):
 
     s = run_summary(path)
     status = s["status"]
-    if s["incomplete"]:
+    if s["being_written"]:
+        status += f" (being written now by {s['writer']})"
+    elif s["incomplete"]:
         status += " (incomplete: the writer stopped without finishing the run)"
     elif s["reason"]:
         status += f" ({s['reason']})"

@@ -15,9 +15,11 @@ reserve file, so they fit on a disk another program filled.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
+import os
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
@@ -28,6 +30,7 @@ import numpy as np
 from labrig import __version__
 from labrig.errors import StorageError
 from labrig.interrupts import reason_for, signum_of
+from labrig.metadata import RunMetadata
 from labrig.store_format import (
     FINAL_STATUSES,
     FORMAT_VERSION,
@@ -37,6 +40,15 @@ from labrig.store_format import (
     channel,
     now_iso,
     seal_of,
+    stored_long_name,
+    stored_units,
+)
+from labrig.store_nexus import (
+    set_str,
+    write_entry_identity,
+    write_metadata_collection,
+    write_note,
+    write_tree,
 )
 from labrig.store_space import (
     BLOCK_MARGIN_BYTES,
@@ -46,90 +58,17 @@ from labrig.store_space import (
     free_bytes,
     is_disk_full,
 )
+from labrig.store_writing import mark_writer, unmark_writer
 
 log = logging.getLogger("labrig.store")
 _STR = STRING_DTYPE
 #: the HDF5 filter every sample dataset of a new run file carries
 CHECKSUM = "fletcher32"
 
-#: units guessed from key suffixes when the instrument description is stored
-_SUFFIX_UNITS = {
-    "_V": "V",
-    "_mV": "mV",
-    "_A": "A",
-    "_F": "F",
-    "_uF": "uF",
-    "_hz": "Hz",
-    "_Hz": "Hz",
-    "_s": "s",
-    "_ms": "ms",
-    "_ue": "ue",
-    "_ohm": "ohm",
-    "_degC": "degC",
-    "_m": "m",
-    "_um": "um",
-}
-
-
-def _units_from_key(key: str) -> str | None:
-    """``i_peak_A`` -> ``A``; ``gain_V_per_V`` -> ``V/V``; ``sensitivity_mV_per_ue`` ->
-    ``mV/ue``; None when the key names no unit."""
-    units = {u.lstrip("_") for u in _SUFFIX_UNITS}
-    m = re.search(r"_([A-Za-z]+)_per_([A-Za-z]+)$", key)
-    if m and m.group(1) in units and m.group(2) in units:
-        return f"{m.group(1)}/{m.group(2)}"
-    if m:
-        return None
-    for suffix, u in _SUFFIX_UNITS.items():
-        if key.endswith(suffix):
-            return u
-    return None
-
 
 def _check_name(name: str, what: str) -> None:
     if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]{0,62}", name):
         raise ValueError(f"{what} {name!r}: use a letter, then letters, digits or underscores")
-
-
-def _set_str(group: h5py.Group, name: str, value: str) -> None:
-    """Create or overwrite a scalar string dataset."""
-    if name in group:
-        group[name][()] = value
-    else:
-        group.create_dataset(name, data=value, dtype=_STR)
-
-
-def _write_tree(group: h5py.Group, d: Mapping, nx_class: str = "NXcollection") -> None:
-    """Nested dict -> groups and scalar/array datasets (units guessed from key suffixes)."""
-    group.attrs["NX_class"] = nx_class
-    for key, value in d.items():
-        name = str(key).replace("/", "_") or "_"
-        if name in (".", ".."):
-            name = "_" + name
-        if isinstance(value, Mapping):
-            _write_tree(group.create_group(name, track_order=True), value)
-            continue
-        if value is None:
-            ds = group.create_dataset(name, data="null", dtype=_STR)
-        elif isinstance(value, bool | np.bool_):
-            ds = group.create_dataset(name, data=bool(value))
-        elif isinstance(value, int | float | np.integer | np.floating) and not isinstance(
-            value, bool
-        ):
-            ds = group.create_dataset(name, data=value)
-        elif isinstance(value, str):
-            ds = group.create_dataset(name, data=value, dtype=_STR)
-        elif (
-            isinstance(value, list | tuple)
-            and value
-            and all(isinstance(x, int | float) and not isinstance(x, bool) for x in value)
-        ):
-            ds = group.create_dataset(name, data=np.asarray(value, dtype=float))
-        else:
-            ds = group.create_dataset(name, data=json.dumps(value, default=str), dtype=_STR)
-        units = _units_from_key(name)
-        if units and not isinstance(value, str):
-            ds.attrs["units"] = units
 
 
 def _renew_seal(obj: h5py.Group | h5py.Dataset) -> None:
@@ -153,16 +92,6 @@ def seal_groups(groups: Iterable[h5py.Group]) -> None:
         for obj in g.values():
             if isinstance(obj, h5py.Dataset):
                 _renew_seal(obj)
-
-
-def _note(group: h5py.Group, name: str, text: str, file_name: str, description: str) -> h5py.Group:
-    g = group.create_group(name)
-    g.attrs["NX_class"] = "NXnote"
-    _set_str(g, "type", "text/x-yaml")
-    _set_str(g, "file_name", file_name)
-    _set_str(g, "description", description)
-    _set_str(g, "data", text)
-    return g
 
 
 class EntryWriter:
@@ -249,13 +178,13 @@ class EntryWriter:
             return
         g = self.group
         try:
-            _set_str(g, "end_time", now_iso())
+            set_str(g, "end_time", now_iso())
             if "duration" not in g:
                 ds = g.create_dataset("duration", data=max(self._n - 1, 0) / self.rate_hz)
                 ds.attrs["units"] = "s"
                 ds.attrs["long_name"] = "time from the first to the last sample"
-            _set_str(g, "status_reason", reason or "")
-            _set_str(g, "status", status)
+            set_str(g, "status_reason", reason or "")
+            set_str(g, "status", status)
             self._run.entry_done()
             self._run.seal_and_flush(self._run.root, g)
         except Exception as e:
@@ -290,59 +219,89 @@ class RunWriter:
         planned_entries: Sequence[str] | None = None,
         overwrite: bool = False,
         reserve_bytes: int = 0,
+        metadata: RunMetadata | None = None,
     ):
         self.path = Path(path)
         if self.path.exists() and not overwrite:
             raise FileExistsError(f"run file {self.path} exists; refusing to overwrite it")
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.close_error = ""
-        self._reserve = Reserve(self.path, reserve_bytes)
-        try:
-            # no chunk cache: a block goes to the file in its own write call, so a write the
-            # disk refuses fails there and then, and no unwritable chunk waits in a cache (with
-            # a cache, cutting a channel back after a refused flush read back zeros)
-            self._f = h5py.File(self.path, "w", track_order=True, rdcc_nbytes=0)
-        except BaseException:
-            self._reserve.release()
-            raise
+        self._open(reserve_bytes, "w")
+        self.version = software_version or __version__
+        self.metadata = metadata or RunMetadata()
         f = self._f
-        version = software_version or __version__
         f.attrs["NX_class"] = "NXroot"
         f.attrs["creator"] = "labrig"
-        f.attrs["creator_version"] = version
+        f.attrs["creator_version"] = self.version
         f.attrs["file_name"] = self.path.name
         f.attrs["file_time"] = now_iso()
         f.attrs["file_update_time"] = f.attrs["file_time"]
         f.attrs["HDF5_Version"] = h5py.version.hdf5_version
         f.attrs["h5py_version"] = h5py.version.version
         f.attrs["labrig_format"] = FORMAT_VERSION
+        mark_writer(f)
         run = f.create_group("run", track_order=True)
         run.attrs["NX_class"] = "NXcollection"
         self._g = run
-        _set_str(run, "status", "running")
-        _set_str(run, "status_reason", "")
-        _set_str(run, "start_time", now_iso())
-        _set_str(run, "program_name", "labrig")
-        _set_str(run, "software_version", version)
-        _set_str(run, "protocol_name", protocol_name)
+        set_str(run, "status", "running")
+        set_str(run, "status_reason", "")
+        set_str(run, "start_time", now_iso())
+        set_str(run, "program_name", "labrig")
+        set_str(run, "software_version", self.version)
+        set_str(run, "protocol_name", protocol_name)
         ds = run.create_dataset("seed", data=-1 if seed is None else int(seed))
         ds.attrs["long_name"] = "random seed of the simulated rig (-1: none)"
-        _set_str(run, "planned_entries", json.dumps(list(planned_entries or [])))
-        _note(run, "protocol", protocol_text, protocol_file, "the protocol file as run")
-        _note(
-            run,
-            "rig",
-            rig_text,
-            rig_file,
-            "the rig file as run" if rig_file else "built-in rig (no rig file)",
-        )
+        set_str(run, "planned_entries", json.dumps(list(planned_entries or [])))
+        write_note(run, "protocol", protocol_text, protocol_file, "the protocol file as run")
+        rig_what = "the rig file as run" if rig_file else "built-in rig (no rig file)"
+        write_note(run, "rig", rig_text, rig_file, rig_what)
         inst = run.create_group("instrument", track_order=True)
-        _write_tree(inst, dict(instrument_description), "NXinstrument")
-        _set_str(inst, "description_json", json.dumps(instrument_description, default=str))
+        write_tree(inst, dict(instrument_description), "NXinstrument")
+        set_str(inst, "description_json", json.dumps(instrument_description, default=str))
+        if self.metadata:
+            write_metadata_collection(run, "metadata", self.metadata)
         self._entries: list[str] = []
         self._current: EntryWriter | None = None
         self.status = "running"
         self.seal_and_flush()
+
+    def _open(self, reserve_bytes: int, mode: str) -> None:
+        """Open the HDF5 file in ``mode`` ("w": create, "r+": continue) with the reserve kept."""
+        self.close_error = ""
+        self._reserve = Reserve(self.path, reserve_bytes)
+        try:
+            # no chunk cache: a block goes to the file in its own write call, so a write the
+            # disk refuses fails there and then, and no unwritable chunk waits in a cache (with
+            # a cache, cutting a channel back after a refused flush read back zeros)
+            self._f = h5py.File(self.path, mode, track_order=True, rdcc_nbytes=0)
+        except BaseException:
+            self._reserve.release()
+            raise
+
+    @classmethod
+    def reopen(
+        cls, path: Path | str, metadata: RunMetadata | None = None, reserve_bytes: int = 0
+    ) -> RunWriter:
+        """Continue writing an existing run file (``labrig run --resume``: the caller works on
+        a copy, :mod:`labrig.store_resume`): the run is ``running`` again, new entries are
+        numbered after the file's, ``metadata`` fills their ``user`` and ``sample`` groups."""
+        self = cls.__new__(cls)
+        self.path = Path(path)
+        self._open(reserve_bytes, "r+")
+        f = self._f
+        self.version = __version__
+        self.metadata = metadata or RunMetadata()
+        self._g = f["run"]
+        entries = [n for n, g in f.items() if n != "run" and isinstance(g, h5py.Group)]
+        self._entries = sorted(entries, key=lambda n: int(f[n]["entry_index"][()]))
+        self._current = None
+        self.status = "running"
+        mark_writer(f)
+        set_str(self._g, "status", "running")
+        set_str(self._g, "status_reason", "")
+        if "end_time" in self._g:
+            del self._g["end_time"]
+        self.seal_and_flush()
+        return self
 
     # -- context manager ------------------------------------------------------------------
     def __enter__(self) -> RunWriter:
@@ -371,6 +330,12 @@ class RunWriter:
     def flush(self) -> None:
         """Write everything to disk (``H5Fflush``)."""
         self._f.flush()
+
+    def heartbeat(self) -> None:
+        """Say the run file is still being written when nothing is written to it (a rest
+        between entries): its modification time is set to now (:mod:`labrig.store_writing`)."""
+        with contextlib.suppress(OSError):
+            os.utime(self.path)
 
     def seal_and_flush(self, *changed: h5py.Group) -> None:
         """After metadata changed in the groups ``changed`` (and the datasets directly in
@@ -492,16 +457,17 @@ class RunWriter:
         g = f.create_group(name, track_order=True)
         g.attrs["NX_class"] = "NXentry"
         g.attrs["default"] = "data"
-        _set_str(g, "title", title or name)
+        set_str(g, "title", title or name)
         ds = g.create_dataset("entry_index", data=len(self._entries))
         ds.attrs["long_name"] = "position of the entry in the run (0-based)"
-        _set_str(g, "start_time", now_iso())
-        _set_str(g, "status", "running")
-        _set_str(g, "status_reason", "")
+        set_str(g, "start_time", now_iso())
+        set_str(g, "status", "running")
+        set_str(g, "status_reason", "")
         ds = g.create_dataset("sample_rate", data=float(rate_hz))
         ds.attrs["units"] = "Hz"
         ds.attrs["long_name"] = "sample rate"
-        _set_str(g, "step_definition", json.dumps(dict(step_meta), default=str))
+        set_str(g, "step_definition", json.dumps(dict(step_meta), default=str))
+        write_entry_identity(g, self.metadata, self.version)
         g["instrument"] = self._g["instrument"]
         g["protocol"] = self._g["protocol"]
         g["rig"] = self._g["rig"]
@@ -523,13 +489,13 @@ class RunWriter:
                 dtype="f8",
                 fletcher32=CHECKSUM == "fletcher32",
             )
-            ds.attrs["units"] = c.units
-            ds.attrs["long_name"] = c.long_name
+            ds.attrs["units"] = stored_units(c.units)
+            ds.attrs["long_name"] = stored_long_name(c.units, c.long_name)
         if not self._entries:
             f.attrs["default"] = name
         self._entries.append(name)
         self._current = EntryWriter(self, g, rate_hz, chans)
-        self.seal_and_flush(f, g, data)
+        self.seal_and_flush(f, g, data, *(g[k] for k in ("user", "sample") if k in g))
         return self._current
 
     def entry_done(self) -> None:
@@ -550,9 +516,9 @@ class RunWriter:
             if self._current is not None and self._current.status == "running":
                 why = reason or (None if status == "complete" else f"run {status}")
                 self._current.finish(status, why)
-            _set_str(self._g, "end_time", now_iso())
-            _set_str(self._g, "status_reason", reason or "")
-            _set_str(self._g, "status", status)
+            set_str(self._g, "end_time", now_iso())
+            set_str(self._g, "status_reason", reason or "")
+            set_str(self._g, "status", status)
             self._f.attrs["file_update_time"] = now_iso()
             self.seal_and_flush(self._f, self._g)
         except Exception as e:
@@ -565,6 +531,10 @@ class RunWriter:
         self.release_reserve()
         if not self._f:
             return
+        if self.status == "running":  # closed unfinished: no longer being written
+            with contextlib.suppress(Exception):
+                unmark_writer(self._f)
+                _renew_seal(self._f)
         try:
             self._f.close()
         except Exception as e:

@@ -21,6 +21,7 @@ from typer.testing import CliRunner
 import labrig
 from labrig.cli import app
 from labrig.errors import InputFileError
+from labrig.store_format import memory_units
 
 PROTOCOL = """\
 name: api test
@@ -72,7 +73,8 @@ def test_to_pandas_has_units_in_names_and_the_file_values(seeded: Path):
     df = run.to_pandas()
     with h5py.File(seeded) as f:
         channels = list(f[ENTRIES[0]]["data"])
-        units = {c: f[ENTRIES[0]]["data"][c].attrs["units"] for c in channels}
+        # as labrig names units in memory (microstrain stored as um/m reads as ue)
+        units = {c: memory_units(f[ENTRIES[0]]["data"][c].attrs["units"]) for c in channels}
         expected = ["entry", *(f"{c}_{units[c]}" for c in channels)]
         assert list(df.columns) == expected
         assert list(df["entry"].cat.categories) == ENTRIES

@@ -218,7 +218,7 @@ def test_metadata_is_read_generically(tmp_path: Path):
             g.attrs["NX_class"] = "NXsample"
             g["name"] = f"stack {i}"
             g["model"] = "P-888.51"
-            f[name]["definition"] = "NXlabrig"
+            assert f[name]["definition"][()] == b"NXlabrig"  # written by the store
         seal_all(f)
     meta, _ = read_metadata_here(p)
     assert meta["metadata/operator"] == "dora"

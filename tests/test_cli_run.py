@@ -33,7 +33,7 @@ CHANNELS = {
     "time": "s",
     "command_voltage": "V",
     "gauge_raw": "V",
-    "strain": "ue",
+    "strain": "um/m",  # microstrain as pint and UDUNITS read it (in memory: ue)
     "amplifier_voltage": "V",
 }
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from labrig.cli.common import flag, friendly
+from labrig.cli.run import META_OPTION, OPERATOR_OPTION, SAMPLE_OPTION, metadata_of
 
 
 @friendly
@@ -71,6 +72,9 @@ def import_(
     decimal: str | None = typer.Option(None, help="Decimal mark . or , (default: detect)."),
     encoding: str | None = typer.Option(None, help="Text encoding (default: detect)."),
     overwrite: bool = flag(False, "--overwrite", help="Replace an existing --out file."),
+    meta: list[str] = META_OPTION,
+    operator: str | None = OPERATOR_OPTION,
+    sample: str | None = SAMPLE_OPTION,
 ) -> None:
     """Bring measured data into a run file, one entry per input file or ControlDesk capture
     (named after the file's stem). docs/import.md describes the formats and options."""
@@ -92,7 +96,8 @@ def import_(
         return
     if out is None:
         raise option_error("--out", "missing: give the run file to write (or --list)")
-    for e in import_files(list(files), out, opt, overwrite):
+    metadata = metadata_of(meta, operator, sample)
+    for e in import_files(list(files), out, opt, overwrite, metadata):
         cols = ", ".join(f"{k}={v}" for k, v in e.meta["columns"].items() if v)
         aux_text = (
             "; aux " + ", ".join(f"{k} [{u}]" for k, (_, u) in e.aux.items()) if e.aux else ""

@@ -1,5 +1,6 @@
 """``labrig check`` and ``labrig run``: a protocol against the rig's limits, then on the rig
-(:mod:`labrig.runner`; the progress bar and exit code of a run: :mod:`labrig.cli_run`)."""
+(:mod:`labrig.runner`; the progress bar, the live view and the exit code of a run:
+:mod:`labrig.cli_run`)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,48 @@ from pathlib import Path
 import typer
 
 from labrig.cli.common import RIG_OPTION_HELP, flag, friendly, plural
+
+META_HELP = (
+    "KEY=VALUE recorded with the run (/run/metadata; repeatable), e.g. actuator_model=P-888.51, "
+    "actuator_serial=123; wins over the protocol's metadata."
+)
+OPERATOR_HELP = "Who runs it (NXuser name; same as --meta operator=NAME)."
+SAMPLE_HELP = "The sample (actuator) id, e.g. 'P-888 #3' (NXsample name; --meta sample=ID)."
+
+
+def checked_meta(values: list[str]) -> list[str]:
+    """``--meta`` values that are KEY=VALUE with a valid key (a usage error otherwise)."""
+    from labrig.metadata import MetadataError, parse_assignment
+
+    for v in values:
+        try:
+            parse_assignment(v)
+        except MetadataError as e:
+            raise typer.BadParameter(str(e)) from None
+    return values
+
+
+def meta_options() -> tuple:
+    """The ``--meta``, ``--operator`` and ``--sample`` options (run and import share them)."""
+    return (
+        typer.Option([], "--meta", help=META_HELP, callback=checked_meta, metavar="KEY=VALUE"),
+        typer.Option(None, "--operator", help=OPERATOR_HELP, metavar="NAME"),
+        typer.Option(None, "--sample", help=SAMPLE_HELP, metavar="ID"),
+    )
+
+
+META_OPTION, OPERATOR_OPTION, SAMPLE_OPTION = meta_options()
+
+
+def metadata_of(meta: list[str], operator: str | None, sample: str | None):
+    """The options' metadata (:func:`labrig.metadata.from_options`); a bad value is a usage
+    error naming the option."""
+    from labrig.metadata import MetadataError, from_options
+
+    try:
+        return from_options(meta, operator, sample)
+    except MetadataError as e:
+        raise typer.BadParameter(str(e), param_hint="--meta/--operator/--sample") from None
 
 
 @friendly
@@ -36,9 +79,38 @@ def run(
     seed: int | None = typer.Option(None, "--seed", help="Random seed of the simulated rig."),
     realtime: bool = flag(False, "--realtime", help="Pace a simulated rig to the clock."),
     overwrite: bool = flag(False, "--overwrite", help="Replace an existing --out file."),
+    meta: list[str] = META_OPTION,
+    operator: str | None = OPERATOR_OPTION,
+    sample: str | None = SAMPLE_OPTION,
+    resume: Path | None = typer.Option(
+        None,
+        "--resume",
+        help="Continue this aborted or interrupted run file with the entries it lacks "
+        "(same protocol; written beside it, then renamed over it).",
+        metavar="FILE",
+    ),
+    live: bool = flag(
+        False, "--live", help="Serve a live view of the run on 127.0.0.1 (prints its address)."
+    ),
+    live_port: int | None = typer.Option(
+        None, "--live-port", help="Port of the live view (implies --live; default: a free one)."
+    ),
+    params: Path | None = typer.Option(
+        None, "--params", help="Live view: draw this model's prediction (labrig fit --out file)."
+    ),
 ) -> None:
     """Preflight a protocol, run it on the rig, and log every step to an HDF5 run file."""
-    from labrig.cli_run import run_with_progress
+    from labrig.cli_run import RunExtras, run_with_progress
 
-    code = run_with_progress(protocol, rig, out, seed, realtime, overwrite)
+    live = live or live_port is not None
+    if params is not None and not live:
+        raise typer.BadParameter("draws on the live view: give --live too", param_hint="--params")
+    extras = RunExtras(
+        metadata=metadata_of(meta, operator, sample),
+        resume=resume,
+        live=live,
+        live_port=live_port or 0,
+        params=params,
+    )
+    code = run_with_progress(protocol, rig, out, seed, realtime, overwrite, extras)
     raise typer.Exit(code)

@@ -23,6 +23,7 @@ from labrig.importers.options import Checked, ImportOptions, check_options
 from labrig.importers.table import Table, bad, option_error
 from labrig.importers.text import read_text
 from labrig.importers.writer import import_description, write_run
+from labrig.metadata import RunMetadata
 
 
 def _looks_like_mat(path: Path) -> bool:
@@ -98,15 +99,20 @@ def read_entries(files: list[Path], checked: Checked) -> list[ImportedEntry]:
 
 
 def import_files(
-    files: list[Path], out: Path, opt: ImportOptions, overwrite: bool = False
+    files: list[Path],
+    out: Path,
+    opt: ImportOptions,
+    overwrite: bool = False,
+    metadata: RunMetadata | None = None,
 ) -> list[ImportedEntry]:
     """Read every file, then write the run file ``out`` (beside it, renamed over it when
-    complete: a bad input or a failed write leaves an existing ``out`` as it was)."""
+    complete: a bad input or a failed write leaves an existing ``out`` as it was), with
+    ``metadata`` (``--meta``, ``--operator``, ``--sample``: :mod:`labrig.metadata`)."""
     if not files:
         raise InputFileError([InputIssue("", None, "", "no input files given")])
     checked = check_options(opt)
     files = [Path(f) for f in files]
     _check_out(files, out, overwrite)
     entries = read_entries(files, checked)
-    write_run(out, entries, import_description(files, asdict(opt)))
+    write_run(out, entries, import_description(files, asdict(opt)), metadata)
     return entries

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from labrig import __version__
 from labrig.importers.entry import ImportedEntry
+from labrig.metadata import RunMetadata
 from labrig.store import Channel, RunWriter
 
 
@@ -31,8 +32,14 @@ def _channels(e: ImportedEntry) -> list[Channel]:
     return chans
 
 
-def write_entries(path: Path, entries: list[ImportedEntry], description: dict) -> None:
-    """Write a run file of ``entries`` at ``path`` directly (write_run puts it beside first)."""
+def write_entries(
+    path: Path,
+    entries: list[ImportedEntry],
+    description: dict,
+    metadata: RunMetadata | None = None,
+) -> None:
+    """Write a run file of ``entries`` at ``path`` directly (write_run puts it beside first),
+    with ``metadata`` (``/run/metadata``, each entry's NXuser and NXsample)."""
     with RunWriter(
         path,
         protocol_text=json.dumps(description, indent=2, default=str),
@@ -42,6 +49,7 @@ def write_entries(path: Path, entries: list[ImportedEntry], description: dict) -
         protocol_name="import",
         protocol_file="",
         planned_entries=[e.name for e in entries],
+        metadata=metadata,
     ) as w:
         for e in entries:
             ew = w.begin_entry(
@@ -54,13 +62,18 @@ def write_entries(path: Path, entries: list[ImportedEntry], description: dict) -
         w.finish("complete")
 
 
-def write_run(out: Path, entries: list[ImportedEntry], description: dict) -> None:
+def write_run(
+    out: Path,
+    entries: list[ImportedEntry],
+    description: dict,
+    metadata: RunMetadata | None = None,
+) -> None:
     """Write ``entries`` to ``out`` (beside it first, then renamed over it)."""
     out.parent.mkdir(parents=True, exist_ok=True)
     folder = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
     try:
         partial = folder / out.name
-        write_entries(partial, entries, description)
+        write_entries(partial, entries, description, metadata)
         os.replace(partial, out)
     finally:
         shutil.rmtree(folder, ignore_errors=True)

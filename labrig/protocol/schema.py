@@ -37,6 +37,16 @@ STEP_KINDS = (
 #: step kinds that command a strain (ue) through a controller instead of a voltage
 STRAIN_KINDS = ("strain_sine", "strain_vanishing", "strain_csv")
 FilePath = Annotated[str, StringConstraints(min_length=1, max_length=4096)]
+#: a metadata key (``metadata:``): an HDF5 dataset name (labrig.metadata.KEY_PATTERN)
+MetaKey = Annotated[str, StringConstraints(pattern=r"^[A-Za-z][A-Za-z0-9_]{0,62}$")]
+#: a metadata value: text (printable, at most 200 characters), a boolean, a whole or a
+#: finite number (labrig.metadata.check_value)
+MetaValue = (
+    Annotated[str, StringConstraints(max_length=200, pattern=r"^[^\x00-\x1f\x7f]*$")]
+    | bool
+    | int
+    | Finite
+)
 #: entry names that would collide with the run file's own groups
 RESERVED_NAMES = frozenset({"run"})
 
@@ -306,6 +316,14 @@ class Protocol(_Base):
         None,
         description="default model parameters of the strain-command steps (JSON from "
         "`labrig fit --out`), relative to this file",
+    )
+    metadata: dict[MetaKey, MetaValue] | None = Field(
+        None,
+        max_length=100,
+        description="who ran what on which actuator: operator, sample, actuator_model, "
+        "actuator_serial and any other key (text, numbers, true/false); recorded in the run "
+        "file (/run/metadata, NXuser, NXsample); --meta KEY=VALUE, --operator and --sample "
+        "on the command line win over it",
     )
     edge_slew_V_per_s: Positive = Field(
         1000.0, description="slope of the ramps inserted to start and end every entry at 0 V"
