@@ -260,11 +260,12 @@ class Run:
         from labrig.report.build import build_run_report
 
         target = Path(out) if out is not None else None
+        params_path = Path(params) if params is not None else None
         if target is not None:
-            _check_target(target, overwrite)
+            _check_targets([target], [self.path, params_path], overwrite, "report.html")
         built = build_run_report(
             self.path,
-            Path(params) if params is not None else None,
+            params_path,
             entries=list(entries) if entries else None,
             warmup_s=warmup_s,
             offset=offset,
@@ -273,7 +274,9 @@ class Run:
             ui=_ui(progress),
         )
         if target is not None:
-            _write_beside(target, built.page)
+            from labrig.outputs import write_text_output
+
+            write_text_output(target, built.page, overwrite=overwrite)
         return built
 
     def diagnose(
@@ -282,32 +285,36 @@ class Run:
         params: PathLike | None = None,
         also: Sequence[str] = (),
         max_effects: int = 2,
+        mains_hz: float | None = None,
         out: PathLike | None = None,
+        overwrite: bool = False,
         progress: bool = False,
     ) -> Diagnosis:
         """``labrig diagnose``: what the model misses. ``as_json(result)`` is what
-        ``labrig diagnose --json`` prints; ``result.verdict`` the verdict in words. ``out``:
-        a folder for ``diagnosis.json`` and ``diagnosis.html``."""
-        from labrig.analysis.diagnose import diagnose
-        from labrig.analysis.prepare import prepare_diagnosis
-        from labrig.model.effects import EFFECT_NAMES
+        ``labrig diagnose --json`` prints; ``result.verdict`` the verdict in words.
+        ``mains_hz``: the mains frequency (Hz; default: detected at 50 or 60 Hz). ``out``: a
+        folder for ``diagnosis.json`` and ``diagnosis.html`` (existing ones replaced only with
+        ``overwrite``; checked before the work, written beside and renamed into place)."""
+        from labrig.analysis.diagnose.run_file import OUTPUT_NAMES, diagnose_run_file
 
+        folder = Path(out) if out is not None else None
+        params_path = Path(params) if params else None
+        if folder is not None:
+            targets = [folder / n for n in OUTPUT_NAMES]
+            _check_targets(targets, [self.path, params_path], overwrite, "diagnosis.json")
         say = _stderr if progress else _silent
-        setup = prepare_diagnosis(self.path, Path(params) if params else None, say)
-        result = diagnose(
-            setup.records,
-            setup.start,
-            offset=setup.offset,
-            effects=EFFECT_NAMES + tuple(dict.fromkeys(also)),
+        result = diagnose_run_file(
+            self.path,
+            params_path,
+            also=also,
             max_effects=max_effects,
+            mains_hz=mains_hz,
+            out=folder,
+            overwrite=overwrite,
+            say=say,
             progress=say,
         )
-        if out is not None:
-            from labrig.report.diagnose_html import write_diagnosis
-
-            title = f"labrig diagnose: {self.path.name}"
-            write_diagnosis(Path(out), as_json(result), result, setup.records, title)
-        return result
+        return result.diagnosis
 
     # -- display --------------------------------------------------------------------------
     def _head(self) -> list[str]:
@@ -386,22 +393,21 @@ def _ui(progress: bool):
     return QuietUI()
 
 
-def _check_target(target: Path, overwrite: bool) -> None:
-    if target.is_dir():
-        raise IsADirectoryError(f"{target} is a folder; give a file name such as report.html")
-    if target.exists() and not overwrite:
-        raise FileExistsError(f"{target} exists; pass overwrite=True to replace it")
+def _check_targets(
+    targets: list[Path], inputs: list[Path | None], overwrite: bool, example: str
+) -> None:
+    """Before the work, as Python expects: a folder where a file goes is an
+    ``IsADirectoryError``, an existing file without ``overwrite`` a ``FileExistsError``; then
+    the checks of :func:`labrig.outputs.check_writable` (an input as output, a place that
+    cannot be written: :class:`~labrig.errors.InputFileError`)."""
+    from labrig.outputs import check_writable
 
-
-def _write_beside(target: Path, text: str) -> None:
-    """Write ``target`` through a file beside it, renamed over it when complete."""
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = target.with_name(f".{target.name}.partial")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, target)
-    finally:
-        tmp.unlink(missing_ok=True)
+    for t in targets:
+        if t.is_dir():
+            raise IsADirectoryError(f"{t} is a folder; give a file name such as {example}")
+        if t.exists() and not overwrite:
+            raise FileExistsError(f"{t} exists; pass overwrite=True to replace it")
+    check_writable(targets, inputs=inputs, overwrite=overwrite)
 
 
 def as_json(result: Any) -> dict[str, Any]:

@@ -308,6 +308,34 @@ def _offset(imported: bool, offset: bool | None, notes: list[str]) -> bool:
     return bool(offset)
 
 
+def split_entries(records: Sequence[Record], parts: int = 4) -> list[Record]:
+    """A single long record cut into ``parts`` consecutive entries (at whole drive periods when
+    the record is periodic), chained with no rest: leave-one-entry-out then has folds. The
+    pieces simulated back to back reproduce the original record exactly."""
+    out: list[Record] = []
+    for r in records:
+        f = drive_frequency_hz(r)
+        per = round(r.rate_hz / f) if f else 1
+        per = per if 1 <= per <= r.n // parts else 1
+        edges = [round(k * (r.n // per) / parts) * per for k in range(parts)] + [r.n]
+        for k in range(parts):
+            a, b = edges[k], edges[k + 1]
+            meta = {**r.meta, "rest_after_s": 0.0, "split_of": r.name}
+            out.append(
+                Record(
+                    f"{r.name}_part{k + 1}",
+                    r.rate_hz,
+                    r.time_s[a:b],
+                    r.voltage_V[a:b],
+                    r.strain_ue[a:b],
+                    {n: x[a:b] for n, x in r.aux.items()},
+                    r.hold,
+                    meta,
+                )
+            )
+    return out
+
+
 @dataclass
 class DiagnoseSetup:
     """What ``diagnose`` starts from: the records it scores, whether to fit one strain offset
@@ -324,11 +352,10 @@ def prepare_diagnosis(
     """Read the run file (and the start parameters, :func:`labrig.params_file.start_params`)
     for ``diagnose``.
 
-    A file of one entry is cut into :data:`DIAGNOSE_SPLIT` consecutive parts (said through
-    ``say``) for leave-one-entry-out; imported data get an offset per entry (the sensor's zero
-    is arbitrary). Fewer than :data:`MIN_DIAGNOSE_ENTRIES` entries: an
-    :class:`~labrig.errors.InputFileError`."""
-    from labrig.analysis.diagnose import split_entries
+    A file of one entry is cut into :data:`DIAGNOSE_SPLIT` consecutive parts
+    (:func:`split_entries`, said through ``say``) for leave-one-entry-out; imported data get an
+    offset per entry (the sensor's zero is arbitrary). Fewer than :data:`MIN_DIAGNOSE_ENTRIES`
+    entries: an :class:`~labrig.errors.InputFileError`."""
     from labrig.params_file import start_params
 
     records = load.records_from_run(path)

@@ -1,9 +1,8 @@
 """One run file's task, as a worker runs it: the same library calls as the one-by-one commands.
 
 - ``fit``: :func:`labrig.analysis.fit_run.fit_run_file` (``labrig fit RUN --json``);
-- ``diagnose``: the fit, then :func:`labrig.analysis.prepare.prepare_diagnosis` and
-  :func:`labrig.analysis.diagnose.diagnose` with the default candidates (``labrig diagnose
-  RUN --json --out D``);
+- ``diagnose``: the fit, then :func:`labrig.analysis.diagnose.run_file.diagnose_run_file`
+  (``labrig diagnose RUN --json --out D``);
 - ``report``: the fit, then :func:`labrig.report.build.build_run_report` (``labrig report RUN
   --out report.html --json``).
 
@@ -19,7 +18,6 @@ from __future__ import annotations
 import json
 import os
 import socket
-import tempfile
 import time
 import traceback
 from dataclasses import asdict, dataclass, field
@@ -44,6 +42,7 @@ class TaskOptions:
     heldout: bool = True
     also: tuple[str, ...] = ()
     max_effects: int = 2
+    mains_hz: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {**asdict(self), "also": list(self.also)}
@@ -150,26 +149,18 @@ def fit_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
 def diagnose_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
     """``labrig diagnose RUN --json --out D``: ``diagnosis.json`` and ``diagnosis.html``, the
     effects added, the verdict and its class."""
-    from labrig.analysis.diagnose import diagnose
-    from labrig.analysis.prepare import prepare_diagnosis
-    from labrig.jsonsafe import json_safe
-    from labrig.model.effects import EFFECT_NAMES
-    from labrig.report.diagnose_html import write_diagnosis
+    from labrig.analysis.diagnose.run_file import diagnose_run_file
 
     notes: list[str] = []
-    setup = prepare_diagnosis(path, None, notes.append)
-    d = diagnose(
-        setup.records,
-        setup.start,
-        offset=setup.offset,
-        effects=EFFECT_NAMES + tuple(opt.also),
+    result = diagnose_run_file(
+        path,
+        also=opt.also,
         max_effects=opt.max_effects,
+        mains_hz=opt.mains_hz,
+        say=notes.append,
     )
-    doc = json_safe(d.to_json())
-    with tempfile.TemporaryDirectory(prefix="labrig-fleet-") as tmp:
-        write_diagnosis(Path(tmp), doc, d, setup.records, f"labrig diagnose: {path.name}")
-        for f in sorted(Path(tmp).iterdir()):
-            out.documents[f.name] = f.read_text(encoding="utf-8")
+    d, doc = result.diagnosis, result.document
+    out.documents.update(result.documents())
     r = out.row
     r["effects"] = ",".join(e["effect"] for e in doc["effects_added"])
     r["verdict_class"] = d.classification
