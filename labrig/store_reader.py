@@ -152,6 +152,8 @@ def run_info(path: Path | str):
         status += f" ({s['reason']})"
     planned = s["planned_entries"]
     n = len(s["entries"])
+    complete = sum(1 for e in s["entries"] if e["status"] == "complete")
+    counts = f"\nentries: {n}" + (f" ({complete} complete, {planned} planned)" if planned else "")
     head = Text.assemble(
         ("run file ", "bold"),
         s["path"],
@@ -159,10 +161,12 @@ def run_info(path: Path | str):
         s["protocol"] or "-",
         "\nstatus: ",
         (status, "green" if s["status"] == "complete" else "red"),
-        f"\nentries: {n}" + (f" of {planned} planned" if planned else ""),
+        counts,
         f"\nstarted {s['start_time'] or '-'}, ended {s['end_time'] or '-'}",
         f"\nseed {s['seed'] if s['seed'] is not None else '-'}, "
         f"labrig {s['software_version'] or '-'}",
+        *_metadata_lines(s),
+        *_resume_lines(s),
     )
     t = Table(
         caption="s: duration; Hz: sample rate; max V: largest command voltage; "
@@ -192,6 +196,28 @@ def run_info(path: Path | str):
             g(e["max_strain_ue"]),
         )
     return Group(head, t)
+
+
+def _metadata_lines(s: dict) -> list[str]:
+    """``metadata: operator=alice sample=P-888 #3 ...`` (none when the run has none)."""
+    meta = s.get("metadata") or {}
+    return ["\nmetadata: " + " ".join(f"{k}={v}" for k, v in meta.items())] if meta else []
+
+
+def _resume_lines(s: dict) -> list[str]:
+    """One line per resume: when, which entries, the seed, how the run had ended."""
+    lines = []
+    for r in s.get("resumes") or []:
+        seed = r.get("seed", -1)
+        before = r.get("previous_status", "?")
+        if r.get("previous_reason"):
+            before += f": {r['previous_reason']}"
+        lines.append(
+            f"\nresumed {r.get('time', '?')} (resume {r.get('number', '?')}): "
+            f"{', '.join(r.get('entries') or [])}; seed {seed if seed >= 0 else '-'}; "
+            f"the run had ended {before}"
+        )
+    return lines
 
 
 def _col_header(name: str, units: str) -> str:
