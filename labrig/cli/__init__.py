@@ -18,6 +18,7 @@ from labrig.cli.batch import batch_app
 from labrig.cli.model import model_app
 from labrig.cli.runs import runs as runs_command
 from labrig.cli.sim import sim_app
+from labrig.cli.watch import watch as watch_command
 
 __all__ = ["app"]
 
@@ -52,6 +53,7 @@ def main(
 
 app.command("check")(run.check)
 app.command("run")(run.run)
+app.command("watch")(watch_command)
 app.command("info")(files.info)
 app.command("runs")(runs_command)
 app.command("export")(files.export)

@@ -1,0 +1,43 @@
+"""``labrig watch FILE``: the live view of a run file, from a second terminal while a run is
+written (or of a finished file): the page ``labrig run --live`` serves (:mod:`labrig.live`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from labrig.cli.common import friendly
+
+
+@friendly
+def watch(
+    run_file: Path = typer.Argument(..., help="Run file (HDF5), being written or not."),
+    port: int = typer.Option(0, "--port", help="Port on 127.0.0.1 (default: a free one)."),
+    params: Path | None = typer.Option(
+        None, "--params", help="Draw this model's prediction (a labrig fit --out file)."
+    ),
+) -> None:
+    """Serve a live view of a run file on 127.0.0.1 until Ctrl-C: the current entry's loop and
+    time series, the model's prediction, the progress and the amplifier (docs/live.md)."""
+    import threading
+
+    from labrig.errors import InputFileError, InputIssue
+    from labrig.live import load_params, port_error
+    from labrig.live.server import LiveServer
+    from labrig.store import read_run
+
+    if not run_file.is_file():
+        raise InputFileError([InputIssue(str(run_file), None, "", "run file not found")])
+    read_run(run_file, load_data=False)  # a labrig run file, sound (exit 2 otherwise)
+    model = load_params(params)
+    try:
+        server = LiveServer(run_file, model, port)
+    except OSError as e:
+        raise port_error(port, e) from None
+    server.start()
+    typer.echo(f"live view of {run_file}: {server.url} (Ctrl-C to stop)")
+    try:
+        threading.Event().wait()
+    finally:
+        server.stop()

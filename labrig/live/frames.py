@@ -1,0 +1,171 @@
+"""One look at a run file that may be being written: what the live view draws next.
+
+:func:`read_frame_here` opens the file read-only with HDF5 file locking off (the writer holds
+it open; it flushes after every block, :mod:`labrig.store_writer`) and reads only what a frame
+needs: the run's status, the entries' names, statuses and lengths, and the current entry's
+samples from a given index on. It verifies what it reads: the seal of every scalar it takes
+(:func:`labrig.store_format.seal_of`) and the Fletcher32 checksums of the samples (HDF5 checks
+them on reading). A file caught between two of its writer's writes fails a check or raises:
+:func:`read_frame` runs the reading in a child process with a short time limit
+(:func:`labrig.store_isolated.call_isolated`) and the caller skips that frame.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from labrig.store_format import SEAL_ATTR, seal_of
+from labrig.store_isolated import allow_cpu, call_isolated
+
+#: the channels a frame reads (those an entry lacks are left out)
+CHANNELS = ("time", "command_voltage", "strain", "amplifier_voltage")
+#: a frame reads at most this many new samples per channel (a viewer that joins a long entry
+#: late starts from its last samples)
+MAX_NEW_SAMPLES = 200_000
+#: a frame's read may take this long (s) before it is given up (the frame is skipped)
+FRAME_WALL_S = 2.0
+
+
+class FrameError(Exception):
+    """What was read does not verify (a torn write, a damaged file): skip the frame."""
+
+
+@dataclass
+class EntryInfo:
+    name: str
+    index: int
+    status: str
+    samples: int
+    planned_samples: int | None
+    title: str
+    rate_hz: float | None = None
+
+
+@dataclass
+class Frame:
+    """What one read of the file gave (samples of the current entry from ``start`` on)."""
+
+    status: str
+    reason: str
+    protocol: str
+    planned: list[str]
+    entries: list[EntryInfo]
+    current: str | None
+    start: int
+    samples: dict[str, np.ndarray] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
+    exit_code: int | None = None
+    final_voltage_V: float | None = None
+    writer_pid: int | None = None
+    writer_host: str = ""
+
+
+def _value(ds: h5py.Dataset) -> object:
+    """A scalar dataset's value, checked against its seal."""
+    allow_cpu()
+    if SEAL_ATTR in ds.attrs and ds.attrs[SEAL_ATTR] != seal_of(ds):
+        raise FrameError(f"{ds.name}: does not match its seal (being written?)")
+    v = ds[()]
+    return v.decode("utf-8", "replace") if isinstance(v, bytes) else v
+
+
+def _get(g: h5py.Group, name: str, default: object = None) -> object:
+    ds = g.get(name)
+    return _value(ds) if isinstance(ds, h5py.Dataset) and ds.shape == () else default
+
+
+def _entry_info(name: str, g: h5py.Group, known: dict[str, int | None]) -> EntryInfo:
+    data = g.get("data")
+    # a reader may land between two channels' writes of one block: the shortest counts
+    lengths = [data[c].shape[0] for c in CHANNELS if isinstance(data, h5py.Group) and c in data]
+    if name in known:
+        planned = known[name]
+    else:
+        step = json.loads(str(_get(g, "step_definition", "{}")))
+        planned = step.get("n_samples") if isinstance(step, dict) else None
+    return EntryInfo(
+        name=name,
+        index=int(_get(g, "entry_index", -1)),  # type: ignore[arg-type]
+        status=str(_get(g, "status", "running")),
+        samples=min(lengths, default=0),
+        planned_samples=int(planned) if isinstance(planned, int | float) else None,
+        title=str(_get(g, "title", name)),
+        rate_hz=_float(_get(g, "sample_rate")),
+    )
+
+
+def read_frame_here(
+    path: str, entry: str | None, start: int, known: dict[str, int | None]
+) -> Frame:
+    """Read a frame (module docstring): the current entry's samples from ``start`` on if it is
+    ``entry``, else from its beginning. ``known``: the planned sample counts of entries seen
+    before (their step definitions are not read again)."""
+    with h5py.File(path, "r", locking=False) as f:
+        allow_cpu()
+        run = f["run"]
+        entries = [
+            _entry_info(n, g, known)
+            for n, g in f.items()
+            if n != "run" and isinstance(g, h5py.Group)
+        ]
+        entries.sort(key=lambda e: e.index)
+        frame = Frame(
+            status=str(_get(run, "status", "running")),
+            reason=str(_get(run, "status_reason", "")),
+            protocol=str(_get(run, "protocol_name", "")),
+            planned=list(json.loads(str(_get(run, "planned_entries", "[]")))),
+            entries=entries,
+            current=entries[-1].name if entries else None,
+            start=0,
+            exit_code=_int(_get(run, "exit_code")),
+            final_voltage_V=_float(_get(run, "final_amplifier_voltage_V")),
+            writer_pid=_int(f.attrs.get("writer_pid")),
+            writer_host=str(f.attrs.get("writer_host", "")),
+        )
+        if frame.current is not None:
+            _read_samples(f[frame.current]["data"], frame, entry, start, entries[-1].samples)
+        return frame
+
+
+def _read_samples(data: h5py.Group, frame: Frame, entry: str | None, start: int, n: int) -> None:
+    begin = start if entry == frame.current else 0
+    begin = max(begin, n - MAX_NEW_SAMPLES, 0)
+    frame.start = begin
+    for c in CHANNELS:
+        if c in data and begin < n:
+            allow_cpu(size_bytes=(n - begin) * 8)
+            frame.samples[c] = np.asarray(data[c][begin:n], dtype=float)
+            u = data[c].attrs.get("units", "")
+            frame.units[c] = u.decode() if isinstance(u, bytes) else str(u)
+    t = frame.samples.get("time")
+    if t is None or t.size == 0:
+        return
+    # samples whose extent is on disk before their values (times run k / rate, increasing;
+    # an unwritten sample reads 0): keep the increasing run from the first sample
+    bad = np.flatnonzero(~(np.diff(t) > 0))
+    keep = t.size if bad.size == 0 else int(bad[0]) + 1
+    frame.samples = {c: v[:keep] for c, v in frame.samples.items()}
+
+
+def _int(v: object) -> int | None:
+    return int(v) if isinstance(v, int | np.integer) else None
+
+
+def _float(v: object) -> float | None:
+    return float(v) if isinstance(v, int | float | np.integer | np.floating) else None
+
+
+def read_frame(
+    path: Path | str, entry: str | None, start: int, known: dict[str, int | None]
+) -> Frame:
+    """:func:`read_frame_here` in a child process limited to :data:`FRAME_WALL_S`; raises
+    whatever stopped it (the caller skips the frame)."""
+    size = min(Path(path).stat().st_size, 64 << 20)
+    return call_isolated(
+        read_frame_here, str(path), entry, start, known, size_bytes=size, wall_s=FRAME_WALL_S
+    )
