@@ -153,7 +153,9 @@ def run_info(path: Path | str):
     planned = s["planned_entries"]
     n = len(s["entries"])
     complete = sum(1 for e in s["entries"] if e["status"] == "complete")
-    counts = f"\nentries: {n}" + (f" ({complete} complete, {planned} planned)" if planned else "")
+    counts = f"\nentries: {n}" + (f" of {planned} planned" if planned else "")
+    if complete != n:
+        counts += f" ({complete} complete)"
     head = Text.assemble(
         ("run file ", "bold"),
         s["path"],
