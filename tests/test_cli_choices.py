@@ -1,7 +1,7 @@
 """Options with a fixed set of values: their choices are the library's, ``--help`` lists them,
-and a bad value is a usage error (exit code 2) that names the option, the value and every valid
-choice, before any file is read. Also: ``labrig --help`` stays light (no numerical stack), flags
-show no ``<bool>``, counts take the right number ("1 entry")."""
+and a bad value is a usage error (exit code 64, EX_USAGE) that names the option, the value and
+every valid choice, before any file is read. Also: ``labrig --help`` stays light (no numerical
+stack), flags show no ``<bool>``, counts take the right number ("1 entry")."""
 
 from __future__ import annotations
 
@@ -22,6 +22,7 @@ from labrig.cli.common import (
     StructuralEffect,
     plural,
 )
+from labrig.cli.typer_app import EXIT_USAGE
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -80,7 +81,7 @@ def test_a_bad_choice_is_a_usage_error(
     if command == ["report"]:
         args += ["--out", tmp_path / "r.html"]
     res = invoke(*args, option, "bogus_value")
-    assert res.exit_code == 2, res.output
+    assert res.exit_code == EXIT_USAGE, res.output
     err = " ".join(res.stderr.split())
     assert f"'{option}'" in err and "bogus_value: not " in err
     assert "choose from " + ", ".join(c.value for c in choices) in err
@@ -90,7 +91,7 @@ def test_a_bad_choice_is_a_usage_error(
 
 def test_also_names_what_else_is_tried(tmp_path: Path) -> None:
     res = invoke("diagnose", tmp_path / "run.h5", "--also", "mains")
-    assert res.exit_code == 2
+    assert res.exit_code == EXIT_USAGE
     assert "the other effects are always tried" in " ".join(res.stderr.split())
 
 

@@ -489,12 +489,13 @@ def test_also_accepts_only_structural_effects(tmp_path):
     from typer.testing import CliRunner
 
     from labrig.cli import app
+    from labrig.cli.typer_app import EXIT_USAGE
 
     res = CliRunner().invoke(app, ["diagnose", str(tmp_path / "run.h5"), "--also", "mains"])
-    assert res.exit_code == 2
+    assert res.exit_code == EXIT_USAGE
     assert "remanence, viscoelastic_creep" in res.output
     res = CliRunner().invoke(app, ["diagnose", str(tmp_path / "run.h5"), "--max-effects", "9"])
-    assert res.exit_code == 2
+    assert res.exit_code == EXIT_USAGE
 
 
 def test_also_adds_the_structural_effect_to_the_candidates(tmp_path, monkeypatch, capsys):

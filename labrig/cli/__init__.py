@@ -1,11 +1,15 @@
 """The ``labrig`` command line (typer). Each command module parses its options, calls one
 library function and prints; this module lists the commands, in the order ``--help`` shows them.
 
-- :mod:`labrig.cli.run`: ``check``, ``run`` (protocols on the rig)
+- :mod:`labrig.cli.check`: ``check`` (a protocol against the rig, its drivers loaded);
+  :mod:`labrig.cli.run`: ``run`` (protocols on the rig)
 - :mod:`labrig.cli.files`: ``info``, ``export``, ``import`` (run files in and out)
 - :mod:`labrig.cli.fit`, :mod:`labrig.cli.report`, :mod:`labrig.cli.diagnose`: the analysis
 - :mod:`labrig.cli.model`: ``model demo``, ``model figures``; :mod:`labrig.cli.sim`: ``sim serve``
-- :mod:`labrig.cli.common`: the error wrapper, shared options and the choices of options
+- :mod:`labrig.cli.drivers`: ``drivers`` (the installed drivers)
+- :mod:`labrig.cli.common`: the error wrapper, shared options, the choices of options and the
+  output convention (docs/outputs.md); :mod:`labrig.cli.typer_app`: the command classes (usage
+  errors exit 64, plain metavars, the help layout of :mod:`labrig.cli.help_format`)
 """
 
 from __future__ import annotations
@@ -13,21 +17,21 @@ from __future__ import annotations
 import typer
 
 from labrig import __version__
-from labrig.cli import diagnose, files, fit, report, run
+from labrig.cli import check, diagnose, drivers, files, fit, report, run
 from labrig.cli.batch import batch_app
 from labrig.cli.model import model_app
 from labrig.cli.runs import runs as runs_command
 from labrig.cli.sim import sim_app
+from labrig.cli.typer_app import LabrigTyper
 from labrig.cli.watch import watch as watch_command
 
 __all__ = ["app"]
 
-app = typer.Typer(
+app = LabrigTyper(
     name="labrig",
     help="Run piezo-actuator experiments on real or simulated rigs, log them to HDF5, and "
     "compare them with a fractional-order dynamic hysteresis model.",
     no_args_is_help=True,
-    pretty_exceptions_enable=False,
 )
 
 
@@ -51,9 +55,10 @@ def main(
     """labrig: piezo rigs, HDF5 run files, and the fractional-order hysteresis model."""
 
 
-app.command("check")(run.check)
+app.command("check")(check.check)
 app.command("run")(run.run)
 app.command("watch")(watch_command)
+app.command("drivers")(drivers.drivers)
 app.command("info")(files.info)
 app.command("runs")(runs_command)
 app.command("export")(files.export)

@@ -17,16 +17,29 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-from labrig.cli.common import Memory, Method, StructuralEffect, choice, flag, friendly, one_of
+from labrig.cli.common import (
+    Memory,
+    Method,
+    StructuralEffect,
+    choice,
+    flag,
+    friendly,
+    json_option,
+    one_of,
+    out_dir_option,
+    plural,
+)
+from labrig.cli.diagnose import ALSO_OPTION, MAINS_HZ_OPTION, MAX_EFFECTS_OPTION
+from labrig.cli.typer_app import LabrigTyper
 
-batch_app = typer.Typer(
+batch_app = LabrigTyper(
     help="Analyse many run files at once (one task per file) on a Dask cluster or serially; "
     "one table, per-run outputs and a fleet report (docs/fleet.md).",
     no_args_is_help=True,
 )
 
 FILES = typer.Argument(..., help="Run files, globs (quote them: 'runs/**/*.h5') or folders.")
-OUT = typer.Option(..., "--out", help="Folder for the table, the fleet report and per-run outputs.")
+OUT = out_dir_option("the table, the fleet report and per-run outputs", required=True)
 SCHEDULER = typer.Option(
     None, "--scheduler", help="Address of a running Dask scheduler (tcp://HOST:PORT)."
 )
@@ -34,20 +47,20 @@ WORKERS = typer.Option(
     None, "--workers", min=1, help="Worker processes of the local cluster (default: the cores)."
 )
 SERIAL = flag(False, "--serial", help="Analyse the runs one after another in this process.")
-JSON = flag(False, "--json", help="Print a JSON summary on stdout.")
+JSON = json_option("a summary of the batch")
 FORCE = flag(False, "--force", help="Analyse every run again (no skip of unchanged runs).")
 METHOD = typer.Option(
     Method.GLOBAL,
     "--method",
     parser=choice(Method, "a fit method"),
-    metavar="<method>",
+    metavar="METHOD",
     help=f"Fit method: {one_of(Method)}.",
 )
 MEMORY = typer.Option(
     Memory.RETURN_POINT,
     "--memory",
     parser=choice(Memory, "a memory rule"),
-    metavar="<rule>",
+    metavar="RULE",
     help=f"The hysteresis operator's memory: {one_of(Memory)}.",
 )
 HELDOUT = flag(True, "--heldout/--no-heldout", help="Leave-one-entry-out NRMSE of the fit.")
@@ -105,9 +118,9 @@ def batch_command(
     else:
         con = Console()
         con.print(
-            f"{s['runs']} runs: {s['succeeded']} succeeded, {len(s['failed'])} failed, "
+            f"{plural(s['runs'], 'run')}: {s['succeeded']} succeeded, {len(s['failed'])} failed, "
             f"{s['skipped']} skipped (unchanged), {len(s['flagged'])} flagged; "
-            f"{s['scheduler']} on {s['workers']} worker(s), {s['wall_s']:.1f} s"
+            f"{s['scheduler']} on {plural(s['workers'], 'worker')}, {s['wall_s']:.1f} s"
         )
         for f in s["failed"]:
             con.print(f"[red]failed[/] {escape(f['run_file'])}: {escape(f['error'])}")
@@ -145,21 +158,15 @@ def diagnose(
     serial: bool = SERIAL,
     as_json: bool = JSON,
     force: bool = FORCE,
-    also: list[StructuralEffect] = typer.Option(
-        [],
-        "--also",
-        parser=choice(StructuralEffect, "a structural effect"),
-        metavar="<effect>",
-        help=f"Also try this structural effect (repeatable): {one_of(StructuralEffect)}.",
-    ),
-    max_effects: int = typer.Option(
-        2, "--max-effects", min=1, max=4, help="Add at most this many effects (1-4)."
-    ),
+    also: list[StructuralEffect] = ALSO_OPTION,
+    max_effects: int = MAX_EFFECTS_OPTION,
+    mains_hz: float | None = MAINS_HZ_OPTION,
 ) -> None:
     """`labrig fit` and `labrig diagnose` on every run file: parameters, effects, verdicts."""
     opts = {
         "also": tuple(dict.fromkeys(a.value for a in also)),
         "max_effects": max_effects,
+        "mains_hz": mains_hz,
     }
     code = batch_command(
         "diagnose", run_files, out, scheduler, workers, serial, as_json, force, **opts

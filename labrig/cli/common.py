@@ -1,5 +1,8 @@
 """What the command modules share: the ``friendly`` error wrapper, options used by several
-commands, the choices of options with a fixed set of values, and small output helpers.
+commands, the choices of options with a fixed set of values, and the output convention
+(docs/outputs.md): ``--json`` prints the result as JSON on stdout (progress and notes go to
+stderr); ``--out FILE`` writes a command's one document, ``--out DIR`` a folder for several;
+nothing existing is replaced without ``--overwrite``.
 
 The choices are :class:`~enum.StrEnum` so ``--help`` lists them; they repeat names the library
 defines (tests/test_cli_choices.py checks they match) so that ``labrig --help`` does not import
@@ -9,8 +12,10 @@ the numerical stack.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+import json
+from collections.abc import Callable, Sequence
 from enum import StrEnum
+from pathlib import Path
 from typing import Any, TypeVar
 
 import typer
@@ -83,6 +88,7 @@ class FitEffect(StrEnum):
     REMANENCE = "remanence"
     TIME_DELAY = "time_delay"
     QUADRATIC_TERM = "quadratic_term"
+    FIELD_SATURATION = "field_saturation"
 
 
 class StructuralEffect(StrEnum):
@@ -130,6 +136,58 @@ def choice(enum: type[E], what: str, hint: str = "") -> Callable[[Any], E]:
 def flag(default: bool | None, *decls: str, help: str) -> Any:
     """A boolean option; ``metavar=""`` keeps ``<bool>`` out of its ``--help`` line."""
     return typer.Option(default, *decls, help=help, metavar="")
+
+
+def json_text(doc: Any) -> str:
+    """``doc`` as the commands print and write JSON: strict (undefined numbers ``null``),
+    indented by 2."""
+    from labrig.jsonsafe import json_safe
+
+    return json.dumps(json_safe(doc), indent=2, allow_nan=False)
+
+
+def json_option(what: str = "the result") -> Any:
+    """``--json``: print ``what`` as JSON on stdout, nothing else."""
+    return flag(False, "--json", help=f"Print {what} as JSON on stdout (notes go to stderr).")
+
+
+def out_file_option(what: str, default: Path | None = None) -> Any:
+    """``--out FILE``: the file a command's one document is written to."""
+    return typer.Option(default, "--out", metavar="FILE", help=f"Write {what} to this file.")
+
+
+def out_dir_option(what: str, required: bool = False) -> Any:
+    """``--out DIR``: the folder a command's several output files go to."""
+    return typer.Option(
+        ... if required else None, "--out", metavar="DIR", help=f"Folder for {what}."
+    )
+
+
+OVERWRITE_OPTION = flag(False, "--overwrite", help="Replace existing --out files.")
+
+
+def check_out(out: Path | None, inputs: Sequence[Path | None], overwrite: bool) -> None:
+    """Before the work: ``--out`` must not be an input, a folder or (without ``--overwrite``)
+    an existing file, and its place must be writable (:mod:`labrig.outputs`, exit 2)."""
+    if out is not None:
+        from labrig.outputs import check_writable
+
+        check_writable([out], inputs=list(inputs), overwrite=overwrite)
+
+
+def deliver_json(doc: Any, *, as_json: bool, out: Path | None, overwrite: bool) -> bool:
+    """The JSON result of a one-document command: written to ``out`` (beside it, then renamed;
+    said on stderr) and printed when ``as_json``. Returns True when the caller should print
+    its text form (neither ``--json`` given)."""
+    text = json_text(doc)
+    if out is not None:
+        from labrig.outputs import write_text_output
+
+        write_text_output(out, text + "\n", overwrite=overwrite)
+        typer.echo(f"wrote {out}", err=True)
+    if as_json:
+        typer.echo(text)
+    return not as_json
 
 
 # shared by `fit` and `report`

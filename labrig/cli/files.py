@@ -1,5 +1,6 @@
 """``labrig info``, ``labrig export`` and ``labrig import``: run files in and out
-(:mod:`labrig.store`, :mod:`labrig.importers`)."""
+(:mod:`labrig.store`, :mod:`labrig.importers`). ``info`` of several files or of a folder is the
+catalogue's listing (``labrig runs``, :mod:`labrig.cli.runs`)."""
 
 from __future__ import annotations
 
@@ -7,30 +8,68 @@ from pathlib import Path
 
 import typer
 
-from labrig.cli.common import flag, friendly
+from labrig.cli.common import (
+    OVERWRITE_OPTION,
+    check_out,
+    deliver_json,
+    flag,
+    friendly,
+    json_option,
+    json_text,
+    out_file_option,
+)
 from labrig.cli.run import META_OPTION, OPERATOR_OPTION, SAMPLE_OPTION, metadata_of
 
 
 @friendly
-def info(run_file: Path = typer.Argument(..., help="Run file (HDF5).")) -> None:
-    """Summarise a run file: entries, status, durations, ranges."""
+def info(
+    paths: list[Path] = typer.Argument(
+        ..., metavar="RUN_FILES", help="Run file (HDF5); several files or a folder: a listing."
+    ),
+    as_json: bool = json_option("the summary (several files: the listing of `labrig runs`)"),
+    out: Path | None = out_file_option("the summary as JSON (what --json prints)"),
+    overwrite: bool = OVERWRITE_OPTION,
+) -> None:
+    """Summarise a run file: entries, status, durations, ranges (several: list them)."""
+    if len(paths) > 1 or paths[0].is_dir():
+        from labrig.cli.runs import list_runs_command
+
+        list_runs_command(paths, [], as_json, False, out, overwrite)
+        return
+    from labrig.store import run_info, run_summary
+
+    check_out(out, paths, overwrite)
+    doc_wanted = as_json or out is not None
+    if doc_wanted and not deliver_json(
+        run_summary(paths[0]), as_json=as_json, out=out, overwrite=overwrite
+    ):
+        return
     from rich.console import Console
 
-    from labrig.store import run_info
-
-    Console().print(run_info(run_file))
+    Console().print(run_info(paths[0]))
 
 
 @friendly
 def export(
     run_file: Path = typer.Argument(..., help="Run file (HDF5)."),
-    csv: Path = typer.Option(..., "--csv", help="Directory for one CSV file per entry."),
+    out: Path = typer.Option(
+        ...,
+        "--out",
+        "--csv",
+        metavar="DIR",
+        help="Folder for one CSV file per entry (--csv: the same option's older name).",
+    ),
+    as_json: bool = json_option("the files written"),
     overwrite: bool = flag(False, "--overwrite", help="Replace CSV files of the same names."),
 ) -> None:
     """Export every entry of a run file to CSV (header: column names with units)."""
     from labrig.store import export_csv
 
-    for p in export_csv(run_file, csv, overwrite):
+    written = export_csv(run_file, out, overwrite)
+    if as_json:
+        typer.echo(json_text({"files": [str(p) for p in written]}))
+        return
+    for p in written:
         typer.echo(str(p))
 
 

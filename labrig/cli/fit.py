@@ -4,7 +4,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -18,15 +17,19 @@ from labrig.cli.common import (
     ENTRIES_HELP,
     HELDOUT_OPTION,
     OFFSET_OPTION,
+    OVERWRITE_OPTION,
     WARMUP_OPTION,
     FitEffect,
     Memory,
     Method,
     Model,
+    check_out,
     choice,
-    flag,
+    deliver_json,
     friendly,
+    json_option,
     one_of,
+    out_file_option,
 )
 
 if TYPE_CHECKING:
@@ -47,14 +50,14 @@ METHOD_OPTION = typer.Option(
     Method.GLOBAL,
     "--method",
     parser=choice(Method, "a fit method"),
-    metavar="<method>",
+    metavar="METHOD",
     help="global or staged (the paper's section 3.1).",
 )
 MODEL_OPTION = typer.Option(
     Model.DYNAMIC,
     "--model",
     parser=choice(Model, "a model"),
-    metavar="<model>",
+    metavar="MODEL",
     help="dynamic (ours), prandtl_ishlinskii, bouc_wen or sindy (a sparse ODE fitted with "
     "pysindy, scored in free run; docs/sindy.md).",
 )
@@ -62,7 +65,7 @@ EFFECT_OPTION = typer.Option(
     [],
     "--effect",
     parser=choice(FitEffect, "an effect fit can add"),
-    metavar="<effect>",
+    metavar="EFFECT",
     help=f"Also fit this library effect with the model (repeatable): {one_of(FitEffect)}; "
     "e.g. viscoelastic_creep (which compensation control inverts); see docs/diagnose.md.",
 )
@@ -70,7 +73,7 @@ MEMORY_OPTION = typer.Option(
     Memory.RETURN_POINT,
     "--memory",
     parser=choice(Memory, "a memory rule"),
-    metavar="<rule>",
+    metavar="RULE",
     help="The hysteresis operator's memory: return_point (minor loops close and are "
     "forgotten) or last_reversal (the paper's single memory); docs/analysis.md.",
 )
@@ -82,8 +85,8 @@ def fit(
     entries: str | None = typer.Option(
         None, "--entries", help=ENTRIES_HELP.format("Entries to fit")
     ),
-    out: Path | None = typer.Option(None, "--out", help="Write the result as JSON to this file."),
-    as_json: bool = flag(False, "--json", help="Print only the JSON result on stdout."),
+    out: Path | None = out_file_option("the result as JSON (what --json prints)"),
+    as_json: bool = json_option(),
     method: Method = METHOD_OPTION,
     model: Model = MODEL_OPTION,
     warmup_s: float | None = WARMUP_OPTION,
@@ -91,18 +94,15 @@ def fit(
     offset: bool | None = OFFSET_OPTION,
     effect: list[FitEffect] = EFFECT_OPTION,
     memory: Memory = MEMORY_OPTION,
-    overwrite: bool = flag(False, "--overwrite", help="Replace an existing --out file."),
+    overwrite: bool = OVERWRITE_OPTION,
 ) -> None:
     """Identify the model (or a baseline) from a run file; print parameters and NRMSE."""
     from labrig.analysis.fit_effects import EffectsFit
     from labrig.analysis.fit_run import fit_run_file
     from labrig.analysis.prepare import parse_entries
     from labrig.cli.progress import RichUI
-    from labrig.jsonsafe import json_safe
-    from labrig.outputs import check_writable, write_text_output
 
-    if out is not None:  # before the work: --out an input, an existing file, no place to write
-        check_writable([out], inputs=[run_file], overwrite=overwrite)
+    check_out(out, [run_file], overwrite)  # before the work
     ui = RichUI()
     outcome = fit_run_file(
         run_file,
@@ -117,22 +117,15 @@ def fit(
         ui=ui,
     )
     res = outcome.result
-    text = json.dumps(json_safe(res.to_json()), indent=2, allow_nan=False)
-    if out is not None:
-        write_text_output(out, text + "\n", overwrite=overwrite)
     for m in getattr(res, "messages", []):
         ui.err.print(f"[yellow]note:[/] {escape(m)}")
-    if as_json:
-        typer.echo(text)
-    else:
+    if deliver_json(res.to_json(), as_json=as_json, out=out, overwrite=overwrite):
         con = Console()
         for t in summary_tables(res, model.value):
             con.print(t)
         if isinstance(res, EffectsFit):
             con.print(effects_table(res))
         print_floor_and_time(con, outcome)
-    if out is not None:
-        ui.err.print(f"wrote {escape(str(out))}")
 
 
 def print_floor_and_time(con: Console, outcome: FitOutcome) -> None:

@@ -7,23 +7,39 @@ from pathlib import Path
 
 import typer
 
-from labrig.cli.common import Preset, choice, one_of
+from labrig.cli.common import (
+    OVERWRITE_OPTION,
+    Preset,
+    check_out,
+    choice,
+    deliver_json,
+    friendly,
+    json_option,
+    json_text,
+    one_of,
+    out_file_option,
+)
+from labrig.cli.typer_app import LabrigTyper
 
-model_app = typer.Typer(help="The dynamic hysteresis model: demo and the paper's figures.")
+model_app = LabrigTyper(help="The dynamic hysteresis model: demo and the paper's figures.")
 
 
 @model_app.command("demo")
+@friendly
 def demo(
     preset: Preset = typer.Option(
         Preset.PAPER_TABLE1,
         parser=choice(Preset, "a parameter preset"),
-        metavar="<preset>",
+        metavar="PRESET",
         help=f"Parameter preset: {one_of(Preset)}.",
     ),
     amplitude_v: float = typer.Option(100.0, help="Peak of the unipolar sine (V)."),
     frequency_hz: float = typer.Option(1.0, help="Sine frequency (Hz)."),
     cycles: int = typer.Option(5, help="Number of cycles."),
     rate_hz: float = typer.Option(1000.0, help="Sample rate (Hz)."),
+    as_json: bool = json_option("the table (one row per cycle)"),
+    out: Path | None = out_file_option("the table as JSON (what --json prints)"),
+    overwrite: bool = OVERWRITE_OPTION,
 ) -> None:
     """Print the model's strain for a unipolar sine (the paper's sweep) as a short table."""
     import numpy as np
@@ -32,14 +48,13 @@ def demo(
 
     from labrig.model import PRESETS, DynamicHysteresisModel
 
+    check_out(out, [], overwrite)
     model = DynamicHysteresisModel(PRESETS[preset.value])
     t = np.arange(round(cycles * rate_hz / frequency_hz) + 1) / rate_hz
     v = amplitude_v / 2 * (1 - np.cos(2 * np.pi * frequency_hz * t))
     s = model.predict(v, rate_hz)
     per = round(rate_hz / frequency_hz)
-    table = Table(title=f"{preset}: {amplitude_v:g} V unipolar sine at {frequency_hz:g} Hz")
-    for col in ("cycle", "max strain (ue)", "strain at 0 V (ue)", "loop width at mid (ue)"):
-        table.add_column(col, justify="right")
+    rows = []
     for k in range(cycles):
         seg = slice(k * per, (k + 1) * per + 1)
         vs, ss = v[seg], s[seg]
@@ -47,16 +62,51 @@ def demo(
         mid = amplitude_v / 2
         up = np.interp(mid, vs[:half], ss[:half])
         down = np.interp(mid, vs[half:][::-1], ss[half:][::-1])
-        table.add_row(str(k + 1), f"{ss.max():.1f}", f"{ss[-1]:.1f}", f"{down - up:.1f}")
+        rows.append(
+            {
+                "cycle": k + 1,
+                "max_strain_ue": float(ss.max()),
+                "strain_at_0V_ue": float(ss[-1]),
+                "loop_width_at_mid_ue": float(down - up),
+            }
+        )
+    doc = {
+        "preset": preset.value,
+        "amplitude_V": amplitude_v,
+        "frequency_hz": frequency_hz,
+        "rate_hz": rate_hz,
+        "cycles": rows,
+    }
+    if not deliver_json(doc, as_json=as_json, out=out, overwrite=overwrite):
+        return
+    table = Table(title=f"{preset}: {amplitude_v:g} V unipolar sine at {frequency_hz:g} Hz")
+    for col in ("cycle", "max strain (ue)", "strain at 0 V (ue)", "loop width at mid (ue)"):
+        table.add_column(col, justify="right")
+    for r in rows:
+        table.add_row(
+            str(r["cycle"]),
+            f"{r['max_strain_ue']:.1f}",
+            f"{r['strain_at_0V_ue']:.1f}",
+            f"{r['loop_width_at_mid_ue']:.1f}",
+        )
     Console().print(table)
 
 
 @model_app.command("figures")
+@friendly
 def figures(
-    out: Path = typer.Option(Path("figures"), "--out", help="Output directory for PNG files."),
+    out: Path = typer.Option(
+        Path("figures"), "--out", metavar="DIR", help="Folder for the PNG files."
+    ),
+    as_json: bool = json_option("the files written"),
+    overwrite: bool = OVERWRITE_OPTION,
 ) -> None:
     """Regenerate the paper's section-2 figures (Figs. 1, 3, 4, 5) as PNG files."""
     from labrig.report.model_figures import write_model_figures
 
-    for path in write_model_figures(out):
+    paths = write_model_figures(out, overwrite=overwrite)
+    if as_json:
+        typer.echo(json_text({"files": [str(p) for p in paths]}))
+        return
+    for path in paths:
         typer.echo(str(path))

@@ -1,10 +1,15 @@
 """``labrig report``: model versus measurement as one HTML file, baselines fitted on the same data
-(:func:`labrig.report.build.build_run_report`)."""
+(:func:`labrig.report.build.build_run_report`).
+
+``--out FILE`` writes the page; ``--json`` prints the metrics table (with or without
+``--out``); with neither, the mean NRMSE per entry and model is printed as a table and no page is
+drawn.
+"""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
+from typing import Any
 
 import typer
 from rich.markup import escape
@@ -13,23 +18,30 @@ from labrig.cli.common import (
     ENTRIES_HELP,
     HELDOUT_OPTION,
     OFFSET_OPTION,
+    OVERWRITE_OPTION,
     WARMUP_OPTION,
     Method,
+    check_out,
     choice,
-    flag,
     friendly,
+    json_option,
+    json_text,
     one_of,
+    out_file_option,
 )
 
 
 @friendly
 def report(
     run_file: Path = typer.Argument(..., help="Run file (HDF5), recorded or imported."),
-    out: Path = typer.Option(..., "--out", help="HTML file to write (self-contained)."),
+    out: Path | None = out_file_option("the report as one self-contained HTML page"),
     params: Path | None = typer.Option(
-        None, "--params", help="Parameters from `labrig fit --out` (default: fit now)."
+        None,
+        "--params",
+        metavar="FILE",
+        help="Parameters from `labrig fit --out` (default: fit now).",
     ),
-    as_json: bool = flag(False, "--json", help="Print the metrics table as JSON."),
+    as_json: bool = json_option("the metrics table"),
     entries: str | None = typer.Option(
         None, "--entries", help=ENTRIES_HELP.format("Entries to report")
     ),
@@ -37,22 +49,21 @@ def report(
         Method.GLOBAL,
         "--method",
         parser=choice(Method, "a fit method"),
-        metavar="<method>",
+        metavar="METHOD",
         help=f"Fit method when fitting: {one_of(Method)}.",
     ),
     warmup_s: float | None = WARMUP_OPTION,
     heldout: bool = HELDOUT_OPTION,
     offset: bool | None = OFFSET_OPTION,
-    overwrite: bool = flag(False, "--overwrite", help="Replace an existing --out file."),
+    overwrite: bool = OVERWRITE_OPTION,
 ) -> None:
     """Model versus measurement as one HTML file; baselines fitted on the same data."""
     from labrig.analysis.prepare import parse_entries
     from labrig.cli.progress import RichUI
-    from labrig.outputs import check_writable, write_text_output
+    from labrig.outputs import write_text_output
     from labrig.report.build import build_run_report
 
-    # before the work: --out an input, a folder, an existing file, or no place to write
-    check_writable([out], inputs=[run_file, params], overwrite=overwrite)
+    check_out(out, [run_file, params], overwrite)  # before the work
     ui = RichUI()
     built = build_run_report(
         run_file,
@@ -63,10 +74,42 @@ def report(
         method=method.value,
         heldout=heldout,
         ui=ui,
+        page=out is not None,
     )
-    write_text_output(out, built.page, overwrite=overwrite)
-    ui.err.print(f"wrote {escape(str(out))} ({len(built.page) / 1e6:.1f} MB)")
+    if out is not None:
+        write_text_output(out, built.page, overwrite=overwrite)
+        ui.err.print(f"wrote {escape(str(out))} ({len(built.page) / 1e6:.1f} MB)")
     if as_json:
-        typer.echo(json.dumps(built.metrics, indent=2, allow_nan=False))
-    else:
+        typer.echo(json_text(built.metrics))
+    elif out is not None:
         typer.echo(str(out))
+    else:
+        print_metrics(built.metrics)
+        ui.err.print("no page drawn: --out FILE writes the report")
+
+
+def print_metrics(metrics: dict[str, dict[str, Any]]) -> None:
+    """NRMSE (%) per entry and model, held-out in brackets, as a table on stdout."""
+    from rich.console import Console
+    from rich.table import Table
+
+    models = list(
+        dict.fromkeys(
+            k.removesuffix(".nrmse_pct")
+            for row in metrics.values()
+            for k in row
+            if k.endswith(".nrmse_pct") and not k.endswith("heldout_nrmse_pct")
+        )
+    )
+    t = Table(title="NRMSE (%) per entry and model, held-out in brackets")
+    t.add_column("entry")
+    for m in models:
+        t.add_column(m, justify="right")
+    for entry, row in metrics.items():
+        cells = []
+        for m in models:
+            v, h = row.get(f"{m}.nrmse_pct"), row.get(f"{m}.heldout_nrmse_pct")
+            cell = "—" if v is None else f"{v:.3g}"
+            cells.append(cell + ("" if h is None else f" ({h:.3g})"))
+        t.add_row(escape(entry), *cells)
+    Console().print(t)

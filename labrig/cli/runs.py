@@ -1,13 +1,14 @@
-"""``labrig runs [DIR|FILES...] [--where EXPR]... [--json] [--reindex]``: the catalogue of run
-files (:func:`labrig.catalogue.list_runs`; the filter language: docs/catalogue.md).
+"""``labrig runs [DIR|FILES...] [--where EXPR]... [--json] [--out FILE] [--reindex]``: the
+catalogue of run files (:func:`labrig.catalogue.list_runs`; the filter language:
+docs/catalogue.md). ``labrig info`` of several files or of a folder lists them here too.
 
 Exit codes: 0 listed (unreadable files are listed as such, with a note on stderr), 2 a bad
-``--where`` or a path that does not exist, 130 Ctrl-C (the index keeps what was read).
+``--where`` or a path that does not exist, 64 a usage error, 130 Ctrl-C (the index keeps what
+was read).
 """
 
 from __future__ import annotations
 
-import json
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -16,7 +17,16 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from labrig.cli.common import flag, friendly, plural
+from labrig.cli.common import (
+    OVERWRITE_OPTION,
+    check_out,
+    deliver_json,
+    flag,
+    friendly,
+    json_option,
+    out_file_option,
+    plural,
+)
 
 if TYPE_CHECKING:
     from labrig.catalogue import ListedRun, Listing, ScanProgress
@@ -43,10 +53,25 @@ def runs(
         show_default=False,
     ),
     where: list[str] = typer.Option([], "--where", metavar="EXPR", help=WHERE_HELP),
-    as_json: bool = flag(False, "--json", help="Print the runs as JSON on stdout."),
+    as_json: bool = json_option("the runs"),
+    out: Path | None = out_file_option("the runs as JSON (what --json prints)"),
+    overwrite: bool = OVERWRITE_OPTION,
     reindex: bool = flag(False, "--reindex", help="Read every file again (rebuild the index)."),
 ) -> None:
     """List run files with status, protocol, date, metadata and entries; filter with --where."""
+    list_runs_command(paths or [], where, as_json, reindex, out, overwrite)
+
+
+def list_runs_command(
+    paths: list[Path],
+    where: list[str],
+    as_json: bool,
+    reindex: bool,
+    out: Path | None = None,
+    overwrite: bool = False,
+) -> None:
+    """The listing of ``paths`` (default ``runs/``) filtered by ``where``, as a table on stdout
+    or as JSON (``as_json``, ``out``); counts and notes on stderr."""
     from labrig.catalogue import list_runs
     from labrig.catalogue_where import parse_all
     from labrig.errors import InputFileError, InputIssue
@@ -57,27 +82,26 @@ def runs(
         raise InputFileError(
             [InputIssue(str(DEFAULT_FOLDER), None, "", "no runs/ folder here: give a folder")]
         )
+    check_out(out, [], overwrite)
+    detail = as_json or out is not None
     with _progress_bar() as progress:
-        listing = list_runs(targets, conditions, detail=as_json, reindex=reindex, progress=progress)
-    if as_json:
-        typer.echo(json.dumps(_listing_json(listing), indent=1, allow_nan=False))
-    else:
+        listing = list_runs(targets, conditions, detail=detail, reindex=reindex, progress=progress)
+    if not detail or deliver_json(
+        listing_json(listing), as_json=as_json, out=out, overwrite=overwrite
+    ):
         for line in table_lines(listing.runs):
             typer.echo(line)
     _notes(listing, bool(conditions))
 
 
-def _listing_json(listing: Listing) -> dict[str, Any]:
-    from labrig.jsonsafe import json_safe
-
-    return json_safe(
-        {
-            "runs": [r.to_json() for r in listing.runs],
-            "files": listing.files,
-            "unreadable": [str(r.path) for r in listing.unreadable],
-            "indexes": [str(p) for p in listing.indexes],
-        }
-    )
+def listing_json(listing: Listing) -> dict[str, Any]:
+    """The listing as ``labrig runs --json`` prints it: runs, files, unreadable, indexes."""
+    return {
+        "runs": [r.to_json() for r in listing.runs],
+        "files": listing.files,
+        "unreadable": [str(r.path) for r in listing.unreadable],
+        "indexes": [str(p) for p in listing.indexes],
+    }
 
 
 @contextmanager

@@ -6,9 +6,17 @@ from pathlib import Path
 
 import typer
 
-from labrig.cli.common import flag, friendly
+from labrig.cli.common import (
+    OVERWRITE_OPTION,
+    friendly,
+    json_option,
+    json_text,
+    out_dir_option,
+    plural,
+)
+from labrig.cli.typer_app import LabrigTyper
 
-sim_app = typer.Typer(
+sim_app = LabrigTyper(
     help="The simulated bench: run its instrument simulators standalone; simulate a fleet."
 )
 
@@ -16,7 +24,9 @@ sim_app = typer.Typer(
 @sim_app.command("serve")
 @friendly
 def serve(
-    rig: Path | None = typer.Option(None, "--rig", help="Rig file (default: built-in sim rig)."),
+    rig: Path | None = typer.Option(
+        None, "--rig", metavar="FILE", help="Rig file (default: built-in sim rig)."
+    ),
 ) -> None:
     """Start the simulated amplifier (GCS) and conditioner (Modbus) servers; Ctrl-C stops."""
     from labrig.drivers.sim.serve import serve as serve_rig
@@ -28,15 +38,19 @@ def serve(
 @friendly
 def fleet(
     n: int = typer.Argument(..., min=1, help="Number of actuators."),
-    out: Path = typer.Option(..., "--out", help="Folder for the run files and truth.json."),
+    out: Path = out_dir_option("the run files and truth.json", required=True),
     seed: int = typer.Option(0, "--seed", help="Random seed of the fleet (spread, defects, runs)."),
     defects: float = typer.Option(
         0.05, "--defects", min=0.0, max=1.0, help="Fraction of defective actuators (0-1)."
     ),
     protocol: Path = typer.Option(
-        Path("experiments/paper.yaml"), "--protocol", help="Protocol each actuator runs."
+        Path("experiments/paper.yaml"),
+        "--protocol",
+        metavar="FILE",
+        help="Protocol each actuator runs.",
     ),
-    overwrite: bool = flag(False, "--overwrite", help="Replace the files of an earlier fleet."),
+    as_json: bool = json_option("the files written"),
+    overwrite: bool = OVERWRITE_OPTION,
 ) -> None:
     """Simulate N actuators with a manufacturing spread and a few defects (docs/fleet.md)."""
     from rich.console import Console
@@ -58,4 +72,7 @@ def fleet(
             overwrite=overwrite,
             progress=lambda _a: bar.advance(task),
         )
-    typer.echo(f"{len(paths)} run files and truth.json in {out}")
+    if as_json:
+        typer.echo(json_text({"files": [str(p) for p in paths], "truth": str(out / "truth.json")}))
+    else:
+        typer.echo(f"{plural(len(paths), 'run file')} and truth.json in {out}")

@@ -308,9 +308,11 @@ def build_run_report(
     method: str = "global",
     heldout: bool = True,
     ui: CommandUI | None = None,
+    page: bool = True,
 ) -> BuiltReport:
     """``labrig report``: the report of the run file ``path`` (module docstring); our model's
-    parameters from ``params_file`` (``labrig fit`` output) when given, else fitted now."""
+    parameters from ``params_file`` (``labrig fit`` output) when given, else fitted now.
+    ``page=False``: the metrics only (no figures drawn; ``BuiltReport.page`` is ``""``)."""
     ui = ui or QuietUI()
     doc = read_fit_output(params_file) if params_file is not None else None
     setup = prepare(path, entries, warmup_s, offset)
@@ -318,6 +320,8 @@ def build_run_report(
     with ui.fitting() as progress:
         fitted = fit_report_models(setup, doc, params_file, method, heldout, progress)
     data = report_data(setup, fitted, heldout, doc is not None)
-    with ui.busy("drawing the figures"):
-        page = render_page(setup, data)
-    return BuiltReport(setup, page, metrics_table(setup, data))
+    html = ""
+    if page:
+        with ui.busy("drawing the figures"):
+            html = render_page(setup, data)
+    return BuiltReport(setup, html, metrics_table(setup, data))

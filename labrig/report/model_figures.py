@@ -261,8 +261,16 @@ FIGURES = (
 )
 
 
-def write_model_figures(out: Path) -> list[Path]:
-    """Write the section-2 figures (the paper's Figs. 1, 3, 4, 5) as PNG files into ``out``."""
+def write_model_figures(out: Path, overwrite: bool = False) -> list[Path]:
+    """Write the section-2 figures (the paper's Figs. 1, 3, 4, 5) as PNG files into ``out``
+    (created if needed); existing files are refused before any drawing unless ``overwrite``
+    (:class:`~labrig.errors.InputFileError`), and the files are written beside their targets,
+    then renamed into place (:mod:`labrig.outputs`)."""
+    from labrig.outputs import staged_outputs
+
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    return [fn(out / name) for name, fn in FIGURES]
+    targets = [out / name for name, _ in FIGURES]
+    with staged_outputs(targets, overwrite=overwrite) as staged:
+        for target, (_, fn) in zip(targets, FIGURES, strict=True):
+            fn(staged.path(target))
+    return targets

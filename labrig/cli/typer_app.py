@@ -1,0 +1,139 @@
+"""The command classes every ``labrig`` command and group is built with: usage errors exit with
+:data:`EXIT_USAGE`, parameters show plain metavars (``RUN_FILE``, ``--out FILE``, no
+``<bool>``, ``<list[Path]>`` or ``{protocol}``), and ``--help`` is drawn by
+:func:`labrig.cli.help_format.render_help`.
+
+:class:`LabrigTyper` is a :class:`typer.Typer` whose commands are :class:`LabrigCommand` and
+whose groups are :class:`LabrigGroup` unless told otherwise, so a command registered with
+``app.command("name")(fn)`` gets them without asking.
+"""
+
+from __future__ import annotations
+
+import enum
+import typing
+from pathlib import Path
+from typing import Any
+
+import typer
+from typer.core import TyperCommand, TyperGroup
+
+from labrig.cli.help_format import is_argument, render_help
+
+#: exit code of a usage error (a bad option, a bad choice, a missing argument): EX_USAGE of
+#: BSD's sysexits.h, distinct from 2 (bad input file) and 3 (device fault)
+EXIT_USAGE = 64
+
+#: click's UsageError as typer raises it (typer 0.2x runs a copy of click of its own; its
+#: BadParameter, a public name, derives from that UsageError)
+USAGE_ERROR: type[Exception] = next(
+    c for c in typer.BadParameter.__mro__ if c.__name__ == "UsageError"
+)
+
+#: the metavar of an option's value by its Python type (options that set none)
+TYPE_METAVARS: dict[type, str] = {Path: "PATH", str: "TEXT", float: "NUMBER", int: "INTEGER"}
+
+
+def value_type(param: Any) -> Any:
+    """The Python type of one value of ``param`` (``list[Path]`` -> ``Path``)."""
+    desc = getattr(param, "type_descriptor", None)
+    annotation = getattr(desc, "annotation", None)
+    while typing.get_origin(annotation) in (list, tuple, typing.Union):
+        args = [a for a in typing.get_args(annotation) if a is not type(None)]
+        annotation = args[0] if args else None
+    return annotation
+
+
+def default_metavar(param: Any) -> str:
+    """The metavar a parameter shows when its definition gives none: an argument's name in
+    capitals (``RUN_FILE``), nothing for a flag, else its type's (:data:`TYPE_METAVARS`; an
+    enumeration's class name)."""
+    if is_argument(param):
+        return (param.name or "value").upper()
+    if getattr(param, "is_flag", False) or getattr(param, "count", False):
+        return ""
+    t = value_type(param)
+    if isinstance(t, type) and issubclass(t, enum.Enum):
+        return t.__name__.upper()
+    if t in TYPE_METAVARS:
+        return TYPE_METAVARS[t]
+    click_type = getattr(getattr(param, "type", None), "name", "")  # typer before 0.2x
+    return {"path": "PATH", "text": "TEXT", "float": "NUMBER", "integer": "INTEGER"}.get(
+        click_type, "VALUE"
+    )
+
+
+def name_params(params: list[Any]) -> None:
+    """Give every parameter without a metavar its :func:`default_metavar` (also what usage
+    errors show: ``Missing argument 'RUN_FILE'``)."""
+    for p in params:
+        if p.metavar is None:
+            p.metavar = default_metavar(p)
+
+
+def usage_pieces(command: TyperCommand | TyperGroup, ctx: typer.Context) -> list[str]:
+    """``[OPTIONS] RUN_FILE [PATHS]...``: the usage line after the command's name."""
+    params = command.get_params(ctx)
+    pieces = ["[OPTIONS]"] if any(not is_argument(p) for p in params) else []
+    for p in params:
+        if is_argument(p):
+            name = p.metavar or default_metavar(p)
+            name = name if p.required else f"[{name}]"
+            pieces.append(name + ("..." if p.nargs != 1 else ""))
+    return pieces
+
+
+class LabrigCommand(TyperCommand):
+    """A command with plain metavars and labrig's help layout."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        name_params(self.params)
+
+    def collect_usage_pieces(self, ctx: typer.Context) -> list[str]:
+        return usage_pieces(self, ctx)
+
+    def format_help(self, ctx: typer.Context, formatter: Any) -> None:
+        formatter.write(render_help(self, ctx))
+
+
+class LabrigGroup(TyperGroup):
+    """A group with plain metavars and labrig's help layout; every usage error raised while
+    parsing its command line, or its subcommands', exits with :data:`EXIT_USAGE`."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        name_params(self.params)
+
+    def collect_usage_pieces(self, ctx: typer.Context) -> list[str]:
+        return [*usage_pieces(self, ctx), "COMMAND [ARGS]..."]
+
+    def format_help(self, ctx: typer.Context, formatter: Any) -> None:
+        formatter.write(render_help(self, ctx))
+
+    def make_context(self, *args: Any, **kwargs: Any) -> typer.Context:
+        try:
+            return super().make_context(*args, **kwargs)
+        except USAGE_ERROR as e:
+            e.exit_code = EXIT_USAGE  # type: ignore[attr-defined]
+            raise
+
+    def invoke(self, ctx: typer.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except USAGE_ERROR as e:
+            e.exit_code = EXIT_USAGE  # type: ignore[attr-defined]
+            raise
+
+
+class LabrigTyper(typer.Typer):
+    """A :class:`typer.Typer` building :class:`LabrigGroup` and :class:`LabrigCommand`."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("cls", LabrigGroup)
+        kwargs.setdefault("pretty_exceptions_enable", False)
+        super().__init__(*args, **kwargs)
+
+    def command(self, *args: Any, **kwargs: Any) -> Any:
+        kwargs["cls"] = kwargs.get("cls") or LabrigCommand
+        return super().command(*args, **kwargs)
