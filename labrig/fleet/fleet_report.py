@@ -1,5 +1,6 @@
 """``fleet.html``: the fleet at a glance, built with the report's tools (matplotlib figures as
-inline PNG, the report's style sheet, every text escaped; no scripts, opens offline).
+inline PNG, the template ``fleet.html.j2`` and the style sheet of :mod:`labrig.report.templating`,
+every text escaped; no scripts, opens offline).
 
 Sections: the verdicts (fraction of runs per verdict class), the flagged runs (each with its
 run file, the outlying quantities with their robust z, and the effects diagnose found, linked to
@@ -13,7 +14,6 @@ from __future__ import annotations
 import math
 from collections import Counter
 from datetime import datetime
-from html import escape
 from pathlib import Path
 from typing import Any
 
@@ -24,8 +24,8 @@ from labrig import __version__
 from labrig.fleet.cache import write_atomic
 from labrig.fleet.outliers import QUANTITIES, Z_LIMIT
 from labrig.fleet.schedule import ScheduleInfo
-from labrig.report.html import CSS, img
 from labrig.report.plots import png, style_axes
+from labrig.report.templating import render
 
 RIG_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:cyan")
 PAGES = ("diagnosis.html", "report.html", "fit.json")
@@ -117,101 +117,87 @@ def control_chart(rows: list[dict[str, Any]], q: str) -> bytes:
     return png(fig)
 
 
-def _link(row: dict[str, Any], out_dir: Path) -> str:
+def page_of(row: dict[str, Any], out_dir: Path) -> str | None:
+    """The run's own page beside the fleet page (diagnosis, report or fit), if written."""
     for page in PAGES:
         p = Path("runs") / str(row["key"]) / page
         if (out_dir / p).is_file():
-            return f'<a href="{escape(p.as_posix())}">{escape(page)}</a>'
-    return ""
+            return p.as_posix()
+    return None
 
 
-def verdict_table(rows: list[dict[str, Any]]) -> str:
+def verdict_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Runs per verdict class (the failed ones last), with their fraction of the fleet."""
     ok = [r for r in rows if r["status"] == "ok"]
     counts = Counter(str(r.get("verdict_class") or "(not diagnosed)") for r in ok)
-    n_failed = len(rows) - len(ok)
-    h = ["<table><tr><th>verdict</th><th>runs</th><th>fraction</th></tr>"]
-    for cls, n in counts.most_common():
-        h.append(f"<tr><td>{escape(cls)}</td><td>{n}</td><td>{100 * n / len(rows):.1f} %</td></tr>")
-    if n_failed:
-        frac = 100 * n_failed / len(rows)
-        h.append(f"<tr><td>failed</td><td>{n_failed}</td><td>{frac:.1f} %</td></tr>")
-    h.append("</table>")
-    return "".join(h)
-
-
-def flagged_table(rows: list[dict[str, Any]], out_dir: Path) -> str:
-    flagged = [r for r in rows if r.get("flagged")]
-    if not flagged:
-        return "<p>No run is flagged.</p>"
-    h = [
-        "<table><tr><th>run file</th><th>actuator</th><th>rig</th><th>why flagged</th>"
-        "<th>points to</th><th>verdict</th><th>page</th></tr>"
+    out = [
+        {"name": cls, "runs": n, "fraction": f"{100 * n / len(rows):.1f}"}
+        for cls, n in counts.most_common()
     ]
-    for r in flagged:
-        h.append(
-            f"<tr><td>{escape(Path(str(r['run_file'])).name)}</td>"
-            f"<td>{escape(str(r.get('actuator') or ''))}</td>"
-            f"<td>{escape(str(r.get('rig') or ''))}</td><td>{escape(str(r['flags']))}</td>"
-            f"<td>{escape(str(r.get('named_effect') or ''))}</td>"
-            f"<td>{escape(str(r.get('verdict_class') or ''))}</td><td>{_link(r, out_dir)}</td></tr>"
+    n_failed = len(rows) - len(ok)
+    if n_failed:
+        out.append(
+            {"name": "failed", "runs": n_failed, "fraction": f"{100 * n_failed / len(rows):.1f}"}
         )
-    h.append("</table>")
-    return "".join(h)
+    return out
 
 
-def failed_table(rows: list[dict[str, Any]]) -> str:
-    failed = [r for r in rows if r["status"] != "ok"]
-    if not failed:
-        return "<p>Every run succeeded.</p>"
-    h = ["<table><tr><th>run file</th><th>error</th></tr>"]
-    for r in failed:
-        h.append(
-            f"<tr><td>{escape(str(r['run_file']))}</td><td>{escape(str(r['error']))}</td></tr>"
+def flagged_rows(rows: list[dict[str, Any]], out_dir: Path) -> list[dict[str, Any]]:
+    out = []
+    for r in rows:
+        if not r.get("flagged"):
+            continue
+        page = page_of(r, out_dir)
+        out.append(
+            {
+                "file": Path(str(r["run_file"])).name,
+                "actuator": str(r.get("actuator") or ""),
+                "rig": str(r.get("rig") or ""),
+                "flags": str(r["flags"]),
+                "effect": str(r.get("named_effect") or ""),
+                "verdict": str(r.get("verdict_class") or ""),
+                "page": page,
+                "page_name": Path(page).name if page else "",
+            }
         )
-    h.append("</table>")
-    return "".join(h)
+    return out
+
+
+def fleet_context(
+    rows: list[dict[str, Any]], quantities: list[str], info: ScheduleInfo, out_dir: Path
+) -> dict[str, Any]:
+    """Everything ``fleet.html.j2`` shows (module docstring)."""
+    ok_rows = [r for r in rows if r["status"] == "ok"]
+    return {
+        "version": __version__,
+        "n": len(rows),
+        "n_ok": len(ok_rows),
+        "n_flagged": sum(bool(r.get("flagged")) for r in rows),
+        "command": str(rows[0]["command"]) if rows else "",
+        "scheduler": info.kind,
+        "workers": f"{info.n_workers} worker" + ("" if info.n_workers == 1 else "s"),
+        "verdicts": verdict_rows(rows) if rows else [],
+        "z_limit": Z_LIMIT,
+        "quantities": quantities,
+        "flagged": flagged_rows(rows, out_dir),
+        "distributions_png": distributions_figure(ok_rows, quantities),
+        "charts": [
+            {"png": control_chart(ok_rows, q), "alt": f"{q} against the test date"}
+            for q in quantities
+        ],
+        "failed": [
+            {"file": str(r["run_file"]), "error": str(r["error"])}
+            for r in rows
+            if r["status"] != "ok"
+        ],
+    }
 
 
 def render_fleet(
     rows: list[dict[str, Any]], quantities: list[str], info: ScheduleInfo, out_dir: Path
 ) -> str:
     """The page (module docstring)."""
-    n = len(rows)
-    n_ok = sum(r["status"] == "ok" for r in rows)
-    n_flag = sum(bool(r.get("flagged")) for r in rows)
-    ok_rows = [r for r in rows if r["status"] == "ok"]
-    charts = "".join(
-        f"<figure>{img(control_chart(ok_rows, q), f'{q} against the test date')}</figure>"
-        for q in quantities
-    )
-    dist = distributions_figure(ok_rows, quantities)
-    rule = (
-        f"A run is flagged when a quantity's robust z-score <code>0.6745 (x - median) / MAD</code> "
-        f"over the fleet has |z| &gt; {Z_LIMIT} (time constants on a log scale), when diagnose "
-        "added an effect, or when its verdict is <code>unexplained</code> (docs/fleet.md)."
-    )
-    if not quantities:
-        rule += " Too few runs succeeded for the outlier test (at least 5 are needed)."
-    return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8">
-<meta name="generator" content="labrig {escape(__version__)}">
-<title>Fleet: {n} runs</title><style>{CSS}</style></head>
-<body><main>
-<h1>Fleet: {n} runs</h1>
-<p class="sub">{n_ok} succeeded, {n - n_ok} failed, {n_flag} flagged · command
-{escape(str(rows[0]["command"]) if rows else "")} · {escape(info.kind)} on {info.n_workers}
-worker(s) · labrig {escape(__version__)}</p>
-<h2 id="verdicts">Verdicts</h2>{verdict_table(rows) if rows else ""}
-<h2 id="flagged">Flagged runs</h2><p class="small">{rule}</p>{flagged_table(rows, out_dir)}
-<h2 id="distributions">Parameter distributions</h2>
-{img(dist, "distributions") if dist else "<p>No parameters to show.</p>"}
-<p class="small">Red ticks: runs outside |z| &gt; {Z_LIMIT} for that quantity.</p>
-<h2 id="control">Control charts</h2>
-<p class="small">Each quantity against the run's start time, one colour per rig; black: the
-median, dashed red: where |z| = {Z_LIMIT}.</p>{charts}
-<h2 id="failed">Failed runs</h2>{failed_table(rows)}
-</main></body></html>
-"""
+    return render("fleet.html.j2", **fleet_context(rows, quantities, info, out_dir))
 
 
 def write_fleet_report(

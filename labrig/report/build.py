@@ -263,8 +263,8 @@ def report_data(setup: Setup, fitted: FittedModels, heldout: bool, from_file: bo
 
 def render_page(setup: Setup, data: ReportData) -> str:
     """The figures and the HTML page of ``data``."""
-    from labrig.report.control_section import control_html
-    from labrig.report.html import img, render
+    from labrig.report.control_section import control_context
+    from labrig.report.html import render
     from labrig.report.plots import entry_figure, frequency_figure
 
     models = data.models
@@ -282,8 +282,7 @@ def render_page(setup: Setup, data: ReportData) -> str:
         }
         pngs[e.name] = entry_figure(e, dyn[e.name], setup.warmup_s, noise, unit, others)
     freq = frequency_figure(data.entries, list(models), unit)
-    ctrl_html = control_html(list(setup.records), img)
-    return render(data, freq, pngs, ctrl_html)
+    return render(data, freq, pngs, control_context(list(setup.records)))
 
 
 def metrics_table(setup: Setup, data: ReportData) -> dict[str, Any]:

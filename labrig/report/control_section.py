@@ -5,12 +5,13 @@ definition): the metrics of :func:`labrig.control.entry_metrics` (tracking NRMSE
 width in % of the command span, strain at zero command; :func:`labrig.control.control_metrics`
 gives them for ``labrig report --json``), and one figure per command pairing the direct and
 compensated entries: measured strain versus command (Figs. 15-16) and the computed drive voltage
-in time (Fig. 17).
+in time (Fig. 17). :func:`control_context` gives them to the template ``control.html.j2``,
+which ``report.html.j2`` includes.
 """
 
 from __future__ import annotations
 
-from html import escape
+from typing import Any
 
 from matplotlib.figure import Figure
 
@@ -18,7 +19,7 @@ from labrig.analysis.records import Record
 from labrig.control.metrics import control_metrics, is_control_entry
 from labrig.report.plots import png, style_axes
 
-__all__ = ["COLORS", "control_html", "control_metrics", "is_control_entry"]
+__all__ = ["COLORS", "control_context", "control_metrics", "is_control_entry"]
 
 COLORS = {"direct": "tab:blue", "compensated": "tab:red"}
 
@@ -56,43 +57,33 @@ def _figure(group: list[Record]) -> bytes:
     return png(fig)
 
 
-def control_html(records: list[Record], img) -> str:
-    """The HTML section ("" when the run has no strain-command entry); ``img(png, alt)``."""
+def _number(x: float | None, spec: str = ".2f") -> str:
+    return "—" if x is None else format(x, spec)
+
+
+def control_context(records: list[Record]) -> dict[str, Any] | None:
+    """The section's rows and figures (``None`` when the run has no strain-command entry)."""
     entries = [r for r in records if is_control_entry(r)]
     if not entries:
-        return ""
+        return None
     metrics = control_metrics(entries)
-    rows = []
-    for r in entries:
-        m = metrics[r.name]
-
-        def f(x, fmt=".2f"):
-            return "—" if x is None else format(x, fmt)
-
-        rows.append(
-            f"<tr><td>{escape(r.name)}</td><td>{escape(str(m['control']))}</td>"
-            f"<td>{f(m['frequency_hz'], 'g')}</td><td>{f(m['tracking_nrmse_pct'])}</td>"
-            f"<td>{f(m['hysteresis_width_pct'])}</td><td>{f(m['zero_command_strain_ue'], '.1f')}"
-            "</td></tr>"
-        )
+    rows = [
+        {
+            "name": r.name,
+            "control": str(metrics[r.name]["control"]),
+            "frequency": _number(metrics[r.name]["frequency_hz"], "g"),
+            "tracking": _number(metrics[r.name]["tracking_nrmse_pct"]),
+            "width": _number(metrics[r.name]["hysteresis_width_pct"]),
+            "zero": _number(metrics[r.name]["zero_command_strain_ue"], ".1f"),
+        }
+        for r in entries
+    ]
     groups: dict[tuple, list[Record]] = {}
     for r in entries:
         groups.setdefault(_pair_key(r), []).append(r)
-    figs = []
-    for key, grp in groups.items():
-        kind, amp, freq = key
-        cap = f"{kind} {amp:g} ue" if amp is not None else str(kind)
-        cap += f" at {freq:g} Hz" if freq else ""
-        figs.append(
-            f"<figure>{img(_figure(grp), escape(cap))}<figcaption>{escape(cap)}: direct "
-            "(blue) and compensated (red) control; dotted: the command.</figcaption></figure>"
-        )
-    return (
-        '<h2 id="control">Compensation control</h2>'
-        "<p class='small'>Strain-command entries, over the command samples. Tracking NRMSE and "
-        "hysteresis width (largest strain difference between rising and falling branches at the "
-        "same command) are in % of the command span; strain at zero command in ue.</p>"
-        "<table><thead><tr><th>entry</th><th>control</th><th>f (Hz)</th>"
-        "<th>tracking NRMSE (%)</th><th>hysteresis width (%)</th><th>strain at zero command "
-        "(ue)</th></tr></thead><tbody>" + "".join(rows) + "</tbody></table>" + "".join(figs)
-    )
+    figures = []
+    for (kind, amp, freq), grp in groups.items():
+        caption = f"{kind} {amp:g} ue" if amp is not None else str(kind)
+        caption += f" at {freq:g} Hz" if freq else ""
+        figures.append({"png": _figure(grp), "caption": caption})
+    return {"rows": rows, "figures": figures}

@@ -1,7 +1,8 @@
 """``DIR/diagnosis.html``: the diagnosis as one self-contained HTML page (inline CSS, base64
-PNG figures from matplotlib's Agg canvas, no scripts), in the style of ``labrig report`` (its
-CSS and helpers from :mod:`labrig.report.html` and :mod:`labrig.report.plots`);
-:func:`write_diagnosis` writes it beside ``diagnosis.json``.
+PNG figures from matplotlib's Agg canvas, no scripts), in the style of ``labrig report``: the
+template ``templates/diagnosis.html.j2`` (:mod:`labrig.report.templating`) filled by
+:func:`diagnosis_context`. The files of a diagnosis are written by
+:mod:`labrig.analysis.diagnose.run_file`.
 
 Figures: per-entry residual before and after (time series), and the held-out NRMSE of every
 candidate tried against the base model's.
@@ -9,9 +10,6 @@ candidate tried against the base model's.
 
 from __future__ import annotations
 
-import json
-from html import escape
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -19,10 +17,10 @@ from matplotlib.figure import Figure
 
 from labrig.analysis.diagnose import Diagnosis
 from labrig.analysis.records import Record
-from labrig.report.html import CSS, img
 from labrig.report.plots import png
+from labrig.report.templating import render
 
-__all__ = ["render_diagnosis", "residual_figure", "write_diagnosis"]
+__all__ = ["diagnosis_context", "render_diagnosis", "residual_figure"]
 
 
 def residual_figure(d: Diagnosis, records: list[Record]) -> Figure:
@@ -74,91 +72,57 @@ def _candidates_figure(d: Diagnosis) -> bytes | None:
     return png(fig)
 
 
-def _num(v: Any) -> str:
+def number(v: Any) -> str:
+    """A value of the diagnosis for a table cell: 4 significant digits, ``-`` when undefined."""
     if v is None:
-        return '<span class="na">-</span>'
+        return "-"
     if isinstance(v, float):
         return f"{v:.4g}"
-    return escape(str(v))
+    return str(v)
+
+
+def diagnosis_context(d: Diagnosis, records: list[Record], title: str) -> dict[str, Any]:
+    """Everything ``diagnosis.html.j2`` shows."""
+    after = d.after["per_entry"]
+    return {
+        "title": title,
+        "num": number,
+        "settled": d.classification in ("explained", "consistent_with_noise"),
+        "verdict": d.verdict,
+        "per_entry": [(k, v, after.get(k)) for k, v in d.before["per_entry"].items()],
+        "before": d.before,
+        "after": d.after,
+        "effects_added": [
+            {
+                "effect": e["effect"],
+                "params": ", ".join(f"{k} = {number(v)}" for k, v in e["params"].items()),
+                "evidence": e["evidence"],
+            }
+            for e in d.effects_added
+        ],
+        "candidates": d.candidates,
+        "candidates_png": _candidates_figure(d),
+        "evidence": {
+            "sentences": d.evidence_before.sentences,
+            "entries": [
+                {
+                    "name": e.name,
+                    "frequency_hz": e.frequency_hz,
+                    "amplitude_V": e.amplitude_V,
+                    "nrmse_pct": e.nrmse_pct,
+                    "floor_pct": e.floor_pct,
+                    "harmonics": " / ".join(f"{x['amplitude_pct']:.2g}" for x in e.harmonics)
+                    or "-",
+                }
+                for e in d.evidence_before.entries.values()
+            ],
+        },
+        "residuals_png": png(residual_figure(d, records)),
+        "messages": d.messages,
+        "elapsed_s": d.elapsed_s,
+    }
 
 
 def render_diagnosis(d: Diagnosis, records: list[Record], title: str = "labrig diagnose") -> str:
     """The page (a string)."""
-    h = []
-    h.append(f"<!doctype html><html><head><meta charset='utf-8'><title>{escape(title)}</title>")
-    h.append(f"<style>{CSS}</style></head><body><main>")
-    h.append(f"<h1>{escape(title)}</h1>")
-    box = "ok" if d.classification in ("explained", "consistent_with_noise") else "notes"
-    h.append(f"<h2>Verdict</h2><div class='{box}'><p>{escape(d.verdict)}</p></div>")
-    h.append("<h2>Error before and after</h2><table><tr><th>entry</th>")
-    h.append("<th>NRMSE before (%)</th><th>NRMSE after (%)</th></tr>")
-    for k, v in d.before["per_entry"].items():
-        a = d.after["per_entry"].get(k)
-        h.append(f"<tr><td class='name'>{escape(k)}</td><td class='num'>{_num(v)}</td>")
-        h.append(f"<td class='num'>{_num(a)}</td></tr>")
-    h.append(
-        f"<tr class='mean'><td class='name'>mean</td><td class='num'>{_num(d.before['nrmse_pct'])}"
-        f"</td><td class='num'>{_num(d.after['nrmse_pct'])}</td></tr>"
-    )
-    h.append(
-        f"<tr><td class='name'>held-out (leave one entry out)</td>"
-        f"<td class='num'>{_num(d.before['heldout_nrmse_pct'])}</td>"
-        f"<td class='num'>{_num(d.after['heldout_nrmse_pct'])}</td></tr></table>"
-    )
-    h.append("<h2>Effects added</h2>")
-    if not d.effects_added:
-        h.append("<p>None.</p>")
-    for e in d.effects_added:
-        ps = ", ".join(f"{k} = {_num(v)}" for k, v in e["params"].items())
-        h.append(
-            f"<div class='card'><h3>{escape(e['effect'])}</h3><div class='meta'>{escape(ps)}</div>"
-            f"<p>{escape(e['evidence'])}</p></div>"
-        )
-    h.append("<h2>Candidates</h2><table><tr><th>effect</th><th>held-out NRMSE (%)</th>")
-    h.append("<th>evidence</th></tr>")
-    for c in d.candidates:
-        h.append(
-            f"<tr><td class='name'>{escape(c['effect'])}</td>"
-            f"<td class='num'>{_num(c['heldout_nrmse_pct'])}</td>"
-            f"<td>{escape(c['evidence'])}</td></tr>"
-        )
-    h.append("</table>")
-    bars = _candidates_figure(d)
-    if bars:
-        h.append(f"<figure>{img(bars, 'held-out NRMSE of the candidates')}")
-        h.append(
-            "<figcaption>Held-out NRMSE of the base model and of each candidate tried "
-            "(red: added).</figcaption></figure>"
-        )
-    h.append("<h2>Residual evidence (base model)</h2><ul>")
-    for s in d.evidence_before.sentences:
-        h.append(f"<li>{escape(s)}</li>")
-    h.append("</ul><table><tr><th>entry</th><th>f (Hz)</th><th>Vpp (V)</th><th>NRMSE (%)</th>")
-    h.append("<th>floor (%)</th><th>harmonics k=1..5 (% of fundamental)</th></tr>")
-    for e in d.evidence_before.entries.values():
-        harm = " / ".join(f"{x['amplitude_pct']:.2g}" for x in e.harmonics) or "-"
-        h.append(
-            f"<tr><td class='name'>{escape(e.name)}</td><td class='num'>{_num(e.frequency_hz)}</td>"
-            f"<td class='num'>{_num(e.amplitude_V)}</td><td class='num'>{_num(e.nrmse_pct)}</td>"
-            f"<td class='num'>{_num(e.floor_pct)}</td><td>{escape(harm)}</td></tr>"
-        )
-    h.append("</table>")
-    h.append(f"<h2>Residuals</h2><figure>{img(png(residual_figure(d, records)), 'residuals')}")
-    h.append(
-        "<figcaption>Measured minus predicted strain, base model (grey) and with the added "
-        "effects (red).</figcaption></figure>"
-    )
-    if d.messages:
-        h.append("<h2>Messages</h2><ul>" + "".join(f"<li>{escape(m)}</li>" for m in d.messages))
-        h.append("</ul>")
-    h.append(f"<p class='small'>Diagnosis took {d.elapsed_s:.1f} s.</p></main></body></html>")
-    return "".join(h)
-
-
-def write_diagnosis(
-    out_dir: Path, doc: dict[str, Any], d: Diagnosis, records: list[Record], title: str
-) -> None:
-    """``out_dir/diagnosis.json`` (the JSON contract ``doc``) and ``out_dir/diagnosis.html``."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "diagnosis.json").write_text(json.dumps(doc, indent=2) + "\n")
-    (out_dir / "diagnosis.html").write_text(render_diagnosis(d, records, title=title))
+    return render("diagnosis.html.j2", **diagnosis_context(d, records, title))
