@@ -203,7 +203,7 @@ class Run:
     def to_xarray(self, entries: Sequence[str] | str | None = None) -> xr.Dataset:
         """The samples as an xarray Dataset with dimensions ``entry`` and ``sample`` (shorter
         entries padded with NaN), units in each variable's attrs. Needs xarray
-        (``pip install xarray``): without it, an ImportError that says so."""
+        (``pip install 'labrig[xarray]'``): without it, an ImportError that says so."""
         from labrig.api_frames import entries_dataset
 
         return entries_dataset(self._chosen(entries), self._attrs())
@@ -337,11 +337,16 @@ class Run:
         samples = sum(e.samples for e in infos)
         total = sum(e.duration_s for e in infos)
         lines = self._head()
-        lines.append(f"{len(infos)} entries, {samples} samples, {total:.3g} s:")
+        lines.append(
+            f"{_count(len(infos), 'entry', 'entries')}, {_count(samples, 'sample')}, {total:.3g} s:"
+        )
         width = min(max((len(e.name) for e in infos), default=0), 40)
 
         def line(e: EntryInfo) -> str:
-            return f"  {e.name:<{width}}  {e.status}  {e.samples} samples  {e.duration_s:.3g} s"
+            return (
+                f"  {e.name:<{width}}  {e.status}  {_count(e.samples, 'sample')}  "
+                f"{e.duration_s:.3g} s"
+            )
 
         shown = infos if len(infos) <= REPR_ENTRIES else infos[: REPR_ENTRIES - 2]
         lines += [line(e) for e in shown]
@@ -368,6 +373,11 @@ class Run:
             f"<th>samples</th><th>s</th><th>Hz</th></tr></thead><tbody>{rows}{more}</tbody>"
             "</table></div>"
         )
+
+
+def _count(n: int, singular: str, plural: str | None = None) -> str:
+    """``1 entry``, ``2 entries``."""
+    return f"{n} {singular if n == 1 else plural or singular + 's'}"
 
 
 def _cut(line: str, width: int) -> str:

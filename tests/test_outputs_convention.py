@@ -208,3 +208,21 @@ def test_runs_and_drivers_write_what_json_prints(runs: tuple[Path, Path], tmp_pa
         if args[0] == "runs":  # the second listing reads the index: same runs
             a.pop("indexes"), b.pop("indexes")
         assert a == b, args
+
+
+def test_counts_take_the_right_number(tmp_path: Path) -> None:
+    """One entry, one run, one sample: "1 entry", "1 run" (never "1 entries")."""
+    import labrig
+
+    proto = tmp_path / "one.yaml"
+    proto.write_text(
+        "name: one\nrate_hz: 1000\nsteps:\n  - kind: hold\n    voltage_V: 10\n    duration_s: 0.2\n"
+    )
+    res = invoke("run", proto, "--seed", 1, "--out", tmp_path / "one.h5")
+    assert res.exit_code == 0, res.output
+    text = repr(labrig.open(tmp_path / "one.h5"))
+    assert "1 entry, " in text and "1 entries" not in text
+    listing = invoke("info", tmp_path)
+    assert listing.exit_code == 0 and listing.stderr.startswith("1 run;"), listing.stderr
+    for res in (invoke("check", proto), listing):
+        assert "1 entries" not in res.output and "1 runs" not in res.output
