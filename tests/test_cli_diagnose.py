@@ -18,6 +18,7 @@ import pytest
 from typer.testing import CliRunner
 
 import labrig
+import labrig.analysis.diagnose as diagnosis
 import labrig.analysis.diagnose.run_file as run_file
 import labrig.analysis.load as load
 from labrig.analysis.diagnose import Diagnosis, Evidence
@@ -59,7 +60,7 @@ def recorded(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
         calls.append({"records": records, "params": params, **kw})
         return stub_diagnosis()
 
-    monkeypatch.setattr(run_file, "diagnose", fake)
+    monkeypatch.setattr(diagnosis, "diagnose", fake)
     return calls
 
 

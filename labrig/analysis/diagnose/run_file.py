@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from labrig.analysis.diagnose import Diagnosis, diagnose
+from labrig.analysis import diagnose as diagnosis
+from labrig.analysis.diagnose import Diagnosis
 from labrig.analysis.prepare import prepare_diagnosis
 from labrig.analysis.records import Record
 from labrig.jsonsafe import json_safe
@@ -112,7 +113,7 @@ def diagnose_run_file(
 
     def run() -> RunDiagnosis:
         setup = prepare_diagnosis(path, params_file, say)
-        d = diagnose(
+        d = diagnosis.diagnose(  # looked up at each call (tests replace it)
             setup.records,
             setup.start,
             offset=setup.offset,
