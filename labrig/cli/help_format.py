@@ -86,4 +86,4 @@ def render_help(command: Any, ctx: typer.Context) -> str:
         panels.append(_panel("Commands", command_rows(command, ctx)))
     parts += [p for p in panels if p is not None]
     con.print(Group(*parts))
-    return buf.getvalue().rstrip("\n")
+    return "\n".join(line.rstrip() for line in buf.getvalue().splitlines()).strip("\n")
