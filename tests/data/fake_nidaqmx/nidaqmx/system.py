@@ -14,9 +14,7 @@ class Device:
     def product_type(self) -> str:
         driver_call()
         if self.name != PRESENT or mode() == "no_device":
-            raise DaqError(
-                f"Device identifier is invalid.\nDevice Specified: {self.name}", -200220
-            )
+            raise DaqError(f"Device identifier is invalid.\nDevice Specified: {self.name}", -200220)
         return "USB-6361 (BNC)"
 
     @property
