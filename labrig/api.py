@@ -21,6 +21,8 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from labrig.words import plural
+
 if TYPE_CHECKING:
     import pandas as pd
     import xarray as xr
@@ -337,14 +339,12 @@ class Run:
         samples = sum(e.samples for e in infos)
         total = sum(e.duration_s for e in infos)
         lines = self._head()
-        lines.append(
-            f"{_count(len(infos), 'entry', 'entries')}, {_count(samples, 'sample')}, {total:.3g} s:"
-        )
+        lines.append(f"{plural(len(infos), 'entry')}, {plural(samples, 'sample')}, {total:.3g} s:")
         width = min(max((len(e.name) for e in infos), default=0), 40)
 
         def line(e: EntryInfo) -> str:
             return (
-                f"  {e.name:<{width}}  {e.status}  {_count(e.samples, 'sample')}  "
+                f"  {e.name:<{width}}  {e.status}  {plural(e.samples, 'sample')}  "
                 f"{e.duration_s:.3g} s"
             )
 
@@ -373,11 +373,6 @@ class Run:
             f"<th>samples</th><th>s</th><th>Hz</th></tr></thead><tbody>{rows}{more}</tbody>"
             "</table></div>"
         )
-
-
-def _count(n: int, singular: str, plural: str | None = None) -> str:
-    """``1 entry``, ``2 entries``."""
-    return f"{n} {singular if n == 1 else plural or singular + 's'}"
 
 
 def _cut(line: str, width: int) -> str:

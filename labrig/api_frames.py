@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from labrig.store import RunEntry
 
 XARRAY_MISSING = (
-    "Run.to_xarray needs xarray, an optional package: pip install xarray "
+    "Run.to_xarray needs xarray, an optional package: pip install 'labrig[xarray]' "
     "(Run.to_pandas works without it)"
 )
 

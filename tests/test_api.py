@@ -110,7 +110,7 @@ def test_to_xarray_without_xarray_says_how_to_install_it(
 ):
     run = labrig.open(seeded)
     monkeypatch.setitem(sys.modules, "xarray", None)  # import xarray now fails
-    with pytest.raises(ImportError, match="pip install xarray"):
+    with pytest.raises(ImportError, match=r"pip install 'labrig\[xarray\]'"):
         run.to_xarray()
 
 

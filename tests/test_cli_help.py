@@ -78,6 +78,7 @@ def test_every_option_names_its_value(path: tuple[str, ...]) -> None:
 
 def test_outputs_say_file_or_folder() -> None:
     for cmd, kind in (("fit", "FILE"), ("report", "FILE"), ("info", "FILE"), ("check", "FILE"),
+                      ("run", "FILE"), ("import", "FILE"),
                       ("diagnose", "DIR"), ("export", "DIR")):  # fmt: skip
         text = " ".join(invoke(cmd, "--help").stdout.split())
         assert f"--out {kind}" in text or f"--out, --csv {kind}" in text, (cmd, text)

@@ -21,6 +21,7 @@ from typing import Any, TypeVar
 import typer
 
 from labrig.errors import LabrigError
+from labrig.words import plural as plural  # re-exported for the commands
 
 E = TypeVar("E", bound=StrEnum)
 
@@ -43,12 +44,6 @@ def friendly(fn: Callable) -> Callable:
             raise typer.Exit(130) from None
 
     return wrapper
-
-
-def plural(n: int, singular: str, plural_form: str | None = None) -> str:
-    """``"1 entry"``, ``"2 entries"``: ``n`` and the noun in the number it takes."""
-    many = plural_form or (singular[:-1] + "ies" if singular.endswith("y") else singular + "s")
-    return f"{n} {singular if n == 1 else many}"
 
 
 # -- choices -------------------------------------------------------------------------------------

@@ -76,7 +76,9 @@ def export(
 @friendly
 def import_(
     files: list[Path] = typer.Argument(..., help="Data files: delimited text or MATLAB .mat."),
-    out: Path | None = typer.Option(None, "--out", help="Run file to write (HDF5)."),
+    out: Path | None = typer.Option(
+        None, "--out", help="Run file to write (HDF5).", metavar="FILE"
+    ),
     list_: bool = flag(
         False, "--list", help="Print each file's columns or channels; write nothing."
     ),

@@ -1,4 +1,4 @@
-"""``labrig check`` and ``labrig run``: a protocol against the rig's limits, then on the rig
+"""``labrig run``: a protocol on the rig
 (:mod:`labrig.runner`; the progress bar, the live view and the exit code of a run:
 :mod:`labrig.cli_run`)."""
 
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import typer
 
-from labrig.cli.common import RIG_OPTION_HELP, flag, friendly, plural
+from labrig.cli.common import RIG_OPTION_HELP, flag, friendly
 
 META_HELP = (
     "KEY=VALUE recorded with the run (/run/metadata; repeatable), e.g. actuator_model=P-888.51, "
@@ -54,27 +54,11 @@ def metadata_of(meta: list[str], operator: str | None, sample: str | None):
 
 
 @friendly
-def check(
-    protocol: Path = typer.Argument(..., help="Protocol file (YAML)."),
-    rig: Path | None = typer.Option(None, "--rig", help=RIG_OPTION_HELP),
-) -> None:
-    """Validate a protocol and preflight it against the rig's limits; touches no hardware."""
-    from rich.console import Console
-
-    from labrig.protocol.check import format_plan
-    from labrig.runner import preflight
-
-    plan, _ = preflight(protocol, rig)
-    Console().print(format_plan(plan))
-    typer.echo(f"{protocol}: OK, {plural(len(plan.steps), 'entry')}, {plan.total_duration_s:.1f} s")
-
-
-@friendly
 def run(
     protocol: Path = typer.Argument(..., help="Protocol file (YAML)."),
     rig: Path | None = typer.Option(None, "--rig", help=RIG_OPTION_HELP),
     out: Path | None = typer.Option(
-        None, "--out", help="Run file to write (default: runs/NAME-DATE-TIME.h5)."
+        None, "--out", help="Run file to write (default: runs/NAME-DATE-TIME.h5).", metavar="FILE"
     ),
     seed: int | None = typer.Option(None, "--seed", help="Random seed of the simulated rig."),
     realtime: bool = flag(False, "--realtime", help="Pace a simulated rig to the clock."),

@@ -35,6 +35,7 @@ from labrig.fleet.table import (
     write_table,
 )
 from labrig.fleet.tasks import COMMANDS, TaskOptions, TaskResult, TaskSpec
+from labrig.words import plural
 
 #: exit code of a batch in which some runs failed
 SOME_FAILED = 4
@@ -181,8 +182,8 @@ def run_batch(
     todo = [s for s in specs if s.key not in results]
     if len(todo) < len(specs):
         console.print(
-            f"{len(specs) - len(todo)} of {len(specs)} runs unchanged since the last batch "
-            "(content hash, options, labrig version): skipped"
+            f"{len(specs) - len(todo)} of {plural(len(specs), 'run')} unchanged since the last "
+            "batch (content hash, options, labrig version): skipped"
         )
     by_key = {s.key: s for s in specs}
 

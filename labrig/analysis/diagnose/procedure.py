@@ -52,6 +52,7 @@ from labrig.analysis.diagnose.verdict import (
 from labrig.analysis.extended import LAM_GAP, ExtendedProblem, FitOutcome, effect_context
 from labrig.analysis.fit import PARAM_NAMES, FitResult, fit_model
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic
+from labrig.analysis.prepare import split_entries
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import build_sequences
 from labrig.analysis.spectra import detect_mains_hz
@@ -115,34 +116,6 @@ def _mean(d: dict[str, float] | None) -> float | None:
 def _numeric(params: ModelParams) -> dict[str, float]:
     """The fitted (numeric) parameters, without the operator family's shape and memory."""
     return {n: float(getattr(params, n)) for n in PARAM_NAMES}
-
-
-def split_entries(records: Sequence[Record], parts: int = 4) -> list[Record]:
-    """A single long record cut into ``parts`` consecutive entries (at whole drive periods when
-    the record is periodic), chained with no rest: leave-one-entry-out then has folds. The
-    pieces simulated back to back reproduce the original record exactly."""
-    out: list[Record] = []
-    for r in records:
-        f = drive_frequency_hz(r)
-        per = round(r.rate_hz / f) if f else 1
-        per = per if 1 <= per <= r.n // parts else 1
-        edges = [round(k * (r.n // per) / parts) * per for k in range(parts)] + [r.n]
-        for k in range(parts):
-            a, b = edges[k], edges[k + 1]
-            meta = {**r.meta, "rest_after_s": 0.0, "split_of": r.name}
-            out.append(
-                Record(
-                    f"{r.name}_part{k + 1}",
-                    r.rate_hz,
-                    r.time_s[a:b],
-                    r.voltage_V[a:b],
-                    r.strain_ue[a:b],
-                    {n: x[a:b] for n, x in r.aux.items()},
-                    r.hold,
-                    meta,
-                )
-            )
-    return out
 
 
 def _default_chain(records: Sequence[Record]) -> bool:
