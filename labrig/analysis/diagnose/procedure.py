@@ -12,7 +12,7 @@ The procedure (docs/diagnose.md has the method and its measurements):
 3. **Ranking** (:mod:`.ranking`): a score test of each candidate's direction, projected off the
    current model's Jacobian.
 4. **Refit** base + candidate with every parameter free within physical bounds, for the
-   ``top_k`` best ranked (default 3), from each of the effect's starts. A candidate whose
+   ``top_k`` best ranked (default 4), from each of the effect's starts. A candidate whose
    in-sample gain is below half the minimum gain is not cross-validated (a held-out gain is not
    larger than the in-sample one).
 5. **Held-out NRMSE**, leave-one-entry-out: each entry is predicted by a fit that never saw it
@@ -156,7 +156,7 @@ def diagnose(
     warmup_s: float = 0.0,
     effects: Sequence[str] | None = None,
     max_effects: int = 2,
-    top_k: int = 3,
+    top_k: int = 4,
     min_gain: float = MIN_GAIN,
     mains_hz: float | None = None,
     progress: Progress | None = None,
