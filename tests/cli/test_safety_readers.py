@@ -1,0 +1,146 @@
+"""YAML and JSON readers bound what they read: exit 2 with file and line, never a traceback.
+
+The issue's cases through the command line (typer's CliRunner): a protocol and a rig file
+nested 20 000 deep, a 5000-digit YAML integer, YAML 1.1's base-60 ``1:30`` (read as 90 by
+PyYAML), a double-quoted ``\\U`` escape of many digits (PyYAML's scanner raised OverflowError);
+parameter files for ``report --params`` and ``diagnose --params`` nested 100 000 deep, with a
+5000-digit integer, or larger than the bound. Then the bounds themselves at their edges.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from labrig.errors import InputFileError
+from labrig.jsonsafe import MAX_JSON_DEPTH, json_depth, loads_bounded
+from labrig.params_file import MAX_PARAMS_BYTES, read_params_file
+from labrig.yamlio import MAX_DEPTH, MAX_INT_DIGITS, read_yaml
+
+from helpers import invoke
+
+ROOT = Path(__file__).resolve().parents[2]
+GOOD_PROTOCOL = ROOT / "experiments" / "envelope.yaml"
+HOLD = "name: x\nrate_hz: 1000\nsteps:\n  - kind: hold\n    voltage_V: 10\n    duration_s: {}\n"
+
+
+def refused(res, where: str, message: str) -> None:
+    assert res.exit_code == 2, res.output
+    assert isinstance(res.exception, SystemExit), repr(res.exception)
+    assert res.stderr.startswith(f"error: {where}"), res.stderr
+    assert message in res.stderr, res.stderr
+    assert "Traceback" not in res.output
+    assert "9" * 50 not in res.output  # no number printed with hundreds of digits
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "message"),
+    [
+        ("name: x\nsteps: " + "[" * 20_000 + "]" * 20_000 + "\n", 2, "nested more than 64"),
+        ("name: x\nrate_hz: " + "9" * 5000 + "\nsteps: []\n", 2, "a number with 5000 digits"),
+        (HOLD.format("1:30"), 6, "'1:30' is a base-60 number"),
+        (HOLD.format("-1:30:00.5"), 6, "base-60 number"),
+        ('name: "\\U' + "9" * 400 + '"\nsteps: []\n', 1, "YAML error: cannot read this"),
+    ],
+)
+def test_hostile_yaml_is_refused_at_its_line(tmp_path: Path, text: str, line: int, message: str):
+    proto = tmp_path / "p.yaml"
+    proto.write_text(text)
+    refused(invoke("check", proto), f"{proto}:{line}:", message)
+    rig = tmp_path / "rig.yaml"
+    rig.write_text(text)
+    refused(invoke("check", GOOD_PROTOCOL, "--rig", rig), f"{rig}:{line}:", message)
+
+
+def test_quoted_base_60_is_text_and_a_plain_number_is_read(tmp_path: Path):
+    p = tmp_path / "p.yaml"
+    p.write_text('name: "1:30"\nrate_hz: 1000\nsteps:\n  - kind: hold\n    voltage_V: 10\n'
+                 "    duration_s: 90\n")  # fmt: skip
+    data, _, _ = read_yaml(p)
+    assert data["name"] == "1:30" and data["steps"][0]["duration_s"] == 90
+
+
+@pytest.mark.parametrize(("depth", "ok"), [(MAX_DEPTH, True), (MAX_DEPTH + 1, False)])
+def test_the_yaml_depth_bound(tmp_path: Path, depth: int, ok: bool):
+    p = tmp_path / "d.yaml"
+    p.write_text("a: " + "[" * (depth - 1) + "]" * (depth - 1) + "\n")  # the mapping is 1 level
+    if ok:
+        read_yaml(p)
+    else:
+        with pytest.raises(InputFileError, match="nested more than"):
+            read_yaml(p)
+
+
+@pytest.mark.parametrize(("digits", "ok"), [(MAX_INT_DIGITS, True), (MAX_INT_DIGITS + 1, False)])
+def test_the_yaml_digits_bound(tmp_path: Path, digits: int, ok: bool):
+    p = tmp_path / "n.yaml"
+    p.write_text("a: " + "9" * digits + "\n")
+    if ok:
+        assert read_yaml(p)[0]["a"] == int("9" * digits)
+    else:
+        with pytest.raises(InputFileError, match=f"{digits} digits"):
+            read_yaml(p)
+
+
+# -- parameter files -------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def run_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    tmp = tmp_path_factory.mktemp("run")
+    (tmp / "p.yaml").write_text(
+        "name: p\nrate_hz: 500\nsteps:\n  - kind: sine\n    amplitude_V: 60\n"
+        "    frequency_hz: 2\n    cycles: 2\n"
+    )
+    res = invoke("run", tmp / "p.yaml", "--out", tmp / "run.h5", "--seed", 1)
+    assert res.exit_code == 0, res.output
+    return tmp / "run.h5"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[" * 100_000 + "]" * 100_000, "nested 100000 deep"),
+        ('{"params": {"alpha0_ue_per_V": ' + "9" * 5000 + "}}", "an integer with 5000 digits"),
+        ('{"params": ' * 70 + "{}" + "}" * 70, "nested 71 deep"),
+        ('{"params": {"alpha0_ue_per_V": 1e999}}', "invalid model parameters"),
+    ],
+)
+@pytest.mark.parametrize("command", ["report", "diagnose"])
+def test_hostile_parameter_files_are_refused(
+    run_file: Path, tmp_path: Path, text: str, message: str, command: str
+):
+    params = tmp_path / "params.json"
+    params.write_text(text)
+    extra = ["--out", tmp_path / "r.html"] if command == "report" else []
+    refused(invoke(command, run_file, "--params", params, *extra), f"{params}:", message)
+
+
+def test_a_parameter_file_larger_than_the_bound_is_not_read(tmp_path: Path):
+    p = tmp_path / "big.json"
+    with p.open("w") as f:
+        f.write('{"params": {}, "pad": "')
+        f.write("x" * (MAX_PARAMS_BYTES + 10))
+        f.write('"}')
+    with pytest.raises(InputFileError, match="larger than"):
+        read_params_file(p, "the test")
+
+
+def test_loads_bounded_at_its_edges():
+    assert loads_bounded("[" * MAX_JSON_DEPTH + "]" * MAX_JSON_DEPTH) is not None
+    with pytest.raises(ValueError, match="nested"):
+        loads_bounded("[" * (MAX_JSON_DEPTH + 1) + "]" * (MAX_JSON_DEPTH + 1))
+    with pytest.raises(ValueError, match="longer than"):
+        loads_bounded("[1]", max_bytes=2)
+    assert loads_bounded("9" * 100) == int("9" * 100)
+    with pytest.raises(ValueError, match="101 digits"):
+        loads_bounded("9" * 101)
+    with pytest.raises(json.JSONDecodeError):
+        loads_bounded("{")
+
+
+def test_json_depth_ignores_brackets_in_strings():
+    assert json_depth('{"a": "[[[[{{{{", "b": ["\\"]]]"]}') == 2
+    assert json_depth("[[], [[]]]") == 3

@@ -1,0 +1,263 @@
+"""Physics of the virtual bench, checked through the real drivers and the DAQ path."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from labrig.drivers.sim.bench import BenchConfig, VirtualBench
+from labrig.drivers.sim.effects import ButterLowpass, Creep, LogCreep, SelfHeating, Thermal
+from labrig.drivers.sim.hybrid import EQ11_DEN, EQ11_NUM, HybridParams, HybridPlant
+
+from labrig.model import PAPER_TABLE1, DynamicHysteresisModel
+from labrig.rigfile import open_rig
+
+from helpers import rig_path
+
+pytestmark = pytest.mark.timeout(60)
+
+IDEAL_BENCH = {
+    "amplifier": {"current_limit": False, "monitor_noise_V": 0.0},
+    "gauge": {"noise_ue": 0.0, "bridge_offset_ue": 0.0},
+    "daq": {"ai_bits": None, "ao_bits": None},
+}
+
+
+def unipolar(amp_V: float, f_hz: float, rate_hz: float, seconds: float) -> np.ndarray:
+    t = np.arange(round(seconds * rate_hz)) / rate_hz
+    return amp_V / 2 * (1 - np.cos(2 * np.pi * f_hz * t))
+
+
+def acquire(rig, v_actuator: np.ndarray, rate_hz: float, block: int = 997) -> dict:
+    rig.daq.configure(rate_hz, rig.daq.ai_channel_names())
+    rig.amplifier.enable()
+    blocks = list(rig.daq.play(rig.volts_to_ao(v_actuator), block))
+    starts = [b.start for b in blocks]
+    assert starts == list(range(0, v_actuator.size, block))
+    return {k: np.concatenate([b.channels[k] for b in blocks]) for k in blocks[0].channels}
+
+
+def test_paper_truth_reproduces_the_model_through_the_daq_path(tmp_path):
+    rate = 1000.0
+    v = unipolar(100.0, 5.0, rate, 2.0) + 4.0 * np.sin(2 * np.pi * 13 * np.arange(2000) / rate)
+    v = np.clip(v, -20, 100)
+    with open_rig(rig_path(tmp_path, bench=IDEAL_BENCH), seed=1) as rig:
+        ch = acquire(rig, v, rate)
+        strain = rig.gauge_to_strain(ch["gauge"])
+        monitor = rig.monitor_to_volts(ch["amp_monitor"])
+    ref = DynamicHysteresisModel(PAPER_TABLE1).predict(v, rate, method="fast")
+    assert np.max(np.abs(monitor - v)) < 1e-10
+    assert np.max(np.abs(strain - ref)) < 1e-9 * np.max(np.abs(ref))
+    assert 800 < np.ptp(ref) < 1400  # a real loop, not a trivial record
+
+
+def test_hybrid_truth_loop_size_and_width():
+    rate = 1000.0
+    v = unipolar(100.0, 1.0, rate, 4.0)
+    y = HybridPlant(HybridParams(), rate).process(v)
+    n = int(rate)
+    vc, yc = v[-n:], y[-n:]
+    span = np.ptp(yc)
+    grid = np.linspace(5, 95, 91)
+    up = np.interp(grid, vc[: n // 2], yc[: n // 2])
+    down = np.interp(grid, vc[n // 2 :][::-1], yc[n // 2 :][::-1])
+    width = np.max(down - up) / span
+    assert 1000 < span < 1300
+    assert 0.10 < width < 0.15
+    assert np.all(down - up > -1e-9)  # ascending branch below the descending one
+
+
+def test_hybrid_eq11_discretisation_matches_the_continuous_response():
+    from scipy import signal
+
+    rate = 1000.0
+    t = np.arange(4000) / rate
+    u = np.sin(2 * np.pi * 40 * t)
+    plant = HybridPlant(HybridParams(), rate)
+    y = signal.lfilter(plant._b, plant._a, u)
+    _, yc, _ = signal.lsim((EQ11_NUM, EQ11_DEN), u, t)
+    assert np.max(np.abs(y - yc)) < 2e-3
+    h = np.polyval(EQ11_NUM, 2j * np.pi * 40) / np.polyval(EQ11_DEN, 2j * np.pi * 40)
+    assert abs(h) == pytest.approx(0.919, abs=2e-3)  # spec model.md section 5
+
+
+def test_fast_large_sine_is_slew_limited_as_the_current_limit_predicts(tmp_path):
+    rate = 20_000.0
+    f = 80.0
+    bench = {"amplifier": {"monitor_noise_V": 0.0}, "gauge": {"noise_ue": 0.0}}
+    with open_rig(rig_path(tmp_path, bench=bench), seed=2) as rig:
+        rig.amplifier.status()  # clear the overflow latch
+        v = unipolar(100.0, f, rate, 1.0)
+        mon = rig.monitor_to_volts(acquire(rig, v, rate, block=2000)["amp_monitor"])
+        st = rig.amplifier.status()
+        lim = rig.limits
+        c_eff = lim.effective_capacitance_F
+    assert st.overflow
+    slope = np.diff(mon) * rate
+    s_peak, s_avg = lim.i_peak_A / c_eff, lim.i_avg_A / c_eff  # 17.6 V/ms, 11.8 V/ms
+    cmd_max = 100.0 / 2 * 2 * np.pi * f  # 25.1 V/ms: beyond the peak current
+    assert cmd_max > s_peak
+    first = slope[: int(0.006 * rate)]  # the first half period: peak current
+    assert np.max(np.abs(first)) == pytest.approx(s_peak, rel=0.01)
+    late = slope[int(0.5 * rate) :]  # after the average-current fold-back
+    assert np.max(np.abs(late)) == pytest.approx(s_avg, rel=0.01)
+    mean_i = np.mean(np.abs(late)) * c_eff
+    assert mean_i <= lim.i_avg_A * 1.01
+    pp = np.ptp(mon[int(0.5 * rate) :])
+    triangle = s_avg / (2 * f)  # peak-to-peak of a triangle at the average-current slope
+    assert 0.9 * triangle < pp <= 1.01 * triangle
+    assert pp < 80.0  # visibly short of the commanded 100 V
+
+
+def test_40_hz_full_swing_is_not_limited(tmp_path):
+    rate = 20_000.0
+    bench = {"amplifier": {"monitor_noise_V": 0.0}, "daq": {"ai_bits": None, "ao_bits": None}}
+    with open_rig(rig_path(tmp_path, bench=bench), seed=2) as rig:
+        rig.amplifier.status()
+        v = unipolar(100.0, 40.0, rate, 0.5)
+        mon = rig.monitor_to_volts(acquire(rig, v, rate, block=5000)["amp_monitor"])
+        assert not rig.amplifier.status().overflow
+    assert np.max(np.abs(mon - v)) < 1e-9
+
+
+def test_gauge_noise_and_quantisation_have_the_configured_size(tmp_path):
+    rate = 10_000.0
+    n = 40_000
+    with open_rig(rig_path(tmp_path, bench={"gauge": {"noise_ue": 2.0}}), seed=3) as rig:
+        s = rig.gauge_to_strain(acquire(rig, np.zeros(n), rate, block=4096)["gauge"])
+    lsb_ue = 20.0 / 2**16 / 1.085e-3
+    expected = math.sqrt(2.0**2 + lsb_ue**2 / 12)
+    assert np.std(s) == pytest.approx(expected, rel=0.03)
+    codes = s * 1.085e-3 / (20.0 / 2**16)
+    assert np.max(np.abs(codes - np.round(codes))) < 1e-6  # 16-bit codes
+    assert abs(np.mean(s)) < 0.6  # zeroed on open: 40 ue offset gone (residual noise/10 rms)
+
+
+@pytest.mark.parametrize("bits", [12, 16])
+def test_quantisation_error_is_half_an_lsb(tmp_path, bits):
+    rate = 1000.0
+    v = np.linspace(0, 100, 5000)
+    out = {}
+    for b in (bits, None):
+        bench = {
+            "gauge": {"noise_ue": 0.0},
+            "amplifier": {"monitor_noise_V": 0.0},
+            "daq": {"ai_bits": b, "ao_bits": None},
+        }
+        with open_rig(rig_path(tmp_path, bench=bench), seed=4) as rig:
+            out[b] = acquire(rig, v, rate)["gauge"]
+    lsb = 20.0 / 2**bits
+    err = out[bits] - out[None]
+    assert np.max(np.abs(err)) <= lsb / 2 * (1 + 1e-9)
+    assert np.std(err) == pytest.approx(lsb / math.sqrt(12), rel=0.1)
+
+
+def test_daq_clips_at_its_range(tmp_path):
+    bench = {"gauge": {"noise_ue": 0.0}, "daq": {"ai_bits": None}}
+    with open_rig(rig_path(tmp_path, bench=bench, conditioner={"gain": 20}), seed=5) as rig:
+        g = acquire(rig, np.full(200, 100.0), 1000.0)["gauge"]
+    assert g.max() == pytest.approx(10.0)  # ~900 ue x 21.7 mV/ue would be ~19.5 V
+
+
+def test_conditioner_filter_setting_and_hidden_lowpass():
+    rate = 20_000.0
+    t = np.arange(20_000) / rate
+    for fc in (100.0, 1000.0):
+        lp = ButterLowpass(fc, 2, rate)
+        u = np.sin(2 * np.pi * fc * t)
+        y = lp.process(u)[-4000:]
+        ref = np.exp(-1j * 2 * np.pi * fc * t[-4000:])
+        z = np.mean(y * ref) / np.mean(u[-4000:] * ref)
+        assert abs(z) == pytest.approx(1 / math.sqrt(2), rel=0.01)  # -3 dB
+        assert np.degrees(np.angle(z)) == pytest.approx(-90.0, abs=1.5)
+
+
+def test_filter_above_nyquist_is_stable_and_unit_gain_at_dc():
+    lp = ButterLowpass(1000.0, 2, 1000.0)  # cutoff at the sample rate
+    y = lp.process(np.ones(500))
+    assert y[-1] == pytest.approx(1.0, abs=1e-9)
+
+
+def test_self_heating_power_matches_the_sine_formula():
+    cfg = SelfHeating(name="self_heating", heat_capacity_J_per_K=1.0)
+    rate, f, c_eff = 5000.0, 40.0, 6e-6 * 1.7
+    th = Thermal(cfg, rate)
+    v = unipolar(100.0, f, rate, 4.0)
+    i = c_eff * np.gradient(v) * rate
+    T = th.process(v, i)
+    p_sine = math.pi * f * c_eff * cfg.tan_delta * 100.0**2 / 4  # 0.16 W
+    tau = cfg.thermal_resistance_K_per_W * cfg.heat_capacity_J_per_K
+    dT = p_sine * cfg.thermal_resistance_K_per_W * (1 - math.exp(-(4.0 - 1.0) / tau))
+    # the reference level of v settles within ~1 s; compare the rise over the last 3 s
+    got = T[-1] - T[int(rate)]
+    assert got == pytest.approx(dT * math.exp(-1.0 / tau), rel=0.1)
+
+
+def test_self_heating_raises_temperature_channel_and_gain(tmp_path):
+    eff = [{"name": "self_heating", "heat_capacity_J_per_K": 0.2}]
+    v = unipolar(100.0, 40.0, 2000.0, 5.0)
+    bench = {"gauge": {"noise_ue": 0.0}, "daq": {"ai_bits": None}}
+    with open_rig(rig_path(tmp_path, bench={**bench, "effects": eff}), seed=6) as rig:
+        assert "temperature" in rig.daq.ai_channel_names()
+        ch = acquire(rig, v, 2000.0)
+        T = rig.temperature_to_degC(ch["temperature"])
+        hot = rig.gauge_to_strain(ch["gauge"])
+    with open_rig(rig_path(tmp_path, bench=bench), seed=6) as rig:
+        assert "temperature" not in rig.daq.ai_channel_names()
+        cold = rig.gauge_to_strain(acquire(rig, v, 2000.0)["gauge"])
+    assert T[:100].mean() == pytest.approx(23.0, abs=0.1)
+    assert T[-100:].mean() > 25.0
+    ratio = np.ptp(hot[-2000:]) / np.ptp(cold[-2000:])
+    assert ratio - 1 == pytest.approx(0.002 * (T[-2000:].mean() - 23.0), rel=0.15)
+
+
+def test_log_creep_per_decade():
+    cfg = LogCreep(name="log_creep", per_decade=0.02)
+    rate = 100.0
+    y = Creep(cfg, rate).process(np.ones(int(1000 * rate)))
+    t = (np.arange(y.size) + 1) / rate
+    at = {d: np.interp(10.0**d, t, y) for d in (0, 1, 2, 3)}
+    for d in (0, 1, 2):
+        assert at[d + 1] - at[d] == pytest.approx(0.02, rel=0.12)
+
+
+def test_mains_pickup_and_offset_drift(tmp_path):
+    eff = [
+        {"name": "mains_pickup", "amplitude_mV": 3.0},
+        {"name": "offset_drift", "rate_ue_per_s": 0.5, "random_walk_ue_per_sqrt_s": 0.0},
+    ]
+    rate = 1000.0
+    bench = {"effects": eff, "gauge": {"noise_ue": 0.0}, "daq": {"ai_bits": None}}
+    with open_rig(rig_path(tmp_path, bench=bench), seed=7) as rig:
+        g = acquire(rig, np.zeros(10_000), rate)["gauge"]
+        strain = rig.gauge_to_strain(g)
+    t = np.arange(g.size) / rate
+    slope = np.polyfit(t, strain, 1)[0]
+    assert slope == pytest.approx(0.5, rel=0.02)
+    detr = g - np.polyval(np.polyfit(t, g, 1), t)
+    spec = np.abs(np.fft.rfft(detr)) * 2 / g.size
+    freqs = np.fft.rfftfreq(g.size, 1 / rate)
+    assert spec[np.argmin(np.abs(freqs - 50))] == pytest.approx(3e-3, rel=0.05)
+    assert spec[np.argmin(np.abs(freqs - 150))] == pytest.approx(0.9e-3, rel=0.05)
+
+
+def test_weaker_amplifier_effect_limits_a_20_hz_sine(tmp_path):
+    eff = [{"name": "amplifier_current_limit", "i_peak_A": 0.05, "i_avg_A": 0.04}]
+    rate = 10_000.0
+    bench = {"effects": eff, "amplifier": {"monitor_noise_V": 0.0}, "daq": {"ai_bits": None}}
+    with open_rig(rig_path(tmp_path, bench=bench), seed=8) as rig:
+        mon = rig.monitor_to_volts(acquire(rig, unipolar(100, 20, rate, 0.5), rate)["amp_monitor"])
+    slope = np.abs(np.diff(mon)) * rate
+    c_eff = 6e-6 * 1.7
+    assert np.max(slope) <= 0.05 / c_eff * 1.001
+    assert np.max(slope[-2000:]) == pytest.approx(0.04 / c_eff, rel=0.01)
+
+
+def test_rate_change_rebuilds_the_chain_at_rest():
+    b = VirtualBench(BenchConfig.ideal(), seed=0)
+    b.step(np.full(100, 5.0))
+    b.set_rate(2000.0)
+    assert b.rate_hz == 2000.0
+    out = b.step(np.zeros(10))
+    assert np.all(np.isfinite(out["gauge"]))

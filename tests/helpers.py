@@ -1,0 +1,103 @@
+"""Helpers the tests share: the CLI in-process, a protocol run on the simulated rig, small
+protocols. (Fixtures built on them are in ``conftest.py``.)"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+from typer.testing import CliRunner
+
+from labrig.cli import app
+
+#: the repository and its test data
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "tests" / "data"
+
+#: the keys of ``labrig fit --json`` (the contract of the fit output)
+FIT_JSON_KEYS = (
+    "params",
+    "uncertainty",
+    "correlation",
+    "nrmse_pct",
+    "per_entry",
+    "heldout_nrmse_pct",
+    "method",
+    "entries",
+)
+
+#: three short sines at 500 Hz (a run file of a few hundred kB, written in about a second)
+TINY = """\
+name: small
+rate_hz: 500
+steps:
+  - kind: sine
+    amplitude_V: 60
+    frequency_hz: 2
+    cycles: 2
+    rest_s: 0.2
+  - kind: sine
+    amplitude_V: 80
+    frequency_hz: 2
+    cycles: 2
+    rest_s: 0.2
+  - kind: sine
+    amplitude_V: 100
+    frequency_hz: 2
+    cycles: 2
+"""
+
+#: a small version of the paper's campaign: the sweep at 50 and 100 V, 1-40 Hz, 2 cycles or 2 s,
+#: and the vanishing envelope (about 25 s of protocol)
+SMALL_CAMPAIGN = """\
+name: small campaign
+rate_hz: 1000
+rest_s: 1
+steps:
+  - kind: sweep
+    amplitudes_V: [50, 100]
+    frequencies_hz: [1, 5, 20, 40]
+    cycles: 2
+    min_duration_s: 2
+  - kind: vanishing
+    amplitude_V: 100
+    frequency_hz: 1
+    decay_s: 3
+    hold_s: 2
+"""
+
+
+def invoke(*args: object, columns: int | None = 160):
+    """``labrig ARGS...`` in-process (typer's CliRunner), the terminal ``columns`` wide."""
+    env = {"COLUMNS": str(columns)} if columns else None
+    return CliRunner().invoke(app, [str(a) for a in args], env=env)
+
+
+def run_protocol(text: str, tmp: Path, seed: int, rig: Path | None = None) -> Path:
+    """``labrig run`` of the protocol ``text`` on the simulated rig (or ``rig``) into
+    ``tmp/run{seed}.h5``; asserts it completed."""
+    proto = tmp / "protocol.yaml"
+    proto.write_text(text)
+    out = tmp / f"run{seed}.h5"
+    extra = ["--rig", str(rig)] if rig else []
+    res = invoke("run", proto, "--seed", seed, "--out", out, *extra)
+    assert res.exit_code == 0, res.output
+    return out
+
+
+def merge(base: dict, over: dict) -> dict:
+    """``base`` with ``over`` merged in, nested mappings merged key by key."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def rig_path(tmp_path: Path, **over) -> Path:
+    """The built-in simulated rig with ``over`` merged in, written to ``tmp_path/rig.yaml``."""
+    from labrig.rigspec import DEFAULT_RIG_YAML
+
+    data = merge(yaml.safe_load(DEFAULT_RIG_YAML), over)
+    p = tmp_path / "rig.yaml"
+    p.write_text(yaml.safe_dump(data, sort_keys=False))
+    return p

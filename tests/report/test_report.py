@@ -1,0 +1,138 @@
+"""``labrig report``: one self-contained HTML file and the metrics table as JSON.
+
+The run is a reduced campaign on the simulated rig (see test_cli_fit.py); the report either
+fits first (held-out on a few chosen entries, to stay fast) or takes ``labrig fit --out``
+parameters.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from labrig.analysis.records import Record
+from labrig.report.data import METRICS, MODEL_KEYS, configured_noise_ue, hold_noise_ue
+
+from helpers import SMALL_CAMPAIGN, invoke, run_protocol
+
+SECTIONS = ("summary", "metrics", "frequency", "parameters", "entries", "provenance")
+CHOSEN = ["sine_50V_1Hz", "sine_100V_5Hz", "sine_50V_40Hz", "vanishing_100V_1Hz"]
+CHOSEN_RUN_ORDER = ["sine_50V_1Hz", "sine_50V_40Hz", "sine_100V_5Hz", "vanishing_100V_1Hz"]
+
+
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory) -> Path:
+    return run_protocol(SMALL_CAMPAIGN, tmp_path_factory.mktemp("report"), seed=6)
+
+
+@pytest.fixture(scope="module")
+def fitted_report(small_run: Path, tmp_path_factory) -> tuple[Path, dict, str]:
+    """Report that fits first, on chosen entries, with held-out NRMSE, and --json."""
+    out = tmp_path_factory.mktemp("html") / "report.html"
+    res = invoke("report", small_run, "--out", out, "--entries", ",".join(CHOSEN), "--json")
+    assert res.exit_code == 0, res.stderr
+    return out, json.loads(res.stdout), res.stderr
+
+
+def assert_self_contained(page: str) -> None:
+    assert page.startswith("<!DOCTYPE html>")
+    low = page.lower()
+    for bad in ("http://", "https://", "<script", "<link", "@import", "url(", "<iframe"):
+        assert bad not in low, bad
+    srcs = re.findall(r"""src\s*=\s*["']([^"']*)""", page)
+    assert srcs and all(s.startswith("data:image/png;base64,") for s in srcs)
+
+
+def test_report_is_one_self_contained_file(fitted_report) -> None:
+    out, _, stderr = fitted_report
+    page = out.read_text(encoding="utf-8")
+    assert_self_contained(page)
+    for sec in SECTIONS:
+        assert f'id="{sec}"' in page
+    # one figure per entry plus the frequency figure (periodic entries at 1, 5 and 40 Hz)
+    assert page.count("<img ") == len(CHOSEN) + 1
+    for name in CHOSEN:
+        assert f"<h3>{name}</h3>" in page
+    for text in ("Prandtl-Ishlinskii", "Bouc-Wen", "fractional-order model", "NRMSE held-out",
+                 "loop-area error", "strain-shift error", "max error", "± 1σ", "alpha0_ue_per_V",
+                 "small campaign", "labrig 0.1.0", "Noise floor", "Protocol file",
+                 "Instrument description", "seed</dt><dd>6"):  # fmt: skip
+        assert text in page, text
+    # the envelope is not periodic: said in the notes
+    assert "not computed for vanishing_100V_1Hz" in page
+    assert "wrote" in stderr
+
+
+def test_report_json_metrics_table(fitted_report) -> None:
+    _, table, _ = fitted_report
+    assert list(table) == CHOSEN_RUN_ORDER
+    for name, row in table.items():
+        for model in MODEL_KEYS:
+            for metric, _, _ in METRICS:
+                key = f"{model}.{metric}"
+                assert key in row, key
+                assert row[key] is None or isinstance(row[key], float)
+        assert row["dynamic.nrmse_pct"] < 1.0
+        assert row["dynamic.heldout_nrmse_pct"] is not None
+        # our model beats both rate-independent baselines on the simulated rig
+        assert row["dynamic.nrmse_pct"] < row["prandtl_ishlinskii.nrmse_pct"]
+        assert row["dynamic.nrmse_pct"] < row["bouc_wen.nrmse_pct"]
+        periodic = not name.startswith("vanishing")
+        assert (row["dynamic.loop_area_error_pct"] is not None) == periodic
+        assert (row["measured.strain_shift_ue"] is not None) == periodic
+    assert abs(table["sine_50V_40Hz"]["dynamic.loop_area_error_pct"]) < 5.0
+
+
+def test_report_from_params_file(small_run: Path, tmp_path: Path) -> None:
+    params = tmp_path / "params.json"
+    res = invoke("fit", small_run, "--no-heldout", "--json", "--out", params)
+    assert res.exit_code == 0, res.stderr
+    out = tmp_path / "r.html"
+    res = invoke("report", small_run, "--params", params, "--out", out, "--no-heldout")
+    assert res.exit_code == 0, res.stderr
+    assert res.stdout.strip() == str(out)
+    page = out.read_text(encoding="utf-8")
+    assert_self_contained(page)
+    assert page.count("<img ") == 9 + 1
+    assert f"from {params}" in page
+    assert "held-out NRMSE not computed" in page
+
+
+def test_report_refuses_baseline_params(small_run: Path, tmp_path: Path) -> None:
+    params = tmp_path / "pi.json"
+    res = invoke("fit", small_run, "--model", "prandtl_ishlinskii", "--no-heldout", "--out", params)
+    assert res.exit_code == 0, res.stderr
+    res = invoke("report", small_run, "--params", params, "--out", tmp_path / "r.html")
+    assert res.exit_code == 2
+    assert "baseline" in res.stderr and "Traceback" not in res.stderr
+    assert not (tmp_path / "r.html").exists()
+
+
+# -- noise floor -----------------------------------------------------------------------------------
+
+
+def test_hold_noise_ignores_creep() -> None:
+    rng = np.random.default_rng(1)
+    t = np.arange(6000) / 1000.0
+    v = np.where(t < 3.0, 50 * (1 - np.cos(2 * np.pi * t)), 0.0)
+    creep = 80.0 * np.exp(-t / 2.0)  # slow drift at 0 V
+    s = 8 * v + creep + rng.normal(0, 1.5, t.size)
+    rec = Record.from_arrays("x", 1000.0, v, s)
+    assert hold_noise_ue([rec]) == pytest.approx(1.5, rel=0.05)
+    assert hold_noise_ue([Record.from_arrays("y", 1000.0, v[:3000], s[:3000])]) is None
+
+
+def test_configured_noise_needs_a_clean_simulated_bench() -> None:
+    inst = {
+        "bench": {"config": {"gauge": {"noise_ue": 2.0}, "effects": []}},
+        "daq": {"ai_range_V": [-10.0, 10.0], "ai_bits": 16},
+        "calibration": {"sensitivity_mV_per_ue": 1.085, "conditioner_gain": 1.0},
+    }
+    assert configured_noise_ue(inst) == pytest.approx(2.0, abs=0.01)
+    inst["bench"]["config"]["effects"] = [{"name": "mains_pickup"}]
+    assert configured_noise_ue(inst) is None
+    assert configured_noise_ue({}) is None

@@ -1,0 +1,353 @@
+"""Reading run files cannot hang or crash a command (labrig.store_isolated, labrig.store_parse).
+
+- The issue's case: a run file from ``labrig run`` with 512 zeroed bytes at offset 3000 or 6000
+  makes plain h5py spin forever (checked here as the precondition, in a child killed after
+  3 s); every command that reads run files ends with exit 2 and a message well within 10 s.
+- Ctrl-C stops a command reading such a file at once (exit 130) and leaves no child behind.
+- The isolation itself: a crash, a loop, a slow child, an exception, a result.
+- Seals: metadata changed behind labrig's back (an attribute, an entry's class, a text) is
+  refused naming the object; files without seals (older labrig) still read.
+- Reader checks: a scalar dataset in ``data``, a bad ``sample_rate``, no ``time``, a step
+  definition nested 100 000 deep, a dataset claiming more samples than the file holds.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from labrig import store_isolated, store_reader
+from labrig.errors import InputFileError, InputIssue
+from labrig.store import RunWriter, read_run
+from labrig.store_format import SEAL_ATTR
+from labrig.store_isolated import IsolatedReadError, call_isolated
+from labrig.store_writer import seal_all
+
+from helpers import invoke
+
+EXE = Path(sys.executable).parent / "labrig"
+#: h5py reading every attribute and dataset of a file (the precondition: does libhdf5 loop?)
+PLAIN_READ = """
+import sys, h5py
+f = h5py.File(sys.argv[1], "r", locking=False)
+def visit(obj):
+    dict(obj.attrs)
+    if isinstance(obj, h5py.Dataset):
+        obj[()]
+visit(f)
+f.visititems(lambda name, obj: visit(obj))
+"""
+
+
+def zeroed(src: Path, offset: int, dst: Path) -> Path:
+    data = bytearray(src.read_bytes())
+    data[offset : offset + 512] = bytes(len(data[offset : offset + 512]))
+    dst.write_bytes(bytes(data))
+    return dst
+
+
+def plain_h5py_hangs(path: Path, timeout_s: float = 3.0) -> bool:
+    try:
+        subprocess.run(
+            [sys.executable, "-c", PLAIN_READ, str(path)], capture_output=True, timeout=timeout_s
+        )
+    except subprocess.TimeoutExpired:
+        return True
+    return False
+
+
+@pytest.fixture(scope="module")
+def hanging(tiny_run: Path, tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    """The issue's files (zeroed at 3000 and 6000) on which plain h5py loops; if the writer's
+    layout moved, other offsets of the first 8 kB where it does."""
+    tmp = tmp_path_factory.mktemp("hang")
+    found = []
+    for offset in (3000, 6000, *range(2000, 8001, 500)):
+        p = zeroed(tiny_run, offset, tmp / f"z{offset}.h5")
+        if plain_h5py_hangs(p):
+            found.append(p)
+        if len(found) == 2:
+            break
+    assert found, "no zeroed block of the first 8 kB makes libhdf5 loop any more"
+    return found
+
+
+@pytest.mark.timeout(180)
+def test_every_command_ends_on_a_file_libhdf5_loops_on(hanging: list[Path], tmp_path: Path):
+    for path in hanging:
+        for args in (
+            ["info", path],
+            ["export", path, "--csv", tmp_path / "csv"],
+            ["fit", path, "--no-heldout"],
+            ["report", path, "--out", tmp_path / "r.html", "--no-heldout"],
+            ["diagnose", path],
+        ):
+            t0 = time.monotonic()
+            res = invoke(*args)
+            took = time.monotonic() - t0
+            assert res.exit_code == 2, (args, res.output)
+            assert isinstance(res.exception, SystemExit), repr(res.exception)
+            assert "looped on it" in res.stderr and str(path) in res.stderr, res.stderr
+            assert "Traceback" not in res.output
+            assert took < 10, (args, took)
+        assert not (tmp_path / "r.html").exists() and not (tmp_path / "csv").exists()
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                if int((d / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                    out.append(int(d.name))
+            except (OSError, ValueError, IndexError):
+                pass
+    return out
+
+
+@pytest.mark.skipif(not EXE.exists() or not Path("/proc").is_dir(), reason="needs /proc")
+def test_ctrl_c_stops_a_command_reading_a_looping_file(hanging: list[Path]):
+    proc = subprocess.Popen(
+        [str(EXE), "info", str(hanging[0])], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    try:
+        child: list[int] = []
+        deadline = time.monotonic() + 20
+        while not child and time.monotonic() < deadline:
+            time.sleep(0.05)
+            child = _children(proc.pid)
+        assert child, "the reading child never started"
+        time.sleep(0.2)
+        t0 = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=5)
+        assert time.monotonic() - t0 < 2.0
+        assert proc.returncode == 130, err.decode()
+        assert b"Traceback" not in err
+        time.sleep(0.1)
+        assert not Path(f"/proc/{child[0]}").exists(), "the reading child outlived the command"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+# -- the isolation -------------------------------------------------------------------------
+
+
+def _crash() -> None:
+    os.kill(os.getpid(), signal.SIGSEGV)
+
+
+def _spin() -> None:
+    while True:
+        pass
+
+
+def _sleep() -> None:
+    time.sleep(60)
+
+
+def _refuse() -> None:
+    raise InputFileError([InputIssue("f.h5", 3, "entry/data", "why")])
+
+
+def _value(n: int) -> dict:
+    return {"x": np.arange(n)}
+
+
+def test_a_crashing_reader_is_reported_not_fatal():
+    with pytest.raises(IsolatedReadError, match="crashed reading it \\(SIGSEGV\\)"):
+        call_isolated(_crash, size_bytes=0)
+
+
+def test_a_looping_reader_is_stopped_by_its_cpu_time():
+    t0 = time.process_time(), time.monotonic()
+    with pytest.raises(IsolatedReadError, match="looped on it"):
+        call_isolated(_spin, size_bytes=0)
+    # the parent waited without spending CPU; the child had about STEP_CPU_S
+    assert time.process_time() - t0[0] < 0.5
+    assert time.monotonic() - t0[1] < 1 + 2 * store_isolated.STEP_CPU_S + 5
+
+
+def test_a_waiting_reader_is_stopped_by_the_wall_clock(monkeypatch):
+    monkeypatch.setattr(store_isolated, "BASE_WALL_S", 0.5)
+    t0 = time.monotonic()
+    with pytest.raises(IsolatedReadError, match="did not finish within"):
+        call_isolated(_sleep, size_bytes=0)
+    assert time.monotonic() - t0 < 5
+
+
+def test_results_and_errors_come_back():
+    np.testing.assert_array_equal(call_isolated(_value, 5, size_bytes=0)["x"], np.arange(5))
+    with pytest.raises(InputFileError) as e:
+        call_isolated(_refuse, size_bytes=0)
+    assert e.value.issues == [InputIssue("f.h5", 3, "entry/data", "why")]
+    assert e.value.exit_code == 2
+
+
+# -- seals -----------------------------------------------------------------------------------
+
+
+def write_run(path: Path, n: int = 300) -> Path:
+    with RunWriter(path, "name: p\n", "", {"daq": {"rate_hz": 1000}}, 1, protocol_name="p") as w:
+        for k in range(3):
+            e = w.begin_entry(f"e{k}", {"kind": "sine"}, 1000.0, ["command_voltage", "strain"])
+            v = np.sin(np.arange(n) / 50.0) * 50 + 50
+            e.append({"command_voltage": v, "strain": 9 * v})
+            e.finish("complete")
+    return path
+
+
+def read_error(path: Path) -> str:
+    with pytest.raises(InputFileError) as e:
+        read_run(path)
+    assert e.value.exit_code == 2
+    return str(e.value)
+
+
+def test_every_object_is_sealed_and_the_file_reads(tmp_path: Path):
+    path = write_run(tmp_path / "run.h5")
+    with h5py.File(path, "r") as f:
+        missing = []
+        f.visititems(lambda name, obj: missing.append(name) if SEAL_ATTR not in obj.attrs else 0)
+        assert SEAL_ATTR in f.attrs and missing == []
+    assert [e.name for e in read_run(path)] == ["e0", "e1", "e2"]
+
+
+@pytest.mark.parametrize(
+    ("where", "edit"),
+    [
+        ("e1/data/strain", lambda f: f["e1/data/strain"].attrs.__setitem__("units", "um")),
+        ("e1", lambda f: f["e1"].attrs.__setitem__("NX_class", "NXentrz")),
+        ("run/status", lambda f: f["run/status"].__setitem__((), "aborted")),
+        ("e2/step_definition", lambda f: f["e2/step_definition"].__setitem__((), '{"kind": 1}')),
+        ("e0/data", lambda f: f["e0/data"].move("time", "tame")),
+    ],
+)
+def test_metadata_changed_behind_labrig_is_refused(tmp_path: Path, where, edit):
+    path = write_run(tmp_path / "run.h5")
+    with h5py.File(path, "r+") as f:
+        edit(f)
+    msg = read_error(path)
+    assert f"[{where}]" in msg and "checksum" in msg, msg
+
+
+def test_files_without_seals_still_read(tmp_path: Path):
+    path = write_run(tmp_path / "run.h5")
+    before = read_run(path)
+    with h5py.File(path, "r+") as f:
+        del f.attrs[SEAL_ATTR]
+        f.visititems(lambda name, obj: obj.attrs.__delitem__(SEAL_ATTR))
+    after = read_run(path)
+    assert [e.name for e in after] == [e.name for e in before]
+    np.testing.assert_array_equal(after["e1"]["strain"], before["e1"]["strain"])
+
+
+# -- reader checks (on files edited and resealed: wrong, not damaged) -------------------------
+
+
+def edited(tmp_path: Path, edit) -> Path:
+    path = write_run(tmp_path / "run.h5")
+    with h5py.File(path, "r+") as f:
+        edit(f)
+        seal_all(f)
+    return path
+
+
+def _replace(f: h5py.File, name: str, value: object) -> None:
+    del f[name]
+    f[name] = value
+
+
+@pytest.mark.parametrize(
+    ("edit", "where", "message"),
+    [
+        (lambda f: _replace(f, "e1/data/strain", 3.0), "e1/data/strain", "found a scalar"),
+        (lambda f: _replace(f, "e1/data/strain", np.zeros((4, 4))), "e1/data/strain", "shape"),
+        (lambda f: _replace(f, "e1/data/strain", [b"a", b"b"]), "e1/data/strain", "numbers"),
+        (lambda f: _replace(f, "e1/sample_rate", 0.0), "e1/sample_rate", "found 0"),
+        (lambda f: _replace(f, "e1/sample_rate", np.nan), "e1/sample_rate", "found nan"),
+        (lambda f: _replace(f, "e1/sample_rate", -5.0), "e1/sample_rate", "found -5"),
+        (lambda f: _replace(f, "e1/sample_rate", "fast"), "e1/sample_rate", "expected a number"),
+        (lambda f: f["e1/data"].__delitem__("time"), "e1/data", "no time channel"),
+        (lambda f: f["e1"].__delitem__("data"), "e1/data", "no group of channels"),
+        (lambda f: _replace(f, "e1/entry_index", 7), "", "numbered [0, 2, 7]"),
+        (lambda f: _replace(f, "e1/status", "finished"), "e1/status", "not a status"),
+        (
+            lambda f: _replace(f, "e1/step_definition", "[" * 100_000 + "]" * 100_000),
+            "e1/step_definition",
+            "nested 100000 deep",
+        ),
+        (lambda f: _replace(f, "e1/step_definition", "[1, 2]"), "e1/step_definition", "object"),
+        (
+            lambda f: f["e1/data"].create_dataset(
+                "huge", shape=(10**12,), chunks=(1000,), dtype="f8"
+            ),
+            "e1/data/huge",
+            "more than the file can hold",
+        ),
+        (lambda f: f.create_group("notes"), "notes/@NX_class", "not an entry"),
+        (lambda f: f.attrs.__setitem__("creator", "someone"), "", "not a labrig run file"),
+    ],
+)
+def test_what_labrig_never_writes_is_refused_with_where(tmp_path: Path, edit, where, message):
+    path = edited(tmp_path, edit)
+    msg = read_error(path)
+    assert f"{path}:" in msg
+    assert (f"[{where}]" in msg) if where else (f"{path}: [" not in msg), msg
+    assert message in msg, msg
+
+
+@pytest.mark.parametrize("command", ["info", "export", "fit", "report", "diagnose"])
+def test_a_scalar_in_data_is_exit_2_for_every_command(tmp_path: Path, command: str):
+    path = edited(tmp_path, lambda f: _replace(f, "e1/data/strain", 3.0))
+    extra = {
+        "export": ["--csv", tmp_path / "csv"],
+        "report": ["--out", tmp_path / "r.html"],
+        "fit": ["--no-heldout"],
+    }.get(command, [])
+    res = invoke(command, path, *extra)
+    assert res.exit_code == 2 and isinstance(res.exception, SystemExit), res.output
+    assert "[e1/data/strain] expected a 1-D array of numbers" in res.stderr
+
+
+def test_info_never_prints_hundreds_of_digits(tmp_path: Path):
+    path = tmp_path / "big.h5"
+    with RunWriter(path, "name: p\n", "", {}, 1, protocol_name="p") as w:
+        e = w.begin_entry("e0", {}, 1e300, ["command_voltage", "strain"])
+        e.append({"command_voltage": [1e300, -1e300], "strain": [1e300, 2e300]})
+        e.finish("complete")
+    res = invoke("info", path)
+    assert res.exit_code == 0, res.output
+    assert "1e+300" in res.stdout and "0" * 20 not in res.stdout
+
+
+def test_one_file_read_twice_is_read_once(tmp_path: Path, monkeypatch):
+    path = write_run(tmp_path / "run.h5")
+    calls = []
+    real = store_reader.call_isolated
+
+    def counting(*args, **kwargs):
+        calls.append(args)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(store_reader, "call_isolated", counting)
+    a = read_run(path)
+    a["e1"]["strain"][:] = 0  # a caller changing its arrays does not change the next read
+    b = read_run(path, load_data=False)
+    c = read_run(path)
+    assert len(calls) == 1
+    assert b["e1"]["strain"].shape == c["e1"]["strain"].shape == (300,)
+    assert c["e1"]["strain"].any()
+    write_run(tmp_path / "other.h5", n=200)
+    os.replace(tmp_path / "other.h5", path)  # a new file under the same name is read again
+    assert read_run(path)["e1"].n_samples == 200 and len(calls) == 2
