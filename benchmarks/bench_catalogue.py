@@ -44,7 +44,7 @@ import h5py
 import numpy as np
 
 from labrig.store import RunWriter
-from labrig.store_writer import seal_all
+from labrig.store.writer import seal_all
 
 VARIANTS = 40
 PROTOCOLS = ("paper sine sweep", "sweep", "creep hold", "vanishing check")

@@ -323,7 +323,7 @@ class Run:
         start = self._header.start_time[:19].replace("T", " ") or "-"
         status = self.status + (f" ({self.reason})" if self.reason else "")
         seed = f"; seed {self.seed}" if self.seed is not None else ""
-        from labrig.catalogue_read import shown_metadata
+        from labrig.catalogue.read import shown_metadata
 
         shown = shown_metadata(self.metadata)
         lines = [
@@ -430,7 +430,7 @@ def as_json(result: Any) -> dict[str, Any]:
 def open(path: PathLike) -> Run:  # labrig.open (the builtin stays open inside labrig.api)
     """Open a run file: metadata now, samples on first use. A missing, damaged or foreign file
     raises :class:`~labrig.errors.InputFileError` naming it."""
-    from labrig.catalogue_read import read_metadata
+    from labrig.catalogue.read import read_metadata
     from labrig.store import read_run
 
     p = Path(path)

@@ -39,7 +39,7 @@ class InputFileError(LabrigError):
         super().__init__("\n".join(str(i) for i in issues))
 
     def __reduce__(self) -> tuple:
-        # pickled with its issues (a run file is read in a child process: labrig.store_isolated)
+        # pickled with its issues (a run file is read in a child process: labrig.store.isolated)
         return (type(self), (self.issues,))
 
 

@@ -47,8 +47,8 @@ from labrig.ramp import RAMP_CURRENT_FRACTION, RampRecord
 from labrig.rigfile import load_rig, open_rig
 from labrig.run_record import record_end
 from labrig.store import Channel, RunWriter, estimate_run_bytes, free_bytes
-from labrig.store_resume import ResumePlan, check_resume, check_same_rig, record_resume
-from labrig.store_space import RESERVE_BYTES
+from labrig.store.resume import ResumePlan, check_resume, check_same_rig, record_resume
+from labrig.store.space import RESERVE_BYTES
 
 #: acquisition block length (s): the most a crash can lose
 BLOCK_S = 0.1
@@ -245,7 +245,7 @@ def _rest(
     gen = rig.daq.play(np.zeros(n), block)
     try:
         for j, blk in enumerate(gen, start=1):
-            writer.heartbeat()  # the file is still being written (labrig.store_writing)
+            writer.heartbeat()  # the file is still being written (labrig.store.writing)
             if progress:
                 frac = (blk.start + len(blk)) / n
                 progress(k, n_steps, where, frac, left - frac * step.rest_after_s)
@@ -275,7 +275,7 @@ def execute(
 
     ``metadata``: the options' metadata (``--meta``, ``--operator``, ``--sample``), put over
     the protocol's ``metadata:`` (:mod:`labrig.metadata`). ``resume``: continue that run file
-    with the planned entries it does not hold complete (:mod:`labrig.store_resume`; ``out`` is
+    with the planned entries it does not hold complete (:mod:`labrig.store.resume`; ``out`` is
     then ignored). ``on_file(path)`` is called once the run file exists, with the path being
     written (a copy beside the target with ``overwrite`` or ``resume``).
 
@@ -430,7 +430,7 @@ def _reopen_writer(
     job: _Job, rig: Rig, out: Path, chans: list[Channel], staged: Staged
 ) -> RunWriter:
     """A resume's writer: ``out`` copied beside itself, the copy reopened and the resume
-    recorded in it (:mod:`labrig.store_resume`)."""
+    recorded in it (:mod:`labrig.store.resume`)."""
     assert job.resume is not None
     _check_disk(job, rig, out, chans)
     copy = staged.path(out)

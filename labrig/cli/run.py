@@ -1,6 +1,6 @@
 """``labrig run``: a protocol on the rig
 (:mod:`labrig.runner`; the progress bar, the live view and the exit code of a run:
-:mod:`labrig.cli_run`)."""
+:mod:`labrig.cli.run_execute`)."""
 
 from __future__ import annotations
 
@@ -84,7 +84,7 @@ def run(
     ),
 ) -> None:
     """Preflight a protocol, run it on the rig, and log every step to an HDF5 run file."""
-    from labrig.cli_run import RunExtras, run_with_progress
+    from labrig.cli.run_execute import RunExtras, run_with_progress
 
     live = live or live_port is not None
     if params is not None and not live:

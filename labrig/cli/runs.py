@@ -73,7 +73,7 @@ def list_runs_command(
     """The listing of ``paths`` (default ``runs/``) filtered by ``where``, as a table on stdout
     or as JSON (``as_json``, ``out``); counts and notes on stderr."""
     from labrig.catalogue import list_runs
-    from labrig.catalogue_where import parse_all
+    from labrig.catalogue.where import parse_all
     from labrig.errors import InputFileError, InputIssue
 
     conditions = parse_all(where)  # a bad expression: exit 2 before any file is read
@@ -182,7 +182,7 @@ def entries_text(record: dict[str, Any]) -> str:
 def metadata_text(record: dict[str, Any]) -> str:
     """The metadata a person looks for (instrument details are in ``--json``), as
     ``key=value`` pairs; ``sample/name`` shows as ``sample``, ``metadata/x`` as ``x``."""
-    from labrig.catalogue_read import shown_metadata
+    from labrig.catalogue.read import shown_metadata
 
     pairs = []
     for k, v in shown_metadata(record.get("metadata", {})).items():

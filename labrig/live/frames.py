@@ -1,13 +1,13 @@
 """One look at a run file that may be being written: what the live view draws next.
 
 :func:`read_frame_here` opens the file read-only with HDF5 file locking off (the writer holds
-it open; it flushes after every block, :mod:`labrig.store_writer`) and reads only what a frame
+it open; it flushes after every block, :mod:`labrig.store.writer`) and reads only what a frame
 needs: the run's status, the entries' names, statuses and lengths, and the current entry's
 samples from a given index on. It verifies what it reads: the seal of every scalar it takes
-(:func:`labrig.store_format.seal_of`) and the Fletcher32 checksums of the samples (HDF5 checks
+(:func:`labrig.store.format.seal_of`) and the Fletcher32 checksums of the samples (HDF5 checks
 them on reading). A file caught between two of its writer's writes fails a check or raises:
 :func:`read_frame` runs the reading in a child process with a short time limit
-(:func:`labrig.store_isolated.call_isolated`) and the caller skips that frame.
+(:func:`labrig.store.isolated.call_isolated`) and the caller skips that frame.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from labrig.store_format import SEAL_ATTR, seal_of
-from labrig.store_isolated import allow_cpu, call_isolated
+from labrig.store.format import SEAL_ATTR, seal_of
+from labrig.store.isolated import allow_cpu, call_isolated
 
 #: the channels a frame reads (those an entry lacks are left out)
 CHANNELS = ("time", "command_voltage", "strain", "amplifier_voltage")

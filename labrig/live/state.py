@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from labrig.live.frames import Frame
-from labrig.store_writing import writer_of
+from labrig.store.writing import writer_of
 
 #: the time series shows this many seconds of the current entry (its last ones)
 SERIES_WINDOW_S = 5.0

@@ -21,7 +21,7 @@ from typer.testing import CliRunner
 import labrig
 from labrig.cli import app
 from labrig.errors import InputFileError
-from labrig.store_format import memory_units
+from labrig.store.format import memory_units
 
 PROTOCOL = """\
 name: api test

@@ -22,11 +22,11 @@ import pytest
 from typer.testing import CliRunner
 
 from labrig.catalogue import list_runs
-from labrig.catalogue_index import INDEX_NAME
-from labrig.catalogue_read import read_metadata_here
+from labrig.catalogue.index import INDEX_NAME
+from labrig.catalogue.read import read_metadata_here
 from labrig.cli import app
 from labrig.store import RunWriter
-from labrig.store_writer import seal_all
+from labrig.store.writer import seal_all
 
 STEP_KEYS = {"sine": ("amplitude_V", "frequency_hz"), "hold": ("voltage_V",)}
 

@@ -27,7 +27,7 @@ from labrig.analysis.prepare import (
 from labrig.analysis.records import Record
 from labrig.errors import InputFileError
 from labrig.store import RunWriter
-from labrig.store_writer import seal_all
+from labrig.store.writer import seal_all
 
 from helpers import invoke
 

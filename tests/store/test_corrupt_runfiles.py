@@ -32,9 +32,9 @@ import h5py
 import numpy as np
 import pytest
 
-from labrig.store_format import SEAL_ATTR
-from labrig.store_isolated import IsolatedReadError, call_isolated
-from labrig.store_writer import seal_all
+from labrig.store.format import SEAL_ATTR
+from labrig.store.isolated import IsolatedReadError, call_isolated
+from labrig.store.writer import seal_all
 
 from helpers import TINY, invoke
 

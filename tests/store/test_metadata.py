@@ -19,7 +19,7 @@ import labrig
 from labrig.cli import app
 from labrig.metadata import MetadataError, from_options, parse_assignment
 from labrig.store import RunWriter, read_run
-from labrig.store_writer import seal_all
+from labrig.store.writer import seal_all
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -95,8 +95,8 @@ HDF5_MEETS_IT = textwrap.dedent(
     from pathlib import Path
     mnt, out_dir, labrig_exe, proto, size = sys.argv[1:6]
     subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", mnt], check=True)
-    import labrig.store_writer
-    labrig.store_writer.free_bytes = lambda path: 1 << 40  # the check sees room; HDF5 won't
+    import labrig.store.writer
+    labrig.store.writer.free_bytes = lambda path: 1 << 40  # the check sees room; HDF5 won't
     from labrig.runner import execute, preflight
     plan, rig = preflight(Path(proto), None)
     run = Path(mnt) / "run.h5"

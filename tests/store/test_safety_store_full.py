@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from labrig import store_writer
 from labrig.errors import StorageError
 from labrig.store import RunWriter, read_run
+from labrig.store import writer as store_writer
 
 CHANNELS = ["command_voltage", "strain"]
 BLOCK = 300

@@ -21,7 +21,7 @@ from labrig.store import (
     run_info,
     run_summary,
 )
-from labrig.store_format import stored_units
+from labrig.store.format import stored_units
 
 CHANNELS = ["command_voltage", "amplifier_voltage", "gauge_raw", "strain", "temperature"]
 DESCRIBE = {

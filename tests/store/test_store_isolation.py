@@ -1,4 +1,4 @@
-"""Reading run files cannot hang or crash a command (labrig.store_isolated, labrig.store_parse).
+"""Reading run files cannot hang or crash a command (labrig.store.isolated, labrig.store.parse).
 
 - The issue's case: a run file from ``labrig run`` with 512 zeroed bytes at offset 3000 or 6000
   makes plain h5py spin forever (checked here as the precondition, in a child killed after
@@ -24,12 +24,13 @@ import h5py
 import numpy as np
 import pytest
 
-from labrig import store_isolated, store_reader
 from labrig.errors import InputFileError, InputIssue
 from labrig.store import RunWriter, read_run
-from labrig.store_format import SEAL_ATTR
-from labrig.store_isolated import IsolatedReadError, call_isolated
-from labrig.store_writer import seal_all
+from labrig.store import isolated as store_isolated
+from labrig.store import reader as store_reader
+from labrig.store.format import SEAL_ATTR
+from labrig.store.isolated import IsolatedReadError, call_isolated
+from labrig.store.writer import seal_all
 
 from helpers import invoke
 

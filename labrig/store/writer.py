@@ -5,7 +5,7 @@ file (``H5Fflush``) before returning, so after a ``kill -9`` the file opens and 
 whose ``append`` returned. Sample datasets carry Fletcher32 checksums (a damaged chunk is
 reported on reading, not read back as numbers).
 
-Disk full (:mod:`labrig.store_space`): before each block the free space is checked against the
+Disk full (:mod:`labrig.store.space`): before each block the free space is checked against the
 chunks the block allocates; a block that does not fit, or a write HDF5 refuses, raises
 :class:`~labrig.errors.StorageError` with the file as it was before the block (the channels are
 cut back to the last complete block). The final records (:meth:`RunWriter.set_run_value`,
@@ -31,7 +31,7 @@ from labrig import __version__
 from labrig.errors import StorageError
 from labrig.interrupts import reason_for, signum_of
 from labrig.metadata import RunMetadata
-from labrig.store_format import (
+from labrig.store.format import (
     FINAL_STATUSES,
     FORMAT_VERSION,
     SEAL_ATTR,
@@ -43,14 +43,14 @@ from labrig.store_format import (
     stored_long_name,
     stored_units,
 )
-from labrig.store_nexus import (
+from labrig.store.nexus import (
     set_str,
     write_entry_identity,
     write_metadata_collection,
     write_note,
     write_tree,
 )
-from labrig.store_space import (
+from labrig.store.space import (
     BLOCK_MARGIN_BYTES,
     Reserve,
     chunk_bytes,
@@ -58,7 +58,7 @@ from labrig.store_space import (
     free_bytes,
     is_disk_full,
 )
-from labrig.store_writing import mark_writer, unmark_writer
+from labrig.store.writing import mark_writer, unmark_writer
 
 log = logging.getLogger("labrig.store")
 _STR = STRING_DTYPE
@@ -78,7 +78,7 @@ def _renew_seal(obj: h5py.Group | h5py.Dataset) -> None:
 
 
 def seal_all(f: h5py.File) -> None:
-    """Renew the seal (:func:`labrig.store_format.seal_of`) of every object in ``f`` whose
+    """Renew the seal (:func:`labrig.store.format.seal_of`) of every object in ``f`` whose
     seal no longer matches (new objects, changed metadata)."""
     _renew_seal(f)
     f.visititems(lambda _name, obj: _renew_seal(obj))
@@ -282,7 +282,7 @@ class RunWriter:
         cls, path: Path | str, metadata: RunMetadata | None = None, reserve_bytes: int = 0
     ) -> RunWriter:
         """Continue writing an existing run file (``labrig run --resume``: the caller works on
-        a copy, :mod:`labrig.store_resume`): the run is ``running`` again, new entries are
+        a copy, :mod:`labrig.store.resume`): the run is ``running`` again, new entries are
         numbered after the file's, ``metadata`` fills their ``user`` and ``sample`` groups."""
         self = cls.__new__(cls)
         self.path = Path(path)
@@ -333,7 +333,7 @@ class RunWriter:
 
     def heartbeat(self) -> None:
         """Say the run file is still being written when nothing is written to it (a rest
-        between entries): its modification time is set to now (:mod:`labrig.store_writing`)."""
+        between entries): its modification time is set to now (:mod:`labrig.store.writing`)."""
         with contextlib.suppress(OSError):
             os.utime(self.path)
 

@@ -1,8 +1,8 @@
 """The catalogue's index of a folder: one SQLite file, ``FOLDER/.labrig-index.sqlite``.
 
 One row per run file, keyed by its path below the folder, with the file's size and modification
-time (ns) when it was read and its record (:mod:`labrig.catalogue_read`) as JSON, in two parts
-(:func:`~labrig.catalogue_read.split_record`): the part every listing reads and the instrument's
+time (ns) when it was read and its record (:mod:`labrig.catalogue.read`) as JSON, in two parts
+(:func:`~labrig.catalogue.read.split_record`): the part every listing reads and the instrument's
 metadata with the units, read only when asked (``--json``, or a ``--where`` key that names a
 key of that part: the table ``detail_keys`` lists them). A row whose
 size or time differs from the file's is stale and the file is read again; rows of files that
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from labrig.catalogue_read import RECORD_VERSION, join_record, split_record
+from labrig.catalogue.read import RECORD_VERSION, join_record, split_record
 
 INDEX_NAME = ".labrig-index.sqlite"
 SCHEMA_VERSION = 1
@@ -121,7 +121,7 @@ class FolderIndex:
 
     def records(self, paths: Iterable[str], detail: bool = False) -> dict[str, dict[str, Any]]:
         """The records of ``paths`` the index holds; without ``detail``, the part every
-        listing reads (:func:`~labrig.catalogue_read.split_record`)."""
+        listing reads (:func:`~labrig.catalogue.read.split_record`)."""
         wanted = set(paths)
         column = "record, detail" if detail else "record, ''"
         rows = self.db.execute(f"SELECT path, {column} FROM files")

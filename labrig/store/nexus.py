@@ -1,9 +1,9 @@
 """The run file's descriptive groups (NeXus base classes), written by
-:mod:`labrig.store_writer`: the instrument description (NXinstrument), the protocol and rig
+:mod:`labrig.store.writer`: the instrument description (NXinstrument), the protocol and rig
 texts (NXnote), the run's metadata (``/run/metadata``, NXcollection) and, in each entry,
 ``definition``, ``program_name``, ``user`` (NXuser) and ``sample`` (NXsample) (layout:
 docs/runfile.md). Units are stored as pint and UDUNITS-2 read them
-(:func:`labrig.store_format.stored_units`); an unset value (``None``) is not stored at all.
+(:func:`labrig.store.format.stored_units`); an unset value (``None``) is not stored at all.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import h5py
 import numpy as np
 
 from labrig.metadata import RunMetadata
-from labrig.store_format import FORMAT_VERSION, STRING_DTYPE, stored_units
+from labrig.store.format import FORMAT_VERSION, STRING_DTYPE, stored_units
 
 #: the name written as each entry's ``definition`` (labrig's layout, docs/runfile.md)
 DEFINITION = "NXlabrig"

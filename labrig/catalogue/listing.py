@@ -1,11 +1,10 @@
-"""The catalogue of run files: which runs a folder holds, what each one is, filtered on request
-(``labrig runs``; docs/catalogue.md).
+"""Listing run files: which runs folders hold, what each one is, filtered on request.
 
 :func:`list_runs` finds the run files under folders (recursively) or takes files one by one,
-brings each folder's index up to date (:mod:`labrig.catalogue_index`: only files whose size or
+brings each folder's index up to date (:mod:`labrig.catalogue.index`: only files whose size or
 modification time changed are read, through the store's reader in child processes with time
-limits, :mod:`labrig.catalogue_read`), and keeps the runs that satisfy every ``--where``
-condition (:mod:`labrig.catalogue_where`). A file the reader refuses is listed as
+limits, :mod:`labrig.catalogue.read`), and keeps the runs that satisfy every ``--where``
+condition (:mod:`labrig.catalogue.where`). A file the reader refuses is listed as
 ``unreadable`` with the reader's reason; it never stops the listing.
 """
 
@@ -18,8 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from labrig.catalogue_index import INDEX_NAME, FolderIndex, Stamp
-from labrig.catalogue_where import Condition, matches, metadata_values, parse_all
+from labrig.catalogue.index import INDEX_NAME, FolderIndex, Stamp
+from labrig.catalogue.where import Condition, matches, metadata_values, parse_all
 from labrig.errors import InputFileError, InputIssue
 
 #: file names the catalogue takes for run files when it searches a folder
@@ -41,7 +40,7 @@ __all__ = [
 @dataclass
 class ListedRun:
     """One run file of a listing: its path (as the folder argument spells it), its record
-    (:mod:`labrig.catalogue_read`) and the entries that satisfied the entry conditions."""
+    (:mod:`labrig.catalogue.read`) and the entries that satisfied the entry conditions."""
 
     path: Path
     record: dict[str, Any]
@@ -169,7 +168,7 @@ def _update(
     total: int,
 ) -> int:
     """Read the files whose stamp changed into ``index``; returns how many were read."""
-    from labrig.catalogue_read import BATCH_FILES, read_records
+    from labrig.catalogue.read import BATCH_FILES, read_records
 
     have = index.stamps()
     stale = [rel for rel, (_, s) in wanted.files.items() if reindex or have.get(rel) != s]
@@ -221,7 +220,7 @@ def list_runs(
 ) -> Listing:
     """The runs under ``paths`` (folders, searched recursively, or run files) that satisfy
     every ``where`` condition (texts are parsed first: a bad one raises
-    :class:`~labrig.catalogue_where.WhereError` before any file is read), oldest first,
+    :class:`~labrig.catalogue.where.WhereError` before any file is read), oldest first,
     unreadable files last. ``detail``: the records hold the instrument's metadata and the
     units too (``--json``); ``reindex`` reads every file again."""
     t0 = time.perf_counter()

@@ -3,7 +3,7 @@
 
 Files from older labrig versions (without checksums, seals or the records of how a run ended)
 read the same. Every read happens in a child process with limits on its time
-(:mod:`labrig.store_isolated`), and every check is made there (:mod:`labrig.store_parse`): a
+(:mod:`labrig.store.isolated`), and every check is made there (:mod:`labrig.store.parse`): a
 damaged file, or one libhdf5 loops or crashes on, is an input error (exit 2) naming the file
 and, where known, the object.
 """
@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from labrig.errors import InputFileError, InputIssue
-from labrig.store_isolated import IsolatedReadError, call_isolated
-from labrig.store_parse import RunEntry, RunFile, read_run_here
-from labrig.store_writing import writer_of
+from labrig.store.isolated import IsolatedReadError, call_isolated
+from labrig.store.parse import RunEntry, RunFile, read_run_here
+from labrig.store.writing import writer_of
 
 __all__ = ["RunEntry", "RunFile", "export_csv", "read_run", "run_info", "run_summary"]
 
@@ -41,7 +41,7 @@ def read_run(path: Path | str, load_data: bool = True) -> RunFile:
     """Read a run file: metadata, and every entry's arrays (in run order).
 
     ``load_data=False`` reads metadata only (arrays are left empty of the right shape).
-    The file is read in a child process with a time limit (:mod:`labrig.store_isolated`):
+    The file is read in a child process with a time limit (:mod:`labrig.store.isolated`):
     a file that is not a labrig run file, is damaged, or makes libhdf5 loop or crash raises
     :class:`InputFileError` naming the file and, where known, the object.
     """

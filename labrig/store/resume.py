@@ -4,7 +4,7 @@
 resumed with a protocol and which entries remain: the file must not be complete nor being
 written now, and the protocol must be the one it recorded (the same text). The runner then
 works on a copy written beside the file (:mod:`labrig.outputs`), opened by
-:meth:`labrig.store_writer.RunWriter.reopen`, and renames the copy over the file only once the
+:meth:`labrig.store.writer.RunWriter.reopen`, and renames the copy over the file only once the
 copy is closed: a resume that fails, or is killed, leaves the file as it was.
 
 :func:`record_resume` writes, in the copy, what the resume changes and what it replaces
@@ -35,9 +35,9 @@ import h5py
 
 from labrig.errors import InputFileError, InputIssue
 from labrig.metadata import RunMetadata
-from labrig.store_format import now_iso
-from labrig.store_nexus import set_str, write_metadata_collection
-from labrig.store_reader import read_run
+from labrig.store.format import now_iso
+from labrig.store.nexus import set_str, write_metadata_collection
+from labrig.store.reader import read_run
 
 #: records of earlier endings moved into the resume record: /run name -> name in the record
 _PREVIOUS = {

@@ -29,15 +29,15 @@ before returning, so after a ``kill -9`` the file opens and holds every block wh
 returned. The statuses then still read ``running``: readers report such a run as incomplete.
 Tests kill a writer for real. We do not use SWMR: it needs every object created before writing
 starts and leaves a file that plain readers refuse to open after a crash; plain flushes
-survived every kill we tried. A full disk stops the writer cleanly (:mod:`labrig.store_space`).
+survived every kill we tried. A full disk stops the writer cleanly (:mod:`labrig.store.space`).
 
-This module is the public face; the work is in :mod:`labrig.store_format` (vocabulary),
-:mod:`labrig.store_writer`, :mod:`labrig.store_reader` and :mod:`labrig.store_space`.
+This module is the public face; the work is in :mod:`labrig.store.format` (vocabulary),
+:mod:`labrig.store.writer`, :mod:`labrig.store.reader` and :mod:`labrig.store.space`.
 """
 
 from __future__ import annotations
 
-from labrig.store_format import (
+from labrig.store.format import (
     FINAL_STATUSES,
     FORMAT_VERSION,
     STANDARD_CHANNELS,
@@ -46,7 +46,7 @@ from labrig.store_format import (
     channel,
     now_iso,
 )
-from labrig.store_reader import (
+from labrig.store.reader import (
     RunEntry,
     RunFile,
     export_csv,
@@ -54,8 +54,8 @@ from labrig.store_reader import (
     run_info,
     run_summary,
 )
-from labrig.store_space import estimate_run_bytes, free_bytes
-from labrig.store_writer import EntryWriter, RunWriter
+from labrig.store.space import estimate_run_bytes, free_bytes
+from labrig.store.writer import EntryWriter, RunWriter
 
 __all__ = [
     "FINAL_STATUSES",

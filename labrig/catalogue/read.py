@@ -11,14 +11,14 @@ A record is a JSON-able dict::
      "metadata": {"instrument/amplifier/identity": "...", "sample/name": "P-888 #3", ...},
      "units": {"instrument/amplifier/gain_V_per_V": "V/V", ...}}
 
-The run's fixed fields come from :func:`labrig.store_parse.read_run_here` (which checks the
+The run's fixed fields come from :func:`labrig.store.parse.read_run_here` (which checks the
 file's seals and refuses a damaged one); *metadata* is read generically afterwards
 (:func:`read_metadata_here`), so whatever groups a run file gains later (NXuser, NXsample, a
 protocol's ``metadata:``) are indexed without a change here. An unreadable file gives a record
 with ``readable: false`` and the reader's message in ``error``.
 
 Reading happens in child processes with CPU and wall-clock limits
-(:func:`labrig.store_isolated.call_isolated`), a batch of files per child; a batch whose child
+(:func:`labrig.store.isolated.call_isolated`), a batch of files per child; a batch whose child
 crashes or runs out of time is read again one file per child, so one bad file costs only its own
 record.
 """
@@ -34,9 +34,9 @@ import h5py
 import numpy as np
 
 from labrig.errors import InputFileError, InputIssue
-from labrig.store_format import SEAL_ATTR
-from labrig.store_isolated import IsolatedReadError, call_isolated
-from labrig.store_parse import read_run_here
+from labrig.store.format import SEAL_ATTR
+from labrig.store.isolated import IsolatedReadError, call_isolated
+from labrig.store.parse import read_run_here
 
 #: bumped whenever a record's content changes: an index of another version is rebuilt
 RECORD_VERSION = 1
@@ -44,7 +44,7 @@ RECORD_VERSION = 1
 #: files read per child process
 BATCH_FILES = 32
 #: CPU time granted per file of a batch on top of the store's size-based allowance, expressed
-#: as bytes of the store's budget (:data:`labrig.store_isolated.CPU_BYTES_PER_S` bytes per
+#: as bytes of the store's budget (:data:`labrig.store.isolated.CPU_BYTES_PER_S` bytes per
 #: second: 5e6 bytes is 0.25 s, several times what a sound file's metadata takes)
 PER_FILE_BUDGET_BYTES = 5_000_000
 

@@ -2,7 +2,7 @@
 (root attributes ``writer_pid``, ``writer_host``, set when it opens the file; ``writer_pid`` -1
 once it closed the file without finishing the run) and keeps its
 modification time fresh: every block is flushed (about 10 times a second) and a rest between
-entries touches the file (:meth:`labrig.store_writer.RunWriter.heartbeat`).
+entries touches the file (:meth:`labrig.store.writer.RunWriter.heartbeat`).
 
 A file whose run status is ``running`` is **being written** when its modification time is
 less than :data:`STALE_S` old and, if it was written on this host, its writer's process is

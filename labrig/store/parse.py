@@ -1,8 +1,8 @@
 """Parsing an open run file into :class:`RunFile` with every check a reader owes its user: the
-metadata seals (:func:`labrig.store_format.seal_of`), the types and shapes labrig writes, sizes
+metadata seals (:func:`labrig.store.format.seal_of`), the types and shapes labrig writes, sizes
 bounded by the file's size, Fletcher32 checksums of the samples; anything unexpected is an
 :class:`~labrig.errors.InputFileError` naming the file and the object (the HDF5 path). Run in a
-child process with a time limit by :func:`labrig.store_reader.read_run`."""
+child process with a time limit by :func:`labrig.store.reader.read_run`."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ import numpy as np
 
 from labrig.errors import InputFileError, InputIssue
 from labrig.jsonsafe import loads_bounded
-from labrig.store_format import SEAL_ATTR, STATUSES, memory_long_name, memory_units, seal_of
-from labrig.store_isolated import allow_cpu
+from labrig.store.format import SEAL_ATTR, STATUSES, memory_long_name, memory_units, seal_of
+from labrig.store.isolated import allow_cpu
 
 
 @dataclass
@@ -98,8 +98,8 @@ class RunFile:
     #: the process that writes (or wrote) the file: its id (None: not recorded) and host
     writer_pid: int | None = None
     writer_host: str = ""
-    #: the writer is writing the file now (set by :func:`labrig.store_reader.read_run`:
-    #: :mod:`labrig.store_writing`); ``writer`` says who and when it last wrote
+    #: the writer is writing the file now (set by :func:`labrig.store.reader.read_run`:
+    #: :mod:`labrig.store.writing`); ``writer`` says who and when it last wrote
     being_written: bool = False
     writer: str = ""
 
@@ -209,7 +209,7 @@ class _Reader:
         return value
 
     def status(self, group: h5py.Group) -> str:
-        """A run's or an entry's status: one of :data:`~labrig.store_format.STATUSES`."""
+        """A run's or an entry's status: one of :data:`~labrig.store.format.STATUSES`."""
         status = self.text(group, "status", "unknown")
         if status not in (*STATUSES, "unknown"):
             raise self.error(f"{status[:40]!r} is not a status ({', '.join(STATUSES)})")
@@ -335,7 +335,7 @@ class _Reader:
         return out
 
     def resumes(self, run: h5py.Group) -> list[dict]:
-        """``/run/resumes``: one record per resume, in order (:mod:`labrig.store_resume`)."""
+        """``/run/resumes``: one record per resume, in order (:mod:`labrig.store.resume`)."""
         g = run.get("resumes")
         if not isinstance(g, h5py.Group):
             return []
@@ -352,7 +352,7 @@ class _Reader:
 
     def check_seals(self) -> None:
         """Every object's attributes and values read back, and every seal in the file matches
-        what its object holds (:func:`labrig.store_format.seal_of`); files written before the
+        what its object holds (:func:`labrig.store.format.seal_of`); files written before the
         seals have none."""
 
         def check(obj: h5py.Group | h5py.Dataset) -> None:
