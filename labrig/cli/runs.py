@@ -183,12 +183,17 @@ def metadata_text(record: dict[str, Any]) -> str:
     """The metadata a person looks for (instrument details are in ``--json``), as
     ``key=value`` pairs; ``sample/name`` shows as ``sample``, ``metadata/x`` as ``x``."""
     from labrig.catalogue.read import shown_metadata
+    from labrig.catalogue.where import METADATA_ALIASES
 
-    pairs = []
+    # a key with an alias shows under its canonical name (NXuser's name is the operator)
+    same_as = {a: key for key, aliases in METADATA_ALIASES.items() for a in aliases}
+    pairs: list[str] = []
     for k, v in shown_metadata(record.get("metadata", {})).items():
         name = k.removeprefix("metadata/").removesuffix("/name")
+        name = same_as.get(name, name)
         value = ", ".join(map(str, v)) if isinstance(v, list) else str(v)
-        pairs.append(f"{name}={value}")
+        if f"{name}={value}" not in pairs:
+            pairs.append(f"{name}={value}")
     return " ".join(pairs)
 
 

@@ -187,7 +187,7 @@ def test_listing_shows_status_protocol_date_metadata_and_entries(folder: Path):
     a = lines["a.h5"]
     for text in ("complete", "2026-03-05 10:00", "paper sine sweep", "2 sine", "100 V"):
         assert text in a
-    assert "10, 40 Hz" in a and "sample=P-888 #3" in a and "user=alice" in a
+    assert "10, 40 Hz" in a and "sample=P-888 #3" in a and "operator=alice" in a
     assert "operator=carol" in lines["c.h5"] and "1 hold" in lines["c.h5"]
     assert "4 runs" in result.stderr
 
@@ -318,3 +318,20 @@ def test_without_a_path_lists_runs_here(tmp_path: Path, monkeypatch: pytest.Monk
     assert result.exit_code == 2 and "runs/" in result.stderr
     write_run(tmp_path / "runs" / "x.h5", "here", [("sine", 10, 1)])
     assert listed(cli("--json")) == {"x.h5"}
+
+
+def test_listing_shows_each_fact_once():
+    """``--operator ana --sample X`` is stored in /run/metadata and as NXuser/NXsample names:
+    the listing shows ``operator=ana sample=X`` once each, and an NXuser alone as the operator."""
+    from labrig.cli.runs import metadata_text
+
+    both = {
+        "metadata/operator": "ana",
+        "metadata/sample": "X",
+        "user/name": "ana",
+        "sample/name": "X",
+    }
+    assert metadata_text({"metadata": both}) == "operator=ana sample=X"
+    assert metadata_text({"metadata": {"user/name": "bob"}}) == "operator=bob"
+    different = {"metadata/operator": "ana", "user/name": "bob"}
+    assert metadata_text({"metadata": different}) == "operator=ana operator=bob"
