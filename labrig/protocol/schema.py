@@ -10,7 +10,16 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StringConstraints,
+    field_validator,
+    model_validator,
+)
+
+from labrig.metadata import MetadataError, check_value
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -329,3 +338,15 @@ class Protocol(_Base):
         1000.0, description="slope of the ramps inserted to start and end every entry at 0 V"
     )
     steps: list[Step] = Field(min_length=1, max_length=10_000)
+
+    @field_validator("metadata")
+    @classmethod
+    def _storable(cls, values: dict[str, MetaValue] | None) -> dict[str, MetaValue] | None:
+        """The rules the run file applies (:func:`labrig.metadata.check_value`), so that
+        ``labrig check`` refuses what ``labrig run`` could not store."""
+        if values is None:
+            return None
+        try:
+            return {k: check_value(k, v) for k, v in values.items()}
+        except MetadataError as e:
+            raise ValueError(str(e)) from None

@@ -195,6 +195,25 @@ def test_bad_protocol_metadata_is_refused_at_its_line(tmp_path: Path):
     assert r.exit_code == 2 and "metadata.nested" in r.output
 
 
+@pytest.mark.parametrize(
+    ("value", "words"),
+    [(10**23, "64 bits"), ("a\u200bb", "printable"), ("x" * 201, "200 characters")],
+)
+def test_protocol_metadata_run_could_not_store_is_refused_by_check_and_run(
+    tmp_path: Path, value, words
+):
+    """What the run file cannot store is refused by ``check`` (exit 2, the file's line), and
+    ``run`` refuses it the same way before anything is energised."""
+    doc = {**PROTOCOL, "metadata": {"note": value}}
+    proto = tmp_path / "p.yaml"
+    proto.write_text(yaml.safe_dump(doc, sort_keys=False, allow_unicode=True))
+    out = tmp_path / "r.h5"
+    for args in (["check", str(proto)], ["run", str(proto), "--out", str(out)]):
+        r = CliRunner().invoke(app, args)
+        assert r.exit_code == 2 and words in r.output, (args, r.output)
+    assert not out.exists()
+
+
 def test_command_line_values_are_typed():
     assert parse_assignment("temperature_degC=23.5") == ("temperature_degC", 23.5)
     assert parse_assignment("n=-4") == ("n", -4)
