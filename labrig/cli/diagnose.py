@@ -40,8 +40,9 @@ ALSO_OPTION = typer.Option(
     "--also",
     parser=choice(StructuralEffect, "a structural effect", "(the other effects are always tried)"),
     metavar="EFFECT",
-    help=f"Also try this structural effect (repeatable): {one_of(StructuralEffect)} "
-    "(not default candidates; docs/diagnose.md).",
+    help=f"Also try this structural effect (repeatable): {one_of(StructuralEffect)}; "
+    "remanence is not a default candidate, viscoelastic_creep is one only where an entry is "
+    "long and slow enough to identify it (docs/diagnose.md).",
 )
 MAX_EFFECTS_OPTION = typer.Option(
     2, "--max-effects", min=1, max=4, help="Add at most this many effects (1-4)."

@@ -561,3 +561,17 @@ def test_hybrid_rig_structure_is_found_with_the_structural_effects(tmp_path):
     assert added["viscoelastic_creep"]["tau_s"] == pytest.approx(0.285, rel=0.1)
     assert doc["verdict"].startswith("Explained"), doc["verdict"]
     assert doc["after"]["heldout_nrmse_pct"] <= 0.5 * doc["before"]["heldout_nrmse_pct"]
+
+
+def test_viscoelastic_creep_is_left_out_where_unidentifiable_unless_asked_for():
+    """Fast sines only (10-40 Hz): a slow mode would look like a gain, so the default
+    candidates leave ``viscoelastic_creep`` out and say why; ``always`` (``--also``) tries it."""
+    records = bench_campaign(entries=((100.0, 10.0, 2.0), (50.0, 20.0, 2.0), (100.0, 40.0, 2.0)))
+    default = diagnose(records, effects=("viscoelastic_creep",), max_effects=1)
+    assert not default.candidates
+    assert any("viscoelastic_creep not tried" in m for m in default.messages)
+    asked = diagnose(
+        records, effects=("viscoelastic_creep",), max_effects=1, always=("viscoelastic_creep",)
+    )
+    assert [c["effect"] for c in asked.candidates] == ["viscoelastic_creep"]
+    assert any("tried as asked" in m for m in asked.messages)

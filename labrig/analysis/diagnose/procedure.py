@@ -159,6 +159,7 @@ def diagnose(
     top_k: int = 4,
     min_gain: float = MIN_GAIN,
     mains_hz: float | None = None,
+    always: Sequence[str] = (),
     progress: Progress | None = None,
 ) -> Diagnosis:
     """Diagnose what the dynamic model misses in ``records`` (module docstring).
@@ -170,6 +171,8 @@ def diagnose(
     - ``effects``: the library names to consider (default all of :data:`EFFECT_NAMES`).
     - ``mains_hz``: the mains frequency (default: the line the strain shows at 50 or 60 Hz;
       without one, ``mains_pickup`` is not tried).
+    - ``always``: names tried even where the records cannot identify them (``--also``):
+      ``viscoelastic_creep`` is otherwise left out without a long, slow entry.
     """
     t0 = time.perf_counter()
     if len(records) < 3:
@@ -184,7 +187,7 @@ def diagnose(
         min_gain,
         progress or (lambda _msg: None),
     )
-    proc.fit_base(effects, mains_hz)
+    proc.fit_base(effects, mains_hz, always)
     for rnd in range(max_effects):
         if not proc.next_round(rnd):
             break
@@ -233,7 +236,9 @@ class _Procedure:
         self.added_cands: list[Candidate] = []
 
     # -- 1. the base model --------------------------------------------------------------------
-    def fit_base(self, effects: Sequence[str] | None, mains_hz: float | None) -> None:
+    def fit_base(
+        self, effects: Sequence[str] | None, mains_hz: float | None, always: Sequence[str] = ()
+    ) -> None:
         """Fit the base model, configure the library, cross-validate the base."""
         self.say("fitting the base model")
         fr = fit_model(self.records, **self.fr_kwargs)
@@ -245,12 +250,16 @@ class _Procedure:
         self.lib = library(**self.lib_context)
         self.names = [n for n in dict.fromkeys(effects or EFFECT_NAMES) if n in self.lib]
         if "viscoelastic_creep" in self.names and not slow_mode_identifiable(self.records):
-            self.names.remove("viscoelastic_creep")
-            self.messages.append(
+            why = (
                 "no entry long and slow enough to identify a slow viscoelastic mode "
                 f"(at least {SLOW_MODE_RECORD_S:g} s at {SLOW_MODE_MAX_HZ:g} Hz or below, or a "
-                "step): viscoelastic_creep not tried"
+                "step)"
             )
+            if "viscoelastic_creep" in always:
+                self.messages.append(f"{why}: viscoelastic_creep tried as asked (--also)")
+            else:
+                self.names.remove("viscoelastic_creep")
+                self.messages.append(f"{why}: viscoelastic_creep not tried")
         if mains_hz is None and "mains_pickup" in self.names and not detect_mains_hz(self.records):
             self.names.remove("mains_pickup")
             self.messages.append(

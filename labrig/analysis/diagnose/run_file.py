@@ -120,6 +120,7 @@ def diagnose_run_file(
             effects=EFFECT_NAMES + also,
             max_effects=max_effects,
             mains_hz=mains_hz,
+            always=also,
             progress=progress,
         )
         return RunDiagnosis(path, setup.records, also, d)
