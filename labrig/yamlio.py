@@ -222,8 +222,23 @@ def read_yaml(path: Path | str) -> tuple[object, dict, str]:
     if "\x00" in text:
         line = text[: text.index("\x00")].count("\n") + 1
         raise InputFileError([InputIssue(name, line, "", "binary data in a YAML file")])
+    node, data = _parse(text, name)
+    lines = line_index(node) if node is not None else {}
+    return data, lines, text
+
+
+def load_text(text: str, name: str = "<text>") -> object:
+    """Parse YAML text with the bounds of :func:`read_yaml` (a recorded protocol or rig text,
+    for example); problems raise InputFileError naming ``name``."""
+    if len(text) > MAX_BYTES:
+        raise InputFileError([InputIssue(name, None, "", "text is too large for YAML")])
+    return _parse(text, name)[1]
+
+
+def _parse(text: str, name: str) -> tuple[yaml.Node | None, object]:
+    """:func:`_compose` with every failure as an InputFileError naming the line."""
     try:
-        node, data = _compose(text, name)
+        return _compose(text, name)
     except yaml.constructor.ConstructorError as e:
         line = e.problem_mark.line + 1 if e.problem_mark else None
         raise InputFileError([InputIssue(name, line, "", str(e.problem))]) from None
@@ -237,8 +252,6 @@ def read_yaml(path: Path | str) -> tuple[object, dict, str]:
     except RecursionError:  # not expected past the depth check; a message all the same
         msg = "nested too deeply to read"
         raise InputFileError([InputIssue(name, None, "", msg)]) from None
-    lines = line_index(node) if node is not None else {}
-    return data, lines, text
 
 
 def issues_from_validation(name: str, err: ValidationError, lines: dict) -> list[InputIssue]:

@@ -20,9 +20,10 @@ from pathlib import Path
 from typing import Any
 
 import h5py
-import yaml
 
+from labrig.errors import InputFileError
 from labrig.store import RunFile, read_run
+from labrig.yamlio import load_text
 
 #: keys naming the actuator in an NXsample group or a protocol's ``metadata:``
 SAMPLE_KEYS = ("sample_id", "serial_number", "actuator", "sample", "serial", "name")
@@ -38,9 +39,10 @@ def _text(v: Any) -> str:
 
 
 def _safe_yaml(text: str) -> Any:
+    """The recorded text's YAML (bounded like a protocol file), ``None`` when unreadable."""
     try:
-        return yaml.safe_load(text) if text else None
-    except yaml.YAMLError:
+        return load_text(text) if text else None
+    except InputFileError:
         return None
 
 

@@ -306,6 +306,8 @@ def test_actuator_identity_from_the_file(fleet, tmp_path):
     assert sample_from_hdf5(nexus) == "P-888 #3"
     assert sample_from_protocol("name: x\nmetadata: {sample: stack 12}\n") == "stack 12"
     assert sample_from_protocol("name: x\ndescription: no id here\n") == ""
+    # a recorded text is read with the protocol files' bounds: a nesting bomb is no identity
+    assert sample_from_protocol("a: " + "[" * 50_000 + "]" * 50_000) == ""
 
 
 def test_simulated_fleet_truth_and_run_files(fleet):

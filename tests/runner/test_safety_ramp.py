@@ -121,8 +121,9 @@ def test_ramp_through_the_daq_stays_within_the_current_limit(tmp_path, capacitan
         m = check_descent(trace.since(t_call), 80.0, rate)
     assert rec.path == "daq" and rec.start_source == "amplifier read-back"
     assert rec.rate_V_per_s == pytest.approx(rate, rel=1e-12)
-    # not needlessly slow either: within 3x the limit's time plus 20 ms
-    assert m["duration_s"] <= 3 * 80.0 / rate + 0.02, m
+    # not needlessly slow either: within 3x the limit's time plus 0.25 s (a loaded machine can
+    # stall the process for tens of ms; a ramp paced by its writes, 20 ms each, took seconds)
+    assert m["duration_s"] <= 3 * 80.0 / rate + 0.25, m
 
 
 def test_ramp_through_the_amplifier_setpoint_when_the_daq_fails(tmp_path, monkeypatch):
