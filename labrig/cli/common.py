@@ -5,7 +5,7 @@ stderr); ``--out FILE`` writes a command's one document, ``--out DIR`` a folder 
 nothing existing is replaced without ``--overwrite``.
 
 The choices are :class:`~enum.StrEnum` so ``--help`` lists them; they repeat names the library
-defines (tests/test_cli_choices.py checks they match) so that ``labrig --help`` does not import
+defines (tests/cli/test_cli_choices.py checks they match) so that ``labrig --help`` does not import
 the numerical stack.
 """
 

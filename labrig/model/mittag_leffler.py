@@ -4,7 +4,7 @@ The two-parameter Mittag-Leffler function ``E_{a,b}(z) = sum_k z^k / Gamma(a k +
 with the maintained ``pymittagleffler`` package (Garrappa's Laplace-inversion algorithm, accurate
 to about 1e-15 for real negative arguments); the naive power series is useless for the large
 arguments a slow relaxor produces. Our own accuracy check against a high-precision mpmath
-reference lives in ``tests/test_mittag_leffler.py``.
+reference lives in ``tests/model/test_mittag_leffler.py``.
 
 For the relaxor ``G(s) = 1 / (1 + (tau s)^lam)`` (the paper's Eq. 4-9):
 

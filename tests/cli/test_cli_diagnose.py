@@ -3,8 +3,8 @@
 diagnosis from each of them, the outputs are refused before any work when they exist, and the
 diagnosis module no longer sits below ``prepare`` (imports go one way).
 
-The diagnosis itself is replaced by a recorder here (its numbers are tests/test_diagnose.py's):
-these tests are about what reaches it and what is written."""
+The diagnosis itself is replaced by a recorder here (its numbers are
+tests/diagnose/test_diagnose.py's): these tests are about what reaches it and what is written."""
 
 from __future__ import annotations
 

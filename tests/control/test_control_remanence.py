@@ -152,7 +152,7 @@ def strain_sine(amplitude_ue: float, f_hz: float, cycles: float) -> Array:
 
 
 def vanishing(amplitude_ue: float = 800.0, f_hz: float = 2.0) -> Array:
-    """The vanishing command of tests/test_control.py (ends near, not at, 0 ue)."""
+    """The vanishing command of tests/control/test_control.py (ends near, not at, 0 ue)."""
     t = np.arange(round(4.0 * RATE) + 1) / RATE
     env = np.where(t < 0.25, 1.0, np.exp(-(t - 0.25) / 0.8))
     return env * 0.5 * amplitude_ue * (1.0 - np.cos(2 * np.pi * f_hz * t))

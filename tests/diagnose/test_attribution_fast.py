@@ -7,7 +7,8 @@ at 1, 10, 40 Hz, 1 kHz, 2 ue noise), each from
 does: the effects added (exactly), the verdict class, and the held-out NRMSE before and after
 against the table's figures (within 5 %: the runs are seeded; the margin is for arithmetic that
 differs between machines). About 40 s together; the full study is
-``python -m labrig.analysis.diagnose.campaign`` and the slow tests of tests/test_diagnose.py.
+``python -m labrig.analysis.diagnose.campaign`` and the slow tests of
+tests/diagnose/test_diagnose.py.
 """
 
 from __future__ import annotations

@@ -3,8 +3,8 @@ optional effects switched on; the fitted model is never told which.
 
 Fast tests: the JSON contract, a null campaign (2 seeds), mains pickup and the conditioner
 low-pass, the CLI function. The many-seed and every-effect studies are ``@pytest.mark.slow``
-(``pytest -m slow tests/test_diagnose.py``); ``python -m labrig.analysis.diagnose.campaign``
-prints the confusion table.
+(``pytest -m slow tests/diagnose/test_diagnose.py``);
+``python -m labrig.analysis.diagnose.campaign`` prints the confusion table.
 """
 
 from __future__ import annotations

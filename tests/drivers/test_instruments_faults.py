@@ -4,8 +4,8 @@ The faults are injected in the simulators (the drivers under test are the real o
 over their transports): a serial link dropped mid-command, missing and garbled GCS answers,
 Modbus timeouts, exception responses and damaged frames, amplifier overload and
 over-temperature, and a conditioner excitation fault. A driver leaves the output where it is
-when it raises (no step to 0 V); the Rig ramps it down (tests/test_safety_ramp.py measures the
-ramp's slope).
+when it raises (no step to 0 V); the Rig ramps it down
+(tests/runner/test_safety_ramp.py measures the ramp's slope).
 """
 
 from __future__ import annotations

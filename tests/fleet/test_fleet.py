@@ -8,7 +8,7 @@
 - the robust z-score against scipy's MAD, the flag rule, the actuator identity, the simulated
   fleet's spread and defects.
 
-Scheduler and workers as separate processes, a killed worker: tests/test_fleet_cluster.py.
+Scheduler and workers as separate processes, a killed worker: tests/fleet/test_fleet_cluster.py.
 """
 
 from __future__ import annotations

@@ -93,7 +93,7 @@ def test_mat_file(tmp_path: Path) -> None:
     ],
 )
 def test_bad_files_clear_error_nothing_written(tmp_path: Path, content, args, needle) -> None:
-    # (a good file read before a bad one: tests/test_import_safety.py)
+    # (a good file read before a bad one: tests/importers/test_import_safety.py)
     bad = tmp_path / "bad.csv"
     bad.write_bytes(content if isinstance(content, bytes) else content.encode())
     out = tmp_path / "r.h5"

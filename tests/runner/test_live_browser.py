@@ -5,8 +5,9 @@ and the model colours in a screenshot of each plot) within 1 s of the first bloc
 rate, no error in the browser's console; then Ctrl-C of the run: exit 130, the amplifier at
 0 V (the file's read-back after the ramp) and the page saying "aborted".
 
-Marked ``browser`` (not in the default suite): ``pytest -m browser tests/test_live_browser.py``
-with ``pip install -e '.[test,browser]'`` and ``apt-get install chromium``.
+Marked ``browser`` (not in the default suite):
+``pytest -m browser tests/runner/test_live_browser.py`` with
+``pip install -e '.[test,browser]'`` and ``apt-get install chromium``.
 """
 
 from __future__ import annotations

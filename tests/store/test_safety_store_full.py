@@ -1,6 +1,6 @@
 """The run-file writer when the disk is (nearly) full, in-process: a block that does not fit is
 refused before anything is written, a block the disk refuses is cut back out, and the reserve
-file gives its room back for the final records. (tests/test_safety_disk_full.py does it on a
+file gives its room back for the final records. (tests/store/test_safety_disk_full.py does it on a
 real full filesystem.)"""
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 Run from the repository root: ``.venv/bin/python tests/data/import/make_examples.py``. The
 signals come from :func:`signals` (tests import it to check what labrig reads); every file is
 written with scipy, h5py or pandas, as a lab's software would write it. The broken variants
-each carry one fault that ``labrig import`` must name (tests/test_import_examples.py).
+each carry one fault that ``labrig import`` must name (tests/importers/test_import_examples.py).
 """
 
 from __future__ import annotations
