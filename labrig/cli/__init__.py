@@ -6,7 +6,9 @@ library function and prints; this module lists the commands, in the order ``--he
 - :mod:`labrig.cli.files`: ``info``, ``export``, ``import`` (run files in and out)
 - :mod:`labrig.cli.fit`, :mod:`labrig.cli.report`, :mod:`labrig.cli.diagnose`: the analysis
 - :mod:`labrig.cli.model`: ``model demo``, ``model figures``; :mod:`labrig.cli.sim`: ``sim serve``
-- :mod:`labrig.cli.drivers`: ``drivers`` (the installed drivers)
+- :mod:`labrig.cli.drivers`: ``drivers`` (the installed drivers); :mod:`labrig.cli.runs`:
+  ``runs`` (the catalogue); :mod:`labrig.cli.watch`: ``watch`` (the live view of a run file)
+- :mod:`labrig.cli.batch`: ``batch fit|diagnose|report`` (many run files, on Dask)
 - :mod:`labrig.cli.common`: the error wrapper, shared options, the choices of options and the
   output convention (docs/outputs.md); :mod:`labrig.cli.typer_app`: the command classes (usage
   errors exit 64, plain metavars, the help layout of :mod:`labrig.cli.help_format`)

@@ -101,7 +101,7 @@ def figures(
     as_json: bool = json_option("the files written"),
     overwrite: bool = OVERWRITE_OPTION,
 ) -> None:
-    """Regenerate the paper's section-2 figures (Figs. 1, 3, 4, 5) as PNG files."""
+    """Regenerate the paper's section-2 figures as PNG files (its figures 1, 3, 4 and 5)."""
     from labrig.report.model_figures import write_model_figures
 
     paths = write_model_figures(out, overwrite=overwrite)

@@ -12,7 +12,7 @@ from labrig.cli.common import RIG_OPTION_HELP, flag, friendly
 
 META_HELP = (
     "KEY=VALUE recorded with the run (/run/metadata; repeatable), e.g. actuator_model=P-888.51, "
-    "actuator_serial=123; wins over the protocol's metadata."
+    "actuator_serial=123 (run: wins over the protocol's metadata:)."
 )
 OPERATOR_HELP = "Who runs it (NXuser name; same as --meta operator=NAME)."
 SAMPLE_HELP = "The sample (actuator) id, e.g. 'P-888 #3' (NXsample name; --meta sample=ID)."

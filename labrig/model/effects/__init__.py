@@ -1,7 +1,7 @@
 """The effect library: physical extensions of the dynamic model for ``labrig diagnose``.
 
 Pure numerics (no I/O). Each effect is a small, physical extension of
-``V -> G_t G_d -> quasi-static operator -> S`` with few parameters; it acts in one of three
+``V -> G_t G_d -> quasi-static operator -> S`` with few parameters; it acts in one of four
 places:
 
 - ``"voltage"``: on the driving voltage before the model (amplifier and actuator input effects:
@@ -29,9 +29,10 @@ measured output voltage and a temperature channel (over the whole sequence; rest
 entries filled in by :class:`Context`'s builder).
 
 The effects live in :mod:`.actuator` (the actuator's own physics) and :mod:`.electronics` (the
-amplifier and the measuring chain); :mod:`.base` has their common interface. Forms deliberately
-differ from the simulated bench's (``drivers/sim/effects.py``) where the
-physics allows: a fitted first-order low-pass here against the bench's Butterworth, a pure slew
+amplifier and the measuring chain); :mod:`.base` has their common interface and
+:mod:`.empirical` the sparse terms found in a residual when no named effect passes. Forms
+deliberately differ from the simulated bench's (``drivers/sim/effects.py``) where the physics
+allows: a fitted first-order low-pass here against the bench's Butterworth, a pure slew
 limit against the bench's peak/average fold-back, an exact logarithmic kernel with a fitted
 onset time ``t0`` against the bench's mode bank from 0.01 s, a heating state driven by each entry's
 mean loss power against the bench's instantaneous power.
