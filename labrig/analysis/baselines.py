@@ -49,7 +49,7 @@ held-out NRMSE.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -353,6 +353,24 @@ class BaselineResult:
         }
 
 
+def _heldout_nrmse_pct(
+    name: str,
+    seqs: list[_PlayedSequence],
+    fit: Callable[..., Any],
+    warm: Any,
+    offset: bool,
+) -> float:
+    """NRMSE (%) of entry ``name`` predicted by ``fit`` on every other entry (started from
+    ``warm``); with ``offset``, the offset from the first half, scored on the second."""
+    items = [(q, [g for g in q.segments if g.name != name]) for q in seqs]
+    model = fit([(q, gs) for q, gs in items if gs], warm=warm)
+    q = next(q for q in seqs if any(g.name == name for g in q.segments))
+    seg = next(g for g in q.segments if g.name == name)
+    p = model.predict(q.v, rest_V=q.seq.rest_V)[q.start(name) : seg.hi][seg.i0 :]
+    m = seg.measured_ue
+    return second_half_nrmse_pct(m, p, fit_offset=True) if offset else nrmse_pct(m, p)
+
+
 def fit_baseline(
     records: list[Record],
     kind: str = "prandtl_ishlinskii",
@@ -409,17 +427,7 @@ def fit_baseline(
         per_entry = {n: nrmse_pct(segs[n].measured_ue, preds[n][segs[n].i0 :]) for n in scored}
         held, held_per = None, None
         if heldout and len(scored) >= 2:
-            held_per = {}
-            for name in scored:
-                items = [(q, [g for g in q.segments if g.name != name]) for q in seqs]
-                m_k = fit([(q, gs) for q, gs in items if gs], warm=model)
-                q = next(q for q in seqs if any(g.name == name for g in q.segments))
-                p_k = m_k.predict(q.v, rest_V=q.seq.rest_V)
-                p_k = p_k[q.start(name) : segs[name].hi][segs[name].i0 :]
-                m = segs[name].measured_ue
-                held_per[name] = (  # with an offset: from the first half, scored on the second
-                    second_half_nrmse_pct(m, p_k, fit_offset=True) if offset else nrmse_pct(m, p_k)
-                )
+            held_per = {n: _heldout_nrmse_pct(n, seqs, fit, model, offset) for n in scored}
             held = float(np.mean(list(held_per.values())))
     return BaselineResult(
         kind=kind,
