@@ -49,6 +49,19 @@ steps:
 
 #: a small version of the paper's campaign: the sweep at 50 and 100 V, 1-40 Hz, 2 cycles or 2 s,
 #: and the vanishing envelope (about 25 s of protocol)
+#: the fleet tests' campaign: three 100 V sines, 2 cycles each (tests/fleet/)
+FLEET_CAMPAIGN = """\
+name: fleet test campaign
+description: three sines
+rate_hz: 1000
+rest_s: 0.5
+steps:
+  - kind: sweep
+    amplitudes_V: [100]
+    frequencies_hz: [1, 10, 40]
+    cycles: 2
+    min_duration_s: 1
+"""
 SMALL_CAMPAIGN = """\
 name: small campaign
 rate_hz: 1000

@@ -26,34 +26,13 @@ import pytest
 import yaml
 from scipy import stats
 
+from labrig.analysis.simulate import PARAM_NAMES
 from labrig.fleet.outliers import Z_LIMIT, flag_runs, robust_z
 from labrig.fleet.simfleet import DEFECTS, SPREAD, TRUNCATE_SIGMA, draw_fleet, write_fleet
 from labrig.fleet.table import read_table
 from labrig.model import PAPER_TABLE1
 
-from helpers import invoke
-
-SMALL = """\
-name: fleet test campaign
-description: three sines
-rate_hz: 1000
-rest_s: 0.5
-steps:
-  - kind: sweep
-    amplitudes_V: [100]
-    frequencies_hz: [1, 10, 40]
-    cycles: 2
-    min_duration_s: 1
-"""
-PARAMS = [
-    "alpha0_ue_per_V",
-    "gamma_ue_per_V",
-    "vc_V",
-    "lam_t",
-    "tau_t_s",
-    "lam_d",
-    "tau_d_s",
-]
+from helpers import FLEET_CAMPAIGN, invoke
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +40,7 @@ def fleet(tmp_path_factory) -> Path:
     """Five simulated actuators on the small campaign, two of them defective."""
     d = tmp_path_factory.mktemp("fleet")
     proto = d / "small.yaml"
-    proto.write_text(SMALL)
+    proto.write_text(FLEET_CAMPAIGN)
     write_fleet(5, d / "runs", proto, seed=11, defect_fraction=0.4)
     return d / "runs"
 
@@ -84,7 +63,7 @@ def check_equals_cli(rows: list[dict], out: Path, names: list[str], runs: Path) 
         assert res.exit_code == 0, res.stderr
         fit = json.loads(res.stdout)
         row = rows_by[name]
-        for p in PARAMS:
+        for p in PARAM_NAMES:
             assert row[p] == fit["params"][p], (name, p)
             assert row[f"{p}_sd"] == fit["uncertainty"][p], (name, p)
         assert row["nrmse_pct"] == fit["nrmse_pct"]
@@ -131,7 +110,7 @@ def res_fit(run: Path) -> str:
 @pytest.mark.slow
 def test_batch_diagnose_equals_the_one_by_one_commands_on_six_runs(tmp_path):
     proto = tmp_path / "small.yaml"
-    proto.write_text(SMALL)
+    proto.write_text(FLEET_CAMPAIGN)
     runs = tmp_path / "runs"
     write_fleet(6, runs, proto, seed=12, defect_fraction=0.5)
     out = tmp_path / "out"
@@ -160,7 +139,7 @@ def test_batch_fit_on_a_local_cluster_equals_serial(fleet, tmp_path):
     ra, rb = by_file(table(serial)), by_file(table(dask))
     assert sorted(ra) == sorted(rb) == sorted(Path(f).name for f in files)
     for name in ra:
-        for col in [*PARAMS, "nrmse_pct", "heldout_nrmse_pct", "creep_pct_per_decade"]:
+        for col in [*PARAM_NAMES, "nrmse_pct", "heldout_nrmse_pct", "creep_pct_per_decade"]:
             assert ra[name][col] == rb[name][col], (name, col)
     check_equals_cli(list(rb.values()), dask, [sorted(rb)[0]], fleet)
     page = (dask / "fleet.html").read_text()
@@ -348,7 +327,7 @@ def test_manufacturing_spread_and_defect_mix():
 
 def test_sim_fleet_refuses_to_overwrite(tmp_path):
     proto = tmp_path / "small.yaml"
-    proto.write_text(SMALL)
+    proto.write_text(FLEET_CAMPAIGN)
     out = tmp_path / "f"
     assert invoke("sim", "fleet", 1, "--out", out, "--protocol", proto).exit_code == 0
     before = (out / "A0001.h5").read_bytes()

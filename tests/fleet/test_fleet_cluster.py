@@ -26,20 +26,11 @@ import pytest
 from labrig.fleet.simfleet import write_fleet
 from labrig.fleet.table import read_table
 
+from helpers import FLEET_CAMPAIGN
+
 pytest.importorskip("distributed")
 pytestmark = [pytest.mark.cluster, pytest.mark.timeout(900)]
 
-SMALL = """\
-name: fleet test campaign
-rate_hz: 1000
-rest_s: 0.5
-steps:
-  - kind: sweep
-    amplitudes_V: [100]
-    frequencies_hz: [1, 10, 40]
-    cycles: 2
-    min_duration_s: 1
-"""
 BIN = Path(sys.executable).parent
 
 
@@ -119,7 +110,7 @@ def cluster(request, tmp_path) -> Iterator[Cluster]:
 
 def small_fleet(tmp_path: Path, n: int) -> list[Path]:
     proto = tmp_path / "small.yaml"
-    proto.write_text(SMALL)
+    proto.write_text(FLEET_CAMPAIGN)
     return write_fleet(n, tmp_path / "runs", proto, seed=21, defect_fraction=0.0)
 
 
