@@ -106,7 +106,7 @@ def _labrig_cmd() -> list[str]:
 
 
 def bench_campaign(tmp: Path, repeats: int) -> dict:
-    from labrig.runner import execute, preflight
+    from labrig.runner.execute import execute, preflight
     from labrig.store import read_run
 
     plan, rig_path = preflight(PAPER, None)
@@ -170,8 +170,8 @@ def _check_lossless(out: Path, n_expected: int, rate_hz: float) -> dict:
 
 
 def bench_sustained_sim(tmp: Path, duration_s: float, repeats: int) -> dict:
-    from labrig.rigfile import load_rig
-    from labrig.runner import execute, preflight
+    from labrig.runner.execute import execute, preflight
+    from labrig.runner.rigfile import load_rig
 
     rate = load_rig(None).limits.rate_max_hz
     proto = _long_protocol(tmp, rate, duration_s)
@@ -226,8 +226,8 @@ def bench_sustained_sim(tmp: Path, duration_s: float, repeats: int) -> dict:
 
 
 def bench_logging_ceiling(tmp: Path, rate_hz: float, duration_s: float, repeats: int) -> dict:
-    import labrig.runner as runner
-    from labrig.instruments import AcquiredBlock
+    import labrig.runner.execute as runner
+    from labrig.rig.instruments import AcquiredBlock
 
     real_open = runner.open_rig
 

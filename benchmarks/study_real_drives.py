@@ -32,8 +32,8 @@ import numpy as np  # noqa: E402
 
 from labrig.analysis.baselines import fit_baseline  # noqa: E402
 from labrig.analysis.diagnose import diagnose, split_entries  # noqa: E402
-from labrig.analysis.diagnose.campaign import study_campaign  # noqa: E402
 from labrig.analysis.records import Record  # noqa: E402
+from labrig.studies.campaign import study_campaign  # noqa: E402
 
 REAL = ROOT / "tests" / "data" / "real" / "yan9a-micromanipulator"
 

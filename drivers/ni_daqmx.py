@@ -10,7 +10,7 @@ Opening the driver checks what the rig needs before anything is energised: the p
 absence: exit 3, "pip install 'labrig[nidaq]'"), NI's runtime (the package installed without
 it raises ``DaqNotFoundError`` on its first call) and the device named in the rig file (among
 the devices the runtime lists). Every failure of the package, whatever its class, becomes a
-:class:`~labrig.errors.DeviceError` naming the device and the operation, in words
+:class:`~labrig.core.errors.DeviceError` naming the device and the operation, in words
 (:func:`failure_text`).
 
 Not exercised on hardware in CI; tests/data/fake_nidaqmx stands in for the package (its calls
@@ -29,8 +29,8 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
-from labrig.errors import DeviceError
-from labrig.instruments import AcquiredBlock, DriverContext, DriverInfo, Package
+from labrig.core.errors import DeviceError
+from labrig.rig.instruments import AcquiredBlock, DriverContext, DriverInfo, Package
 
 #: the package the driver needs and how to install it
 PACKAGE = Package("nidaqmx", "nidaqmx", "pip install 'labrig[nidaq]'")
@@ -87,7 +87,7 @@ class NIDAQmxSettings(BaseModel):
 
 
 class NIDAQmx:
-    """The :class:`~labrig.instruments.DAQ` role on an NI multifunction device."""
+    """The :class:`~labrig.rig.instruments.DAQ` role on an NI multifunction device."""
 
     def __init__(self, settings: NIDAQmxSettings):
         self.s = settings

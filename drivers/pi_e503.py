@@ -18,7 +18,7 @@ input (the DAQ's AO) times the amplifier gain. So:
   <V>`` then ``ONL 1 1``, then ``SVA A <V>`` steps: the Rig's ramp to 0 V when the DAQ fails.
 
 Faults: a dropped link, a missing answer (timeout) or a damaged answer raise
-:class:`~labrig.errors.DeviceError` naming the amplifier and the operation. The driver does not
+:class:`~labrig.core.errors.DeviceError` naming the amplifier and the operation. The driver does not
 move the output on a fault (the Rig ramps it to 0 V within the current limit); it closes a
 link that is out of step, and the next call reconnects.
 """
@@ -34,8 +34,8 @@ import time
 import serial
 from pydantic import BaseModel, ConfigDict, Field
 
-from labrig.errors import DeviceError
-from labrig.instruments import AmplifierStatus, DriverContext, DriverInfo, Package
+from labrig.core.errors import DeviceError
+from labrig.rig.instruments import AmplifierStatus, DriverContext, DriverInfo, Package
 
 log = logging.getLogger("labrig.drivers.pi_e503")
 
@@ -160,7 +160,7 @@ class GCSLink:
 
 
 class E503Amplifier:
-    """The :class:`~labrig.instruments.Amplifier` role over GCS (see the module docstring)."""
+    """The :class:`~labrig.rig.instruments.Amplifier` role over GCS (see the module docstring)."""
 
     def __init__(self, settings: E503Settings, url: str | None = None):
         self.settings = settings

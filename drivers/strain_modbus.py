@@ -4,8 +4,8 @@ The register map is :mod:`labrig.drivers.strain_registers` (designed for labrig:
 map is not public). ``transport: tcp`` takes ``address: host:port``; ``transport: rtu`` takes a
 serial port or any pyserial URL (``/dev/ttyUSB0``, ``COM4``, ``socket://host:port``).
 
-Every Modbus failure becomes a :class:`~labrig.errors.DeviceError` naming the conditioner and the
-operation (with the register): no answer within ``timeout_s``, an exception response (its code
+Every Modbus failure becomes a :class:`~labrig.core.errors.DeviceError` naming the conditioner and
+the operation (with the register): no answer within ``timeout_s``, an exception response (its code
 and meaning), a damaged frame, or a lost connection. The link is closed after a failure and
 reopened by the next call (every operation here is safe to repeat).
 """
@@ -21,8 +21,8 @@ from pymodbus import FramerType
 from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ModbusException
 
-from labrig.errors import DeviceError
-from labrig.instruments import ConditionerStatus, DriverContext, DriverInfo, Package
+from labrig.core.errors import DeviceError
+from labrig.rig.instruments import ConditionerStatus, DriverContext, DriverInfo, Package
 
 log = logging.getLogger("labrig.drivers.strain_modbus")
 # pymodbus logs frame dumps on every failure; ours are reported as DeviceError instead
@@ -75,7 +75,7 @@ class StrainModbusSettings(BaseModel):
 
 
 class ModbusConditioner:
-    """The :class:`~labrig.instruments.Conditioner` role over Modbus."""
+    """The :class:`~labrig.rig.instruments.Conditioner` role over Modbus."""
 
     def __init__(self, settings: StrainModbusSettings, address: str | None = None):
         self.settings = settings

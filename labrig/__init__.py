@@ -2,19 +2,19 @@
 fractional-order dynamic hysteresis model.
 
 The Python API (docs/python-api.md): ``labrig.open(path)`` and ``labrig.run(protocol)`` give a
-:class:`~labrig.api.Run` (metadata, samples as pandas or xarray, ``fit``, ``report``,
+:class:`~labrig.api.runs.Run` (metadata, samples as pandas or xarray, ``fit``, ``report``,
 ``diagnose``); ``labrig.runs(folder, where=[...])`` lists run files as ``labrig runs`` does;
 ``labrig.as_json(result)`` is what the matching command prints with ``--json``.
+
+The package's folders are its layers (docs/architecture.md): ``core`` (errors, YAML/JSON safety,
+outputs), ``model`` (the numerics), ``rig`` (device roles, limits, rig files), ``store`` (the run
+file), ``protocol``, ``control``, ``importers``, ``catalogue``, ``runner`` (acquisition),
+``analysis`` (fit, baselines, diagnose), ``report``, ``live``, ``commands`` (each command as one
+library call), ``studies``, ``fleet``, ``api`` and ``cli``; instrument drivers are
+``labrig.drivers``.
 """
 
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("labrig")
-except PackageNotFoundError:  # running from a source tree that was not installed
-    __version__ = "0.0.0+unknown"
-
-# after __version__: the modules the API loads on first use read it
-from labrig.api import EntryInfo, Run, as_json, open, run, runs
+from labrig.api.runs import EntryInfo, Run, as_json, open, run, runs
+from labrig.core.version import __version__
 
 __all__ = ["EntryInfo", "Run", "__version__", "as_json", "open", "run", "runs"]

@@ -108,7 +108,7 @@ def merge(base: dict, over: dict) -> dict:
 
 def rig_path(tmp_path: Path, **over) -> Path:
     """The built-in simulated rig with ``over`` merged in, written to ``tmp_path/rig.yaml``."""
-    from labrig.rigspec import DEFAULT_RIG_YAML
+    from labrig.rig.rigspec import DEFAULT_RIG_YAML
 
     data = merge(yaml.safe_load(DEFAULT_RIG_YAML), over)
     p = tmp_path / "rig.yaml"

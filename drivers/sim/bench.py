@@ -64,8 +64,8 @@ from labrig.drivers.sim.hybrid import HybridParams
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from labrig.instruments import TEMPERATURE_V_PER_DEGC
-from labrig.limits import RigLimits
+from labrig.rig.instruments import TEMPERATURE_V_PER_DEGC
+from labrig.rig.limits import RigLimits
 
 # -- configuration (the rig file's ``bench:`` section) ---------------------------------------
 

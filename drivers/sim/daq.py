@@ -25,8 +25,8 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
-from labrig.errors import DeviceError
-from labrig.instruments import AcquiredBlock, DriverContext, DriverInfo
+from labrig.core.errors import DeviceError
+from labrig.rig.instruments import AcquiredBlock, DriverContext, DriverInfo
 
 #: realtime static writes advance the bench by at most this much simulated time (s)
 MAX_STATIC_ADVANCE_S = 1.0
@@ -42,7 +42,7 @@ class SimDAQSettings(BaseModel):
 
 
 class SimDAQ:
-    """The :class:`~labrig.instruments.DAQ` role on a :class:`VirtualBench`."""
+    """The :class:`~labrig.rig.instruments.DAQ` role on a :class:`VirtualBench`."""
 
     device = "daq (simulated)"
 

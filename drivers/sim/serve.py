@@ -1,4 +1,4 @@
-"""Start the simulators of a virtual bench: for :func:`labrig.rigfile.open_rig` and for
+"""Start the simulators of a virtual bench: for :func:`labrig.runner.rigfile.open_rig` and for
 ``labrig sim serve`` (standalone, so a person can point the real drivers, a terminal or a Modbus
 tool at them).
 
@@ -24,10 +24,11 @@ from labrig.drivers.sim.bench import BenchConfig, VirtualBench
 from labrig.drivers.sim.gcs_server import GCSServer
 from labrig.drivers.sim.modbus_server import ModbusConditionerServer
 
-from labrig.errors import InputFileError, InputIssue, LabrigError
-from labrig.interrupts import interrupt_once
-from labrig.limits import RigLimits
-from labrig.rigspec import load_rig
+from labrig.core.errors import InputFileError, InputIssue, LabrigError
+from labrig.core.interrupts import interrupt_once
+from labrig.rig.instruments import SimulatorInfo
+from labrig.rig.limits import RigLimits
+from labrig.rig.rigspec import RigSpec, load_rig
 
 #: simulator kind -> the rig file's port field
 PORT_FIELDS = {
@@ -166,3 +167,26 @@ def _print_addresses(rig_name: str, sims: Simulators) -> None:
     print(f"  conditioner (Modbus RTU framing):  {ep['modbus_rtu']}  unit 1")
     print("  try: python -m serial.tools.miniterm --eol LF " + ep["gcs"])
     print("Press Ctrl-C to stop.", flush=True)
+
+
+def start_for_rig(spec: RigSpec, seed: int | None) -> Simulators:
+    """The virtual bench and its servers started for the simulated rig ``spec`` (the
+    amplifier's axis and channel and the conditioner's unit from its settings); a port that
+    cannot be bound is an :class:`InputFileError` naming the rig file's field (exit 2)."""
+    amp_s = spec.settings["amplifier"]
+    try:
+        return Simulators(
+            spec.bench_config or BenchConfig(),
+            spec.limits,
+            seed,
+            spec.sim_ports,
+            axis=getattr(amp_s, "axis", "A"),
+            channel=getattr(amp_s, "channel", "1"),
+            unit=getattr(spec.settings["conditioner"], "unit", 1),
+        ).start()
+    except SimulatorPortError as e:
+        raise InputFileError([InputIssue(spec.source, None, e.field, e.detail)]) from None
+
+
+#: the virtual bench, registered under the ``labrig.simulators`` entry points (pyproject.toml)
+SIMULATOR = SimulatorInfo(name="bench", config=BenchConfig, start=start_for_rig)

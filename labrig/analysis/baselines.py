@@ -67,7 +67,7 @@ from labrig.analysis.simulate import (
     scored_sequences,
 )
 from labrig.analysis.sindy import SindyBaseline, fit_sindy
-from labrig.blas import single_thread_blas
+from labrig.core.blas import single_thread_blas
 from labrig.model.bouc_wen import bouc_wen_exact, monotone_runs
 
 __all__ = [

@@ -49,7 +49,7 @@ from labrig.analysis.simulate import (
     score_segments,
 )
 from labrig.analysis.spectra import detect_mains_hz
-from labrig.blas import single_thread_blas
+from labrig.core.blas import single_thread_blas
 from labrig.model import ModelParams, QuasiStaticHysteresis
 from labrig.model.effects import Context, Effect
 

@@ -24,8 +24,8 @@ from the full fit) and scored on it; the mean over entries. With ``offset`` the 
 offset is fitted on the first half of its scored samples and the error taken on the second half
 (:func:`~labrig.analysis.metrics.second_half_nrmse_pct`).
 
-OpenBLAS threads are limited to one while fitting (:mod:`labrig.blas`). docs/analysis.md has the
-method's measurements.
+OpenBLAS threads are limited to one while fitting (:mod:`labrig.core.blas`). docs/analysis.md has
+the method's measurements.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ from labrig.analysis.simulate import (
     scored_sequences,
 )
 from labrig.analysis.staged import classify, generic_starts, staged_fit
-from labrig.blas import single_thread_blas
+from labrig.core.blas import single_thread_blas
 from labrig.model import DynamicHysteresisModel, ModelParams
 
 __all__ = [

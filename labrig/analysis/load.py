@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from labrig.analysis.records import Record
-from labrig.errors import InputFileError, InputIssue
+from labrig.core.errors import InputFileError, InputIssue
 from labrig.store import read_run
 
 _CORE = {"time", "command_voltage", "strain"}

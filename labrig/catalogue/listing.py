@@ -19,7 +19,7 @@ from typing import Any
 
 from labrig.catalogue.index import INDEX_NAME, FolderIndex, Stamp
 from labrig.catalogue.where import Condition, matches, metadata_values, parse_all
-from labrig.errors import InputFileError, InputIssue
+from labrig.core.errors import InputFileError, InputIssue
 
 #: file names the catalogue takes for run files when it searches a folder
 RUN_SUFFIXES = (".h5", ".hdf5")

@@ -33,7 +33,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from labrig.errors import InputFileError, InputIssue
+from labrig.core.errors import InputFileError, InputIssue
 from labrig.store.format import SEAL_ATTR
 from labrig.store.isolated import IsolatedReadError, call_isolated
 from labrig.store.parse import read_run_here
@@ -199,7 +199,7 @@ def read_metadata_here(path: Path | str) -> tuple[dict[str, Any], dict[str, str]
 
 def read_metadata(path: Path | str) -> tuple[dict[str, Any], dict[str, str]]:
     """:func:`read_metadata_here` in a child process with the store's time limits; a file it
-    cannot read is an :class:`~labrig.errors.InputFileError` naming it."""
+    cannot read is an :class:`~labrig.core.errors.InputFileError` naming it."""
     size = Path(path).stat().st_size
     try:
         return call_isolated(read_metadata_here, str(path), size_bytes=_budget([size]))

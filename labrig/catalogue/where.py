@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from datetime import date, datetime, timedelta
 from typing import Any
 
-from labrig.errors import LabrigError
+from labrig.core.errors import LabrigError
 
 OPERATORS = ("!=", "!~", "<=", ">=", "=", "~", "<", ">")
 ORDERING = ("<", "<=", ">", ">=")

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import typer
 
-from labrig import __version__
 from labrig.cli import check, diagnose, drivers, files, fit, report, run
 from labrig.cli.batch import batch_app
 from labrig.cli.model import model_app
@@ -26,6 +25,7 @@ from labrig.cli.runs import runs as runs_command
 from labrig.cli.sim import sim_app
 from labrig.cli.typer_app import LabrigTyper
 from labrig.cli.watch import watch as watch_command
+from labrig.core.version import __version__
 
 __all__ = ["app"]
 

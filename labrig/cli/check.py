@@ -1,7 +1,7 @@
 """``labrig check PROTOCOL [--rig RIG] [--json] [--out FILE]``: validate a protocol, preflight it
 against the rig's limits, and load the rig's drivers (their modules and the packages they need,
-validated settings) without opening any device (:func:`labrig.runner.preflight`,
-:func:`labrig.driver_check.load_rig_drivers`).
+validated settings) without opening any device (:func:`labrig.runner.execute.preflight`,
+:func:`labrig.rig.driver_check.load_rig_drivers`).
 
 Exit codes: 0 OK; 2 a bad protocol or rig file (file, line, field); 3 a driver that cannot load
 (a package missing: the role, the driver and how to install it); 64 a usage error.
@@ -26,7 +26,7 @@ from labrig.cli.common import (
 )
 
 if TYPE_CHECKING:
-    from labrig.driver_check import DriverReport
+    from labrig.rig.driver_check import DriverReport
 
 __all__ = ["check", "driver_line"]
 
@@ -41,9 +41,9 @@ def check(
 ) -> None:
     """Validate a protocol, preflight it against the rig's limits and load the rig's drivers;
     opens no device."""
-    from labrig.driver_check import load_rig_drivers
-    from labrig.rigspec import DEFAULT_RIG_NAME, load_rig
-    from labrig.runner import preflight
+    from labrig.rig.driver_check import load_rig_drivers
+    from labrig.rig.rigspec import DEFAULT_RIG_NAME, load_rig
+    from labrig.runner.execute import preflight
 
     check_out(out, [protocol, rig], overwrite)
     plan, rig_path = preflight(protocol, rig)

@@ -20,8 +20,8 @@ from typing import Any, TypeVar
 
 import typer
 
-from labrig.errors import LabrigError
-from labrig.words import plural as plural  # re-exported for the commands
+from labrig.core.errors import LabrigError
+from labrig.core.words import plural as plural  # re-exported for the commands
 
 E = TypeVar("E", bound=StrEnum)
 
@@ -57,7 +57,7 @@ class Method(StrEnum):
 
 
 class Model(StrEnum):
-    """What ``fit`` identifies: our model or a baseline (labrig.analysis.fit_run.MODELS)."""
+    """What ``fit`` identifies: our model or a baseline (labrig.commands.fit.MODELS)."""
 
     DYNAMIC = "dynamic"
     PRANDTL_ISHLINSKII = "prandtl_ishlinskii"
@@ -136,7 +136,7 @@ def flag(default: bool | None, *decls: str, help: str) -> Any:
 def json_text(doc: Any) -> str:
     """``doc`` as the commands print and write JSON: strict (undefined numbers ``null``),
     indented by 2."""
-    from labrig.jsonsafe import json_safe
+    from labrig.core.jsonsafe import json_safe
 
     return json.dumps(json_safe(doc), indent=2, allow_nan=False)
 
@@ -163,9 +163,9 @@ OVERWRITE_OPTION = flag(False, "--overwrite", help="Replace existing --out files
 
 def check_out(out: Path | None, inputs: Sequence[Path | None], overwrite: bool) -> None:
     """Before the work: ``--out`` must not be an input, a folder or (without ``--overwrite``)
-    an existing file, and its place must be writable (:mod:`labrig.outputs`, exit 2)."""
+    an existing file, and its place must be writable (:mod:`labrig.core.outputs`, exit 2)."""
     if out is not None:
-        from labrig.outputs import check_writable
+        from labrig.core.outputs import check_writable
 
         check_writable([out], inputs=list(inputs), overwrite=overwrite)
 
@@ -176,7 +176,7 @@ def deliver_json(doc: Any, *, as_json: bool, out: Path | None, overwrite: bool) 
     its text form (neither ``--json`` given)."""
     text = json_text(doc)
     if out is not None:
-        from labrig.outputs import write_text_output
+        from labrig.core.outputs import write_text_output
 
         write_text_output(out, text + "\n", overwrite=overwrite)
         typer.echo(f"wrote {out}", err=True)

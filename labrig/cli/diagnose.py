@@ -1,6 +1,6 @@
 """``labrig diagnose RUN.h5 [--params params.json] [--out DIR] [--json] [--also NAME]...
 [--max-effects N] [--mains-hz HZ]``: find what the model misses
-(:func:`labrig.analysis.diagnose.run_file.diagnose_run_file`; the method: docs/diagnose.md).
+(:func:`labrig.commands.diagnose.diagnose_run_file`; the method: docs/diagnose.md).
 
 Exit codes: 0 done (whatever the verdict), 2 bad input (file, parameters), 64 a usage error,
 1 unexpected failure. ``--json`` prints only the JSON contract on stdout (progress and messages
@@ -94,8 +94,8 @@ def diagnose_command(
     ``also``: structural effects to try beside the defaults; ``max_effects``: at most this
     many effects are added; ``mains_hz``: the mains frequency (Hz, default: detected). The
     files in ``out_dir`` are checked before the work and written beside their targets, then
-    renamed into place (:func:`~labrig.analysis.diagnose.run_file.diagnose_run_file`)."""
-    from labrig.analysis.diagnose.run_file import diagnose_run_file
+    renamed into place (:func:`~labrig.commands.diagnose.diagnose_run_file`)."""
+    from labrig.commands.diagnose import diagnose_run_file
 
     err = Console(stderr=True)
     result = diagnose_run_file(

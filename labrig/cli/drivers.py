@@ -1,6 +1,6 @@
 """``labrig drivers [--json] [--out FILE]``: the drivers labrig can find (the ``labrig.drivers``
 entry-point group and the built-in ones), each with its role, the distribution that registers
-it and the packages it needs (:func:`labrig.driver_check.installed_drivers`). Opens no device.
+it and the packages it needs (:func:`labrig.rig.driver_check.installed_drivers`). Opens no device.
 
 Exit codes: 0 listed (a driver that does not load is listed with its error); 64 a usage error.
 """
@@ -32,8 +32,8 @@ def drivers(
 ) -> None:
     """List the installed drivers: role, who provides them, the packages they need."""
     from labrig.cli.check import driver_line
-    from labrig.driver_check import installed_drivers
-    from labrig.rigspec import ENTRY_POINT_GROUP
+    from labrig.rig.driver_check import installed_drivers
+    from labrig.rig.rigspec import ENTRY_POINT_GROUP
 
     check_out(out, [], overwrite)
     found = installed_drivers()

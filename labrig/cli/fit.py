@@ -1,6 +1,6 @@
 """``labrig fit``: identify the model (or a baseline) from a run file; print parameters and NRMSE
-(:func:`labrig.analysis.fit_run.fit_run_file`; how entries are treated:
-:mod:`labrig.analysis.prepare`)."""
+(:func:`labrig.commands.fit.fit_run_file`; how entries are treated:
+:mod:`labrig.commands.prepare`)."""
 
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from labrig.analysis.baselines import BaselineResult
     from labrig.analysis.fit import FitResult
     from labrig.analysis.fit_effects import EffectsFit
-    from labrig.analysis.fit_run import FitOutcome
+    from labrig.commands.fit import FitOutcome
 
 UNITS = {
     "alpha0_ue_per_V": "ue/V",
@@ -98,9 +98,9 @@ def fit(
 ) -> None:
     """Identify the model (or a baseline) from a run file; print parameters and NRMSE."""
     from labrig.analysis.fit_effects import EffectsFit
-    from labrig.analysis.fit_run import fit_run_file
-    from labrig.analysis.prepare import parse_entries
-    from labrig.cli.progress import RichUI
+    from labrig.commands.fit import fit_run_file
+    from labrig.commands.prepare import parse_entries
+    from labrig.commands.progress import RichUI
 
     check_out(out, [run_file], overwrite)  # before the work
     ui = RichUI()

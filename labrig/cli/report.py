@@ -1,5 +1,5 @@
 """``labrig report``: model versus measurement as one HTML file, baselines fitted on the same data
-(:func:`labrig.report.build.build_run_report`).
+(:func:`labrig.commands.report.build_run_report`).
 
 ``--out FILE`` writes the page; ``--json`` prints the metrics table (with or without
 ``--out``); with neither, the mean NRMSE per entry and model is printed as a table and no page is
@@ -58,10 +58,10 @@ def report(
     overwrite: bool = OVERWRITE_OPTION,
 ) -> None:
     """Model versus measurement as one HTML file; baselines fitted on the same data."""
-    from labrig.analysis.prepare import parse_entries
-    from labrig.cli.progress import RichUI
-    from labrig.outputs import write_text_output
-    from labrig.report.build import build_run_report
+    from labrig.commands.prepare import parse_entries
+    from labrig.commands.progress import RichUI
+    from labrig.commands.report import build_run_report
+    from labrig.core.outputs import write_text_output
 
     check_out(out, [run_file, params], overwrite)  # before the work
     ui = RichUI()

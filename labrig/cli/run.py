@@ -1,5 +1,5 @@
 """``labrig run``: a protocol on the rig
-(:mod:`labrig.runner`; the progress bar, the live view and the exit code of a run:
+(:mod:`labrig.runner.execute`; the progress bar, the live view and the exit code of a run:
 :mod:`labrig.cli.run_execute`)."""
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ SAMPLE_HELP = "The sample (actuator) id, e.g. 'P-888 #3' (NXsample name; --meta 
 
 def checked_meta(values: list[str]) -> list[str]:
     """``--meta`` values that are KEY=VALUE with a valid key (a usage error otherwise)."""
-    from labrig.metadata import MetadataError, parse_assignment
+    from labrig.core.metadata import MetadataError, parse_assignment
 
     for v in values:
         try:
@@ -43,9 +43,9 @@ META_OPTION, OPERATOR_OPTION, SAMPLE_OPTION = meta_options()
 
 
 def metadata_of(meta: list[str], operator: str | None, sample: str | None):
-    """The options' metadata (:func:`labrig.metadata.from_options`); a bad value is a usage
+    """The options' metadata (:func:`labrig.core.metadata.from_options`); a bad value is a usage
     error naming the option."""
-    from labrig.metadata import MetadataError, from_options
+    from labrig.core.metadata import MetadataError, from_options
 
     try:
         return from_options(meta, operator, sample)

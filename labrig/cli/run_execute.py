@@ -19,10 +19,10 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from labrig.cli.common import plural
-from labrig.interrupts import Interrupted, interrupt_once
-from labrig.metadata import RunMetadata
+from labrig.core.interrupts import Interrupted, interrupt_once
+from labrig.core.metadata import RunMetadata
 from labrig.protocol.plan import Plan
-from labrig.runner import RunOutcome, execute, preflight
+from labrig.runner.execute import RunOutcome, execute, preflight
 
 
 @dataclass

@@ -74,7 +74,7 @@ def list_runs_command(
     or as JSON (``as_json``, ``out``); counts and notes on stderr."""
     from labrig.catalogue import list_runs
     from labrig.catalogue.where import parse_all
-    from labrig.errors import InputFileError, InputIssue
+    from labrig.core.errors import InputFileError, InputIssue
 
     conditions = parse_all(where)  # a bad expression: exit 2 before any file is read
     targets = list(paths or [DEFAULT_FOLDER])

@@ -22,7 +22,7 @@ def watch(
     time series, the model's prediction, the progress and the amplifier (docs/live.md)."""
     import threading
 
-    from labrig.errors import InputFileError, InputIssue
+    from labrig.core.errors import InputFileError, InputIssue
     from labrig.live import load_params, port_error
     from labrig.live.server import LiveServer
     from labrig.store import read_run

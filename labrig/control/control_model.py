@@ -9,7 +9,7 @@ actuator effects fitted with it that the controller inverts (:data:`INVERTIBLE_E
 ``beta`` and ``gamma`` 1/V). :func:`load_params` reads the model alone, :func:`load_control_model`
 the model with its effects; both raise ``ValueError`` naming the file and the problem (the
 controller's reader: ``labrig report`` and ``diagnose`` read the same files with
-:mod:`labrig.params_file`).
+:mod:`labrig.analysis.params_file`).
 """
 
 from __future__ import annotations

@@ -17,8 +17,8 @@ from labrig.control.bank_inverse import PREVIEW_TOL, BankInverse
 from labrig.control.control_model import ControlModel, as_control_model
 from labrig.control.inversion import strain_command
 from labrig.control.static_inverse import static_stepper
-from labrig.limits import RigLimits
 from labrig.model import ModelParams
+from labrig.rig.limits import RigLimits
 
 __all__ = ["CompensationController", "DirectController"]
 

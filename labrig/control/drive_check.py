@@ -1,10 +1,10 @@
 """Is a drive within the rig? Voltage range, peak and mean amplifier current.
 
 :func:`check_drive` measures a drive with the protocol preflight's measurement
-(:func:`labrig.drive_load.measure_load`: peak current ``C_eff dV/dt`` on a grid finer than the
+(:func:`labrig.rig.drive_load.measure_load`: peak current ``C_eff dV/dt`` on a grid finer than the
 rate, with the drive linear between its samples and at rest at 0 V before them; mean ``|i|`` over
 one command period, or 1 s), compares it and the drive's voltage range with a rig's
-:class:`~labrig.limits.RigLimits`, and raises :class:`InfeasibleCommandError` (a ``ValueError``)
+:class:`~labrig.rig.limits.RigLimits`, and raises :class:`InfeasibleCommandError` (a ``ValueError``)
 saying what the command needs and what the rig gives. Compensation asks for negative voltages (to
 cancel the drift, the paper's Fig. 17): within ``v_min_V`` they are allowed.
 """
@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from labrig.drive_load import OVERSAMPLE, averaging_window_s, measure_load, window_points
-from labrig.limits import RigLimits
+from labrig.rig.drive_load import OVERSAMPLE, averaging_window_s, measure_load, window_points
+from labrig.rig.limits import RigLimits
 
 __all__ = ["DriveCheck", "InfeasibleCommandError", "check_drive"]
 

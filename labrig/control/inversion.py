@@ -57,9 +57,9 @@ from labrig.control.control_model import ControlModel, as_control_model
 from labrig.control.drive_check import check_drive
 from labrig.control.inverse_system import outside_zeros
 from labrig.control.static_inverse import static_stepper
-from labrig.limits import RigLimits
 from labrig.model import ModelParams
 from labrig.model.relaxor import sampled_kernel, series_reciprocal
+from labrig.rig.limits import RigLimits
 
 __all__ = [
     "CONTROLS",

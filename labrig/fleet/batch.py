@@ -22,8 +22,9 @@ from typing import Any
 
 from rich.console import Console
 
-from labrig import __version__
-from labrig.errors import InputFileError, InputIssue
+from labrig.core.errors import InputFileError, InputIssue
+from labrig.core.version import __version__
+from labrig.core.words import plural
 from labrig.fleet.cache import MANIFEST, cached_result, run_keys, store_result, write_atomic
 from labrig.fleet.outliers import flag_runs
 from labrig.fleet.schedule import ScheduleInfo, Where, run_tasks
@@ -35,7 +36,6 @@ from labrig.fleet.table import (
     write_table,
 )
 from labrig.fleet.tasks import COMMANDS, TaskOptions, TaskResult, TaskSpec
-from labrig.words import plural
 
 #: exit code of a batch in which some runs failed
 SOME_FAILED = 4

@@ -19,9 +19,9 @@ import os
 from pathlib import Path
 from typing import Any
 
-from labrig import __version__
+from labrig.core.jsonsafe import json_safe
+from labrig.core.version import __version__
 from labrig.fleet.tasks import TaskResult, TaskSpec, file_sha256
-from labrig.jsonsafe import json_safe
 
 #: marks a folder as a batch's output (a batch writes only into a new, empty or marked folder)
 MANIFEST = "fleet-manifest.json"

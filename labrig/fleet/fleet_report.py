@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from labrig import __version__
+from labrig.core.version import __version__
 from labrig.fleet.cache import write_atomic
 from labrig.fleet.outliers import QUANTITIES, Z_LIMIT
 from labrig.fleet.schedule import ScheduleInfo

@@ -21,9 +21,9 @@ from typing import Any
 
 import h5py
 
-from labrig.errors import InputFileError
+from labrig.core.errors import InputFileError
+from labrig.core.yamlio import load_text
 from labrig.store import RunFile, read_run
-from labrig.yamlio import load_text
 
 #: keys naming the actuator in an NXsample group or a protocol's ``metadata:``
 SAMPLE_KEYS = ("sample_id", "serial_number", "actuator", "sample", "serial", "name")

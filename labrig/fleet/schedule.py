@@ -30,8 +30,8 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-from labrig import __version__
-from labrig.errors import LabrigError
+from labrig.core.errors import LabrigError
+from labrig.core.version import __version__
 from labrig.fleet.tasks import TaskResult, TaskSpec, error_text, run_task
 
 OnResult = Callable[[TaskResult], None]

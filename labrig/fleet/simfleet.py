@@ -12,12 +12,13 @@ random, in turn: a **depolarised** stack (alpha0 20 % lower), a **cracked** one 
 bench effect ``log_creep``, 5 %/decade) and a **loose gauge** (an undeclared 2nd-order 150 Hz
 low-pass in the conditioner: the bench effect ``conditioner_lowpass``).
 
-Each actuator gets a rig file (the built-in simulated rig, :data:`labrig.rigspec.DEFAULT_RIG_YAML`,
-with its truth in ``bench.truth.paper_overrides`` and its defect in ``bench.effects``, named after
-one of :data:`STATIONS`) and a protocol file (the given protocol with ``description`` starting
-``actuator A0007``) in ``DIR/setup/``; the run file ``DIR/A0007.h5`` is written by
-:func:`labrig.runner.execute`, as ``labrig run`` would, with the actuator's own random seed. The
-run file records the protocol and rig texts, so it names its actuator and its station.
+Each actuator gets a rig file (the built-in simulated rig,
+:data:`labrig.rig.rigspec.DEFAULT_RIG_YAML`, with its truth in ``bench.truth.paper_overrides`` and
+its defect in ``bench.effects``, named after one of :data:`STATIONS`) and a protocol file (the given
+protocol with ``description`` starting ``actuator A0007``) in ``DIR/setup/``; the run file
+``DIR/A0007.h5`` is written by :func:`labrig.runner.execute`, as ``labrig run`` would, with the
+actuator's own random seed. The run file records the protocol and rig texts, so it names its
+actuator and its station.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from labrig.errors import InputFileError, InputIssue, LabrigError
+from labrig.core.errors import InputFileError, InputIssue, LabrigError
 from labrig.fleet.cache import write_atomic
 from labrig.model import PAPER_TABLE1
 
@@ -107,7 +108,7 @@ def draw_fleet(n: int, seed: int, defect_fraction: float) -> list[Actuator]:
 
 def rig_text(a: Actuator) -> str:
     """The actuator's rig file: the built-in simulated rig with its truth and defect."""
-    from labrig.rigspec import DEFAULT_RIG_YAML
+    from labrig.rig.rigspec import DEFAULT_RIG_YAML
 
     doc = yaml.safe_load(DEFAULT_RIG_YAML)
     doc["name"] = a.rig
@@ -175,7 +176,7 @@ def write_fleet(
 ) -> list[Path]:
     """Draw the fleet, run each actuator on its simulated rig, write ``truth.json``; returns
     the run files. A run that does not complete is a :class:`LabrigError` naming it."""
-    from labrig.runner import execute, preflight
+    from labrig.runner.execute import execute, preflight
 
     try:
         base = protocol.read_text(encoding="utf-8")

@@ -1,9 +1,9 @@
 """One run file's task, as a worker runs it: the same library calls as the one-by-one commands.
 
-- ``fit``: :func:`labrig.analysis.fit_run.fit_run_file` (``labrig fit RUN --json``);
-- ``diagnose``: the fit, then :func:`labrig.analysis.diagnose.run_file.diagnose_run_file`
+- ``fit``: :func:`labrig.commands.fit.fit_run_file` (``labrig fit RUN --json``);
+- ``diagnose``: the fit, then :func:`labrig.commands.diagnose.diagnose_run_file`
   (``labrig diagnose RUN --json --out D``);
-- ``report``: the fit, then :func:`labrig.report.build.build_run_report` (``labrig report RUN
+- ``report``: the fit, then :func:`labrig.commands.report.build_run_report` (``labrig report RUN
   --out report.html --json``).
 
 A task never raises: any failure (a file that is not a run file, a truncated one, a fit that
@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from labrig import __version__
-from labrig.errors import LabrigError
+from labrig.core.errors import LabrigError
+from labrig.core.version import __version__
 
 #: the three batch commands
 COMMANDS = ("fit", "diagnose", "report")
@@ -119,8 +119,8 @@ def fit_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
     after a step to the run's largest voltage)."""
     from labrig.analysis.diagnose import modelled_creep_per_decade
     from labrig.analysis.fit import PARAM_NAMES
-    from labrig.analysis.fit_run import fit_run_file
-    from labrig.jsonsafe import json_safe
+    from labrig.commands.fit import fit_run_file
+    from labrig.core.jsonsafe import json_safe
     from labrig.model import ModelParams
 
     outcome = fit_run_file(path, method=opt.method, memory=opt.memory, heldout=opt.heldout)
@@ -149,7 +149,7 @@ def fit_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
 def diagnose_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
     """``labrig diagnose RUN --json --out D``: ``diagnosis.json`` and ``diagnosis.html``, the
     effects added, the verdict and its class."""
-    from labrig.analysis.diagnose.run_file import diagnose_run_file
+    from labrig.commands.diagnose import diagnose_run_file
 
     notes: list[str] = []
     result = diagnose_run_file(
@@ -188,7 +188,7 @@ def diagnose_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
 def report_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
     """``labrig report RUN --out report.html --json``: the page, its metrics table, and each
     model's mean NRMSE."""
-    from labrig.report.build import build_run_report
+    from labrig.commands.report import build_run_report
 
     built = build_run_report(path, None, method=opt.method, heldout=opt.heldout)
     out.documents["report.html"] = built.page

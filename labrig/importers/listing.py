@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from labrig.errors import InputFileError
+from labrig.core.errors import InputFileError
 from labrig.importers.aux import aux_channels
 from labrig.importers.options import Checked
 from labrig.importers.select import select

@@ -12,7 +12,8 @@ from __future__ import annotations
 from dataclasses import asdict
 from pathlib import Path
 
-from labrig.errors import InputFileError, InputIssue
+from labrig.core.errors import InputFileError, InputIssue
+from labrig.core.metadata import RunMetadata
 from labrig.importers.dspace import capture_table, find_captures
 from labrig.importers.entry import ImportedEntry, build_entry
 from labrig.importers.labels import entry_name
@@ -23,7 +24,6 @@ from labrig.importers.options import Checked, ImportOptions, check_options
 from labrig.importers.table import Table, bad, option_error
 from labrig.importers.text import read_text
 from labrig.importers.writer import import_description, write_run
-from labrig.metadata import RunMetadata
 
 
 def _looks_like_mat(path: Path) -> bool:
@@ -107,7 +107,7 @@ def import_files(
 ) -> list[ImportedEntry]:
     """Read every file, then write the run file ``out`` (beside it, renamed over it when
     complete: a bad input or a failed write leaves an existing ``out`` as it was), with
-    ``metadata`` (``--meta``, ``--operator``, ``--sample``: :mod:`labrig.metadata`)."""
+    ``metadata`` (``--meta``, ``--operator``, ``--sample``: :mod:`labrig.core.metadata`)."""
     if not files:
         raise InputFileError([InputIssue("", None, "", "no input files given")])
     checked = check_options(opt)

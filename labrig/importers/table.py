@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from labrig.errors import InputFileError, InputIssue
+from labrig.core.errors import InputFileError, InputIssue
 
 
 def bad(path: Path | str, message: str, line: int | None = None, where: str = "") -> InputFileError:

@@ -14,9 +14,9 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from labrig import __version__
+from labrig.core.metadata import RunMetadata
+from labrig.core.version import __version__
 from labrig.importers.entry import ImportedEntry
-from labrig.metadata import RunMetadata
 from labrig.store import Channel, RunWriter
 
 

@@ -13,14 +13,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from labrig.errors import InputFileError, InputIssue
+from labrig.core.errors import InputFileError, InputIssue
 
 
 def load_params(path: Path | None) -> Any:
     """The model parameters of a ``labrig fit --out`` file for the prediction (None: none)."""
     if path is None:
         return None
-    from labrig.params_file import read_params_file
+    from labrig.analysis.params_file import read_params_file
 
     return read_params_file(path, "the live view").params
 

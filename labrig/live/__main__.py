@@ -11,7 +11,7 @@ import signal
 import sys
 from pathlib import Path
 
-from labrig.errors import LabrigError
+from labrig.core.errors import LabrigError
 from labrig.live import load_params, port_error
 from labrig.live.server import LiveServer
 

@@ -13,7 +13,7 @@ import sys
 import time
 from pathlib import Path
 
-from labrig.errors import InputFileError, InputIssue
+from labrig.core.errors import InputFileError, InputIssue
 
 #: how long (s) the server may take to start and print its address
 START_TIMEOUT_S = 20.0

@@ -29,7 +29,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
-from labrig.blas import single_thread_blas
+from labrig.core.blas import single_thread_blas
 
 HOLDS = ("zoh", "linear")
 

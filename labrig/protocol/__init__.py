@@ -6,7 +6,7 @@ steps, :mod:`~labrig.protocol.concrete`, with :mod:`~labrig.protocol.waveforms`,
 :mod:`~labrig.protocol.offset_sine` and :mod:`~labrig.protocol.csvsource` making their samples),
 :mod:`~labrig.protocol.plan` (the result: a :class:`Plan` of :class:`PlannedStep`),
 :mod:`~labrig.protocol.preflight` (every step against the rig's limits, one
-:class:`~labrig.protocol.step_check.StepCheck` each, measured by :mod:`labrig.drive_load`) and
+:class:`~labrig.protocol.step_check.StepCheck` each, measured by :mod:`labrig.rig.drive_load`) and
 :mod:`~labrig.protocol.check` (the entry points the CLI calls); the numbers in their messages are
 printed by :mod:`~labrig.protocol.numbers`.
 

@@ -14,13 +14,13 @@ from pydantic import ValidationError
 from rich.markup import escape
 from rich.table import Table
 
-from labrig.errors import InputFileError, InputIssue
-from labrig.limits import RigLimits
+from labrig.core.errors import InputFileError, InputIssue
+from labrig.core.yamlio import read_yaml
 from labrig.protocol.expand import build_plan
 from labrig.protocol.plan import Plan, PlannedStep, field_name, line_of
 from labrig.protocol.preflight import preflight_checks
 from labrig.protocol.schema import STEP_KINDS, Protocol
-from labrig.yamlio import read_yaml
+from labrig.rig.limits import RigLimits
 
 
 def _clean_loc(loc: tuple) -> tuple:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from labrig.errors import InputFileError, InputIssue
+from labrig.core.errors import InputFileError, InputIssue
 from labrig.protocol import waveforms as wf
 from labrig.protocol.concrete import Concrete, intervals, num_tag, sanitize
 from labrig.protocol.csvsource import CsvError, load_csv, resolve_csv_path

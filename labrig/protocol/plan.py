@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from labrig.limits import RigLimits
 from labrig.protocol import waveforms as wf
 from labrig.protocol.schema import Protocol
 from labrig.protocol.step_check import StepCheck
+from labrig.rig.limits import RigLimits
 
 __all__ = ["Plan", "PlannedStep", "Where", "field_name", "line_of"]
 

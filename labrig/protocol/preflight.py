@@ -11,7 +11,7 @@ For each entry of a plan:
 - mean ``|i|`` over a sliding window at most ``i_avg_A``; the window is one carrier cycle for
   sines and envelopes, :data:`AVG_WINDOW_S` otherwise (0 V assumed before the entry starts).
 
-The measurement is :func:`labrig.drive_load.measure_load` (shared with the controller's
+The measurement is :func:`labrig.rig.drive_load.measure_load` (shared with the controller's
 :func:`labrig.control.check_drive`): the current ``i = C_eff dV/dt`` on a grid
 :data:`OVERSAMPLE` times finer than the output rate (waveforms are functions of continuous time,
 so the preflight evaluates them there). For a unipolar sine of amplitude A and frequency f this
@@ -34,7 +34,12 @@ import math
 
 import numpy as np
 
-from labrig.drive_load import (
+from labrig.core.errors import InputFileError, InputIssue
+from labrig.protocol.numbers import amps, at_least, at_most, beyond, exact, fixed
+from labrig.protocol.plan import Plan, PlannedStep, Where
+from labrig.protocol.schema import STRAIN_KINDS
+from labrig.protocol.step_check import StepCheck
+from labrig.rig.drive_load import (
     AVG_WINDOW_S,
     CHUNK,
     OVERSAMPLE,
@@ -42,12 +47,7 @@ from labrig.drive_load import (
     measure_load,
     window_points,
 )
-from labrig.errors import InputFileError, InputIssue
-from labrig.limits import RigLimits
-from labrig.protocol.numbers import amps, at_least, at_most, beyond, exact, fixed
-from labrig.protocol.plan import Plan, PlannedStep, Where
-from labrig.protocol.schema import STRAIN_KINDS
-from labrig.protocol.step_check import StepCheck
+from labrig.rig.limits import RigLimits
 
 __all__ = [
     "AVG_WINDOW_S",
@@ -105,7 +105,7 @@ def sine_currents_A(amplitude_V: float, frequency_hz: float, limits: RigLimits) 
 def measure(
     step: PlannedStep, limits: RigLimits, oversample: int = OVERSAMPLE, chunk: int = CHUNK
 ) -> StepCheck:
-    """Voltage range and currents of one entry (:func:`labrig.drive_load.measure_load` on its
+    """Voltage range and currents of one entry (:func:`labrig.rig.drive_load.measure_load` on its
     waveform, ``chunk`` fine-grid points at a time: never the whole fine grid at once)."""
     wave = step.waveform
     fine_rate = step.rate_hz * oversample
@@ -446,7 +446,7 @@ def preflight_checks(plan: Plan, limits: RigLimits) -> list[StepCheck]:
 def preflight(plan: Plan, limits: RigLimits | None = None) -> list[StepCheck]:
     """:func:`preflight_checks` against ``limits`` (default: the built-in rig's), handing the
     results to the plan (:meth:`Plan.take_checks`) for callers that read them from it
-    (``labrig.runner.preflight``). Returns the checks; raises :class:`InputFileError`."""
+    (``labrig.runner.execute.preflight``). Returns the checks; raises :class:`InputFileError`."""
     lim = limits if limits is not None else RigLimits()
     checks = preflight_checks(plan, lim)
     plan.take_checks(checks, lim)

@@ -19,7 +19,7 @@ from pydantic import (
     model_validator,
 )
 
-from labrig.metadata import MetadataError, check_value
+from labrig.core.metadata import MetadataError, check_value
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -46,10 +46,10 @@ STEP_KINDS = (
 #: step kinds that command a strain (ue) through a controller instead of a voltage
 STRAIN_KINDS = ("strain_sine", "strain_vanishing", "strain_csv")
 FilePath = Annotated[str, StringConstraints(min_length=1, max_length=4096)]
-#: a metadata key (``metadata:``): an HDF5 dataset name (labrig.metadata.KEY_PATTERN)
+#: a metadata key (``metadata:``): an HDF5 dataset name (labrig.core.metadata.KEY_PATTERN)
 MetaKey = Annotated[str, StringConstraints(pattern=r"^[A-Za-z][A-Za-z0-9_]{0,62}$")]
 #: a metadata value: text (printable, at most 200 characters), a boolean, a whole or a
-#: finite number (labrig.metadata.check_value)
+#: finite number (labrig.core.metadata.check_value)
 MetaValue = (
     Annotated[str, StringConstraints(max_length=200, pattern=r"^[^\x00-\x1f\x7f]*$")]
     | bool
@@ -342,7 +342,7 @@ class Protocol(_Base):
     @field_validator("metadata")
     @classmethod
     def _storable(cls, values: dict[str, MetaValue] | None) -> dict[str, MetaValue] | None:
-        """The rules the run file applies (:func:`labrig.metadata.check_value`), so that
+        """The rules the run file applies (:func:`labrig.core.metadata.check_value`), so that
         ``labrig check`` refuses what ``labrig run`` could not store."""
         if values is None:
             return None

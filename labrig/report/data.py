@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from labrig.analysis.metrics import compare, drive_frequency_hz, is_periodic, last_period
 from labrig.analysis.records import Record
-from labrig.jsonsafe import json_safe
+from labrig.core.jsonsafe import json_safe
 
 #: models of a report, in display order: ours first, then the baselines
 MODEL_KEYS: tuple[str, ...] = ("dynamic", "prandtl_ishlinskii", "bouc_wen", "sindy")

@@ -2,7 +2,7 @@
 PNG figures from matplotlib's Agg canvas, no scripts), in the style of ``labrig report``: the
 template ``templates/diagnosis.html.j2`` (:mod:`labrig.report.templating`) filled by
 :func:`diagnosis_context`. The files of a diagnosis are written by
-:mod:`labrig.analysis.diagnose.run_file`.
+:mod:`labrig.commands.diagnose`.
 
 Figures: per-entry residual before and after (time series), and the held-out NRMSE of every
 candidate tried against the base model's.

@@ -264,9 +264,9 @@ FIGURES = (
 def write_model_figures(out: Path, overwrite: bool = False) -> list[Path]:
     """Write the section-2 figures (the paper's Figs. 1, 3, 4, 5) as PNG files into ``out``
     (created if needed); existing files are refused before any drawing unless ``overwrite``
-    (:class:`~labrig.errors.InputFileError`), and the files are written beside their targets,
-    then renamed into place (:mod:`labrig.outputs`)."""
-    from labrig.outputs import staged_outputs
+    (:class:`~labrig.core.errors.InputFileError`), and the files are written beside their targets,
+    then renamed into place (:mod:`labrig.core.outputs`)."""
+    from labrig.core.outputs import staged_outputs
 
     out = Path(out)
     targets = [out / name for name, _ in FIGURES]

@@ -15,7 +15,7 @@ from collections.abc import Mapping
 import h5py
 import numpy as np
 
-from labrig.metadata import RunMetadata
+from labrig.core.metadata import RunMetadata
 from labrig.store.format import FORMAT_VERSION, STRING_DTYPE, stored_units
 
 #: the name written as each entry's ``definition`` (labrig's layout, docs/runfile.md)

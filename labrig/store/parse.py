@@ -1,7 +1,7 @@
 """Parsing an open run file into :class:`RunFile` with every check a reader owes its user: the
 metadata seals (:func:`labrig.store.format.seal_of`), the types and shapes labrig writes, sizes
 bounded by the file's size, Fletcher32 checksums of the samples; anything unexpected is an
-:class:`~labrig.errors.InputFileError` naming the file and the object (the HDF5 path). Run in a
+:class:`~labrig.core.errors.InputFileError` naming the file and the object (the HDF5 path). Run in a
 child process with a time limit by :func:`labrig.store.reader.read_run`."""
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from labrig.errors import InputFileError, InputIssue
-from labrig.jsonsafe import loads_bounded
+from labrig.core.errors import InputFileError, InputIssue
+from labrig.core.jsonsafe import loads_bounded
 from labrig.store.format import SEAL_ATTR, STATUSES, memory_long_name, memory_units, seal_of
 from labrig.store.isolated import allow_cpu
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from labrig.errors import InputFileError, InputIssue
+from labrig.core.errors import InputFileError, InputIssue
 from labrig.store.isolated import IsolatedReadError, call_isolated
 from labrig.store.parse import RunEntry, RunFile, read_run_here
 from labrig.store.writing import writer_of
@@ -234,9 +234,9 @@ def export_csv(path: Path | str, out_dir: Path | str, overwrite: bool = False) -
     amplifier_voltage_V,gauge_raw_V,strain_ue``; values use up to 10 significant digits.
     Existing CSVs are refused unless ``overwrite`` (an :class:`InputFileError` naming them,
     before anything is written); the files are written beside their targets and renamed into
-    place together (:mod:`labrig.outputs`).
+    place together (:mod:`labrig.core.outputs`).
     """
-    from labrig.outputs import staged_outputs
+    from labrig.core.outputs import staged_outputs
 
     run = read_run(path)
     out = Path(out_dir)

@@ -3,7 +3,7 @@
 :func:`check_resume` decides, before anything is opened or energised, whether a file can be
 resumed with a protocol and which entries remain: the file must not be complete nor being
 written now, and the protocol must be the one it recorded (the same text). The runner then
-works on a copy written beside the file (:mod:`labrig.outputs`), opened by
+works on a copy written beside the file (:mod:`labrig.core.outputs`), opened by
 :meth:`labrig.store.writer.RunWriter.reopen`, and renames the copy over the file only once the
 copy is closed: a resume that fails, or is killed, leaves the file as it was.
 
@@ -33,8 +33,8 @@ from pathlib import Path
 
 import h5py
 
-from labrig.errors import InputFileError, InputIssue
-from labrig.metadata import RunMetadata
+from labrig.core.errors import InputFileError, InputIssue
+from labrig.core.metadata import RunMetadata
 from labrig.store.format import now_iso
 from labrig.store.nexus import set_str, write_metadata_collection
 from labrig.store.reader import read_run

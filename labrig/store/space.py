@@ -5,7 +5,7 @@ A run that fills the disk must still be able to record how it ended. Three measu
 - before a run: :func:`estimate_run_bytes` (the chunks HDF5 allocates, channel by channel,
   plus metadata) against :func:`free_bytes` of the run file's filesystem;
 - before each block: the chunks the block will allocate against the free space, so the run
-  stops cleanly (:class:`~labrig.errors.StorageError`) before HDF5 ever fails a write;
+  stops cleanly (:class:`~labrig.core.errors.StorageError`) before HDF5 ever fails a write;
 - a :class:`Reserve` file of ``RESERVE_BYTES`` beside the run file, allocated when the run
   starts and deleted when the run's final records are written, so they fit even when another
   program has taken the last byte.

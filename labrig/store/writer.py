@@ -7,7 +7,7 @@ reported on reading, not read back as numbers).
 
 Disk full (:mod:`labrig.store.space`): before each block the free space is checked against the
 chunks the block allocates; a block that does not fit, or a write HDF5 refuses, raises
-:class:`~labrig.errors.StorageError` with the file as it was before the block (the channels are
+:class:`~labrig.core.errors.StorageError` with the file as it was before the block (the channels are
 cut back to the last complete block). The final records (:meth:`RunWriter.set_run_value`,
 :meth:`RunWriter.add_run_collection`, :meth:`RunWriter.finish`) first release the writer's
 reserve file, so they fit on a disk another program filled.
@@ -27,10 +27,10 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from labrig import __version__
-from labrig.errors import StorageError
-from labrig.interrupts import reason_for, signum_of
-from labrig.metadata import RunMetadata
+from labrig.core.errors import StorageError
+from labrig.core.interrupts import reason_for, signum_of
+from labrig.core.metadata import RunMetadata
+from labrig.core.version import __version__
 from labrig.store.format import (
     FINAL_STATUSES,
     FORMAT_VERSION,
@@ -118,7 +118,7 @@ class EntryWriter:
         ``time`` may be omitted: it is then ``k / rate_hz`` continuing from the previous
         block. Every other channel given to :meth:`RunWriter.begin_entry` must be present.
         When this returns, the block is on disk (flushed). Returns the total sample count.
-        Raises :class:`~labrig.errors.StorageError` if the block does not fit on the disk or
+        Raises :class:`~labrig.core.errors.StorageError` if the block does not fit on the disk or
         cannot be written; the entry then holds the blocks before it.
         """
         if self.status != "running":
@@ -171,7 +171,7 @@ class EntryWriter:
 
     def finish(self, status: str = "complete", reason: str | None = None) -> None:
         """Close the entry with ``status`` (complete / aborted / failed) and flush; raises
-        :class:`~labrig.errors.StorageError` if that cannot be written."""
+        :class:`~labrig.core.errors.StorageError` if that cannot be written."""
         if status not in FINAL_STATUSES:
             raise ValueError(f"entry status must be one of {FINAL_STATUSES}, not {status!r}")
         if self.status != "running":

@@ -20,13 +20,13 @@ import pytest
 
 from labrig.analysis.fit import fit_model
 from labrig.analysis.fit_effects import fit_effects
-from labrig.analysis.prepare import prepare
+from labrig.analysis.params_file import fitted_effects
 from labrig.analysis.records import Record
 from labrig.analysis.signals import sine
+from labrig.commands.prepare import prepare
+from labrig.commands.report import predict_entries
 from labrig.control import load_control_model
 from labrig.model import PAPER_TABLE1, DynamicHysteresisModel
-from labrig.params_file import fitted_effects
-from labrig.report.build import predict_entries
 
 from helpers import invoke
 
@@ -108,8 +108,8 @@ def test_a_fit_file_without_its_effects_context_is_read_and_configured_from_the_
     """Files written before ``effects_context`` existed: the names are checked when the file is
     read, the parameters once the run's records say how the effects are configured (a
     temperature channel gives thermal_drift its ``k_per_K`` form)."""
-    from labrig.errors import InputFileError
-    from labrig.params_file import read_fit_output as read_params
+    from labrig.analysis.params_file import read_fit_output as read_params
+    from labrig.core.errors import InputFileError
 
     doc = {
         "params": PAPER_TABLE1.model_dump(),

@@ -20,7 +20,7 @@ from typer.testing import CliRunner
 
 import labrig
 from labrig.cli import app
-from labrig.errors import InputFileError
+from labrig.core.errors import InputFileError
 from labrig.store.format import memory_units
 
 PROTOCOL = """\

@@ -8,8 +8,8 @@ Two corpora, each with a manifest of where labrig must point (file:line, field, 
 
 Every file must give exit code 2, print ``FILE:LINE:`` and the field, no traceback, write no
 run file, and never open the rig: the CLI runs in-process (typer's CliRunner) with
-``labrig.runner.open_rig``, ``labrig.rigfile.open_rig``, the simulators' start and the
-transports' constructors replaced by functions that record the call and raise. A few files
+``labrig.runner.execute.open_rig``, ``labrig.runner.rigfile.open_rig``, the simulators' start and
+the transports' constructors replaced by functions that record the call and raise. A few files
 also go through a real ``labrig`` process, to see exactly what a person sees on stderr.
 """
 
@@ -22,7 +22,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from labrig import rigfile, runner
+from labrig.runner.execute import execute as runner
+from labrig.runner.execute import rigfile
 
 from helpers import invoke as run_cli
 
@@ -57,8 +58,8 @@ def no_hardware(monkeypatch) -> list:
 
         return f
 
-    monkeypatch.setattr(runner, "open_rig", refuse("labrig.runner.open_rig"))
-    monkeypatch.setattr(rigfile, "open_rig", refuse("labrig.rigfile.open_rig"))
+    monkeypatch.setattr(runner, "open_rig", refuse("labrig.runner.execute.open_rig"))
+    monkeypatch.setattr(rigfile, "open_rig", refuse("labrig.runner.rigfile.open_rig"))
     monkeypatch.setattr(serve.Simulators, "start", refuse("Simulators.start"))
     monkeypatch.setattr(serial, "serial_for_url", refuse("serial.serial_for_url"))
     monkeypatch.setattr(strain_modbus, "ModbusTcpClient", refuse("ModbusTcpClient"))

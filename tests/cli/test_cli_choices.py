@@ -34,7 +34,7 @@ def invoke(*args: object):
 def test_choices_are_the_librarys() -> None:
     from labrig.analysis.fit import fit_model
     from labrig.analysis.fit_effects import known_effects
-    from labrig.analysis.fit_run import MODELS
+    from labrig.commands.fit import MODELS
     from labrig.model import PRESETS
     from labrig.model.effects import STRUCTURAL_EFFECT_NAMES
     from labrig.model.hysteresis import MEMORY_RULES
@@ -145,8 +145,8 @@ def test_help_does_not_load_the_numerical_stack() -> None:
 def test_warmup_note_counts_records() -> None:
     import numpy as np
 
-    from labrig.analysis.prepare import auto_warmup
     from labrig.analysis.records import Record
+    from labrig.commands.prepare import auto_warmup
 
     t = np.arange(4000) / 1000.0
     late = Record.from_arrays("late", 1000.0, 50 + 50 * np.sin(2 * np.pi * t), np.zeros(t.size))

@@ -1,5 +1,5 @@
 """One library function diagnoses a run file for the command, the Python API and the batch
-(:func:`labrig.analysis.diagnose.run_file.diagnose_run_file`): ``--mains-hz`` reaches the
+(:func:`labrig.commands.diagnose.diagnose_run_file`): ``--mains-hz`` reaches the
 diagnosis from each of them, the outputs are refused before any work when they exist, and the
 diagnosis module no longer sits below ``prepare`` (imports go one way).
 
@@ -19,14 +19,14 @@ from typer.testing import CliRunner
 
 import labrig
 import labrig.analysis.diagnose as diagnosis
-import labrig.analysis.diagnose.run_file as run_file
 import labrig.analysis.load as load
+import labrig.commands.diagnose as run_file
 from labrig.analysis.diagnose import Diagnosis, Evidence
-from labrig.analysis.diagnose.campaign import bench_campaign
 from labrig.cli import app
 from labrig.cli.typer_app import EXIT_USAGE
-from labrig.errors import InputFileError
+from labrig.core.errors import InputFileError
 from labrig.model.effects import EFFECT_NAMES
+from labrig.studies.campaign import bench_campaign
 
 pytestmark = pytest.mark.timeout(120)
 ROOT = Path(__file__).resolve().parents[2]

@@ -138,3 +138,30 @@ def test_batch_summary_counts_in_words(tmp_path: Path) -> None:
     line = res.stdout.splitlines()[0]
     assert line.startswith("1 run: 0 succeeded, 1 failed"), line
     assert "on 1 worker," in line
+
+
+def test_python_dash_m_labrig_is_the_command():
+    """``python -m labrig`` runs the same command line as the ``labrig`` script (usage errors
+    exit 64 there too)."""
+    from labrig import __version__
+
+    ok = subprocess.run(
+        [sys.executable, "-m", "labrig", "--version"], capture_output=True, text=True, timeout=60
+    )
+    assert ok.returncode == 0, ok.stderr
+    assert ok.stdout.strip() == f"labrig {__version__}"
+    bad = subprocess.run(
+        [sys.executable, "-m", "labrig", "no-such-command"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert bad.returncode == EXIT_USAGE
+    assert "no-such-command" in bad.stderr
+
+
+def test_the_package_says_it_is_typed():
+    """PEP 561: the installed package carries ``py.typed`` so type checkers read its hints."""
+    from importlib import resources
+
+    assert resources.files("labrig").joinpath("py.typed").is_file()

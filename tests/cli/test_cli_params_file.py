@@ -1,6 +1,6 @@
 """Parameter files (``report --params``, ``diagnose --params``) go through one reader
-(labrig.params_file): the same problem gets the same message from both commands, naming the
-file, the field and what would be valid; and the one JSON sanitizer (labrig.jsonsafe)."""
+(labrig.analysis.params_file): the same problem gets the same message from both commands, naming the
+file, the field and what would be valid; and the one JSON sanitizer (labrig.core.jsonsafe)."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from labrig.errors import InputFileError
-from labrig.jsonsafe import json_safe
+from labrig.analysis.params_file import read_fit_output, read_params_file, start_params
+from labrig.core.errors import InputFileError
+from labrig.core.jsonsafe import json_safe
 from labrig.model import PAPER_TABLE1
-from labrig.params_file import read_fit_output, read_params_file, start_params
 
 
 def _message(read, path: Path) -> str:

@@ -1,4 +1,4 @@
-"""Degenerate data is refused before any fit, not reported as a result (labrig.analysis.prepare).
+"""Degenerate data is refused before any fit, not reported as a result (labrig.commands.prepare).
 
 Run files written with the store's writer (three entries of a 2 Hz, 0-100 V sine at 1 kHz, the
 strain 9 ue/V plus 1 ue of noise) with one defect each: 2-sample entries, all-zero voltage,
@@ -17,15 +17,15 @@ import h5py
 import numpy as np
 import pytest
 
-from labrig.analysis.prepare import (
+from labrig.analysis.records import Record
+from labrig.commands.prepare import (
     MAX_REST_S,
     MIN_SAMPLES,
     MIN_VOLTAGE_SPAN_V,
     RATE_RANGE_HZ,
     check_records,
 )
-from labrig.analysis.records import Record
-from labrig.errors import InputFileError
+from labrig.core.errors import InputFileError
 from labrig.store import RunWriter
 from labrig.store.writer import seal_all
 
@@ -106,8 +106,8 @@ CASES: dict[str, tuple[Callable[[Path], Path], list[str]]] = {
 def no_fitting(monkeypatch) -> list:
     """The fits and the diagnosis record a call instead of running."""
     import labrig.analysis.diagnose as diagnose
-    import labrig.analysis.fit_run as fit_run
-    import labrig.report.build as build
+    import labrig.commands.fit as fit_run
+    import labrig.commands.report as build
 
     called: list = []
 

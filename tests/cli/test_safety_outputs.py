@@ -1,5 +1,5 @@
 """No command destroys a file without ``--overwrite``, none destroys the old file before the new
-one is complete, and no output may be an input (labrig.outputs).
+one is complete, and no output may be an input (labrig.core.outputs).
 
 fit --out, report --out, diagnose --out DIR, export --csv DIR and run --overwrite: an input as
 the output is refused whatever the flags (the input unchanged, byte for byte); an existing output
@@ -19,8 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from labrig.errors import InputFileError
-from labrig.outputs import check_outputs, stage, staged_outputs
+from labrig.core.errors import InputFileError
+from labrig.core.outputs import check_outputs, stage, staged_outputs
 
 from helpers import TINY, invoke
 
@@ -99,10 +99,10 @@ def test_fit_and_report_refuse_an_existing_out_and_replace_it_with_overwrite(
 @pytest.mark.parametrize(
     ("command", "target", "extra"),
     [
-        ("fit", "labrig.analysis.fit_run.fit_run_file", ["--out", "{blocker}/p.json"]),
-        ("report", "labrig.report.build.build_run_report", ["--out", "{blocker}/r.html"]),
-        ("diagnose", "labrig.analysis.prepare.prepare_diagnosis", ["--out", "{blocker}/d"]),
-        ("fit", "labrig.analysis.fit_run.fit_run_file", ["--out", "{tmp}"]),
+        ("fit", "labrig.commands.fit.fit_run_file", ["--out", "{blocker}/p.json"]),
+        ("report", "labrig.commands.report.build_run_report", ["--out", "{blocker}/r.html"]),
+        ("diagnose", "labrig.commands.prepare.prepare_diagnosis", ["--out", "{blocker}/d"]),
+        ("fit", "labrig.commands.fit.fit_run_file", ["--out", "{tmp}"]),
     ],
 )
 def test_an_unwritable_out_is_found_before_the_computation(
@@ -123,7 +123,7 @@ def test_an_unwritable_out_is_found_before_the_computation(
 def test_diagnose_refuses_existing_outputs_before_the_computation(
     run_copy: Path, tmp_path: Path, monkeypatch
 ):
-    import labrig.analysis.prepare as prepare
+    import labrig.commands.prepare as prepare
 
     called = []
     monkeypatch.setattr(prepare, "prepare_diagnosis", lambda *a, **k: called.append(1))

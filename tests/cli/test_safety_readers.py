@@ -14,10 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from labrig.errors import InputFileError
-from labrig.jsonsafe import MAX_JSON_DEPTH, json_depth, loads_bounded
-from labrig.params_file import MAX_PARAMS_BYTES, read_params_file
-from labrig.yamlio import MAX_DEPTH, MAX_INT_DIGITS, read_yaml
+from labrig.analysis.params_file import MAX_PARAMS_BYTES, read_params_file
+from labrig.core.errors import InputFileError
+from labrig.core.jsonsafe import MAX_JSON_DEPTH, json_depth, loads_bounded
+from labrig.core.yamlio import MAX_DEPTH, MAX_INT_DIGITS, read_yaml
 
 from helpers import invoke
 

@@ -28,9 +28,9 @@ from labrig.control import (
 )
 from labrig.control.inversion import relaxor_inverse
 from labrig.control.static_inverse import StaticInverseStepper
-from labrig.limits import RigLimits
 from labrig.model import PAPER_CONTROL, DynamicHysteresisModel, QuasiStaticHysteresis
 from labrig.model.relaxor import sampled_kernel
+from labrig.rig.limits import RigLimits
 
 ROOT = Path(__file__).resolve().parents[2]
 FITTED = load_params(ROOT / "experiments" / "hybrid-params.json")

@@ -18,12 +18,12 @@ import yaml
 
 from labrig.analysis.load import records_from_run
 from labrig.control import check_drive, compute_drive, entry_metrics, load_control_model
-from labrig.errors import InputFileError
-from labrig.limits import RigLimits
+from labrig.core.errors import InputFileError
 from labrig.model import PAPER_TABLE1
 from labrig.protocol.check import check_protocol, load_plan
 from labrig.protocol.preflight import preflight_checks
-from labrig.runner import execute
+from labrig.rig.limits import RigLimits
+from labrig.runner.execute import execute
 from labrig.store import read_run
 
 ROOT = Path(__file__).resolve().parents[2]

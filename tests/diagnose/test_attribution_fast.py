@@ -2,12 +2,12 @@
 
 Three rows of the table on the paper truth, seed 1, the short campaign (0-50 and 0-100 V sines
 at 1, 10, 40 Hz, 1 kHz, 2 ue noise), each from
-:func:`labrig.analysis.diagnose.campaign.truth_campaign` with the bench effect of
-:data:`~labrig.analysis.diagnose.campaign.STUDY_CASES` and diagnosed as ``labrig diagnose``
+:func:`labrig.studies.campaign.truth_campaign` with the bench effect of
+:data:`~labrig.studies.campaign.STUDY_CASES` and diagnosed as ``labrig diagnose``
 does: the effects added (exactly), the verdict class, and the held-out NRMSE before and after
 against the table's figures (within 5 %: the runs are seeded; the margin is for arithmetic that
 differs between machines). About 40 s together; the full study is
-``python -m labrig.analysis.diagnose.campaign`` and the slow tests of
+``python -m labrig.studies.campaign`` and the slow tests of
 tests/diagnose/test_diagnose.py.
 """
 
@@ -16,7 +16,7 @@ from __future__ import annotations
 import pytest
 
 from labrig.analysis.diagnose import diagnose
-from labrig.analysis.diagnose.campaign import STUDY_CASES, truth_campaign
+from labrig.studies.campaign import STUDY_CASES, truth_campaign
 
 #: case -> (effects added, verdict class, held-out NRMSE % before, after), as in README.md
 ROWS = {

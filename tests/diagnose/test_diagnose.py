@@ -4,7 +4,7 @@ optional effects switched on; the fitted model is never told which.
 Fast tests: the JSON contract, a null campaign (2 seeds), mains pickup and the conditioner
 low-pass, the CLI function. The many-seed and every-effect studies are ``@pytest.mark.slow``
 (``pytest -m slow tests/diagnose/test_diagnose.py``);
-``python -m labrig.analysis.diagnose.campaign`` prints the confusion table.
+``python -m labrig.studies.campaign`` prints the confusion table.
 """
 
 from __future__ import annotations
@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from labrig.analysis.diagnose import diagnose
-from labrig.analysis.diagnose.campaign import (
+from labrig.model.effects import library
+from labrig.studies.campaign import (
     HOLD_ENTRIES,
     SHORT_ENTRIES,
     STUDY_CASES,
@@ -23,7 +24,6 @@ from labrig.analysis.diagnose.campaign import (
     study_campaign,
     truth_campaign,
 )
-from labrig.model.effects import library
 
 #: bench effect (as in a rig file) -> the library effect diagnose should name; strengths are
 #: clear (the effect dominates the residual), forms differ from the library's (2nd-order
@@ -97,7 +97,7 @@ def test_cli_function_writes_json_and_html(tmp_path, monkeypatch, capsys):
 def test_params_file_is_validated(tmp_path, monkeypatch):
     import labrig.analysis.load as load
     from labrig.cli.diagnose import diagnose_command
-    from labrig.errors import InputFileError
+    from labrig.core.errors import InputFileError
 
     monkeypatch.setattr(load, "records_from_run", lambda path, entries=None: [])
     bad = tmp_path / "p.json"
@@ -109,7 +109,7 @@ def test_params_file_is_validated(tmp_path, monkeypatch):
 def test_params_from_a_baseline_fit_are_refused(tmp_path, monkeypatch):
     import labrig.analysis.load as load
     from labrig.cli.diagnose import diagnose_command
-    from labrig.errors import InputFileError
+    from labrig.core.errors import InputFileError
 
     monkeypatch.setattr(load, "records_from_run", lambda path, entries=None: [])
     f = tmp_path / "pi.json"
@@ -121,8 +121,8 @@ def test_params_from_a_baseline_fit_are_refused(tmp_path, monkeypatch):
 def test_params_with_fitted_effects_use_the_base_and_say_so(tmp_path):
     """A ``labrig fit --effect`` file: its base parameters are the start, its effects are named
     as not assumed (diagnose tests every effect itself)."""
+    from labrig.analysis.params_file import start_params
     from labrig.model import PAPER_TABLE1
-    from labrig.params_file import start_params
 
     doc = {
         "params": PAPER_TABLE1.model_dump(),

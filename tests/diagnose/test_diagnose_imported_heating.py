@@ -12,8 +12,8 @@ import pytest
 from typer.testing import CliRunner
 
 import labrig
-from labrig.analysis.diagnose.campaign import bench_campaign
 from labrig.cli import app
+from labrig.studies.campaign import bench_campaign
 
 K_PER_K = 0.005
 HEATING = {

@@ -11,7 +11,11 @@ import numpy as np
 import pytest
 from labrig.drivers.sim.bench import BenchConfig
 
-from labrig.analysis.diagnose.campaign import (
+from labrig.analysis.load import records_from_run
+from labrig.core.errors import InputFileError
+from labrig.protocol.check import check_protocol
+from labrig.rig.rigspec import load_rig
+from labrig.studies.campaign import (
     BENCH_RIGS,
     BIASED_ENTRIES,
     BIPOLAR_ENTRIES,
@@ -21,10 +25,6 @@ from labrig.analysis.diagnose.campaign import (
     bench_campaign,
     study_campaign,
 )
-from labrig.analysis.load import records_from_run
-from labrig.errors import InputFileError
-from labrig.protocol.check import check_protocol
-from labrig.rigspec import load_rig
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -21,7 +21,7 @@ from labrig.drivers.sim.effects import (
 from pydantic import TypeAdapter, ValidationError
 from scipy.optimize import curve_fit
 
-from labrig.limits import RigLimits
+from labrig.rig.limits import RigLimits
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -18,8 +18,8 @@ import pytest
 import yaml
 from labrig.drivers import strain_registers as R
 
-from labrig.errors import DeviceError
-from labrig.rigfile import DEFAULT_RIG_YAML, open_rig
+from labrig.core.errors import DeviceError
+from labrig.runner.rigfile import DEFAULT_RIG_YAML, open_rig
 
 pytestmark = pytest.mark.timeout(60)
 

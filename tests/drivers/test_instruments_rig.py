@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import yaml
 
-from labrig.errors import DeviceError, InputFileError
-from labrig.instruments import DAQ, AcquiredBlock, Amplifier, Conditioner, DriverInfo, Rig
-from labrig.rigfile import DEFAULT_RIG_YAML, driver_names, get_driver, load_rig, open_rig
+from labrig.core.errors import DeviceError, InputFileError
+from labrig.rig.instruments import DAQ, AcquiredBlock, Amplifier, Conditioner, DriverInfo, Rig
+from labrig.runner.rigfile import DEFAULT_RIG_YAML, driver_names, get_driver, load_rig, open_rig
 
 from helpers import rig_path
 

@@ -11,7 +11,7 @@ from labrig.drivers.sim.effects import ButterLowpass, Creep, LogCreep, SelfHeati
 from labrig.drivers.sim.hybrid import EQ11_DEN, EQ11_NUM, HybridParams, HybridPlant
 
 from labrig.model import PAPER_TABLE1, DynamicHysteresisModel
-from labrig.rigfile import open_rig
+from labrig.runner.rigfile import open_rig
 
 from helpers import rig_path
 

@@ -15,7 +15,7 @@ import serial
 import yaml
 from pymodbus.client import ModbusTcpClient
 
-from labrig.rigfile import DEFAULT_RIG_YAML
+from labrig.runner.rigfile import DEFAULT_RIG_YAML
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.io import savemat
 
-from labrig.errors import InputFileError
+from labrig.core.errors import InputFileError
 from labrig.importers import ImportOptions, check_options, read_entries
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "import"

@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 from labrig.analysis.diagnose.acceptance import accept
-from labrig.analysis.diagnose.campaign import bench_campaign
 from labrig.analysis.extended import ExtendedProblem
 from labrig.analysis.fit import PARAM_NAMES, fit_model
 from labrig.analysis.simulate import build_sequences
@@ -27,6 +26,7 @@ from labrig.analysis.terms import (
 )
 from labrig.model.effects.base import Context
 from labrig.model.effects.empirical import EMPIRICAL_NOTE, EmpiricalTerms
+from labrig.studies.campaign import bench_campaign
 
 SCALES = TermScales(100.0, 2e4, 1000.0)
 #: a small campaign: 100 and 50 V at 1 and 10 Hz, 1 s rests (6 s recorded)

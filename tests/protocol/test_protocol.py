@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from labrig.errors import InputFileError
-from labrig.limits import RigLimits
+from labrig.core.errors import InputFileError
 from labrig.protocol import preflight as pf
 from labrig.protocol.check import check_protocol, format_plan, load_plan
 from labrig.protocol.waveforms import envelope, unipolar_sine
+from labrig.rig.limits import RigLimits
 
 ROOT = Path(__file__).resolve().parents[2]
 EXP = ROOT / "experiments"

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from labrig.errors import InputFileError
+from labrig.core.errors import InputFileError
 from labrig.protocol.check import check_protocol
 
 BAD = Path(__file__).parents[1] / "data" / "bad"

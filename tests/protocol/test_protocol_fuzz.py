@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
-from labrig.errors import InputFileError
+from labrig.core.errors import InputFileError
 from labrig.protocol.check import check_protocol
 from labrig.protocol.schema import STEP_KINDS, Protocol
 

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from labrig.errors import InputFileError
+from labrig.core.errors import InputFileError
 from labrig.protocol.check import check_protocol
 from labrig.protocol.numbers import amps, at_least, at_most, beyond, exact, fixed
 

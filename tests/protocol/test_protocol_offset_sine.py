@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from labrig.errors import InputFileError
-from labrig.limits import RigLimits
+from labrig.core.errors import InputFileError
 from labrig.protocol import preflight as pf
 from labrig.protocol.check import check_protocol, format_plan, load_plan
+from labrig.rig.limits import RigLimits
 
 #: the bipolar rig's limits (experiments/rigs/bipolar.yaml)
 BIPOLAR = RigLimits(

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from labrig import runner
 from labrig.cli import app
+from labrig.runner.execute import execute as runner
 from labrig.store import read_run
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,6 +1,6 @@
 """The runner in-process: Ctrl-C, device faults, rests and bad --out paths on the simulated rig.
 
-``labrig.runner.open_rig`` is wrapped (not replaced) so each test keeps the rig the runner
+``labrig.runner.execute.open_rig`` is wrapped (not replaced) so each test keeps the rig the runner
 opened: its simulators (``rig.sim``) stay inspectable after the run closed them, which is how
 these tests see the amplifier's real output voltage (the virtual bench's ``amp.v_out``), and
 how faults are injected mid-run through the simulators' own hooks (the drivers under test are
@@ -20,9 +20,9 @@ import h5py
 import pytest
 import yaml
 
-from labrig import runner
-from labrig.errors import InputFileError
-from labrig.rigfile import DEFAULT_RIG_YAML
+from labrig.core.errors import InputFileError
+from labrig.runner.execute import execute as runner
+from labrig.runner.rigfile import DEFAULT_RIG_YAML
 from labrig.store import read_run
 
 pytestmark = pytest.mark.timeout(60)

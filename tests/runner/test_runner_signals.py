@@ -34,7 +34,7 @@ import h5py
 import numpy as np
 import pytest
 
-from labrig.runner import preflight
+from labrig.runner.execute import preflight
 from labrig.store import read_run
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -204,7 +204,7 @@ WRITER = textwrap.dedent(
     """
     import sys
     from pathlib import Path
-    from labrig.runner import execute, preflight
+    from labrig.runner.execute import execute, preflight
 
     plan, rig = preflight(Path(sys.argv[1]), None)
 

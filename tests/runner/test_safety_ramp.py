@@ -26,9 +26,9 @@ import numpy as np
 import pytest
 import yaml
 
-from labrig import runner
-from labrig.errors import DeviceError
-from labrig.rigfile import DEFAULT_RIG_YAML, open_rig
+from labrig.core.errors import DeviceError
+from labrig.runner.execute import execute as runner
+from labrig.runner.rigfile import DEFAULT_RIG_YAML, open_rig
 
 pytestmark = pytest.mark.timeout(60)
 

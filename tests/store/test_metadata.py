@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 
 import labrig
 from labrig.cli import app
-from labrig.metadata import MetadataError, from_options, parse_assignment
+from labrig.core.metadata import MetadataError, from_options, parse_assignment
 from labrig.store import RunWriter, read_run
 from labrig.store.writer import seal_all
 

@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 import pytest
 
-from labrig.errors import InputFileError
+from labrig.core.errors import InputFileError
 from labrig.store import RunWriter, read_run
 
 CHANNELS = ["command_voltage", "strain"]

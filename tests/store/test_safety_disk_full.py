@@ -27,7 +27,7 @@ import h5py
 import numpy as np
 import pytest
 
-from labrig.runner import preflight
+from labrig.runner.execute import preflight
 from labrig.store import read_run
 
 pytestmark = pytest.mark.timeout(120)
@@ -97,7 +97,7 @@ HDF5_MEETS_IT = textwrap.dedent(
     subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", mnt], check=True)
     import labrig.store.writer
     labrig.store.writer.free_bytes = lambda path: 1 << 40  # the check sees room; HDF5 won't
-    from labrig.runner import execute, preflight
+    from labrig.runner.execute import execute, preflight
     plan, rig = preflight(Path(proto), None)
     run = Path(mnt) / "run.h5"
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from labrig.errors import StorageError
+from labrig.core.errors import StorageError
 from labrig.store import RunWriter, read_run
 from labrig.store import writer as store_writer
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from labrig import __version__
-from labrig.errors import InputFileError
+from labrig.core.errors import InputFileError
+from labrig.core.version import __version__
 from labrig.store import (
     STANDARD_CHANNELS,
     Channel,

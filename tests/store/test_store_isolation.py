@@ -24,7 +24,7 @@ import h5py
 import numpy as np
 import pytest
 
-from labrig.errors import InputFileError, InputIssue
+from labrig.core.errors import InputFileError, InputIssue
 from labrig.store import RunWriter, read_run
 from labrig.store import isolated as store_isolated
 from labrig.store import reader as store_reader

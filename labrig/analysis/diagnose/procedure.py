@@ -52,10 +52,10 @@ from labrig.analysis.diagnose.verdict import (
 from labrig.analysis.extended import LAM_GAP, ExtendedProblem, FitOutcome, effect_context
 from labrig.analysis.fit import PARAM_NAMES, FitResult, fit_model
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic
-from labrig.analysis.prepare import split_entries
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import build_sequences
 from labrig.analysis.spectra import detect_mains_hz
+from labrig.analysis.split import split_entries
 from labrig.analysis.terms import (
     TermScales,
     empirical_effect,
@@ -63,7 +63,7 @@ from labrig.analysis.terms import (
     select_terms,
     term_library,
 )
-from labrig.blas import single_thread_blas
+from labrig.core.blas import single_thread_blas
 from labrig.model import ModelParams
 from labrig.model.effects import CREEP_EFFECTS, EFFECT_NAMES, Effect, library
 

@@ -20,7 +20,7 @@ from scipy import optimize
 
 from labrig.analysis.extended import ExtendedProblem, FitOutcome
 from labrig.analysis.records import Record
-from labrig.blas import single_thread_blas
+from labrig.core.blas import single_thread_blas
 from labrig.model.effects import Effect
 
 __all__ = ["jacobian_basis", "nuisance_directions", "rank"]

@@ -1,9 +1,9 @@
 """Open a rig: the drivers of a rig file, and the simulators when the rig is simulated.
 
-Reading and validating rig files is :mod:`labrig.rigspec` (re-exported here: ``load_rig``,
+Reading and validating rig files is :mod:`labrig.rig.rigspec` (re-exported here: ``load_rig``,
 ``RigSpec``, ``DEFAULT_RIG_YAML``, the driver registry). :func:`open_rig` starts the virtual
 bench and its protocol servers on 127.0.0.1 for a simulated rig, creates the drivers and
-returns a :class:`~labrig.instruments.Rig`. Full reference: ``docs/instruments.md``.
+returns a :class:`~labrig.rig.instruments.Rig`. Full reference: ``docs/instruments.md``.
 """
 
 from __future__ import annotations
@@ -12,10 +12,9 @@ import logging
 import secrets
 from pathlib import Path
 
-from labrig.errors import DeviceError, InputFileError, InputIssue
-from labrig.instruments import DriverContext, Rig
-from labrig.rigspec import (
-    BUILTIN_DRIVERS,
+from labrig.core.errors import DeviceError
+from labrig.rig.instruments import DriverContext, Rig
+from labrig.rig.rigspec import (
     DEFAULT_RIG_NAME,
     DEFAULT_RIG_YAML,
     ENTRY_POINT_GROUP,
@@ -25,9 +24,10 @@ from labrig.rigspec import (
     driver_names,
     get_driver,
     load_rig,
+    simulator,
 )
 
-log = logging.getLogger("labrig.rigfile")
+log = logging.getLogger("labrig.runner.rigfile")
 
 
 # -- opening --------------------------------------------------------------------------------
@@ -85,28 +85,13 @@ def open_rig(path: Path | str | None = None, seed: int | None = None) -> Rig:
 
 
 def start_simulators(spec: RigSpec, seed: int | None):
-    """Start the virtual bench and its servers for a simulated rig; a simulator port that
-    cannot be bound is an :class:`InputFileError` naming the rig file's field (exit 2)."""
-    from labrig.drivers.sim.bench import BenchConfig
-    from labrig.drivers.sim.serve import SimulatorPortError, Simulators
-
-    amp_s = spec.settings["amplifier"]
-    try:
-        return Simulators(
-            spec.bench_config or BenchConfig(),
-            spec.limits,
-            seed,
-            spec.sim_ports,
-            axis=getattr(amp_s, "axis", "A"),
-            channel=getattr(amp_s, "channel", "1"),
-            unit=getattr(spec.settings["conditioner"], "unit", 1),
-        ).start()
-    except SimulatorPortError as e:
-        raise InputFileError([InputIssue(spec.source, None, e.field, e.detail)]) from None
+    """Start the virtual bench and its servers for a simulated rig (through the
+    ``labrig.simulators`` entry point); a simulator port that cannot be bound is an
+    :class:`InputFileError` naming the rig file's field (exit 2)."""
+    return simulator().start(spec, seed)
 
 
 __all__ = [
-    "BUILTIN_DRIVERS",
     "DEFAULT_RIG_NAME",
     "DEFAULT_RIG_YAML",
     "ENTRY_POINT_GROUP",

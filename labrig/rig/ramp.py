@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from labrig.limits import RigLimits
+from labrig.rig.limits import RigLimits
 
 #: ramp-down current as a fraction of the amplifier's peak current
 RAMP_CURRENT_FRACTION = 0.5

@@ -8,11 +8,11 @@ import math
 
 import numpy as np
 
-from labrig.instruments import Rig
-from labrig.ramp import RAMP_CURRENT_FRACTION, RampRecord
+from labrig.rig.instruments import Rig
+from labrig.rig.ramp import RAMP_CURRENT_FRACTION, RampRecord
 from labrig.store import RunWriter
 
-log = logging.getLogger("labrig.runner")
+log = logging.getLogger("labrig.runner.execute")
 
 #: the ramp record keeps at most this many points (evenly spaced writes, first and last kept)
 RAMP_RECORD_POINTS = 4096

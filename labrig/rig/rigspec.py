@@ -8,18 +8,19 @@ level keys::
     daq:         {driver: sim_daq, ...driver settings}
     amplifier:   {driver: pi_e503, url: sim, gain_V_per_V: 10, ...}
     conditioner: {driver: strain_modbus, transport: tcp, address: sim, ...}
-    limits:      {v_min_V: -20, v_max_V: 100, capacitance_F: 6e-6, ...}   (labrig.limits.RigLimits)
+    limits:      {v_min_V: -20, v_max_V: 100, capacitance_F: 6e-6, ...}   (rig.limits.RigLimits)
     bench:       {truth: ..., amplifier: ..., gauge: ..., daq: ..., effects: [...]}  (simulated)
     simulator:   {seed: null, gcs_port: 0, modbus_tcp_port: 0, modbus_rtu_port: 0}
 
 Each role's keys besides ``driver`` are that driver's settings (its pydantic model). Drivers are
-found through the ``labrig.drivers`` entry-point group (built-in ones also without installation).
+found through the ``labrig.drivers`` entry-point group, the virtual bench through
+``labrig.simulators``.
 A rig is *simulated* when it has a ``bench`` section, uses the ``sim_daq`` driver, or gives the
-address ``sim``: :func:`labrig.rigfile.open_rig` then starts the virtual bench and its protocol
-servers on 127.0.0.1 and the real drivers talk to them over their transports. Full reference:
-``docs/instruments.md``.
+address ``sim``: :func:`labrig.runner.rigfile.open_rig` then starts the virtual bench and its
+protocol servers on 127.0.0.1 and the real drivers talk to them over their transports. Full
+reference: ``docs/instruments.md``.
 
-This module reads and validates (it opens nothing and starts nothing); :mod:`labrig.rigfile`
+This module reads and validates (it opens nothing and starts nothing); :mod:`labrig.runner.rigfile`
 opens a rig. The simulators (:mod:`labrig.drivers.sim.serve`) read rig files from here, so
 imports run one way: ``rigfile -> drivers.sim.serve -> rigspec``.
 """
@@ -36,22 +37,17 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 
-from labrig.errors import DeviceError, InputFileError, InputIssue
-from labrig.instruments import DriverInfo
-from labrig.limits import RigLimits
-from labrig.yamlio import issues_from_validation, line_index, read_yaml
+from labrig.core.errors import DeviceError, InputFileError, InputIssue
+from labrig.core.yamlio import issues_from_validation, line_index, read_yaml
+from labrig.rig.instruments import DriverInfo, SimulatorInfo
+from labrig.rig.limits import RigLimits
 
-log = logging.getLogger("labrig.rigspec")
+log = logging.getLogger("labrig.rig.rigspec")
 
 ENTRY_POINT_GROUP = "labrig.drivers"
+#: the entry-point group of the virtual bench (its ``bench`` section and its simulators)
+SIMULATOR_GROUP = "labrig.simulators"
 ROLES = ("daq", "amplifier", "conditioner")
-
-BUILTIN_DRIVERS = {
-    "sim_daq": "labrig.drivers.sim.daq:DRIVER",
-    "pi_e503": "labrig.drivers.pi_e503:DRIVER",
-    "strain_modbus": "labrig.drivers.strain_modbus:DRIVER",
-    "nidaqmx": "labrig.drivers.ni_daqmx:DRIVER",
-}
 
 #: how to install the packages the built-in drivers import when they are loaded (a driver whose
 #: package is missing cannot say so itself: its module does not import)
@@ -148,10 +144,26 @@ class SimulatorSettings(BaseModel):
     modbus_rtu_port: int = Field(0, ge=0, le=65535)
 
 
-def _bench_model():
-    from labrig.drivers.sim.bench import BenchConfig
+def simulator(name: str = "bench") -> SimulatorInfo:
+    """The virtual bench registered as ``name`` in the ``labrig.simulators`` entry points."""
+    try:
+        eps = metadata.entry_points(group=SIMULATOR_GROUP, name=name)
+    except Exception as e:  # a broken installation
+        raise DeviceError("simulator", "find the virtual bench", str(e)) from None
+    for ep in eps:
+        info = ep.load()
+        if isinstance(info, SimulatorInfo):
+            return info
+    raise DeviceError(
+        "simulator",
+        "find the virtual bench",
+        f"no {name!r} entry point in the {SIMULATOR_GROUP!r} group: reinstall labrig "
+        "(pip install -e .)",
+    )
 
-    return BenchConfig
+
+def _bench_model() -> type[BaseModel]:
+    return simulator().config
 
 
 def _outline() -> type[BaseModel]:
@@ -178,12 +190,13 @@ def _load_ref(ref: str) -> DriverInfo:
 
 
 def driver_names() -> dict[str, str]:
-    """Driver name -> ``module:object`` reference, built-in and from entry points."""
-    names = dict(BUILTIN_DRIVERS)
+    """Driver name -> ``module:object`` reference, from the ``labrig.drivers`` entry points
+    (labrig's own drivers are registered there too, by its installation)."""
+    names: dict[str, str] = {}
     try:
         for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
             names[ep.name] = ep.value
-    except Exception as e:  # a broken installation must not hide the built-in drivers
+    except Exception as e:  # a broken installation: say so, list what was found
         log.warning("reading the %s entry points failed: %s", ENTRY_POINT_GROUP, e)
     return names
 

@@ -16,7 +16,7 @@ Every file a command writes (``fit --out``, ``report --out``, ``diagnose --out D
   they are still empty. After a crash the old file is untouched and the partial folder stays
   beside it.
 
-Problems are :class:`~labrig.errors.InputFileError` (exit code 2) naming the file and the
+Problems are :class:`~labrig.core.errors.InputFileError` (exit code 2) naming the file and the
 option.
 """
 
@@ -31,7 +31,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from labrig.errors import InputFileError, InputIssue
+from labrig.core.errors import InputFileError, InputIssue
 
 #: at most this many existing outputs are named in a refusal
 MAX_NAMED = 5

@@ -9,14 +9,14 @@ step; rests between entries are played as 0 V through the DAQ (not recorded).
 
 Every way a run ends - complete, a stop signal (SIGINT, SIGTERM, SIGHUP, SIGQUIT), a device
 fault, a full disk, any other error - ends the same way: the output is ramped to 0 V within
-the current limit, paced by the wall clock (:mod:`labrig.ramp`), the amplifier is disabled, and
+the current limit, paced by the wall clock (:mod:`labrig.rig.ramp`), the amplifier is disabled, and
 the file records the cause (``status``, ``status_reason``, ``exit_code``), the ramp
 (``/run/ramp_to_zero``) and the amplifier's read-back voltage after it
 (``/run/final_amplifier_voltage_V``). Exit codes: 0 complete, 128 + signal number for a signal
 (SIGINT 130, SIGTERM 143, SIGHUP 129, SIGQUIT 131), 3 for a device fault or a full disk, 2
 for bad input found before the output is energised, 1 for anything unexpected.
 
-Stop signals are deferred while the rig is energised (:class:`labrig.interrupts.SignalGuard`)
+Stop signals are deferred while the rig is energised (:class:`labrig.core.interrupts.SignalGuard`)
 and acted on after the block in flight, so no exception lands in the middle of a write; a
 second signal never interrupts the ramp or the closing of the file.
 """
@@ -33,19 +33,19 @@ from pathlib import Path
 
 import numpy as np
 
-from labrig import __version__
-from labrig.errors import DeviceError, InputFileError, InputIssue, LabrigError
-from labrig.instruments import Rig
-from labrig.interrupts import SignalGuard, exit_code_for, interrupt_once, reason_for, signum_of
-from labrig.limits import RigLimits
-from labrig.metadata import RunMetadata, combine
-from labrig.outputs import Staged, check_outputs, stage
+from labrig.core.errors import DeviceError, InputFileError, InputIssue, LabrigError
+from labrig.core.interrupts import SignalGuard, exit_code_for, interrupt_once, reason_for, signum_of
+from labrig.core.metadata import RunMetadata, combine
+from labrig.core.outputs import Staged, check_outputs, stage
+from labrig.core.version import __version__
 from labrig.protocol.check import load_plan
 from labrig.protocol.plan import Plan, PlannedStep
 from labrig.protocol.preflight import preflight as check_plan
-from labrig.ramp import RAMP_CURRENT_FRACTION, RampRecord
-from labrig.rigfile import load_rig, open_rig
-from labrig.run_record import record_end
+from labrig.rig.instruments import Rig
+from labrig.rig.limits import RigLimits
+from labrig.rig.ramp import RAMP_CURRENT_FRACTION, RampRecord
+from labrig.runner.record import record_end
+from labrig.runner.rigfile import load_rig, open_rig
 from labrig.store import Channel, RunWriter, estimate_run_bytes, free_bytes
 from labrig.store.resume import ResumePlan, check_resume, check_same_rig, record_resume
 from labrig.store.space import RESERVE_BYTES
@@ -109,7 +109,7 @@ def preflight(protocol: Path, rig_path: Path | None) -> tuple[Plan, Path | None]
     """Validate the protocol against the rig's limits without opening any device.
 
     The rig is ``rig_path``, else the protocol's ``rig`` key, else the built-in simulated rig.
-    Raises :class:`~labrig.errors.InputFileError` (exit 2) on any problem.
+    Raises :class:`~labrig.core.errors.InputFileError` (exit 2) on any problem.
     """
     plan = load_plan(protocol)
     rig = rig_path if rig_path is not None else plan.rig_path
@@ -120,7 +120,7 @@ def preflight(protocol: Path, rig_path: Path | None) -> tuple[Plan, Path | None]
 
 def ramp_to_zero(rig: Rig) -> RampRecord:
     """Ramp the actuator to 0 V within the current limit, paced by the wall clock, and hold it
-    there (:meth:`labrig.instruments.Rig.ramp_to_zero`). Never raises."""
+    there (:meth:`labrig.rig.instruments.Rig.ramp_to_zero`). Never raises."""
     return rig.ramp_to_zero()
 
 
@@ -274,16 +274,16 @@ def execute(
     in the file and in the outcome).
 
     ``metadata``: the options' metadata (``--meta``, ``--operator``, ``--sample``), put over
-    the protocol's ``metadata:`` (:mod:`labrig.metadata`). ``resume``: continue that run file
+    the protocol's ``metadata:`` (:mod:`labrig.core.metadata`). ``resume``: continue that run file
     with the planned entries it does not hold complete (:mod:`labrig.store.resume`; ``out`` is
     then ignored). ``on_file(path)`` is called once the run file exists, with the path being
     written (a copy beside the target with ``overwrite`` or ``resume``).
 
     Called from the main thread, SIGINT, SIGTERM, SIGHUP and SIGQUIT stop the run once:
     repeats are ignored until the output is at 0 V and the file is closed (see
-    :func:`labrig.interrupts.interrupt_once`). Before the run file exists, a stop signal
-    propagates as :class:`labrig.interrupts.Interrupted`, and bad input as
-    :class:`~labrig.errors.InputFileError` (nothing energised).
+    :func:`labrig.core.interrupts.interrupt_once`). Before the run file exists, a stop signal
+    propagates as :class:`labrig.core.interrupts.Interrupted`, and bad input as
+    :class:`~labrig.core.errors.InputFileError` (nothing energised).
     """
     job = _Job(plan, rig_path, realtime, progress, overwrite, on_file)
     if resume is not None:

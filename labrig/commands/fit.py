@@ -1,9 +1,9 @@
-"""Fitting a prepared run file (:class:`~labrig.analysis.prepare.Setup`) as ``labrig fit`` and
+"""Fitting a prepared run file (:class:`~labrig.commands.prepare.Setup`) as ``labrig fit`` and
 ``labrig report`` ask: our model (:func:`fit_dynamic`), a rate-independent baseline
 (:func:`fit_base`), the model with library effects (:func:`fit_with_effects`), and the whole
 ``fit`` command (:func:`fit_run_file`).
 
-A fit that cannot be done is an :class:`~labrig.analysis.prepare.AnalysisError` (exit code 2)
+A fit that cannot be done is an :class:`~labrig.commands.prepare.AnalysisError` (exit code 2)
 naming the file. What a command shows while it works goes through a :class:`CommandUI` (the
 command line draws progress bars; :class:`QuietUI` shows nothing).
 """
@@ -19,7 +19,7 @@ from typing import Protocol
 from labrig.analysis.baselines import KINDS, BaselineResult, fit_baseline
 from labrig.analysis.fit import FitResult, fit_model
 from labrig.analysis.fit_effects import EffectsFit
-from labrig.analysis.prepare import AnalysisError, Setup, prepare
+from labrig.commands.prepare import AnalysisError, Setup, prepare
 
 #: ``progress(stage, done, total)``; stages: ``model:fit``, ``model:<heldout stage>``, a
 #: baseline's kind, ``effects:<stage>`` of :func:`labrig.analysis.fit_effects.fit_effects`
@@ -164,7 +164,7 @@ def fit_run_file(
     offset: bool | None = None,
     ui: CommandUI | None = None,
 ) -> FitOutcome:
-    """``labrig fit``: read the run file (:func:`~labrig.analysis.prepare.prepare`) and fit
+    """``labrig fit``: read the run file (:func:`~labrig.commands.prepare.prepare`) and fit
     ``model`` (one of :data:`MODELS`) to it; with ``effects`` our model is fitted first, then
     refitted with them (held-out scores only for the refit)."""
     from labrig.analysis.fit_effects import resolve_effects

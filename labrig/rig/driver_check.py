@@ -1,11 +1,11 @@
 """The drivers installed, and whether a rig's drivers load, without opening any device.
 
 :func:`installed_drivers` (``labrig drivers``) lists every driver of the ``labrig.drivers``
-entry-point group and the built-in ones: role, summary, the distribution that registers it, the
+entry-point group: role, summary, the distribution that registers it, the
 Python packages it needs (installed or not, with their versions) and what else it needs that
 only opening the device can check (a vendor's runtime). :func:`load_rig_drivers` (``labrig
 check``) imports the drivers of a validated rig file and the packages they need and reports
-them; a missing package is a :class:`~labrig.errors.DeviceError` naming the role, the driver
+them; a missing package is a :class:`~labrig.core.errors.DeviceError` naming the role, the driver
 and the package (exit code 3), as a run would fail. Neither opens a port, a socket or a device.
 """
 
@@ -17,10 +17,9 @@ from dataclasses import asdict, dataclass, field
 from importlib import metadata
 from typing import Any
 
-from labrig.errors import DeviceError
-from labrig.instruments import DriverInfo, Package
-from labrig.rigspec import (
-    BUILTIN_DRIVERS,
+from labrig.core.errors import DeviceError
+from labrig.rig.instruments import DriverInfo, Package
+from labrig.rig.rigspec import (
     ENTRY_POINT_GROUP,
     ROLES,
     RigSpec,
@@ -128,9 +127,7 @@ def installed_drivers() -> list[DriverReport]:
     providers = _providers()
     out = []
     for name, ref in driver_names().items():
-        provided_by = providers.get(name) or (
-            "labrig (built in)" if name in BUILTIN_DRIVERS else "?"
-        )
+        provided_by = providers.get(name, "?")
         try:
             info = get_driver(name)
         except ModuleNotFoundError as e:
@@ -154,9 +151,7 @@ def load_rig_drivers(spec: RigSpec) -> list[DriverReport]:
     out = []
     for role in ROLES:
         info = spec.drivers[role]
-        provided_by = providers.get(info.name) or (
-            "labrig (built in)" if info.name in BUILTIN_DRIVERS else "?"
-        )
+        provided_by = providers.get(info.name, "?")
         report = _report(info.name, names.get(info.name, "?"), provided_by, info, import_it=True)
         for p in report.packages:
             if not p.ok:

@@ -21,7 +21,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from labrig.words import plural
+from labrig.core.words import plural
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -31,8 +31,8 @@ if TYPE_CHECKING:
     from labrig.analysis.diagnose import Diagnosis
     from labrig.analysis.fit import FitResult
     from labrig.analysis.fit_effects import EffectsFit
-    from labrig.report.build import BuiltReport
-    from labrig.runner import ProgressFn
+    from labrig.commands.report import BuiltReport
+    from labrig.runner.execute import ProgressFn
     from labrig.store import RunEntry, RunFile
 
 PathLike = str | os.PathLike[str]
@@ -198,7 +198,7 @@ class Run:
         ``entry`` column, then one column per channel named with its unit (``time_s``,
         ``command_voltage_V``, ``strain_ue``); ``df.attrs["units"]`` and
         ``df.attrs["long_names"]`` by column. One entry: ``df[df.entry == name]``."""
-        from labrig.api_frames import entries_frame
+        from labrig.api.frames import entries_frame
 
         return entries_frame(self._chosen(entries), self._attrs())
 
@@ -206,7 +206,7 @@ class Run:
         """The samples as an xarray Dataset with dimensions ``entry`` and ``sample`` (shorter
         entries padded with NaN), units in each variable's attrs. Needs xarray
         (``pip install 'labrig[xarray]'``): without it, an ImportError that says so."""
-        from labrig.api_frames import entries_dataset
+        from labrig.api.frames import entries_dataset
 
         return entries_dataset(self._chosen(entries), self._attrs())
 
@@ -227,7 +227,7 @@ class Run:
         """``labrig fit``: identify the model (or the baseline ``model``) from the run; the
         options are the command's. ``as_json(result)`` is what ``labrig fit --json`` prints;
         ``result.params`` the parameters (our model)."""
-        from labrig.analysis.fit_run import fit_run_file
+        from labrig.commands.fit import fit_run_file
 
         outcome = fit_run_file(
             self.path,
@@ -259,7 +259,7 @@ class Run:
         """``labrig report``: model versus measurement. Returns the report (``.page``, the
         HTML; ``.metrics``, what ``labrig report --json`` prints) and writes the page to
         ``out`` when given (an existing file only with ``overwrite``)."""
-        from labrig.report.build import build_run_report
+        from labrig.commands.report import build_run_report
 
         target = Path(out) if out is not None else None
         params_path = Path(params) if params is not None else None
@@ -276,7 +276,7 @@ class Run:
             ui=_ui(progress),
         )
         if target is not None:
-            from labrig.outputs import write_text_output
+            from labrig.core.outputs import write_text_output
 
             write_text_output(target, built.page, overwrite=overwrite)
         return built
@@ -297,7 +297,7 @@ class Run:
         ``mains_hz``: the mains frequency (Hz; default: detected at 50 or 60 Hz). ``out``: a
         folder for ``diagnosis.json`` and ``diagnosis.html`` (existing ones replaced only with
         ``overwrite``; checked before the work, written beside and renamed into place)."""
-        from labrig.analysis.diagnose.run_file import OUTPUT_NAMES, diagnose_run_file
+        from labrig.commands.diagnose import OUTPUT_NAMES, diagnose_run_file
 
         folder = Path(out) if out is not None else None
         params_path = Path(params) if params else None
@@ -388,12 +388,12 @@ def _silent(message: str) -> None:
 
 
 def _ui(progress: bool):
-    """The analysis' :class:`~labrig.analysis.fit_run.CommandUI`: bars on stderr or nothing."""
+    """The analysis' :class:`~labrig.commands.fit.CommandUI`: bars on stderr or nothing."""
     if progress:
-        from labrig.cli.progress import RichUI
+        from labrig.commands.progress import RichUI
 
         return RichUI()
-    from labrig.analysis.fit_run import QuietUI
+    from labrig.commands.fit import QuietUI
 
     return QuietUI()
 
@@ -403,9 +403,9 @@ def _check_targets(
 ) -> None:
     """Before the work, as Python expects: a folder where a file goes is an
     ``IsADirectoryError``, an existing file without ``overwrite`` a ``FileExistsError``; then
-    the checks of :func:`labrig.outputs.check_writable` (an input as output, a place that
-    cannot be written: :class:`~labrig.errors.InputFileError`)."""
-    from labrig.outputs import check_writable
+    the checks of :func:`labrig.core.outputs.check_writable` (an input as output, a place that
+    cannot be written: :class:`~labrig.core.errors.InputFileError`)."""
+    from labrig.core.outputs import check_writable
 
     for t in targets:
         if t.is_dir():
@@ -419,17 +419,17 @@ def as_json(result: Any) -> dict[str, Any]:
     """What the command line prints with ``--json`` for a result of :meth:`Run.fit`,
     :meth:`Run.diagnose` (``to_json()``, undefined numbers as ``None``) or :meth:`Run.report`
     (its metrics)."""
-    from labrig.jsonsafe import json_safe
-    from labrig.report.build import BuiltReport
+    from labrig.commands.report import BuiltReport
+    from labrig.core.jsonsafe import json_safe
 
     if isinstance(result, BuiltReport):
         return result.metrics
     return json_safe(result.to_json())
 
 
-def open(path: PathLike) -> Run:  # labrig.open (the builtin stays open inside labrig.api)
+def open(path: PathLike) -> Run:  # labrig.open (the builtin stays open inside labrig.api.runs)
     """Open a run file: metadata now, samples on first use. A missing, damaged or foreign file
-    raises :class:`~labrig.errors.InputFileError` naming it."""
+    raises :class:`~labrig.core.errors.InputFileError` naming it."""
     from labrig.catalogue.read import read_metadata
     from labrig.store import read_run
 
@@ -484,9 +484,9 @@ def run(
     Ctrl-C (SIGINT) stops the run that way and then raises ``KeyboardInterrupt``; another stop
     signal raises ``SystemExit`` with the command's exit code (128 + the signal number). A run
     that ended on a device fault or a full disk is returned (``status`` says ``failed``, with
-    a warning). Bad input raises :class:`~labrig.errors.InputFileError` before anything is
+    a warning). Bad input raises :class:`~labrig.core.errors.InputFileError` before anything is
     energised."""
-    from labrig.runner import execute, preflight
+    from labrig.runner.execute import execute, preflight
 
     rig_path = Path(rig) if rig is not None else None
     plan, rig_path = preflight(Path(protocol), rig_path)

@@ -2,17 +2,17 @@
 
 Drivers live in ``labrig.drivers`` (the repository's ``drivers/``) and are found through the
 ``labrig.drivers`` entry-point group: each entry point names a :class:`DriverInfo` (role, the
-pydantic model of its rig-file section, and a factory). :func:`labrig.rigfile.open_rig` reads a
-rig file, starts the simulators when the rig is simulated, creates the drivers and returns a
+pydantic model of its rig-file section, and a factory). :func:`labrig.runner.rigfile.open_rig` reads
+a rig file, starts the simulators when the rig is simulated, creates the drivers and returns a
 :class:`Rig`.
 
 Units: V, s, Hz, ue (microstrain). Raw DAQ data are volts at the DAQ input; the Rig's helpers
 convert them (``gauge_to_strain``, ``monitor_to_volts``, ``temperature_to_degC``).
 
 Safety contract: a driver never steps the output on its own: on a fault it raises a
-:class:`~labrig.errors.DeviceError` and leaves the output where it is. Bringing the actuator to
+:class:`~labrig.core.errors.DeviceError` and leaves the output where it is. Bringing the actuator to
 0 V is the :class:`Rig`'s job, always by a ramp within the amplifier's current limit
-(:mod:`labrig.ramp`): :meth:`Rig.ramp_to_zero` / :meth:`Rig.safe_zero` (never raise),
+(:mod:`labrig.rig.ramp`): :meth:`Rig.ramp_to_zero` / :meth:`Rig.safe_zero` (never raise),
 :meth:`Rig.check` before it raises, :meth:`Rig.zero_on_error` and :meth:`Rig.close`. The ramp
 goes through the DAQ's analog output; if the DAQ cannot be written, through the amplifier's
 digital setpoint (optional amplifier methods ``take_digital_control(volts)`` and
@@ -32,11 +32,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel
 
-from labrig.errors import DeviceError
-from labrig.limits import RigLimits
-from labrig.ramp import RampRecord, paced_ramp, ramp_rate_V_per_s
+from labrig.core.errors import DeviceError
+from labrig.rig.limits import RigLimits
+from labrig.rig.ramp import RampRecord, paced_ramp, ramp_rate_V_per_s
 
-log = logging.getLogger("labrig.instruments")
+log = logging.getLogger("labrig.rig.instruments")
 
 Role = Literal["daq", "amplifier", "conditioner"]
 
@@ -172,7 +172,7 @@ class Conditioner(Protocol):
 
 @dataclass
 class DriverContext:
-    """What :func:`labrig.rigfile.open_rig` hands a driver factory.
+    """What :func:`labrig.runner.rigfile.open_rig` hands a driver factory.
 
     ``endpoints`` maps simulator kinds (``"gcs"``, ``"modbus_tcp"``, ``"modbus_rtu"``) to the
     address of the simulator started for this rig; a rig-file address ``sim`` resolves to it.
@@ -215,6 +215,18 @@ class DriverInfo:
     summary: str = ""
     packages: tuple[Package, ...] = ()
     runtime: str = ""
+
+
+@dataclass(frozen=True)
+class SimulatorInfo:
+    """The virtual bench as registered under the ``labrig.simulators`` entry-point group: the
+    pydantic model of a rig file's ``bench`` section, and ``start(spec, seed)``, which starts the
+    bench and its protocol servers for a validated simulated rig (a
+    :class:`~labrig.rig.rigspec.RigSpec`) and returns them running (``stop()`` ends them)."""
+
+    name: str
+    config: type[BaseModel]
+    start: Callable[[Any, int | None], Any]
 
 
 # -- the rig ------------------------------------------------------------------------------------
@@ -348,7 +360,7 @@ class Rig:
 
     def ramp_to_zero(self) -> RampRecord:
         """Ramp the actuator from its present voltage to 0 V within the current limit, paced by
-        the wall clock (:func:`labrig.ramp.paced_ramp`), then hold 0 V (DAQ stopped at 0 V,
+        the wall clock (:func:`labrig.rig.ramp.paced_ramp`), then hold 0 V (DAQ stopped at 0 V,
         amplifier at 0 V and disabled). Never raises; what happened is in the record."""
         abort = getattr(self.daq, "abort_playback", None)
         if callable(abort):  # a suspended playback holds the AO; end it without moving it

@@ -36,8 +36,8 @@ import numpy as np
 
 from labrig.analysis.records import Record
 from labrig.analysis.signals import sine, step_hold
-from labrig.limits import RigLimits
 from labrig.protocol.schema import OffsetSineStep
+from labrig.rig.limits import RigLimits
 
 #: a short campaign (about 14 s recorded, 20 s with rests): both amplitudes at 1, 10, 40 Hz
 SHORT_ENTRIES: tuple[tuple[float, float, float], ...] = (
@@ -265,7 +265,7 @@ def bench_campaign(
             name = f"{name}_{names[name]}"
         aux = {"amplifier_voltage": ch["amp_monitor"] / config.amplifier.monitor_V_per_V}
         if "temperature" in ch:
-            from labrig.instruments import TEMPERATURE_V_PER_DEGC
+            from labrig.rig.instruments import TEMPERATURE_V_PER_DEGC
 
             aux["temperature"] = ch["temperature"] / TEMPERATURE_V_PER_DEGC
         time_s = np.arange(v.size) / rate_hz
@@ -276,7 +276,7 @@ def bench_campaign(
     return out
 
 
-# -- attribution study (python -m labrig.analysis.diagnose.campaign) --------------------------
+# -- attribution study (python -m labrig.studies.campaign) --------------------------
 
 #: bench effect (rig-file form) for each library effect, at clear strengths
 STUDY_CASES: dict[str, list[dict[str, Any]]] = {

@@ -3,7 +3,7 @@
 The one measurement behind both limit checks: the protocol preflight
 (:func:`labrig.protocol.preflight.measure`, on a planned step's waveform) and the controller's
 :func:`labrig.control.check_drive` (on a computed drive). Both then compare it with the rig's
-:class:`~labrig.limits.RigLimits` and word their own messages.
+:class:`~labrig.rig.limits.RigLimits` and word their own messages.
 
 The current into the stack is ``i = C_eff dV/dt`` (:meth:`RigLimits.current_A`: ``C_eff =
 capacitance_F * large_signal_factor``, ``dV/dt`` by central differences). It is taken on a grid
@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from labrig.limits import RigLimits
+from labrig.rig.limits import RigLimits
 
 __all__ = [
     "AVG_WINDOW_S",

@@ -1,4 +1,5 @@
-"""Run-file entries as tables: pandas DataFrames and xarray Datasets (for :class:`labrig.api.Run`).
+"""Run-file entries as tables: pandas DataFrames and xarray Datasets (for
+:class:`labrig.api.runs.Run`).
 
 Column and variable names carry their units the way ``labrig export`` headers do
 (``time_s``, ``command_voltage_V``, ``strain_ue``); the units and long names are also kept as

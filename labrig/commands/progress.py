@@ -1,6 +1,6 @@
 """What ``fit`` and ``report`` show on stderr while they work: the setup line and its notes, rich
 progress bars for the fits, a spinner for the figures (a
-:class:`~labrig.analysis.fit_run.CommandUI`)."""
+:class:`~labrig.commands.fit.CommandUI`)."""
 
 from __future__ import annotations
 
@@ -19,10 +19,10 @@ from rich.progress import (
     TimeElapsedColumn,
 )
 
-from labrig.analysis.prepare import Setup
-from labrig.cli.common import plural
+from labrig.commands.prepare import Setup
+from labrig.core.words import plural
 
-#: what the bars say for the stages the fits report (labrig.analysis.fit_run.Progress)
+#: what the bars say for the stages the fits report (labrig.commands.fit.Progress)
 BASELINE_BARS = {
     "prandtl_ishlinskii": "Prandtl-Ishlinskii: fit (and leave-one-out)",
     "bouc_wen": "Bouc-Wen: fit (and leave-one-out)",
@@ -76,7 +76,7 @@ class FitBars:
 
 
 class RichUI:
-    """The command line's :class:`~labrig.analysis.fit_run.CommandUI`: everything on stderr."""
+    """The command line's :class:`~labrig.commands.fit.CommandUI`: everything on stderr."""
 
     def __init__(self) -> None:
         self.err = Console(stderr=True)

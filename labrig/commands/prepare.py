@@ -38,7 +38,8 @@ import numpy as np
 from labrig.analysis import load
 from labrig.analysis.metrics import drive_frequency_hz
 from labrig.analysis.records import Record
-from labrig.errors import InputFileError, InputIssue, LabrigError
+from labrig.analysis.split import split_entries
+from labrig.core.errors import InputFileError, InputIssue, LabrigError
 from labrig.model import ModelParams
 from labrig.store import RunFile, read_run
 
@@ -308,34 +309,6 @@ def _offset(imported: bool, offset: bool | None, notes: list[str]) -> bool:
     return bool(offset)
 
 
-def split_entries(records: Sequence[Record], parts: int = 4) -> list[Record]:
-    """A single long record cut into ``parts`` consecutive entries (at whole drive periods when
-    the record is periodic), chained with no rest: leave-one-entry-out then has folds. The
-    pieces simulated back to back reproduce the original record exactly."""
-    out: list[Record] = []
-    for r in records:
-        f = drive_frequency_hz(r)
-        per = round(r.rate_hz / f) if f else 1
-        per = per if 1 <= per <= r.n // parts else 1
-        edges = [round(k * (r.n // per) / parts) * per for k in range(parts)] + [r.n]
-        for k in range(parts):
-            a, b = edges[k], edges[k + 1]
-            meta = {**r.meta, "rest_after_s": 0.0, "split_of": r.name}
-            out.append(
-                Record(
-                    f"{r.name}_part{k + 1}",
-                    r.rate_hz,
-                    r.time_s[a:b],
-                    r.voltage_V[a:b],
-                    r.strain_ue[a:b],
-                    {n: x[a:b] for n, x in r.aux.items()},
-                    r.hold,
-                    meta,
-                )
-            )
-    return out
-
-
 @dataclass
 class DiagnoseSetup:
     """What ``diagnose`` starts from: the records it scores, whether to fit one strain offset
@@ -349,14 +322,14 @@ class DiagnoseSetup:
 def prepare_diagnosis(
     path: Path, params_file: Path | None = None, say: Callable[[str], None] = print
 ) -> DiagnoseSetup:
-    """Read the run file (and the start parameters, :func:`labrig.params_file.start_params`)
-    for ``diagnose``.
+    """Read the run file (and the start parameters,
+    :func:`labrig.analysis.params_file.start_params`) for ``diagnose``.
 
     A file of one entry is cut into :data:`DIAGNOSE_SPLIT` consecutive parts
     (:func:`split_entries`, said through ``say``) for leave-one-entry-out; imported data get an
     offset per entry (the sensor's zero is arbitrary). Fewer than :data:`MIN_DIAGNOSE_ENTRIES`
-    entries: an :class:`~labrig.errors.InputFileError`."""
-    from labrig.params_file import start_params
+    entries: an :class:`~labrig.core.errors.InputFileError`."""
+    from labrig.analysis.params_file import start_params
 
     records = load.records_from_run(path)
     start = start_params(params_file, say) if params_file is not None else None

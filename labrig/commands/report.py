@@ -2,7 +2,7 @@
 (or takes its parameters from a ``labrig fit`` file) and the baselines on the same records, and
 returns the HTML page with its metrics table.
 
-Steps: :func:`~labrig.analysis.prepare.prepare` (which records, chained or not, warm-up,
+Steps: :func:`~labrig.commands.prepare.prepare` (which records, chained or not, warm-up,
 offset); :func:`fit_report_models` (our model and the baselines, as
 :class:`~labrig.report.data.Fitted`); :func:`~labrig.report.data.build_report` (the metrics);
 the figures (:mod:`labrig.report.plots`, :mod:`labrig.report.control_section`) and the page
@@ -20,16 +20,16 @@ from typing import Any
 
 import numpy as np
 
-from labrig import __version__
 from labrig.analysis.baselines import KINDS
 from labrig.analysis.fit import predict_record
-from labrig.analysis.fit_run import CommandUI, Progress, QuietUI, fit_base, fit_dynamic
-from labrig.analysis.prepare import AnalysisError, Setup, prepare
+from labrig.analysis.params_file import fitted_effects, read_fit_output
 from labrig.analysis.records import Record
-from labrig.jsonsafe import json_safe
+from labrig.commands.fit import CommandUI, Progress, QuietUI, fit_base, fit_dynamic
+from labrig.commands.prepare import AnalysisError, Setup, prepare
+from labrig.core.jsonsafe import json_safe
+from labrig.core.version import __version__
 from labrig.model import DynamicHysteresisModel, ModelParams
 from labrig.model.effects import Effect
-from labrig.params_file import fitted_effects, read_fit_output
 from labrig.report.data import (
     Fitted,
     Provenance,
@@ -42,7 +42,7 @@ from labrig.report.data import (
 
 @dataclass
 class FittedModels:
-    """The report's models fitted to a :class:`~labrig.analysis.prepare.Setup`."""
+    """The report's models fitted to a :class:`~labrig.commands.prepare.Setup`."""
 
     models: dict[str, Fitted]
     source: str  # where our model's parameters come from
@@ -66,7 +66,7 @@ def predict_entries(
 ) -> dict[str, np.ndarray]:
     """The model's strain for each scored entry (chained as the run when ``setup.chain``),
     with one offset per entry fitted over the scored samples when ``setup.offset``; with the
-    fitted ``effects`` (:func:`labrig.params_file.fitted_effects`) when given, simulated as
+    fitted ``effects`` (:func:`labrig.analysis.params_file.fitted_effects`) when given, simulated as
     ``labrig fit --effect`` fitted them."""
     if effects and effects[0]:
         from labrig.analysis.extended import ExtendedProblem

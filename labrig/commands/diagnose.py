@@ -1,12 +1,12 @@
 """``labrig diagnose RUN`` as one library call, for the command, the Python API and the batch
-tasks: read the run file (:func:`labrig.analysis.prepare.prepare_diagnosis`), diagnose it
+tasks: read the run file (:func:`labrig.commands.prepare.prepare_diagnosis`), diagnose it
 with the default candidates and the structural effects asked for
 (:func:`labrig.analysis.diagnose.diagnose`), and render or write its outputs,
 ``diagnosis.json`` (the JSON contract, docs/diagnose.md) and ``diagnosis.html``.
 
 Outputs in a folder are checked before the work (an input, an existing file without
-``overwrite``, a place that cannot be written: :class:`~labrig.errors.InputFileError`) and
-written beside their targets, then renamed into place (:mod:`labrig.outputs`).
+``overwrite``, a place that cannot be written: :class:`~labrig.core.errors.InputFileError`) and
+written beside their targets, then renamed into place (:mod:`labrig.core.outputs`).
 """
 
 from __future__ import annotations
@@ -19,11 +19,11 @@ from typing import Any
 
 from labrig.analysis import diagnose as diagnosis
 from labrig.analysis.diagnose import Diagnosis
-from labrig.analysis.prepare import prepare_diagnosis
 from labrig.analysis.records import Record
-from labrig.jsonsafe import json_safe
+from labrig.commands.prepare import prepare_diagnosis
+from labrig.core.jsonsafe import json_safe
+from labrig.core.outputs import staged_outputs
 from labrig.model.effects import EFFECT_NAMES, STRUCTURAL_EFFECT_NAMES
-from labrig.outputs import staged_outputs
 
 __all__ = ["OUTPUT_NAMES", "RunDiagnosis", "diagnose_run_file"]
 
@@ -40,7 +40,7 @@ def _quiet(_message: str) -> None:
 @dataclass
 class RunDiagnosis:
     """A run file's diagnosis: its path, the records diagnosed (after
-    :func:`~labrig.analysis.prepare.prepare_diagnosis`), the structural effects tried beside the
+    :func:`~labrig.commands.prepare.prepare_diagnosis`), the structural effects tried beside the
     defaults, the :class:`~labrig.analysis.diagnose.Diagnosis`, and the folder its outputs
     were written to (``None`` when not written)."""
 

@@ -7,9 +7,9 @@ A parameter file is what ``labrig fit --json`` / ``--out`` writes: an object wit
 configured with. ``diagnose`` also takes a bare ``ModelParams`` object. A baseline's file
 (``labrig fit --model prandtl_ishlinskii``) holds no model parameters and is refused.
 
-Every problem is an :class:`~labrig.errors.InputFileError` (exit code 2) naming the file, the
+Every problem is an :class:`~labrig.core.errors.InputFileError` (exit code 2) naming the file, the
 field and what would be valid; the file is read within bounds (:data:`MAX_PARAMS_BYTES`,
-:func:`labrig.jsonsafe.loads_bounded`: nesting, digits).
+:func:`labrig.core.jsonsafe.loads_bounded`: nesting, digits).
 """
 
 from __future__ import annotations
@@ -24,8 +24,8 @@ from pydantic import ValidationError
 
 from labrig.analysis.baselines import KINDS
 from labrig.analysis.records import Record
-from labrig.errors import InputFileError, InputIssue
-from labrig.jsonsafe import loads_bounded
+from labrig.core.errors import InputFileError, InputIssue
+from labrig.core.jsonsafe import loads_bounded
 from labrig.model import ModelParams
 from labrig.model.effects import Effect
 
