@@ -48,5 +48,5 @@ def watch(
             pass
         finally:
             with guard.defer():
-                server.stop()
+                server.close()  # an open page is told, then the server stops (at most 3 s)
     typer.echo("live view: closed", err=True)

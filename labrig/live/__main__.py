@@ -2,8 +2,9 @@
 ``labrig run --live`` (:mod:`labrig.live.launch`). Prints ``url URL`` (or ``error MESSAGE`` and
 exits 2), then reads commands on stdin: ``file PATH`` (read that file), ``end [PATH]`` (the run
 ended, its file now at PATH: the server reads its final state and goes on serving it). At the
-end of input it stops, once a page has fetched the final state or
-:data:`labrig.live.server.LINGER_S` after the end of input, whichever comes first."""
+end of input it closes (:meth:`labrig.live.server.LiveServer.close`): once a page has fetched
+the final state and been told, or :data:`labrig.live.server.LINGER_S` after the end of input,
+whichever comes first."""
 
 from __future__ import annotations
 
@@ -44,8 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     # end of input: the run command is closing the view (or has gone)
     server.end()
     server.read_once()
-    server.linger()
-    server.stop()
+    server.close()
     return 0
 
 

@@ -18,8 +18,9 @@ HEAD (405 otherwise), request targets of at most :data:`MAX_TARGET` characters (
 
 :class:`LiveServer` serves one run file; the file may not exist yet (``labrig run --live``
 starts the server before the run and names the file once it exists: :meth:`LiveServer.follow`).
-After :meth:`LiveServer.end`, :meth:`LiveServer.linger` keeps serving until a page has fetched
-the run's final state (at most :data:`LINGER_S`), so a page open on the run shows how it ended.
+:meth:`LiveServer.close` tells the pages that the view is closing and keeps serving until a page
+has fetched the run's final state and that word (at most :data:`LINGER_S`), so a page open on
+the run shows how it ended and stops asking.
 """
 
 from __future__ import annotations
@@ -55,6 +56,9 @@ READ_HZ_ENDED = 1.0
 PAGE_POLL_MS = 80
 #: after the run ends, serve at most this long (s) for a page to fetch the final state
 LINGER_S = 3.0
+#: a page that has not asked for this long (s) has gone: closing does not wait for it (an open
+#: page asks every PAGE_POLL_MS, once a second after the run has ended)
+PAGE_GONE_S = 1.5
 #: the longest request target (path and query) answered (characters; longer: 414)
 MAX_TARGET = 1024
 #: a connection that sends no complete request within this time (s) is closed
@@ -104,8 +108,12 @@ class LiveServer:
         self.ended = threading.Event()
         self.stopping = threading.Event()
         self.final_served = threading.Event()
+        #: the view is closing (its run command is done with it); a page told so stops asking
+        self.closing = threading.Event()
+        self.closing_served = threading.Event()
         self._final_parts: set[str] = set()
         self.clients = 0
+        self.last_ask = 0.0  # time.monotonic() of the last /frame request
         self._entries: OrderedDict[tuple[str, int, str], bytes] = OrderedDict()
         self.httpd = ThreadingHTTPServer((HOST, port), _handler(self))
         self.httpd.daemon_threads = True
@@ -145,11 +153,23 @@ class LiveServer:
         self.ended.set()
 
     def linger(self) -> None:
-        """After :meth:`end`: wait until a page fetched the final state (if any page ever
-        connected), at most :data:`LINGER_S`."""
+        """After :meth:`end` and with :attr:`closing` set: wait until a page has fetched the
+        final state and been told that the view is closing (if any page ever connected), at
+        most :data:`LINGER_S`; not for a page that has not asked for :data:`PAGE_GONE_S`)."""
         deadline = time.monotonic() + LINGER_S
-        while self.clients and time.monotonic() < deadline and not self.final_served.is_set():
+        while self.clients and time.monotonic() < deadline:
+            if self.final_served.is_set() and self.closing_served.is_set():
+                return
+            if time.monotonic() - self.last_ask > PAGE_GONE_S:
+                return  # no page is asking any more
             time.sleep(0.05)
+
+    def close(self) -> None:
+        """Close the view: tell the pages (``closing`` in ``/frame``: they keep their last
+        picture and stop asking), :meth:`linger` for them, then :meth:`stop`."""
+        self.closing.set()
+        self.linger()
+        self.stop()
 
     def stop(self) -> None:
         self.stopping.set()
@@ -227,7 +247,10 @@ class LiveServer:
             doc = self.state.document()
         doc["ended"] = self.ended.is_set()
         doc["poll_ms"] = PAGE_POLL_MS
+        doc["closing"] = closing = self.closing.is_set()
         self._served("frame", bool(doc.get("final")))
+        if closing:
+            self.closing_served.set()
         return _json(doc)
 
     def loops_document(self) -> bytes:
@@ -333,6 +356,7 @@ def _handler(server: LiveServer) -> type[BaseHTTPRequestHandler]:
             route, _, query = self.path.partition("?")
             if route == "/frame":
                 server.clients += 1
+                server.last_ask = time.monotonic()
                 self._send(server.document(), "application/json", with_body)
             elif route == "/loops":
                 self._send(server.loops_document(), "application/json", with_body)

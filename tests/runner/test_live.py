@@ -31,7 +31,14 @@ from labrig.cli.run_execute import serve_finished_run
 from labrig.live import load_params
 from labrig.live.frames import EntryInfo, Frame, read_entry, read_frame
 from labrig.live.launch import LiveProcess
-from labrig.live.server import LINGER_S, MAX_TARGET, REFUSALS_LOGGED, UPLOT_VERSION, LiveServer
+from labrig.live.server import (
+    LINGER_S,
+    MAX_TARGET,
+    PAGE_GONE_S,
+    REFUSALS_LOGGED,
+    UPLOT_VERSION,
+    LiveServer,
+)
 from labrig.live.state import (
     MAX_POINTS,
     MIN_OVERLAY_POINTS,
@@ -816,3 +823,78 @@ def test_the_view_process_goes_on_after_the_end_until_its_input_closes(
     assert live_main.main([]) == 0
     assert events == [f"end {finished_run} stopped=False", "end None stopped=False", "stop"]
     assert made[0].state.frame is not None and made[0].state.frame.status == "complete"
+
+
+def page_has_the_final_state(server: LiveServer) -> None:
+    """What an open page does: ask /frame until final, then /loops and the last entry."""
+    port, host = server.port, f"127.0.0.1:{server.port}"
+    for _ in range(100):
+        if json.loads(request(port, "/frame", host)[2]).get("final"):
+            break
+        time.sleep(0.05)
+    assert request(port, "/loops", host)[0] == 200
+    assert request(port, f"/entry?name={VANISHING[0]}", host)[0] == 200
+
+
+def test_closing_tells_an_open_page_then_stops(finished_run: Path):
+    server = LiveServer(finished_run)
+    server.start()
+    server.end()
+    page_has_the_final_state(server)
+    closer = threading.Thread(target=server.close)
+    closer.start()
+    try:
+        time.sleep(0.3)
+        assert closer.is_alive()  # it waits for the page to be told
+        doc = json.loads(request(server.port, "/frame", f"127.0.0.1:{server.port}")[2])
+        assert doc["closing"] is True and doc["final"] is True
+        t0 = time.monotonic()
+        closer.join(timeout=LINGER_S)
+        assert not closer.is_alive() and time.monotonic() - t0 < 1.5
+    finally:
+        closer.join(timeout=10)
+
+
+def test_closing_waits_at_most_linger_s_and_not_for_a_page_that_has_gone(finished_run: Path):
+    server = LiveServer(finished_run)
+    server.start()
+    server.end()
+    port, host = server.port, f"127.0.0.1:{server.port}"
+    # a page that asks for the state but has not fetched the loops yet: waited for, up to
+    # LINGER_S
+    stop_asking = threading.Event()
+
+    def ask() -> None:
+        while not stop_asking.is_set():
+            try:
+                request(port, "/frame", host)
+            except OSError:  # the server has stopped
+                return
+            time.sleep(0.2)
+
+    asker = threading.Thread(target=ask)
+    asker.start()
+    try:
+        time.sleep(0.3)
+        t0 = time.monotonic()
+        server.close()
+        took = time.monotonic() - t0
+    finally:
+        stop_asking.set()
+        asker.join(timeout=10)
+    assert LINGER_S - 0.1 <= took < LINGER_S + 1.0
+    # a page that had the final state and went away: not waited for after PAGE_GONE_S
+    gone = LiveServer(finished_run)
+    gone.start()
+    gone.end()
+    page_has_the_final_state(gone)
+    t0 = time.monotonic()
+    gone.close()
+    # (stop() itself takes up to 0.5 s: the server loop's poll interval)
+    assert time.monotonic() - t0 < PAGE_GONE_S + 1.0
+    # and no page ever: no wait
+    quiet = LiveServer(finished_run)
+    quiet.start()
+    t0 = time.monotonic()
+    quiet.close()
+    assert time.monotonic() - t0 < 1.0

@@ -244,6 +244,7 @@ async function update(doc) {
 }
 
 async function poll() {
+  const started = performance.now();
   let ended = false;
   try {
     const doc = await getJSON("/frame");
@@ -255,6 +256,10 @@ async function poll() {
       await update(doc);
     }
     ended = !!doc.final;
+    if (doc.closing) {  // the view is closing: keep this picture, ask no more
+      text("footer", document.getElementById("footer").textContent + " - the live view has stopped");
+      return;
+    }
   } catch (err) {
     // the server stopped (the run ended): keep the last picture, say so, stop asking
     L.fetchErrors += 1;
@@ -263,7 +268,9 @@ async function poll() {
       return;
     }
   }
-  setTimeout(poll, ended ? ENDED_POLL_MS : pollMs);
+  // ask every pollMs from the start of this ask (not pollMs after its answer and drawing)
+  const wait = (ended ? ENDED_POLL_MS : pollMs) - (performance.now() - started);
+  setTimeout(poll, Math.max(10, wait));
 }
 
 document.getElementById("entry-select").addEventListener("change", () => { L.zoomed = {}; });
