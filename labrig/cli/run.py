@@ -61,7 +61,11 @@ def run(
         None, "--out", help="Run file to write (default: runs/NAME-DATE-TIME.h5).", metavar="FILE"
     ),
     seed: int | None = typer.Option(None, "--seed", help="Random seed of the simulated rig."),
-    realtime: bool = flag(False, "--realtime", help="Pace a simulated rig to the clock."),
+    realtime: bool | None = flag(
+        None,
+        "--realtime/--no-realtime",
+        help="Pace a simulated rig to the clock (default: with --live, yes; without, no).",
+    ),
     overwrite: bool = flag(False, "--overwrite", help="Replace an existing --out file."),
     meta: list[str] = META_OPTION,
     operator: str | None = OPERATOR_OPTION,
@@ -82,19 +86,30 @@ def run(
     params: Path | None = typer.Option(
         None, "--params", help="Live view: draw this model's prediction (labrig fit --out file)."
     ),
+    live_hold: float | None = typer.Option(
+        None,
+        "--live-hold",
+        min=0,
+        help="After a run that ended by itself, serve the finished run this long (implies "
+        "--live; default: until Ctrl-C; 0: stop once an open page has it).",
+        metavar="SECONDS",
+    ),
 ) -> None:
     """Preflight a protocol, run it on the rig, and log every step to an HDF5 run file."""
     from labrig.cli.run_execute import RunExtras, run_with_progress
 
-    live = live or live_port is not None
+    live = live or live_port is not None or live_hold is not None
     if params is not None and not live:
         raise typer.BadParameter("draws on the live view: give --live too", param_hint="--params")
+    if realtime is None:  # a live view is watched: the simulated rig runs at the clock's pace
+        realtime = live
     extras = RunExtras(
         metadata=metadata_of(meta, operator, sample),
         resume=resume,
         live=live,
         live_port=live_port or 0,
         params=params,
+        live_hold=live_hold,
     )
     code = run_with_progress(protocol, rig, out, seed, realtime, overwrite, extras)
     raise typer.Exit(code)

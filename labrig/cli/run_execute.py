@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,7 +20,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
 from labrig.cli.common import plural
-from labrig.core.interrupts import Interrupted, interrupt_once
+from labrig.core.interrupts import STOP_SIGNALS, Interrupted, exit_code_for, interrupt_once
 from labrig.core.metadata import RunMetadata
 from labrig.protocol.plan import Plan
 from labrig.runner.execute import RunOutcome, execute, preflight
@@ -34,6 +35,8 @@ class RunExtras:
     live: bool = False
     live_port: int = 0
     params: Path | None = None
+    #: after a run that ended by itself, serve it this long (s); None: until a stop signal
+    live_hold: float | None = None
 
 
 def run_with_progress(
@@ -45,6 +48,8 @@ def run_with_progress(
     overwrite: bool,
     extras: RunExtras | None = None,
 ) -> int:
+    """Preflight and execute ``protocol`` with a progress bar (and the live view of
+    ``extras``); the exit code (module docstring)."""
     console = Console(stderr=True)
     extras = extras or RunExtras()
     plan, rig_path = preflight(protocol, rig)
@@ -87,8 +92,12 @@ def run_with_progress(
             if live is not None:
                 with guard.defer():
                     live.end(outcome.path if outcome is not None else None)
+                    if outcome is None:  # no run to show
+                        live.close()
         with guard.defer():
             _report(console, outcome)
+    if live is not None:
+        serve_finished_run(console, live, outcome, extras.live_hold)
     return outcome.exit_code
 
 
@@ -102,6 +111,31 @@ def _start_live(console: Console, extras: RunExtras):
     live = LiveProcess(extras.live_port, extras.params)
     console.print(f"live view: {live.url}")
     return live
+
+
+def serve_finished_run(console: Console, live, outcome: RunOutcome, hold: float | None) -> None:
+    """After the run: a run that ended by itself (complete, or failed on a device fault or a
+    full disk) stays on view, its file complete and closed, until a stop signal (Ctrl-C) or
+    ``hold`` seconds; the exit code stays the run's. A run stopped by a signal is not held:
+    the view lingers only until an open page has the final state (at most
+    ``labrig.live.server.LINGER_S``)."""
+    signalled = outcome.exit_code in {exit_code_for(s) for s in STOP_SIGNALS}
+    if signalled or hold == 0 or not live.alive:
+        live.close()
+        return
+    until = "until Ctrl-C" if hold is None else f"for {hold:g} s (Ctrl-C to stop sooner)"
+    _say(console, f"live view: serving the finished run at {live.url} {until}")
+    deadline = None if hold is None else time.monotonic() + hold
+    with interrupt_once() as guard:
+        try:
+            while live.alive and (deadline is None or time.monotonic() < deadline):
+                time.sleep(0.2)
+        except Interrupted:
+            pass
+        finally:
+            with guard.defer():
+                live.close()
+                _say(console, "live view: closed")
 
 
 def _report(console: Console, outcome: RunOutcome) -> None:

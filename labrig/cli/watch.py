@@ -18,11 +18,13 @@ def watch(
         None, "--params", help="Draw this model's prediction (a labrig fit --out file)."
     ),
 ) -> None:
-    """Serve a live view of a run file on 127.0.0.1 until Ctrl-C: the current entry's loop and
-    time series, the model's prediction, the progress and the amplifier (docs/live.md)."""
-    import threading
+    """Serve a live view of a run file on 127.0.0.1 until Ctrl-C (exit 0): the current entry's
+    loop and time series during a run, every entry's loop once it has ended, the model's
+    prediction, the progress and the amplifier (docs/live.md)."""
+    import time
 
     from labrig.core.errors import InputFileError, InputIssue
+    from labrig.core.interrupts import Interrupted, interrupt_once
     from labrig.live import load_params, port_error
     from labrig.live.server import LiveServer
     from labrig.store import read_run
@@ -37,7 +39,14 @@ def watch(
         raise port_error(port, e) from None
     server.start()
     typer.echo(f"live view of {run_file}: {server.url} (Ctrl-C to stop)")
-    try:
-        threading.Event().wait()
-    finally:
-        server.stop()
+    # serve until a stop signal (Ctrl-C, SIGTERM, SIGHUP): stopping the view is how it ends
+    with interrupt_once() as guard:
+        try:
+            while True:
+                time.sleep(0.5)
+        except Interrupted:
+            pass
+        finally:
+            with guard.defer():
+                server.close()  # an open page is told, then the server stops (at most 3 s)
+    typer.echo("live view: closed", err=True)

@@ -1,8 +1,10 @@
 """``python -m labrig.live``: the live view's server as a process of its own, for
 ``labrig run --live`` (:mod:`labrig.live.launch`). Prints ``url URL`` (or ``error MESSAGE`` and
 exits 2), then reads commands on stdin: ``file PATH`` (read that file), ``end [PATH]`` (the run
-ended, its file now at PATH); end of input counts as ``end``. Exits once a page has fetched the
-final state, or :data:`labrig.live.server.LINGER_S` after the end."""
+ended, its file now at PATH: the server reads its final state and goes on serving it). At the
+end of input it closes (:meth:`labrig.live.server.LiveServer.close`): once a page has fetched
+the final state and been told, or :data:`labrig.live.server.LINGER_S` after the end of input,
+whichever comes first."""
 
 from __future__ import annotations
 
@@ -39,11 +41,11 @@ def main(argv: list[str] | None = None) -> int:
             server.follow(Path(arg))
         elif command == "end":
             server.end(Path(arg) if arg else None)
-            break
+            server.read_once()  # the final state, read now (the reader thread goes on)
+    # end of input: the run command is closing the view (or has gone)
     server.end()
-    server.read_once()  # the final state, read now
-    server.linger()
-    server.stop()
+    server.read_once()
+    server.close()
     return 0
 
 

@@ -44,6 +44,8 @@ class EntryInfo:
     planned_samples: int | None
     title: str
     rate_hz: float | None = None
+    #: the drive's frequency (Hz) when its step names one (sines, sweeps, envelopes)
+    frequency_hz: float | None = None
 
 
 @dataclass
@@ -79,32 +81,43 @@ def _get(g: h5py.Group, name: str, default: object = None) -> object:
     return _value(ds) if isinstance(ds, h5py.Dataset) and ds.shape == () else default
 
 
-def _entry_info(name: str, g: h5py.Group, known: dict[str, int | None]) -> EntryInfo:
+#: what a step definition says that a frame keeps: planned samples, drive frequency (Hz)
+StepFacts = tuple[int | None, float | None]
+
+
+def _step_facts(g: h5py.Group) -> StepFacts:
+    """The planned sample count and the drive frequency of an entry's step definition."""
+    step = json.loads(str(_get(g, "step_definition", "{}")))
+    if not isinstance(step, dict):
+        return None, None
+    planned, freq = step.get("n_samples"), step.get("frequency_hz")
+    return (
+        int(planned) if isinstance(planned, int | float) else None,
+        float(freq) if isinstance(freq, int | float) and freq > 0 else None,
+    )
+
+
+def _entry_info(name: str, g: h5py.Group, known: dict[str, StepFacts]) -> EntryInfo:
     data = g.get("data")
     # a reader may land between two channels' writes of one block: the shortest counts
     lengths = [data[c].shape[0] for c in CHANNELS if isinstance(data, h5py.Group) and c in data]
-    if name in known:
-        planned = known[name]
-    else:
-        step = json.loads(str(_get(g, "step_definition", "{}")))
-        planned = step.get("n_samples") if isinstance(step, dict) else None
+    planned, freq = known[name] if name in known else _step_facts(g)
     return EntryInfo(
         name=name,
         index=int(_get(g, "entry_index", -1)),  # type: ignore[arg-type]
         status=str(_get(g, "status", "running")),
         samples=min(lengths, default=0),
-        planned_samples=int(planned) if isinstance(planned, int | float) else None,
+        planned_samples=planned,
         title=str(_get(g, "title", name)),
         rate_hz=_float(_get(g, "sample_rate")),
+        frequency_hz=freq,
     )
 
 
-def read_frame_here(
-    path: str, entry: str | None, start: int, known: dict[str, int | None]
-) -> Frame:
+def read_frame_here(path: str, entry: str | None, start: int, known: dict[str, StepFacts]) -> Frame:
     """Read a frame (module docstring): the current entry's samples from ``start`` on if it is
-    ``entry``, else from its beginning. ``known``: the planned sample counts of entries seen
-    before (their step definitions are not read again)."""
+    ``entry``, else from its beginning. ``known``: the step facts (planned samples, frequency)
+    of entries seen before (their step definitions are not read again)."""
     with h5py.File(path, "r", locking=False) as f:
         allow_cpu()
         run = f["run"]
@@ -132,9 +145,16 @@ def read_frame_here(
         return frame
 
 
-def _read_samples(data: h5py.Group, frame: Frame, entry: str | None, start: int, n: int) -> None:
+def _read_samples(
+    data: h5py.Group,
+    frame: Frame,
+    entry: str | None,
+    start: int,
+    n: int,
+    limit: int = MAX_NEW_SAMPLES,
+) -> None:
     begin = start if entry == frame.current else 0
-    begin = max(begin, n - MAX_NEW_SAMPLES, 0)
+    begin = max(begin, n - limit, 0)
     frame.start = begin
     for c in CHANNELS:
         if c in data and begin < n:
@@ -161,7 +181,7 @@ def _float(v: object) -> float | None:
 
 
 def read_frame(
-    path: Path | str, entry: str | None, start: int, known: dict[str, int | None]
+    path: Path | str, entry: str | None, start: int, known: dict[str, StepFacts]
 ) -> Frame:
     """:func:`read_frame_here` in a child process limited to :data:`FRAME_WALL_S`; raises
     whatever stopped it (the caller skips the frame)."""
@@ -169,3 +189,39 @@ def read_frame(
     return call_isolated(
         read_frame_here, str(path), entry, start, known, size_bytes=size, wall_s=FRAME_WALL_S
     )
+
+
+@dataclass
+class EntryData:
+    """One whole entry as read once it has ended (:func:`read_entry`): its samples from
+    ``start`` on (0 unless the entry is longer than :data:`MAX_ENTRY_SAMPLES`)."""
+
+    info: EntryInfo
+    start: int
+    samples: dict[str, np.ndarray]
+
+
+#: an ended entry is read whole up to this many samples (longer: its last ones)
+MAX_ENTRY_SAMPLES = 2_000_000
+#: reading an ended entry may take this long (s) before it is given up (retried later)
+ENTRY_WALL_S = 20.0
+
+
+def read_entry_here(path: str, name: str) -> EntryData:
+    """Read entry ``name`` of the run file whole (its last :data:`MAX_ENTRY_SAMPLES`
+    samples), verified as :func:`read_frame_here` verifies a frame."""
+    with h5py.File(path, "r", locking=False) as f:
+        allow_cpu()
+        g = f.get(name)
+        if name == "run" or not isinstance(g, h5py.Group) or "data" not in g:
+            raise FrameError(f"{path}: no entry {name!r}")
+        info = _entry_info(name, g, {})
+        frame = Frame("", "", "", [], [info], name, 0)
+        _read_samples(g["data"], frame, None, 0, info.samples, MAX_ENTRY_SAMPLES)
+        return EntryData(info, frame.start, frame.samples)
+
+
+def read_entry(path: Path | str, name: str) -> EntryData:
+    """:func:`read_entry_here` in a child process limited to :data:`ENTRY_WALL_S`."""
+    size = min(Path(path).stat().st_size, 256 << 20)
+    return call_isolated(read_entry_here, str(path), name, size_bytes=size, wall_s=ENTRY_WALL_S)

@@ -59,12 +59,19 @@ class LiveProcess:
         self._send(f"file {path}")
 
     def end(self, final_path: Path | None) -> None:
-        """The run ended; wait for the server to show it (it lingers for a page) and stop."""
+        """The run ended (its file now at ``final_path``): the server reads its final state
+        and goes on serving it until :meth:`close`."""
         self._send(f"end {final_path}" if final_path is not None else "end")
-        self.close()
+
+    @property
+    def alive(self) -> bool:
+        """The server is still running."""
+        return self.proc.poll() is None
 
     def close(self) -> None:
-        """Stop the server (waiting up to :data:`STOP_TIMEOUT_S` for it to finish)."""
+        """Stop the server: it serves until a page open on the run has fetched the final
+        state (at most :data:`labrig.live.server.LINGER_S`), then exits; it is killed after
+        :data:`STOP_TIMEOUT_S`."""
         with contextlib.suppress(OSError, ValueError):
             if self.proc.stdin is not None:
                 self.proc.stdin.close()
