@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from labrig.catalogue.index import INDEX_NAME, FolderIndex, Stamp
-from labrig.catalogue.where import Condition, matches, metadata_values, parse_all
+from labrig.catalogue.where import Condition, check_keys, matches, metadata_values, parse_all
 from labrig.errors import InputFileError, InputIssue
 
 #: file names the catalogue takes for run files when it searches a folder
@@ -121,7 +121,7 @@ def _walk(folder: Path, rel: str = "") -> Iterator[tuple[str, Path, os.stat_resu
 
 def find_run_files(folder: Path) -> dict[str, tuple[Path, Stamp]]:
     """The run files below ``folder``: path relative to it -> (path, stamp)."""
-    return {rel: (path, Stamp(st.st_size, st.st_mtime_ns)) for rel, path, st in _walk(folder)}
+    return {rel: (path, Stamp.of(st)) for rel, path, st in _walk(folder)}
 
 
 @dataclass
@@ -146,7 +146,7 @@ def _targets(paths: Sequence[Path]) -> dict[Path, _Wanted]:
         elif p.is_file():
             st = p.stat()
             w = wanted.setdefault(p.parent, _Wanted())
-            w.files.setdefault(p.name, (p, Stamp(st.st_size, st.st_mtime_ns)))
+            w.files.setdefault(p.name, (p, Stamp.of(st)))
         else:
             missing.append(p)
     if missing:
@@ -182,7 +182,7 @@ def _update(
         if progress is not None:
             progress(done_before + n, total)
 
-    for path, record in read_records(files, done):
+    for path, record in read_records(files, done, full=reindex):
         rel = by_path[str(path)]
         batch.append((rel, wanted.files[rel][1], record))
         if len(batch) >= BATCH_FILES:
@@ -232,10 +232,12 @@ def list_runs(
     indexes: list[Path] = []
     read = 0
     seen: set[Path] = set()
+    detail_keys: set[str] = set()
     for folder, wanted in targets.items():
         with FolderIndex(folder) as index:
             read += _update(index, wanted, reindex, progress, read, total)
             records = index.records(wanted.files, detail or _needs_detail(index, conditions))
+            detail_keys |= index.detail_keys()
             if index.note:
                 notes.append(index.note)
             if index.path is not None:
@@ -247,6 +249,7 @@ def list_runs(
                 continue
             seen.add(key)
             listed.append(ListedRun(path, records[rel]))
+    check_keys(conditions, [r.record for r in listed], detail_keys)
     unreadable = sorted((r for r in listed if not r.readable), key=lambda r: str(r.path))
     runs = []
     for run in listed:
