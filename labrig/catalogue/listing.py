@@ -1,11 +1,12 @@
 """Listing run files: which runs folders hold, what each one is, filtered on request.
 
 :func:`list_runs` finds the run files under folders (recursively) or takes files one by one,
-brings each folder's index up to date (:mod:`labrig.catalogue.index`: only files whose size or
-modification time changed are read, through the store's reader in child processes with time
-limits, :mod:`labrig.catalogue.read`), and keeps the runs that satisfy every ``--where``
-condition (:mod:`labrig.catalogue.where`). A file the reader refuses is listed as
-``unreadable`` with the reader's reason; it never stops the listing.
+brings each folder's index up to date (:mod:`labrig.catalogue.index`: only files whose stamp
+changed are read, from their summary or in full, in child processes with time limits,
+:mod:`labrig.catalogue.read`), checks that every ``--where`` key is one the runs listed have,
+and keeps the runs that satisfy every condition (:mod:`labrig.catalogue.where`). A file the
+reader refuses is listed as ``unreadable`` with the reader's reason; it never stops the
+listing.
 """
 
 from __future__ import annotations

@@ -3,7 +3,9 @@
 An expression is ``KEY OP VALUE``; several ``--where`` must all hold. Operators: ``=``, ``!=``,
 ``~`` (contains), ``!~`` (does not contain), ``<``, ``<=``, ``>``, ``>=``. Text compares
 ignoring case and spaces (``sample=P-888#3`` finds ``P-888 #3``); numbers compare as numbers
-(``=`` within a relative 1e-9); ordering needs a number or a date.
+(``=`` within a relative 1e-9; whole numbers exactly: a 63-bit seed is not a float); ordering
+needs a number or a date. ``status`` compares with what the listing prints (``incomplete`` for
+a file that stores ``running``, which also matches).
 
 Keys, looked up in this order:
 
@@ -21,6 +23,11 @@ Keys, looked up in this order:
   ``/KEY``, or ``KEY/name`` (a NeXus group's name: ``sample`` is ``sample/name``);
   ``operator`` also means ``user`` (NXuser). A run without the key matches only ``!=`` and
   ``!~``.
+
+A bad expression is a :class:`WhereError` (exit 2) naming it and what is valid: no operator, an
+operator that is not one (``==``), a value of the wrong type (a status that is not one, a
+number or a whole number expected, a date expected), and (:func:`check_keys`, once the runs are
+known) a key that no run listed has.
 """
 
 from __future__ import annotations

@@ -16,6 +16,7 @@ import numpy as np
 from labrig.errors import InputFileError, InputIssue
 from labrig.jsonsafe import loads_bounded
 from labrig.store.format import (
+    LEGACY_SEAL_ATTR,
     SEAL_ATTR,
     STATUSES,
     check_seal,
@@ -436,9 +437,11 @@ class _Reader:
 
     def run(self, load: bool, seals: bool = True) -> tuple[RunFile, dict[str, dict]]:
         """The whole file (:func:`read_run`) and the shapes of every entry's channels;
-        ``seals=False`` leaves the seals unchecked (a listing that only shows the file)."""
+        ``seals=False`` leaves the seals unchecked (a listing that only shows the file), but
+        in a file sealed the older way (``@labrig_crc32``), where only the check tells what
+        other programs added."""
         f = self.f
-        if seals:
+        if seals or LEGACY_SEAL_ATTR in f.attrs:  # an older file: its additions are found so
             self.check_seals()
         if self.attr(f, "creator") != "labrig" or not isinstance(f.get("run"), h5py.Group):
             raise self.error("not a labrig run file (no /run group)", "")

@@ -564,7 +564,8 @@ class RunWriter:
 
     def _write_summary(self) -> None:
         """The summary a listing reads (:mod:`labrig.store.summary`), as the file is now, when
-        the disk has room for it; never raises (a file without a summary reads in full)."""
+        the disk has room for it. Raises nothing but what interrupts it (Ctrl-C), after taking
+        a half-written summary out: a file without a summary reads in full."""
         run = self._g
         try:
             need = len(json.dumps(self.metadata.values)) + SUMMARY_ROOM_BYTES
@@ -575,16 +576,20 @@ class RunWriter:
             _renew_seal(ds)
             _renew_seal(run)
             self._f.flush()
-        except Exception as e:  # a file the reader would refuse, a full disk: no summary
-            log.info("%s: no summary written (%s)", self.path, e)
+        except BaseException as e:  # a file the reader would refuse, a full disk, Ctrl-C
+            log.info("%s: no summary written (%s)", self.path, e or type(e).__name__)
             with contextlib.suppress(Exception):
                 if SUMMARY_NAME in run:
                     del run[SUMMARY_NAME]
                 _renew_seal(run)
+            if not isinstance(e, Exception):
+                raise
 
     def close(self) -> None:
-        """Close the file (without finishing: a closed running run stays ``running``) and
-        release the reserve. Never raises: a failure is logged and kept in ``close_error``."""
+        """Write the summary, close the file (without finishing: a closed running run stays
+        ``running``) and release the reserve. Raises nothing but an interruption (Ctrl-C)
+        during the summary, after closing the file: a failure is logged and kept in
+        ``close_error``."""
         self.release_reserve()
         if not self._f:
             return
@@ -592,9 +597,11 @@ class RunWriter:
             with contextlib.suppress(Exception):
                 unmark_writer(self._f)
                 _renew_seal(self._f)
-        self._write_summary()
         try:
-            self._f.close()
-        except Exception as e:
-            self.close_error = str(self.storage_error("closing the file", e))
-            log.info("%s", self.close_error)
+            self._write_summary()
+        finally:  # closed whatever happens (a Ctrl-C during the summary propagates after)
+            try:
+                self._f.close()
+            except Exception as e:
+                self.close_error = str(self.storage_error("closing the file", e))
+                log.info("%s", self.close_error)

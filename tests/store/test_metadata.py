@@ -158,7 +158,7 @@ def test_import_records_the_metadata(tmp_path: Path):
     t = np.arange(0, 2, 0.005)
     v = 50 * (1 - np.cos(2 * np.pi * t))
     src = tmp_path / "bench.csv"
-    np.savetxt(src, np.c_[t, v, 9 * v], delimiter=",", header="time,voltage,strain", comments="")
+    np.savetxt(src, np.c_[t, v, 9 * v], delimiter=",", header="time,voltage,strain_ue", comments="")
     out = tmp_path / "imported.h5"
     args = ["import", str(src), "--out", str(out), "--operator", "carol"]
     args += ["--sample", "P-888 #7", "--meta", "actuator_serial=SN-7"]

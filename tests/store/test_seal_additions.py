@@ -18,6 +18,7 @@ import h5py
 import numpy as np
 import pytest
 
+from labrig.catalogue.read import file_record_here
 from labrig.errors import InputFileError
 from labrig.store import read_run
 from labrig.store.format import LEGACY_SEAL_ATTR, SEAL_ATTR
@@ -201,7 +202,9 @@ def legacy_seal(obj: h5py.Group | h5py.Dataset) -> None:
 
 @pytest.fixture
 def legacy(run: Path) -> Path:
+    """The run file as labrig sealed files before (and without a summary, as then)."""
     with h5py.File(run, "a") as f:
+        del f["run/summary"]
         objects = [f]
         f.visititems(lambda _name, obj: objects.append(obj))
         for obj in objects:
@@ -227,3 +230,13 @@ def test_an_older_file_changed_exits_2(legacy: Path):
         f[f"{E}/data/strain"].attrs["units"] = "um"
         f[f"{E}/data/strain"].attrs["reviewed"] = 1  # an addition does not hide the change
     refused(legacy, f"{E}/data/strain")
+
+
+def test_an_older_file_with_an_added_channel_like_dataset_lists_and_reads(legacy: Path):
+    """An added dataset in an entry's data is not a channel, for the listing too (which reads
+    an older file in full, and so finds its additions by its seals)."""
+    with h5py.File(legacy, "a") as f:
+        f[f"{E}/data"].create_dataset("strain_filtered", data=np.zeros(7))
+    record = file_record_here(legacy)
+    assert record["readable"] and record["entries"][0]["samples"] == 201, record
+    assert read_run(legacy).additions == [f"{E}/data/strain_filtered"]

@@ -118,3 +118,22 @@ def test_the_summary_is_plain_json_with_exact_integers(tmp_path: Path):
         text = f["run/summary"][()].decode()
     assert '"seed":5400616385192348103' in text
     assert json.loads(text)["entries"][0]["step"] == STEP
+
+
+def test_ctrl_c_while_the_summary_is_written_closes_the_file_without_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
+    path = tmp_path / "run.h5"
+    w = begin(path)
+    entry(w, "e0")
+    w.finish("complete")
+
+    def interrupted(_path: object, f: h5py.File) -> None:
+        f["run"].create_dataset("summary", data="{half")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(writer_module, "write_summary", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        w.close()
+    assert not has_summary(path)
+    assert read_run(path).status == "complete"  # closed, and every seal matches
