@@ -46,8 +46,9 @@ benchmarks). Sections:
    ``experiments/rigs/sim.yaml`` with ``truth.preset: hybrid``): NRMSE of our model and of
    both baselines, in-sample and held-out (leave-one-entry-out).
 5. **Real data** (``tests/data/real/yan9a-micromanipulator``): the two
-   files imported with ``--voltage 1 --strain 5 --rate-hz 200``; NRMSE of ours and of the
-   baselines, in-sample and held-out (each file predicted by a fit on the other).
+   files imported with ``--voltage 1 --strain 5 --rate-hz 200 --strain-units raw``; NRMSE of
+   ours and of the baselines, in-sample and held-out (each file predicted by a fit on the
+   other).
 """
 
 from __future__ import annotations
@@ -255,13 +256,14 @@ def section_real(tmp: Path) -> None:
         print(f"skipped: {REAL} not found\n")
         return
     run = tmp / "real.h5"
-    cli("import", *files, "--out", run, "--voltage", "1", "--strain", "5", "--rate-hz", "200")
+    cli("import", *files, "--out", run, "--voltage", "1", "--strain", "5", "--rate-hz", "200",
+        "--strain-units", "raw")  # fmt: skip
     recs = records_from_run(run)
     floor = noise_floor(recs, {}, warmup_s=2.0)
-    print("Imported with `--voltage 1 --strain 5 --rate-hz 200` (DAQ-level volts, raw sensor "
-          "units); each file on its own, 2 s warm-up, one offset per entry (as `labrig fit` "
-          f"chooses); held-out = predicted by a fit on the other file. Noise floor "
-          f"{floor.nrmse_pct:.3f} % ({floor.source}).\n")  # fmt: skip
+    print("Imported with `--voltage 1 --strain 5 --rate-hz 200 --strain-units raw` (DAQ-level "
+          "volts, raw sensor units); each file on its own, 2 s warm-up, one offset per entry "
+          "(as `labrig fit` chooses); held-out = predicted by a fit on the other file. Noise "
+          f"floor {floor.nrmse_pct:.3f} % ({floor.source}).\n")  # fmt: skip
     print("\n".join(compare_models(recs, warmup_s=2.0, offset=True)))
     print()
 

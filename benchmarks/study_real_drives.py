@@ -50,8 +50,8 @@ SIMULATED = (
 
 
 def real_records(name: str) -> list[Record]:
-    """A real record as ``labrig import FILE --voltage 1 --strain 5 --rate-hz 200`` reads it,
-    cut into 4 chained parts (what diagnose does with one entry)."""
+    """A real record as ``labrig import FILE --voltage 1 --strain 5 --rate-hz 200 --strain-units
+    raw`` reads it, cut into 4 chained parts (what diagnose does with one entry)."""
     data = np.loadtxt(REAL / name)
     rec = Record.from_arrays(name.split(".")[0], 200.0, data[:, 0], data[:, 4], hold="linear")
     rec.meta["kind"] = "import"

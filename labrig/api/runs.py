@@ -538,4 +538,8 @@ def runs(*paths: PathLike, where: Sequence[str] = (), reindex: bool = False) -> 
                 **rec.get("metadata", {}),
             }
         )
-    return pd.DataFrame(rows)
+    frame = pd.DataFrame(rows)
+    # a whole number above 2**53 in a column with gaps stays an int (pandas would make it float)
+    for key in {k for r in rows for k, v in r.items() if type(v) is int and abs(v) > 2**53}:
+        frame[key] = pd.Series([r.get(key) for r in rows], dtype=object, index=frame.index)
+    return frame

@@ -1,11 +1,12 @@
 """The catalogue's index of a folder: one SQLite file, ``FOLDER/.labrig-index.sqlite``.
 
-One row per run file, keyed by its path below the folder, with the file's size and modification
-time (ns) when it was read and its record (:mod:`labrig.catalogue.read`) as JSON, in two parts
+One row per run file, keyed by its path below the folder, with the file's *stamp* when it was
+read (:class:`Stamp`: size, modification time, inode and inode change time) and its record
+(:mod:`labrig.catalogue.read`) as JSON, in two parts
 (:func:`~labrig.catalogue.read.split_record`): the part every listing reads and the instrument's
 metadata with the units, read only when asked (``--json``, or a ``--where`` key that names a
 key of that part: the table ``detail_keys`` lists them). A row whose
-size or time differs from the file's is stale and the file is read again; rows of files that
+stamp differs from the file's is stale and the file is read again; rows of files that
 are gone are deleted. The HDF5 files stay the source of truth: deleting the index costs one
 rebuild, nothing else. An index of another record or schema version is emptied on opening.
 
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import sqlite3
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -27,17 +29,31 @@ from typing import Any
 from labrig.catalogue.read import RECORD_VERSION, join_record, split_record
 
 INDEX_NAME = ".labrig-index.sqlite"
-SCHEMA_VERSION = 1
+#: 2: the stamp holds the inode and its change time (a file replaced by another of the same size
+#: with its modification time put back was taken for the one read before)
+SCHEMA_VERSION = 2
 #: seconds a listing waits for another process writing the same index
 BUSY_TIMEOUT_S = 10.0
 
 
 @dataclass(frozen=True)
 class Stamp:
-    """What says a file changed: its size (bytes) and modification time (ns)."""
+    """What says a file changed: its size (bytes), modification time (ns), inode number and
+    inode change time (ns). A program can set the modification time back (``touch -d``,
+    ``os.utime``, ``cp -p``), but not the change time: writing the file, or replacing it by
+    another (a new inode, or the same one rewritten), moves it. Costs nothing: the listing's
+    ``stat`` of each file gives all four."""
 
     size: int
     mtime_ns: int
+    ino: int = 0
+    ctime_ns: int = 0
+
+    @classmethod
+    def of(cls, st: os.stat_result) -> Stamp:
+        # SQLite integers are signed 64-bit; some file systems number inodes up to 2**64 - 1
+        ino = st.st_ino - 2**64 if st.st_ino >= 2**63 else st.st_ino
+        return cls(st.st_size, st.st_mtime_ns, ino, st.st_ctime_ns)
 
 
 def _connect(path: Path | str) -> sqlite3.Connection:
@@ -51,7 +67,8 @@ def _connect_tables(db: sqlite3.Connection) -> None:
     db.execute("CREATE TABLE IF NOT EXISTS info (key TEXT PRIMARY KEY, value TEXT NOT NULL)")
     db.execute(
         "CREATE TABLE IF NOT EXISTS files (path TEXT PRIMARY KEY, size INTEGER NOT NULL, "
-        "mtime_ns INTEGER NOT NULL, record TEXT NOT NULL, detail TEXT NOT NULL)"
+        "mtime_ns INTEGER NOT NULL, ino INTEGER NOT NULL, ctime_ns INTEGER NOT NULL, "
+        "record TEXT NOT NULL, detail TEXT NOT NULL)"
     )
     db.execute("CREATE TABLE IF NOT EXISTS detail_keys (key TEXT PRIMARY KEY)")
 
@@ -116,8 +133,8 @@ class FolderIndex:
 
     def stamps(self) -> dict[str, Stamp]:
         """Every indexed path and the stamp it was read with."""
-        rows = self.db.execute("SELECT path, size, mtime_ns FROM files")
-        return {p: Stamp(s, m) for p, s, m in rows}
+        rows = self.db.execute("SELECT path, size, mtime_ns, ino, ctime_ns FROM files")
+        return {p: Stamp(s, m, i, c) for p, s, m, i, c in rows}
 
     def records(self, paths: Iterable[str], detail: bool = False) -> dict[str, dict[str, Any]]:
         """The records of ``paths`` the index holds; without ``detail``, the part every
@@ -143,12 +160,16 @@ class FolderIndex:
         for p, s, r in rows:
             core, rest = split_record(r)
             keys.update(rest["metadata"])
-            data.append((p, s.size, s.mtime_ns, json.dumps(core), json.dumps(rest)))
+            data.append(
+                (p, s.size, s.mtime_ns, s.ino, s.ctime_ns, json.dumps(core), json.dumps(rest))
+            )
         for attempt in (1, 2):
             try:
                 with self.db:
                     self.db.execute("BEGIN IMMEDIATE")
-                    self.db.executemany("INSERT OR REPLACE INTO files VALUES (?, ?, ?, ?, ?)", data)
+                    self.db.executemany(
+                        "INSERT OR REPLACE INTO files VALUES (?, ?, ?, ?, ?, ?, ?)", data
+                    )
                     self.db.executemany(
                         "INSERT OR IGNORE INTO detail_keys VALUES (?)", [(k,) for k in keys]
                     )

@@ -1,11 +1,12 @@
 """Listing run files: which runs folders hold, what each one is, filtered on request.
 
 :func:`list_runs` finds the run files under folders (recursively) or takes files one by one,
-brings each folder's index up to date (:mod:`labrig.catalogue.index`: only files whose size or
-modification time changed are read, through the store's reader in child processes with time
-limits, :mod:`labrig.catalogue.read`), and keeps the runs that satisfy every ``--where``
-condition (:mod:`labrig.catalogue.where`). A file the reader refuses is listed as
-``unreadable`` with the reader's reason; it never stops the listing.
+brings each folder's index up to date (:mod:`labrig.catalogue.index`: only files whose stamp
+changed are read, from their summary or in full, in child processes with time limits,
+:mod:`labrig.catalogue.read`), checks that every ``--where`` key is one the runs listed have,
+and keeps the runs that satisfy every condition (:mod:`labrig.catalogue.where`). A file the
+reader refuses is listed as ``unreadable`` with the reader's reason; it never stops the
+listing.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from labrig.catalogue.index import INDEX_NAME, FolderIndex, Stamp
-from labrig.catalogue.where import Condition, matches, metadata_values, parse_all
+from labrig.catalogue.where import Condition, check_keys, matches, metadata_values, parse_all
 from labrig.core.errors import InputFileError, InputIssue
 
 #: file names the catalogue takes for run files when it searches a folder
@@ -121,7 +122,7 @@ def _walk(folder: Path, rel: str = "") -> Iterator[tuple[str, Path, os.stat_resu
 
 def find_run_files(folder: Path) -> dict[str, tuple[Path, Stamp]]:
     """The run files below ``folder``: path relative to it -> (path, stamp)."""
-    return {rel: (path, Stamp(st.st_size, st.st_mtime_ns)) for rel, path, st in _walk(folder)}
+    return {rel: (path, Stamp.of(st)) for rel, path, st in _walk(folder)}
 
 
 @dataclass
@@ -146,7 +147,7 @@ def _targets(paths: Sequence[Path]) -> dict[Path, _Wanted]:
         elif p.is_file():
             st = p.stat()
             w = wanted.setdefault(p.parent, _Wanted())
-            w.files.setdefault(p.name, (p, Stamp(st.st_size, st.st_mtime_ns)))
+            w.files.setdefault(p.name, (p, Stamp.of(st)))
         else:
             missing.append(p)
     if missing:
@@ -182,7 +183,7 @@ def _update(
         if progress is not None:
             progress(done_before + n, total)
 
-    for path, record in read_records(files, done):
+    for path, record in read_records(files, done, full=reindex):
         rel = by_path[str(path)]
         batch.append((rel, wanted.files[rel][1], record))
         if len(batch) >= BATCH_FILES:
@@ -232,10 +233,12 @@ def list_runs(
     indexes: list[Path] = []
     read = 0
     seen: set[Path] = set()
+    detail_keys: set[str] = set()
     for folder, wanted in targets.items():
         with FolderIndex(folder) as index:
             read += _update(index, wanted, reindex, progress, read, total)
             records = index.records(wanted.files, detail or _needs_detail(index, conditions))
+            detail_keys |= index.detail_keys()
             if index.note:
                 notes.append(index.note)
             if index.path is not None:
@@ -247,6 +250,7 @@ def list_runs(
                 continue
             seen.add(key)
             listed.append(ListedRun(path, records[rel]))
+    check_keys(conditions, [r.record for r in listed], detail_keys)
     unreadable = sorted((r for r in listed if not r.readable), key=lambda r: str(r.path))
     runs = []
     for run in listed:

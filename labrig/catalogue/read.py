@@ -1,6 +1,7 @@
-"""What the catalogue knows of one run file (its *record*), read through the store's reader.
+"""What the catalogue knows of one run file (its *record*), read from the file's summary.
 
-A record is a JSON-able dict::
+A record is a JSON-able dict: the run file's summary (:mod:`labrig.store.summary`: status,
+protocol, times, seed, entries with their steps, metadata, units) and whether it could be read::
 
     {"readable": true, "error": "",
      "status": "complete", "reason": "", "protocol": "paper sine sweep",
@@ -11,11 +12,14 @@ A record is a JSON-able dict::
      "metadata": {"instrument/amplifier/identity": "...", "sample/name": "P-888 #3", ...},
      "units": {"instrument/amplifier/gain_V_per_V": "V/V", ...}}
 
-The run's fixed fields come from :func:`labrig.store.parse.read_run_here` (which checks the
-file's seals and refuses a damaged one); *metadata* is read generically afterwards
-(:func:`read_metadata_here`), so whatever groups a run file gains later (NXuser, NXsample, a
-protocol's ``metadata:``) are indexed without a change here. An unreadable file gives a record
-with ``readable: false`` and the reader's message in ``error``.
+A file labrig closed holds its summary (``/run/summary``): the record is that one dataset,
+checked against its own seal (about 1 ms). A file without one (written by an older labrig,
+being written, interrupted, or a summary that does not match its seal) is read in full by the
+store's reader and the generic metadata walk, which give the same record
+(:func:`labrig.store.summary.summary_of`). Either way the listing does not check the rest of
+the file's seals nor its samples: that is done when the data is read (``labrig info``,
+``export``, ``fit``, ...), not when a folder is listed. An unreadable file gives a record with
+``readable: false`` and the reader's message in ``error``.
 
 Reading happens in child processes with CPU and wall-clock limits
 (:func:`labrig.store.isolated.call_isolated`), a batch of files per child; a batch whose child
@@ -25,21 +29,19 @@ record.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import h5py
-import numpy as np
 
 from labrig.core.errors import InputFileError, InputIssue
-from labrig.store.format import SEAL_ATTR
 from labrig.store.isolated import IsolatedReadError, call_isolated
-from labrig.store.parse import read_run_here
+from labrig.store.summary import metadata_of, read_summary_here, summary_of
 
 #: bumped whenever a record's content changes: an index of another version is rebuilt
-RECORD_VERSION = 1
+#: (2: records from the summary, without the seal check)
+RECORD_VERSION = 2
 
 #: files read per child process
 BATCH_FILES = 32
@@ -48,153 +50,17 @@ BATCH_FILES = 32
 #: second: 5e6 bytes is 0.25 s, several times what a sound file's metadata takes)
 PER_FILE_BUDGET_BYTES = 5_000_000
 
-#: metadata: at most this many path components below ``/run`` or an entry
-MAX_DEPTH = 3
-#: metadata: longer texts (notes, JSON documents) are not indexed
-MAX_TEXT_CHARS = 200
-#: metadata: arrays of up to this many numbers or texts are indexed as lists
-MAX_ARRAY_ITEMS = 16
-#: groups whose contents are data or documents, not metadata
-SKIP_CLASSES = frozenset({"NXdata", "NXnote"})
-#: run-level groups that record how the run ended, not what it was
-SKIP_RUN_GROUPS = frozenset({"ramp_to_zero"})
-#: attributes that describe the file's structure
-HOUSEKEEPING_ATTRS = frozenset({"NX_class", SEAL_ATTR, "default", "units", "long_name"})
 #: metadata kept apart in an index (:func:`split_record`): many keys, rarely asked for
 DETAIL_PREFIXES = ("instrument/",)
 #: metadata every labrig file has the same (indexed, not shown in listings)
 QUIET_KEYS = frozenset({"program_name", "definition"})
-#: fields of ``/run`` and of entries the record holds already
-RUN_FIELDS = frozenset(
-    {
-        "status",
-        "status_reason",
-        "start_time",
-        "end_time",
-        "seed",
-        "software_version",
-        "protocol_name",
-        "planned_entries",
-        "exit_code",
-        "final_amplifier_voltage_V",
-        "description_json",
-    }
-)
-ENTRY_FIELDS = frozenset(
-    {
-        "title",
-        "entry_index",
-        "start_time",
-        "end_time",
-        "status",
-        "status_reason",
-        "sample_rate",
-        "step_definition",
-        "duration",
-    }
-)
-
-
-def _plain(value: Any) -> Any:
-    """An HDF5 value as a JSON value, or ``None`` when it is not metadata (too long, an array
-    too large, the ``"null"`` older writers stored for unset values, a non-finite number)."""
-    if isinstance(value, bytes):
-        value = value.decode("utf-8", "replace")
-    if isinstance(value, str):
-        return value if value != "null" and len(value) <= MAX_TEXT_CHARS else None
-    if isinstance(value, bool | np.bool_):
-        return bool(value)
-    if isinstance(value, np.integer | int):
-        return int(value)
-    if isinstance(value, np.floating | float):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.ndarray) and value.ndim == 1 and 0 < value.size <= MAX_ARRAY_ITEMS:
-        items = [_plain(v) for v in value.tolist()]
-        return items if all(v is not None for v in items) else None
-    return None
-
-
-def _collect(
-    group: h5py.Group,
-    prefix: str,
-    skip_fields: frozenset[str],
-    skip_objects: Sequence[h5py.HLObject],
-    out: dict[str, Any],
-    units: dict[str, str],
-) -> None:
-    """Scalar datasets and attributes of ``group`` and its small subgroups into ``out``, keyed
-    by their path below the top group (``sample/name``)."""
-    for name, value in group.attrs.items():
-        if name not in HOUSEKEEPING_ATTRS and (v := _plain(value)) is not None:
-            out[f"{prefix}{name}"] = v
-    depth = prefix.count("/") + 1
-    for name in group:
-        if not prefix and name in skip_fields:
-            continue
-        obj = group.get(name)
-        if obj is None or any(obj == other for other in skip_objects):
-            continue
-        key = f"{prefix}{name}"
-        if isinstance(obj, h5py.Group):
-            if depth < MAX_DEPTH and obj.attrs.get("NX_class") not in SKIP_CLASSES:
-                _collect(obj, key + "/", skip_fields, skip_objects, out, units)
-        elif isinstance(obj, h5py.Dataset) and obj.size <= MAX_ARRAY_ITEMS and obj.ndim <= 1:
-            if obj.dtype.kind not in "iufbOSU":
-                continue
-            v = _plain(obj[()])
-            if v is None:
-                continue
-            out[key] = v
-            u = obj.attrs.get("units")
-            if isinstance(u, bytes | str) and u:
-                units[key] = u.decode() if isinstance(u, bytes) else u
-
-
-def _merge(into: dict[str, Any], key: str, value: Any) -> None:
-    """Entry-level values: one value when every entry agrees, else the distinct values."""
-    if key not in into:
-        into[key] = value
-        return
-    have = into[key]
-    values = have if isinstance(have, _Distinct) else _Distinct([have])
-    if value not in values:
-        values.append(value)
-    into[key] = values if len(values) > 1 else values[0]
-
-
-class _Distinct(list):
-    """Several entries' differing values of one key (a list the merge can tell from a value)."""
 
 
 def read_metadata_here(path: Path | str) -> tuple[dict[str, Any], dict[str, str]]:
-    """The run file's metadata (module docstring) and the units of the values that have one.
-
-    Run-level values are keyed by their path below ``/run`` (``instrument/amplifier/identity``,
-    ``metadata/operator``); entry-level values by their path below the entry (``sample/name``,
-    ``user/name``), merged across entries. The groups entries share with ``/run`` (hard links),
-    data groups (NXdata) and notes (NXnote: the protocol and rig texts) are skipped."""
-    meta: dict[str, Any] = {}
-    units: dict[str, str] = {}
+    """The run file's metadata and the units of the values that have one
+    (:func:`labrig.store.summary.metadata_of`), read in this process."""
     with h5py.File(path, "r", locking=False) as f:
-        run = f.get("run")
-        shared: list[h5py.HLObject] = []
-        if isinstance(run, h5py.Group):
-            skip = [run[k] for k in SKIP_RUN_GROUPS if k in run]
-            _collect(run, "", RUN_FIELDS, skip, meta, units)
-            shared = [run[k] for k in run if isinstance(run[k], h5py.Group)]
-        entry_meta: dict[str, Any] = {}
-        for name, g in f.items():
-            if name == "run" or not isinstance(g, h5py.Group):
-                continue
-            if g.attrs.get("NX_class") not in ("NXentry", b"NXentry"):
-                continue
-            one: dict[str, Any] = {}
-            _collect(g, "", ENTRY_FIELDS, shared, one, units)
-            for k, v in one.items():
-                _merge(entry_meta, k, v)
-    for k, v in entry_meta.items():
-        meta.setdefault(k, list(v) if isinstance(v, _Distinct) else v)
-    return meta, units
+        return metadata_of(f)
 
 
 def read_metadata(path: Path | str) -> tuple[dict[str, Any], dict[str, str]]:
@@ -210,16 +76,6 @@ def read_metadata(path: Path | str) -> tuple[dict[str, Any], dict[str, str]]:
         ) from None
 
 
-def _step_scalars(step: dict[str, Any]) -> dict[str, Any]:
-    """The step definition's scalar values (numbers, texts, booleans)."""
-    return {
-        k: v
-        for k, v in step.items()
-        if isinstance(v, str | int | float | bool)
-        and not (isinstance(v, float) and not math.isfinite(v))
-    }
-
-
 def unreadable_record(error: str) -> dict[str, Any]:
     """The record of a file the reader refused (``error``: why, for a person)."""
     return {
@@ -231,51 +87,28 @@ def unreadable_record(error: str) -> dict[str, Any]:
     }
 
 
-def file_record_here(path: Path | str) -> dict[str, Any]:
-    """The record of one file, read in this process (module docstring); never raises for a
-    bad file: an unreadable one gives :func:`unreadable_record`."""
+def _record(summary: dict[str, Any]) -> dict[str, Any]:
+    record = {"readable": True, "error": "", **summary}
+    record.pop("summary_version", None)
+    return record
+
+
+def file_record_here(path: Path | str, full: bool = False) -> dict[str, Any]:
+    """The record of one file, read in this process (module docstring): from its summary, or
+    (none, or ``full``) from the whole file; never raises for a bad file: an unreadable one
+    gives :func:`unreadable_record`."""
     try:
-        run, shapes = read_run_here(path, load_data=False)
+        summary = None if full else read_summary_here(path)
+        if summary is None:
+            with h5py.File(path, "r", locking=False) as f:
+                summary = summary_of(path, f, seals=False)
     except InputFileError as e:
         return unreadable_record("; ".join(_issue_text(i) for i in e.issues))
+    except OSError as e:  # h5py: not an HDF5 file, or one it cannot open
+        return unreadable_record(f"not a readable HDF5 run file ({e})")
     except Exception as e:  # the reader's own failure: still one line in the listing
         return unreadable_record(f"{type(e).__name__}: {str(e)[:200]}")
-    entries = []
-    for e in run:
-        n = max((s[0] for s in shapes.get(e.name, {}).values() if s), default=0)
-        rate = e.rate_hz if math.isfinite(e.rate_hz) else None
-        entries.append(
-            {
-                "name": e.name,
-                "kind": str(e.step.get("kind", "")),
-                "status": e.status,
-                "samples": int(n),
-                "rate_hz": rate,
-                "duration_s": (n - 1) / rate if rate and n > 1 else 0.0,
-                "step": _step_scalars(e.step),
-            }
-        )
-    record: dict[str, Any] = {
-        "readable": True,
-        "error": "",
-        "status": run.status,
-        "reason": run.reason,
-        "protocol": run.protocol_name,
-        "protocol_file": run.protocol_file,
-        "rig_file": run.rig_file,
-        "start_time": run.start_time or run.file_time,
-        "end_time": run.end_time,
-        "seed": run.seed,
-        "software_version": run.software_version,
-        "planned_entries": len(run.planned_entries),
-        "entries": entries,
-    }
-    try:
-        record["metadata"], record["units"] = read_metadata_here(path)
-    except Exception as e:  # the checked file read above; its metadata walk failed
-        record["metadata"], record["units"] = {}, {}
-        record["error"] = f"metadata not read ({type(e).__name__}: {str(e)[:160]})"
-    return record
+    return _record(summary)
 
 
 def shown_metadata(metadata: dict[str, Any]) -> dict[str, Any]:
@@ -315,10 +148,10 @@ def _issue_text(issue: Any) -> str:
     return f"{where}{issue.message}"
 
 
-def records_here(paths: Sequence[str]) -> list[dict[str, Any]]:
+def records_here(paths: Sequence[str], full: bool = False) -> list[dict[str, Any]]:
     """:func:`file_record_here` of each path (what a child process of :func:`read_records`
     runs)."""
-    return [file_record_here(p) for p in paths]
+    return [file_record_here(p, full) for p in paths]
 
 
 def _budget(sizes: Sequence[int]) -> int:
@@ -329,28 +162,33 @@ def _budget(sizes: Sequence[int]) -> int:
 def read_records(
     files: Sequence[tuple[Path, int]],
     done: Callable[[int], None] | None = None,
+    full: bool = False,
 ) -> Iterator[tuple[Path, dict[str, Any]]]:
     """The record of every ``(path, size_bytes)``, in order, read in child processes
-    (module docstring); ``done(n)`` is called after each batch with the files read so far."""
+    (module docstring); ``done(n)`` is called after each batch with the files read so far;
+    ``full``: every file read in full, its summary not used."""
     n_done = 0
     for i in range(0, len(files), BATCH_FILES):
         batch = files[i : i + BATCH_FILES]
         try:
             records = call_isolated(
-                records_here, [str(p) for p, _ in batch], size_bytes=_budget([s for _, s in batch])
+                records_here,
+                [str(p) for p, _ in batch],
+                full,
+                size_bytes=_budget([s for _, s in batch]),
             )
         except Exception:  # the child died, ran out of time or could not send its records
-            records = [_alone(p, s) for p, s in batch]
+            records = [_alone(p, s, full) for p, s in batch]
         yield from zip([p for p, _ in batch], records, strict=True)
         n_done += len(batch)
         if done is not None:
             done(n_done)
 
 
-def _alone(path: Path, size: int) -> dict[str, Any]:
+def _alone(path: Path, size: int, full: bool) -> dict[str, Any]:
     """One file in its own child (after its batch's child failed)."""
     try:
-        return call_isolated(file_record_here, str(path), size_bytes=_budget([size]))
+        return call_isolated(file_record_here, str(path), full, size_bytes=_budget([size]))
     except IsolatedReadError as e:
         return unreadable_record(f"{e}: the file is damaged")
     except Exception as e:  # the child could not send its result back

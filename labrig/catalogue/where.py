@@ -3,7 +3,9 @@
 An expression is ``KEY OP VALUE``; several ``--where`` must all hold. Operators: ``=``, ``!=``,
 ``~`` (contains), ``!~`` (does not contain), ``<``, ``<=``, ``>``, ``>=``. Text compares
 ignoring case and spaces (``sample=P-888#3`` finds ``P-888 #3``); numbers compare as numbers
-(``=`` within a relative 1e-9); ordering needs a number or a date.
+(``=`` within a relative 1e-9; whole numbers exactly: a 63-bit seed is not a float); ordering
+needs a number or a date. ``status`` compares with what the listing prints (``incomplete`` for
+a file that stores ``running``, which also matches).
 
 Keys, looked up in this order:
 
@@ -21,6 +23,11 @@ Keys, looked up in this order:
   ``/KEY``, or ``KEY/name`` (a NeXus group's name: ``sample`` is ``sample/name``);
   ``operator`` also means ``user`` (NXuser). A run without the key matches only ``!=`` and
   ``!~``.
+
+A bad expression is a :class:`WhereError` (exit 2) naming it and what is valid: no operator, an
+operator that is not one (``==``), a value of the wrong type (a status that is not one, a
+number or a whole number expected, a date expected), and (:func:`check_keys`, once the runs are
+known) a key that no run listed has.
 """
 
 from __future__ import annotations
@@ -54,16 +61,28 @@ ENTRY_KEYS = ("kind", "entry", "samples", "rate_hz", "duration_s")
 NUMERIC_KEYS = frozenset(
     {"seed", "entries", "samples", "rate_hz", "duration_s", "amplitude_V", "frequency_hz"}
 )
+#: keys whose values are whole numbers: ``=`` and ``!=`` need one, and compare exactly (a seed
+#: is 63 bits: a float would round it)
+INTEGER_KEYS = frozenset({"seed", "entries", "samples"})
+#: what ``status`` can equal: the statuses the listing prints (``incomplete``: the writer never
+#: finished, stored as ``running``, which is also accepted) and ``unreadable``
+STATUS_VALUES = ("complete", "aborted", "failed", "incomplete", "running", "unreadable")
+#: the status the listing prints for a stored status
+SHOWN_STATUS = {"running": "incomplete"}
 ALIASES = {"amplitude": "amplitude_V", "frequency": "frequency_hz"}
 #: metadata keys that also answer to another name
 METADATA_ALIASES = {"operator": ("operator", "user")}
 #: where a record keeps a run key
 RUN_FIELD = {"rig": "rig_file", "file": "path"}
 
+#: characters that make a value look like the rest of a mistyped operator (``==``, ``=>``)
+_OPERATOR_CHARS = "=<>~!"
+_INTEGER = re.compile(r"^[+-]?[0-9]+$")
 _EXPR = re.compile(r"^\s*([^!<>=~\s]+)\s*(!=|!~|<=|>=|=|~|<|>)\s*(.*?)\s*$", re.DOTALL)
 _KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_./#@-]*$")
 _PARTIAL_DATE = re.compile(r"^(\d{4})(?:-(\d{2}))?$")
 
+OPERATOR_TEXT = "operators: = != ~ !~ < <= > >="
 VALID = (
     "valid: KEY=VALUE, KEY!=VALUE, KEY~TEXT (contains), KEY!~TEXT, KEY<N, KEY<=N, KEY>N, "
     "KEY>=N; since=DATE, until=DATE, date>=DATE (YYYY, YYYY-MM, YYYY-MM-DD or ISO 8601); "
@@ -79,8 +98,8 @@ class WhereError(LabrigError):
 
     exit_code = 2
 
-    def __init__(self, text: str, why: str):
-        super().__init__(f"--where {text!r}: {why}; {VALID}")
+    def __init__(self, text: str, why: str, valid: str = VALID):
+        super().__init__(f"--where {text!r}: {why}; {valid}")
 
 
 @dataclass(frozen=True)
@@ -94,6 +113,8 @@ class Condition:
     value: str
     number: float | None
     span: tuple[datetime, datetime] | None
+    #: the value as a whole number when it is written as one (compared exactly)
+    integer: int | None = None
 
     @property
     def scope(self) -> str:
@@ -145,11 +166,21 @@ def parse_where(text: str) -> Condition:
     key, op, value = m.groups()
     if not _KEY.match(key):
         raise WhereError(text, f"{key!r} is not a key (letters, digits, _ . / # @ -)")
+    if value and value[0] in _OPERATOR_CHARS:  # status==complete, date=>2026, x<>3
+        wrong = op + value[0] + (value[1] if value[1:2] and value[1] in _OPERATOR_CHARS else "")
+        raise WhereError(text, f"{wrong!r} is not an operator", f"valid {OPERATOR_TEXT}")
     if not value:
         raise WhereError(text, "no value after the operator")
     key = ALIASES.get(key, key)
     span = date_span(value)
     number = _number(value)
+    integer = int(value) if _INTEGER.match(value) else None
+    if key == "status" and op in ("=", "!=") and _fold(value) not in STATUS_VALUES:
+        raise WhereError(
+            text, f"{value!r} is not a status", f"valid statuses: {', '.join(STATUS_VALUES)}"
+        )
+    if key in INTEGER_KEYS and op in ("=", "!=") and integer is None:
+        raise WhereError(text, f"{key} is a whole number; {value!r} is not")
     if key in ("since", "until") and op != "=":
         raise WhereError(text, f"{key} takes '=' (e.g. {key}=2026-03-01)")
     if key in DATE_KEYS and op != "~" and span is None:
@@ -158,7 +189,7 @@ def parse_where(text: str) -> Condition:
         raise WhereError(text, f"{key} is a number; {value!r} is not")
     if op in ORDERING and number is None and span is None:
         raise WhereError(text, f"{op} needs a number or a date, not {value!r}")
-    return Condition(text, key, op, value, number, span)
+    return Condition(text, key, op, value, number, span, integer)
 
 
 def parse_all(texts: Iterable[str]) -> list[Condition]:
@@ -212,9 +243,11 @@ def _one(value: Any, c: Condition) -> bool:
         return _fold(c.value) in _fold(str(value))
     stored = value if isinstance(value, int | float) and not isinstance(value, bool) else None
     if stored is None and isinstance(value, str):
-        stored = _number(value)
+        stored = int(value) if _INTEGER.match(value) else _number(value)
     if c.number is not None and stored is not None:
-        return _order(float(stored), c.number, op)
+        if isinstance(stored, int) and c.integer is not None:
+            return _order_exact(stored, c.integer, op)
+        return _order(stored, c.number, op)
     if c.span is not None and (t := _as_time(value)) is not None:
         return _compare_times(t, Condition(c.text, "date", op, c.value, None, c.span))
     if op == "=":
@@ -225,9 +258,18 @@ def _one(value: Any, c: Condition) -> bool:
 
 
 def _order(a: float, b: float, op: str) -> bool:
+    """Numbers compared as numbers; ``=`` within a relative 1e-9 (a float may carry rounding).
+    A whole number against a float is compared exactly by Python (no float conversion)."""
     if op == "=":
+        if isinstance(a, int) and not isinstance(b, int) and b.is_integer():
+            return a == b
         return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12)
     return {"<": a < b, "<=": a <= b, ">": a > b, ">=": a >= b}[op]
+
+
+def _order_exact(a: int, b: int, op: str) -> bool:
+    """Two whole numbers, exactly (seeds, counts, ids: 64 bits, no tolerance)."""
+    return {"=": a == b, "<": a < b, "<=": a <= b, ">": a > b, ">=": a >= b}[op]
 
 
 def holds(values: Sequence[Any], c: Condition) -> bool:
@@ -265,6 +307,9 @@ def _run_values(record: dict[str, Any], c: Condition) -> list[Any]:
         return [len(record.get("entries", []))]
     if c.key == "protocol":
         return [record.get("protocol"), record.get("protocol_file")]
+    if c.key == "status":  # as the listing prints it (incomplete), and as the file stores it
+        status = record.get("status")
+        return [SHOWN_STATUS.get(str(status), status), status]
     return [record.get(RUN_FIELD.get(c.key, c.key))]
 
 
@@ -299,3 +344,72 @@ def matches(record: dict[str, Any], conditions: Sequence[Condition]) -> tuple[bo
     if entry_conditions and not chosen:
         return False, []
     return True, chosen
+
+
+def _shown_key(key: str) -> str:
+    """A metadata key as a ``--where`` key most simply names it (``sample/name`` -> ``sample``,
+    ``metadata/operator`` -> ``operator``)."""
+    return key.removeprefix("metadata/").removesuffix("/name")
+
+
+def check_keys(
+    conditions: Sequence[Condition],
+    records: Sequence[dict[str, Any]],
+    more_metadata_keys: Iterable[str] = (),
+) -> None:
+    """Raise :class:`WhereError` for a condition whose key is none of the built-in keys and
+    that no listed run has (as a step key or a metadata key): ``freq<20`` would otherwise match
+    nothing without a word. The message lists the keys the listed runs have. Nothing is checked
+    when no readable run is listed (there is nothing to know the keys from).
+    ``more_metadata_keys``: metadata keys the records do not hold themselves (the index's
+    instrument keys, :meth:`~labrig.catalogue.index.FolderIndex.detail_keys`)."""
+    readable = [r for r in records if r.get("readable")]
+    wanted = [c for c in conditions if c.scope == "entry-or-metadata"]
+    if not readable or not wanted:
+        return
+    step_keys = {k for r in readable for e in r.get("entries", []) for k in e.get("step", {})}
+    meta = dict.fromkeys(more_metadata_keys)
+    for r in readable:
+        meta.update(dict.fromkeys(r.get("metadata", {})))
+    builtin = set(ENTRY_KEYS) | NUMERIC_KEYS
+    for c in wanted:
+        if c.key in builtin or c.key in step_keys or metadata_values(meta, c.key):
+            continue
+        raise WhereError(
+            c.text,
+            f"no run listed has the key {c.key!r}{_did_you_mean(c.key, step_keys, meta)}",
+            _valid_keys(step_keys, list(meta)),
+        )
+
+
+def _did_you_mean(key: str, step_keys: set[str], meta: dict[str, Any]) -> str:
+    import difflib
+
+    names = sorted(
+        {*RUN_KEYS, *DATE_KEYS, *ENTRY_KEYS, *NUMERIC_KEYS, *step_keys}
+        | {_shown_key(k) for k in meta}
+        | {k.rsplit("/", 1)[-1] for k in meta}
+    )
+    fold = key.casefold()
+    close = [n for n in names if n.casefold().startswith(fold)]
+    close += [n for n in difflib.get_close_matches(key, names, n=3) if n not in close]
+    return f" (did you mean {' or '.join(close[:3])}?)" if close else ""
+
+
+#: how many metadata keys a message lists (an instrument has hundreds)
+_MAX_LISTED = 30
+
+
+def _valid_keys(step_keys: set[str], metadata_keys: list[str]) -> str:
+    meta = sorted({_shown_key(k) for k in metadata_keys if not k.startswith("instrument/")})
+    n_instrument = sum(1 for k in metadata_keys if k.startswith("instrument/"))
+    if len(meta) > _MAX_LISTED:
+        meta = [*meta[:_MAX_LISTED], f"... ({len(meta) - _MAX_LISTED} more)"]
+    if n_instrument:
+        meta.append(f"{n_instrument} instrument keys (instrument/..., --json lists them)")
+    steps = sorted(step_keys | {"amplitude_V", "frequency_hz"})
+    return (
+        f"valid keys: run keys {', '.join(RUN_KEYS)}; dates {', '.join(DATE_KEYS)}; entry keys "
+        f"{', '.join(ENTRY_KEYS)}; step keys {', '.join(steps)}; metadata keys of the runs "
+        f"listed: {', '.join(meta) or 'none'}; docs/catalogue.md"
+    )

@@ -56,7 +56,7 @@ def runs(
     as_json: bool = json_option("the runs"),
     out: Path | None = out_file_option("the runs as JSON (what --json prints)"),
     overwrite: bool = OVERWRITE_OPTION,
-    reindex: bool = flag(False, "--reindex", help="Read every file again (rebuild the index)."),
+    reindex: bool = flag(False, "--reindex", help="Read every file again, in full."),
 ) -> None:
     """List run files with status, protocol, date, metadata and entries; filter with --where."""
     list_runs_command(paths or [], where, as_json, reindex, out, overwrite)

@@ -5,8 +5,9 @@ scale applied, the time base found, the window cut; every step stated in the ent
   :data:`~labrig.importers.limits.TIME_JITTER`; the rate is 1 / the median step. Without one,
   ``--rate-hz`` gives time = row / rate. The stored time starts at 0.
 - **Units** (:mod:`labrig.importers.units`): voltage to V, strain to ue (a displacement needs
-  ``--stack-length-mm``), time to s, temperatures to degC; a missing unit is taken as the run
-  file's and said so; a unit pint does not know is kept as its text.
+  ``--stack-length-mm``), time to s, temperatures to degC; a strain without a unit is refused
+  (``--strain-units`` states it: a sensor's raw numbers are not microstrain); another missing
+  unit is taken as the run file's and said so; a unit pint does not know is kept as its text.
 - **Sign and scale**: ``value_in_run_units * scale + offset`` per channel.
 - **Auxiliary channels**: ``--aux`` columns, then every other named column that is numeric,
   finite and as long as the voltage. A temperature column (unit degC, C, K, degF, or named
@@ -74,6 +75,13 @@ def _in_unit(
     values = table.columns[k].values
     assert values is not None
     unit = parse_unit(unit_text)
+    if not unit.text and role == "strain":  # a sensor's raw numbers are not microstrain
+        raise table.error(
+            k,
+            "the strain states no unit (no unit in a header, a units row or the file's "
+            "metadata): give --strain-units UNIT, e.g. ue (microstrain), %, mm/m, um with "
+            "--stack-length-mm, or raw to keep a sensor's numbers as they are",
+        )
     if not unit.text:
         return values, RUN_UNITS[role], f"no unit given: taken as {RUN_UNITS[role]}"
     if role == "strain" and unit.kind == "length":

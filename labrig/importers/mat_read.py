@@ -75,7 +75,9 @@ def _plain(value: Any, path: str, depth: int, budget: _Budget) -> Any:
         )
         budget.take(path, elements=len(items))
         return [_plain(v, f"{path}({i + 1})", depth + 1, budget) for i, v in enumerate(items)]
-    if isinstance(value, bool | np.bool_):
+    if isinstance(value, bool | np.bool_) or (
+        isinstance(value, np.ndarray) and value.dtype.kind == "b"
+    ):
         return "<logical>"
     if isinstance(value, int | float | np.integer | np.floating):
         return np.asarray(float(value))
@@ -94,7 +96,9 @@ def load_v5(path: str) -> Tree:
     declared = sum(math.prod(shape) for _, shape, _ in whosmat(path))
     if declared > MAX_MAT_VALUES:
         raise ValueError(f"the variables hold {declared} values: at most {MAX_MAT_VALUES} are read")
-    mat = loadmat(path, simplify_cells=True)
+    # mat_dtype: each array in the class MATLAB gives it (logical arrays as bool, not as the
+    # uint8 they are stored in: a logical is left out, as for v7.3)
+    mat = loadmat(path, simplify_cells=True, mat_dtype=True)
     budget = _Budget()
     return {k: _plain(v, k, 0, budget) for k, v in mat.items() if not k.startswith("__")}
 

@@ -9,6 +9,8 @@ and dSPACE ControlDesk captures (:mod:`~labrig.importers.dspace`) from v4-v7.3 `
 
 from __future__ import annotations
 
+import hashlib
+import stat
 from dataclasses import asdict
 from pathlib import Path
 
@@ -86,6 +88,57 @@ def _check_out(files: list[Path], out: Path, overwrite: bool) -> None:
         raise option_error("--out", f"{out} is also an input; write to another file")
 
 
+def _digest(path: Path) -> bytes:
+    with path.open("rb") as fh:
+        return hashlib.file_digest(fh, "sha256").digest()
+
+
+def check_distinct(files: list[Path]) -> None:
+    """Each input once: the same path twice, two paths to one file (a link, ``./a.csv`` and
+    ``a.csv``) or two files of the same content would make two entries of the same data (and a
+    leave-one-entry-out score that has seen the entry it scores). An
+    :class:`~labrig.core.errors.InputFileError` names every repeat and the input it repeats. Contents
+    are compared (SHA-256) only between files of the same size."""
+    issues: list[InputIssue] = []
+    first: dict[tuple[int, int], Path] = {}
+    by_size: dict[int, list[Path]] = {}
+    for f in files:
+        try:
+            st = f.stat()
+        except OSError:
+            continue  # not there: reading it says so
+        if not stat.S_ISREG(st.st_mode):
+            continue
+        key = (st.st_dev, st.st_ino)
+        if key in first:
+            same = "the same path" if f == first[key] else f"the same file as {first[key]}"
+            issues.append(InputIssue(str(f), None, "", f"given twice ({same}): give each once"))
+            continue
+        first[key] = f
+        by_size.setdefault(st.st_size, []).append(f)
+    for group in by_size.values():
+        seen: dict[bytes, Path] = {}
+        for f in group if len(group) > 1 else ():
+            try:
+                digest = _digest(f)
+            except OSError:
+                continue
+            if digest in seen:
+                issues.append(
+                    InputIssue(
+                        str(f),
+                        None,
+                        "",
+                        f"the same content as {seen[digest]}: the same data would be two "
+                        "entries; give each record once",
+                    )
+                )
+            else:
+                seen[digest] = f
+    if issues:
+        raise InputFileError(issues)
+
+
 def read_entries(files: list[Path], checked: Checked) -> list[ImportedEntry]:
     """Every input read and checked, in the order given (nothing is written)."""
     entries: list[ImportedEntry] = []
@@ -113,6 +166,7 @@ def import_files(
     checked = check_options(opt)
     files = [Path(f) for f in files]
     _check_out(files, out, overwrite)
+    check_distinct(files)
     entries = read_entries(files, checked)
     write_run(out, entries, import_description(files, asdict(opt)), metadata)
     return entries

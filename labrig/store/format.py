@@ -4,17 +4,23 @@ standard channels, how timestamps are written and the metadata seals (layout:
 
 **Seals.** HDF5 checksums (Fletcher32) cover the stored samples, but not the metadata of the
 original file format: attribute values and text live in unchecksummed heaps, so a damaged byte
-there reads back as another unit, another status or a missing entry. Every group and dataset
-labrig writes carries :data:`SEAL_ATTR`, the CRC-32 (:func:`zlib.crc32`) of what a reader
-takes from it besides the samples (:func:`seal_of`); the writer renews the seals whenever it
-records metadata, the reader checks every seal it finds.
+there reads back as another unit, another status or a missing entry; and another program that
+rewrites samples through HDF5 recomputes their Fletcher32. Every group and dataset labrig
+writes carries :data:`SEAL_ATTR` (:func:`seal_of`): the names of its attributes and members,
+the CRC-32 (:func:`zlib.crc32`) of those names and values and of a non-chunked dataset's value,
+and, once an entry is finished, the CRC-32 of each channel's samples. The writer renews the
+seals whenever it records metadata; the reader checks every seal (:func:`check_seal`): what a
+seal names must be there unchanged, while names it does not cover (an attribute, a group or a
+dataset another NeXus tool added) are *additions*, reported and never taken for damage.
 """
 
 from __future__ import annotations
 
+import itertools
+import json
 import zlib
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from datetime import datetime
 
 import h5py
@@ -113,8 +119,16 @@ def channel(spec: Channel | Sequence[str] | str) -> Channel:
     return Channel(str(name), str(units), str(long_name))
 
 
-#: the attribute holding an object's seal (module docstring)
-SEAL_ATTR = "labrig_crc32"
+#: the attribute holding an object's seal (module docstring): a JSON text, :func:`seal_of`
+SEAL_ATTR = "labrig_seal"
+#: the seal of files written before labrig sealed only its own names (a CRC-32 of everything
+#: the object held, additions by other programs included); still checked, :func:`check_seal`
+LEGACY_SEAL_ATTR = "labrig_crc32"
+#: attributes no seal covers (the seals themselves)
+SEAL_ATTRS = frozenset({SEAL_ATTR, LEGACY_SEAL_ATTR})
+#: a legacy seal that does not match is explained by additions of at most this many names
+#: (attributes or members) before the object is called changed
+LEGACY_ADDITIONS = 2
 
 
 def _canonical(value: object) -> bytes:
@@ -131,15 +145,164 @@ def _canonical(value: object) -> bytes:
     return b"r" + repr(value).encode()
 
 
-def seal_of(obj: h5py.Group | h5py.Dataset) -> int:
-    """CRC-32 of an object's attributes (but its seal), a group's member names and a
-    non-chunked dataset's value; chunked datasets (samples) are covered by Fletcher32."""
+def _attr_piece(name: str, value: object) -> bytes:
+    return b"@" + name.encode() + b"=" + _canonical(value)
+
+
+def _crc(
+    obj: h5py.Group | h5py.Dataset,
+    attrs: Sequence[str],
+    members: Sequence[str] | None,
+    values: Mapping[str, object] | None = None,
+) -> int:
+    """CRC-32 of the attributes ``attrs`` (names and values, sorted by name; ``values``: the
+    attribute values read already), a group's member names ``members`` and a non-chunked
+    dataset's value."""
     crc = 0
-    for name in sorted(obj.attrs):
-        if name != SEAL_ATTR:
-            crc = zlib.crc32(b"@" + name.encode() + b"=" + _canonical(obj.attrs[name]), crc)
-    if isinstance(obj, h5py.Group):
-        crc = zlib.crc32(b"/" + "\x1f".join(sorted(obj)).encode(), crc)
-    elif obj.chunks is None:
+    for name in sorted(attrs):
+        value = values[name] if values is not None else obj.attrs[name]
+        crc = zlib.crc32(_attr_piece(name, value), crc)
+    if members is not None:
+        crc = zlib.crc32(b"/" + "\x1f".join(sorted(members)).encode(), crc)
+    elif isinstance(obj, h5py.Dataset) and obj.chunks is None:
         crc = zlib.crc32(b"=" + _canonical(obj[()]), crc)
     return crc
+
+
+def data_crc(values: np.ndarray, crc: int = 0) -> int:
+    """CRC-32 of samples as stored (little-endian float64 bytes), continued from ``crc``: the
+    writer folds in each block as it writes it, the reader checks the whole channel."""
+    return zlib.crc32(np.ascontiguousarray(values, dtype="<f8").tobytes(), crc)
+
+
+def seal_of(obj: h5py.Group | h5py.Dataset, data: tuple[int, int] | None = None) -> str:
+    """The seal of an object as it is now (:data:`SEAL_ATTR`): a JSON text naming what it
+    covers and its CRC-32 (:func:`_crc`)::
+
+        {"crc": "1c291ca3", "attrs": ["long_name", "units"], "members": [...],
+         "data": "9f0e41c2", "n": 5000}
+
+    ``attrs``: every attribute but the seals; ``members``: a group's member names;
+    ``data``, ``n``: a chunked dataset's samples (CRC-32 of their float64 bytes, their
+    number), given by the writer once they are final (``data``) — chunked samples carry
+    Fletcher32 besides. A reader checks exactly the names listed: what another program adds
+    later is an addition, not a change (:func:`check_seal`)."""
+    attrs = sorted(a for a in obj.attrs if a not in SEAL_ATTRS)
+    members = sorted(obj) if isinstance(obj, h5py.Group) else None
+    seal: dict[str, object] = {"crc": f"{_crc(obj, attrs, members):08x}", "attrs": attrs}
+    if members is not None:
+        seal["members"] = members
+    if data is not None:
+        seal["data"], seal["n"] = f"{data[0]:08x}", int(data[1])
+    return json.dumps(seal, separators=(",", ":"))
+
+
+def sealed_data(obj: h5py.Group | h5py.Dataset) -> tuple[int, int] | None:
+    """The samples' CRC-32 and number an object's seal records (None: none, or no readable
+    seal); not a check (:func:`check_seal` is)."""
+    text = obj.attrs.get(SEAL_ATTR)
+    if not isinstance(text, str | bytes):
+        return None
+    try:
+        seal = json.loads(text)
+        return (int(seal["data"], 16), int(seal["n"])) if "data" in seal else None
+    except (ValueError, TypeError, KeyError, AttributeError):
+        return None
+
+
+def sealed_members(group: h5py.Group) -> list[str] | None:
+    """The member names a group's seal lists (what labrig wrote there), or None when it has no
+    seal of today's kind; not a check (:func:`check_seal` is)."""
+    text = group.attrs.get(SEAL_ATTR)
+    if not isinstance(text, str | bytes):
+        return None
+    try:
+        members = json.loads(text)["members"]
+    except (ValueError, TypeError, KeyError):
+        return None
+    return [str(m) for m in members] if isinstance(members, list) else None
+
+
+@dataclass
+class SealCheck:
+    """What :func:`check_seal` found: ``sealed`` (the object carries a seal), ``problem`` (why
+    it does not match, for a person; empty when it does), ``additions`` (attribute names as
+    ``@name`` and member names the seal does not cover: added by another program) and, for
+    chunked samples sealed by the writer, their CRC-32 and number (``data``)."""
+
+    sealed: bool = False
+    problem: str = ""
+    additions: list[str] = field(default_factory=list)
+    data: tuple[int, int] | None = None
+    legacy: bool = False
+
+
+def check_seal(obj: h5py.Group | h5py.Dataset) -> SealCheck:
+    """Check an object against its seal: every attribute and member the seal names is there and
+    holds what it held (CRC-32); names it does not cover are additions. Reads every attribute
+    of the object, sealed or not (a damaged attribute store raises here, instead of being taken
+    for a missing attribute). A legacy seal (:data:`LEGACY_SEAL_ATTR`, covering everything)
+    that does not match is explained, when it can be, by up to :data:`LEGACY_ADDITIONS` names
+    added since (a CRC-32 equality by chance: about 1 in 4e9 per try)."""
+    values = {name: obj.attrs[name] for name in obj.attrs}  # damage raises here
+    members = sorted(obj) if isinstance(obj, h5py.Group) else None
+    if SEAL_ATTR in values:
+        return _check_current(obj, values, members)
+    if LEGACY_SEAL_ATTR in values:
+        return _check_legacy(obj, values, members)
+    return SealCheck()
+
+
+def _check_current(
+    obj: h5py.Group | h5py.Dataset, values: dict[str, object], members: list[str] | None
+) -> SealCheck:
+    text = values[SEAL_ATTR]
+    text = text.decode("utf-8", "replace") if isinstance(text, bytes) else text
+    try:
+        seal = json.loads(text) if isinstance(text, str) else None
+        crc = int(seal["crc"], 16)
+        attrs = [str(a) for a in seal["attrs"]]
+        sealed_members = [str(m) for m in seal.get("members", [])]
+        data = (int(seal["data"], 16), int(seal["n"])) if "data" in seal else None
+    except (ValueError, TypeError, KeyError, AttributeError):
+        return SealCheck(True, "its checksum (@labrig_seal) is not readable")
+    missing = [f"@{a}" for a in attrs if a not in values]
+    if members is not None:
+        missing += [m for m in sealed_members if m not in members]
+    if missing:
+        gone = ", ".join(missing[:5])
+        return SealCheck(True, f"does not match its checksum (@labrig_seal: {gone} missing)")
+    if _crc(obj, attrs, sealed_members if members is not None else None, values) != crc:
+        return SealCheck(True, "does not match its checksum (@labrig_seal)")
+    added = [f"@{a}" for a in values if a not in SEAL_ATTRS and a not in attrs]
+    if members is not None:
+        added += [m for m in members if m not in sealed_members]
+    return SealCheck(True, "", added, data)
+
+
+def _check_legacy(
+    obj: h5py.Group | h5py.Dataset, values: dict[str, object], members: list[str] | None
+) -> SealCheck:
+    stored = values[LEGACY_SEAL_ATTR]
+    attrs = sorted(a for a in values if a not in SEAL_ATTRS)
+    pieces = {f"@{a}": _attr_piece(a, values[a]) for a in attrs}
+    value = b""
+    if members is None and isinstance(obj, h5py.Dataset) and obj.chunks is None:
+        value = b"=" + _canonical(obj[()])
+    candidates = [*pieces, *(members or [])]
+
+    def crc_without(left_out: tuple[str, ...]) -> int:
+        crc = 0
+        for name, piece in pieces.items():
+            if name not in left_out:
+                crc = zlib.crc32(piece, crc)
+        if members is not None:
+            kept = [m for m in members if m not in left_out]
+            crc = zlib.crc32(b"/" + "\x1f".join(kept).encode(), crc)
+        return zlib.crc32(value, crc) if value else crc
+
+    for k in range(min(LEGACY_ADDITIONS, len(candidates)) + 1):
+        for left_out in itertools.combinations(candidates, k):
+            if crc_without(left_out) == stored:
+                return SealCheck(True, "", list(left_out), legacy=True)
+    return SealCheck(True, "does not match its checksum (@labrig_crc32)", legacy=True)

@@ -72,17 +72,30 @@ def _scalar(group: h5py.Group, name: str, value: object) -> h5py.Dataset | None:
         return None
     if isinstance(value, bool | np.bool_):
         return group.create_dataset(name, data=bool(value))
-    if isinstance(value, int | float | np.integer | np.floating):
+    if isinstance(value, int | np.integer) and _fits_int64(value):
+        return group.create_dataset(name, data=np.int64(value))
+    if isinstance(value, float | np.floating):
         return group.create_dataset(name, data=value)
     if isinstance(value, str):
         return group.create_dataset(name, data=value, dtype=STRING_DTYPE)
-    if (
-        isinstance(value, list | tuple)
-        and value
-        and all(isinstance(x, int | float) and not isinstance(x, bool) for x in value)
-    ):
-        return group.create_dataset(name, data=np.asarray(value, dtype=float))
+    if isinstance(value, list | tuple) and value and all(_is_number(x) for x in value):
+        # whole numbers stay whole (int64): ids and counts above 2**53 keep every digit
+        if all(isinstance(x, int | np.integer) and _fits_int64(x) for x in value):
+            return group.create_dataset(name, data=np.asarray(value, dtype=np.int64))
+        if not any(isinstance(x, int | np.integer) and not _fits_int64(x) for x in value):
+            return group.create_dataset(name, data=np.asarray(value, dtype=float))
+    # anything else (nested values, whole numbers beyond 64 bits) as exact JSON text
     return group.create_dataset(name, data=json.dumps(value, default=str), dtype=STRING_DTYPE)
+
+
+def _is_number(x: object) -> bool:
+    return isinstance(x, int | float | np.integer | np.floating) and not isinstance(
+        x, bool | np.bool_
+    )
+
+
+def _fits_int64(x: int | np.integer) -> bool:
+    return -(2**63) <= int(x) < 2**63
 
 
 def write_tree(group: h5py.Group, d: Mapping, nx_class: str = "NXcollection") -> None:

@@ -15,7 +15,16 @@ import numpy as np
 
 from labrig.core.errors import InputFileError, InputIssue
 from labrig.core.jsonsafe import loads_bounded
-from labrig.store.format import SEAL_ATTR, STATUSES, memory_long_name, memory_units, seal_of
+from labrig.store.format import (
+    LEGACY_SEAL_ATTR,
+    SEAL_ATTR,
+    STATUSES,
+    check_seal,
+    data_crc,
+    memory_long_name,
+    memory_units,
+    sealed_members,
+)
 from labrig.store.isolated import allow_cpu
 
 
@@ -102,6 +111,9 @@ class RunFile:
     #: :mod:`labrig.store.writing`); ``writer`` says who and when it last wrote
     being_written: bool = False
     writer: str = ""
+    #: what other programs added to the file (paths below the root, ``@name`` for an
+    #: attribute): not covered by labrig's seals, not checked, never taken for damage
+    additions: list[str] = field(default_factory=list)
 
     def __getitem__(self, name: str) -> RunEntry:
         return self.entries[name]
@@ -149,6 +161,10 @@ class _Reader:
         self.path, self.f = str(path), f
         self.max_bytes = max(MAX_EXPANSION * size_bytes, MIN_CLAIM_BYTES)
         self.where = ""
+        #: what other programs added (paths; ``@name`` for an attribute): :meth:`check_seals`
+        self.additions: list[str] = []
+        #: the CRC-32 of each sealed channel's samples, by path (checked when they are read)
+        self.data_seals: dict[str, int] = {}
 
     def error(self, message: str, where: str | None = None) -> InputFileError:
         return InputFileError(
@@ -184,9 +200,15 @@ class _Reader:
         return float(ds[()])
 
     def integer(self, group: h5py.Group, name: str) -> int | None:
+        """A scalar whole number, or ``None`` when absent. An integer dataset is read as the
+        integer it holds (never through a float: a 63-bit seed keeps every digit); a float
+        dataset holding a whole number (older writers) is accepted."""
         v = self.number(group, name)
         if v is None:
             return None
+        ds = group[name]
+        if ds.dtype.kind in "iu":
+            return int(ds[()])
         if not (math.isfinite(v) and v == int(v)):
             raise self.error(f"expected a whole number, found {v:g}")
         return int(v)
@@ -243,7 +265,7 @@ class _Reader:
             return np.empty(0)
         allow_cpu(size_bytes=ds.size * ds.dtype.itemsize)
         try:
-            return ds[()]
+            values = ds[()]
         except (OSError, RuntimeError) as e:
             text = str(e)
             if ds.fletcher32 and ("Fletcher32" in text or "filter" in text):
@@ -251,6 +273,14 @@ class _Reader:
             else:
                 why = "unreadable: " + ((text.strip().splitlines() or [""])[0][:160])
             raise self.error(why, where) from None
+        sealed = self.data_seals.get(where)
+        if sealed is not None and data_crc(values) != sealed:
+            raise self.error(
+                "checksum mismatch: the samples differ from those labrig sealed (CRC-32 in "
+                f"@{SEAL_ATTR}): another program changed them, or they are damaged",
+                where,
+            )
+        return values
 
     def entry(self, name: str, g: h5py.Group, load: bool) -> tuple[RunEntry, dict]:
         """One entry and the shapes of its channels (the arrays are empty without ``load``)."""
@@ -261,7 +291,8 @@ class _Reader:
         long_names: dict[str, str] = {}
         if not isinstance(data_g, h5py.Group):
             raise self.error("missing: the entry has no group of channels", f"{name}/data")
-        for cname, ds in data_g.items():
+        for cname in self.own(data_g):
+            ds = data_g[cname]
             if not isinstance(ds, h5py.Dataset):
                 continue
             units[cname] = memory_units(self.label(ds, "units"))
@@ -350,30 +381,68 @@ class _Reader:
             out.append(record)
         return sorted(out, key=lambda r: int(r.get("number", 0)))
 
+    def own(self, group: h5py.Group) -> list[str]:
+        """The members of ``group`` that labrig wrote: those its seal lists, or (a file sealed
+        before, or not at all) all but the additions :meth:`check_seals` found. A channel or
+        a group another program added is not read as labrig's."""
+        listed = sealed_members(group)
+        members = list(group)
+        if listed is not None:
+            return [m for m in members if m in listed]
+        prefix = (group.name or "").strip("/")
+        return [m for m in members if (f"{prefix}/{m}" if prefix else m) not in self.additions]
+
     def check_seals(self) -> None:
-        """Every object's attributes and values read back, and every seal in the file matches
-        what its object holds (:func:`labrig.store.format.seal_of`); files written before the
-        seals have none."""
+        """Every object's attributes and values read back, and every seal matches what its
+        object holds (:func:`labrig.store.format.check_seal`); what a seal does not cover (an
+        attribute, a group or a dataset another program added) is kept in :attr:`additions`
+        and not checked further. In a file whose root carries a seal of today's kind, every
+        object labrig wrote is sealed: an object without one that is not an addition is
+        refused. Files written before the seals have none."""
+        strict = SEAL_ATTR in self.f.attrs
+        added_groups: list[str] = []
 
-        def check(obj: h5py.Group | h5py.Dataset) -> None:
+        def check(name: str, obj: h5py.Group | h5py.Dataset) -> None:
+            path = name.strip("/")
+            if any(path.startswith(a + "/") for a in added_groups):
+                return  # inside an addition: not labrig's
             allow_cpu(size_bytes=obj.size * obj.dtype.itemsize if _contiguous(obj) else 0)
-            self.where = (obj.name or "").strip("/")
-            # every attribute and value is read, sealed or not: damage raises here (a lookup
-            # by name, attrs.get, would take an attribute it cannot find as absent)
-            crc = seal_of(obj)
-            if SEAL_ATTR in set(obj.attrs) and obj.attrs[SEAL_ATTR] != crc:
+            self.where = path
+            found = check_seal(obj)
+            if found.problem:
                 raise self.error(
-                    "does not match its checksum (@labrig_crc32): the file's metadata is "
-                    "damaged, or another program changed it"
+                    f"{found.problem}: the file's metadata is damaged, or another program "
+                    "changed it"
                 )
+            if strict and not found.sealed and path not in self.additions:
+                raise self.error(
+                    f"has no seal (@{SEAL_ATTR}) where labrig seals every object: the file's "
+                    "metadata is damaged, or another program changed it"
+                )
+            for a in found.additions:
+                where = f"{path}/{a}" if path else a
+                self.additions.append(where)
+                if not a.startswith("@"):
+                    added_groups.append(where)
+            if found.data is not None:
+                if obj.shape[:1] != (found.data[1],):
+                    raise self.error(
+                        f"holds {obj.shape[0] if obj.shape else 0} samples, its seal says "
+                        f"{found.data[1]}: the file is damaged, or another program changed it"
+                    )
+                self.data_seals[path] = found.data[0]
 
-        check(self.f)
-        self.f.visititems(lambda _name, obj: check(obj))
+        check("", self.f)
+        self.f.visititems(check)
 
-    def run(self, load: bool) -> tuple[RunFile, dict[str, dict]]:
-        """The whole file (:func:`read_run`) and the shapes of every entry's channels."""
+    def run(self, load: bool, seals: bool = True) -> tuple[RunFile, dict[str, dict]]:
+        """The whole file (:func:`read_run`) and the shapes of every entry's channels;
+        ``seals=False`` leaves the seals unchecked (a listing that only shows the file), but
+        in a file sealed the older way (``@labrig_crc32``), where only the check tells what
+        other programs added."""
         f = self.f
-        self.check_seals()
+        if seals or LEGACY_SEAL_ATTR in f.attrs:  # an older file: its additions are found so
+            self.check_seals()
         if self.attr(f, "creator") != "labrig" or not isinstance(f.get("run"), h5py.Group):
             raise self.error("not a labrig run file (no /run group)", "")
         run = f["run"]
@@ -408,9 +477,11 @@ class _Reader:
             resumes=self.resumes(run),
             writer_pid=_int_or_none(self.attr(f, "writer_pid", None)),
             writer_host=str(self.attr(f, "writer_host", "")),
+            additions=list(self.additions),
         )
         entries, shapes = [], {}
-        for name, g in f.items():
+        for name in self.own(f):
+            g = f[name]
             if name == "run" or not isinstance(g, h5py.Group):
                 continue
             nx_class = self.attr(g, "NX_class")
@@ -427,20 +498,31 @@ class _Reader:
         return out, shapes
 
 
-def read_run_here(path: Path | str, load_data: bool = True) -> tuple[RunFile, dict]:
+def read_run_here(
+    path: Path | str, load_data: bool = True, seals: bool = True
+) -> tuple[RunFile, dict]:
     """:func:`read_run` in this process (no time limit) and the shapes of every entry's
-    channels; anything unexpected is an :class:`InputFileError` naming the object."""
-    size = Path(path).stat().st_size
+    channels; anything unexpected is an :class:`InputFileError` naming the object.
+    ``seals=False``: the seals are not checked (the catalogue's listing of a file without a
+    summary: it shows the file, it does not read its data)."""
     try:
         f = h5py.File(path, "r", locking=False)
     except Exception as e:
         raise InputFileError(
             [InputIssue(str(path), None, "", f"not a readable HDF5 run file ({e})")]
         ) from None
-    reader = _Reader(path, f, size)
+    with f:
+        return read_open(path, f, load_data, seals)
+
+
+def read_open(
+    path: Path | str, f: h5py.File, load_data: bool = False, seals: bool = True
+) -> tuple[RunFile, dict]:
+    """:func:`read_run_here` of a file open already (the writer's summary reads the file it
+    is writing: :mod:`labrig.store.summary`)."""
+    reader = _Reader(path, f, Path(path).stat().st_size)
     try:
-        with f:
-            return reader.run(load_data)
+        return reader.run(load_data, seals)
     except InputFileError:
         raise
     except Exception as e:  # the file is not as labrig writes it: say where

@@ -113,6 +113,7 @@ def run_summary(path: Path | str) -> dict:
         "writer": run.writer,
         "metadata": dict(run.metadata),
         "resumes": [dict(r) for r in run.resumes],
+        "additions": list(run.additions),
         "start_time": run.start_time,
         "end_time": run.end_time,
         "seed": run.seed,
@@ -169,6 +170,7 @@ def run_info(path: Path | str):
         f"labrig {s['software_version'] or '-'}",
         *_metadata_lines(s),
         *_resume_lines(s),
+        *_addition_lines(s),
     )
     t = Table(
         caption="s: duration; Hz: sample rate; max V: largest command voltage; "
@@ -204,6 +206,20 @@ def _metadata_lines(s: dict) -> list[str]:
     """``metadata: operator=alice sample=P-888 #3 ...`` (none when the run has none)."""
     meta = s.get("metadata") or {}
     return ["\nmetadata: " + " ".join(f"{k}={v}" for k, v in meta.items())] if meta else []
+
+
+#: the most additions ``labrig info`` names one by one
+SHOWN_ADDITIONS = 8
+
+
+def _addition_lines(s: dict) -> list[str]:
+    """What other programs added to the file (not covered by labrig's seals, not checked)."""
+    added = s.get("additions") or []
+    if not added:
+        return []
+    names = ", ".join(added[:SHOWN_ADDITIONS])
+    more = f" and {len(added) - SHOWN_ADDITIONS} more" if len(added) > SHOWN_ADDITIONS else ""
+    return [f"\nadded by another program (not labrig's, not checked): {names}{more}"]
 
 
 def _resume_lines(s: dict) -> list[str]:

@@ -27,19 +27,22 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from labrig.core.errors import StorageError
+from labrig.core.version import __version__
+from labrig.core.errors import InputFileError, StorageError
 from labrig.core.interrupts import reason_for, signum_of
 from labrig.core.metadata import RunMetadata
-from labrig.core.version import __version__
 from labrig.store.format import (
     FINAL_STATUSES,
     FORMAT_VERSION,
+    LEGACY_SEAL_ATTR,
     SEAL_ATTR,
     STRING_DTYPE,
     Channel,
     channel,
+    data_crc,
     now_iso,
     seal_of,
+    sealed_data,
     stored_long_name,
     stored_units,
 )
@@ -58,12 +61,15 @@ from labrig.store.space import (
     free_bytes,
     is_disk_full,
 )
+from labrig.store.summary import SUMMARY_NAME, write_summary
 from labrig.store.writing import mark_writer, unmark_writer
 
 log = logging.getLogger("labrig.store")
 _STR = STRING_DTYPE
 #: the HDF5 filter every sample dataset of a new run file carries
 CHECKSUM = "fletcher32"
+#: free bytes the summary needs besides its metadata's size (it is written only then)
+SUMMARY_ROOM_BYTES = 256 * 1024
 
 
 def _check_name(name: str, what: str) -> None:
@@ -71,17 +77,40 @@ def _check_name(name: str, what: str) -> None:
         raise ValueError(f"{what} {name!r}: use a letter, then letters, digits or underscores")
 
 
-def _renew_seal(obj: h5py.Group | h5py.Dataset) -> None:
-    crc = seal_of(obj)
-    if obj.attrs.get(SEAL_ATTR) != crc:
-        obj.attrs[SEAL_ATTR] = np.uint32(crc)
+def _renew_seal(obj: h5py.Group | h5py.Dataset, data: tuple[int, int] | None = None) -> None:
+    """Seal ``obj`` as it is now (:func:`labrig.store.format.seal_of`); a chunked dataset keeps
+    the samples' CRC its seal records unless ``data`` gives a new one. A legacy seal goes."""
+    if data is None and isinstance(obj, h5py.Dataset) and obj.chunks is not None:
+        data = sealed_data(obj)
+    seal = seal_of(obj, data)
+    if obj.attrs.get(SEAL_ATTR) != seal:
+        obj.attrs[SEAL_ATTR] = seal
+    if LEGACY_SEAL_ATTR in obj.attrs:
+        del obj.attrs[LEGACY_SEAL_ATTR]
+
+
+def _renew_all(obj: h5py.Group | h5py.Dataset) -> None:
+    data = None
+    chunked = isinstance(obj, h5py.Dataset) and obj.chunks is not None
+    if chunked and sealed_data(obj) is not None:  # sealed samples: sealed again as they are now
+        values = obj[()]
+        data = (data_crc(values), len(values))
+    _renew_seal(obj, data)
 
 
 def seal_all(f: h5py.File) -> None:
-    """Renew the seal (:func:`labrig.store.format.seal_of`) of every object in ``f`` whose
-    seal no longer matches (new objects, changed metadata)."""
-    _renew_seal(f)
-    f.visititems(lambda _name, obj: _renew_seal(obj))
+    """Renew the seal (:func:`labrig.store.format.seal_of`) of every object in ``f``: new
+    objects, changed metadata, and samples whose seal records their CRC (read again); and
+    the summary (:mod:`labrig.store.summary`) when the file has one, so that a file edited on
+    purpose reads and lists as if labrig had written it so (a file the reader refuses loses
+    its summary)."""
+    run = f.get("run")
+    if isinstance(run, h5py.Group) and SUMMARY_NAME in run:
+        del run[SUMMARY_NAME]
+        with contextlib.suppress(InputFileError, OSError, ValueError, KeyError, TypeError):
+            write_summary(f.filename, f)
+    _renew_all(f)
+    f.visititems(lambda _name, obj: _renew_all(obj))
 
 
 def seal_groups(groups: Iterable[h5py.Group]) -> None:
@@ -105,6 +134,8 @@ class EntryWriter:
         self.channels = channels
         self._data = group["data"]
         self._n = 0
+        #: CRC-32 of each channel's samples written so far (sealed when the entry finishes)
+        self._crcs = {c.name: 0 for c in channels}
         self.status = "running"
 
     @property
@@ -152,6 +183,8 @@ class EntryWriter:
         except Exception as e:
             self._cut_back(n0)
             raise self._run.storage_error(operation, e) from None
+        for c in self.channels:
+            self._crcs[c.name] = data_crc(arrays[c.name], self._crcs[c.name])
         self._n = n1
         return self._n
 
@@ -186,6 +219,8 @@ class EntryWriter:
             set_str(g, "status_reason", reason or "")
             set_str(g, "status", status)
             self._run.entry_done()
+            for c in self.channels:  # the samples are final: their CRC goes into the seal
+                _renew_seal(self._data[c.name], (self._crcs[c.name], self._n))
             self._run.seal_and_flush(self._run.root, g)
         except Exception as e:
             raise self._run.storage_error(f"finishing entry {self.name}", e) from None
@@ -298,8 +333,9 @@ class RunWriter:
         mark_writer(f)
         set_str(self._g, "status", "running")
         set_str(self._g, "status_reason", "")
-        if "end_time" in self._g:
-            del self._g["end_time"]
+        for name in ("end_time", SUMMARY_NAME):  # the summary is written again at the close
+            if name in self._g:
+                del self._g[name]
         self.seal_and_flush()
         return self
 
@@ -419,6 +455,7 @@ class RunWriter:
                 )
                 ds.attrs["units"] = units
                 ds.attrs["long_name"] = long_name
+                _renew_seal(ds, (data_crc(data), data.size))
             self.seal_and_flush(self._g, g)
         except Exception as e:
             raise self.storage_error(f"recording /run/{name}", e) from None
@@ -525,9 +562,34 @@ class RunWriter:
             raise self.storage_error(f"recording the run's end ({status})", e) from None
         self.status = status
 
+    def _write_summary(self) -> None:
+        """The summary a listing reads (:mod:`labrig.store.summary`), as the file is now, when
+        the disk has room for it. Raises nothing but what interrupts it (Ctrl-C), after taking
+        a half-written summary out: a file without a summary reads in full."""
+        run = self._g
+        try:
+            need = len(json.dumps(self.metadata.values)) + SUMMARY_ROOM_BYTES
+            if free_bytes(self.path) < need:
+                log.info("%s: no summary written (disk nearly full)", self.path)
+                return
+            ds = write_summary(self.path, self._f)
+            _renew_seal(ds)
+            _renew_seal(run)
+            self._f.flush()
+        except BaseException as e:  # a file the reader would refuse, a full disk, Ctrl-C
+            log.info("%s: no summary written (%s)", self.path, e or type(e).__name__)
+            with contextlib.suppress(Exception):
+                if SUMMARY_NAME in run:
+                    del run[SUMMARY_NAME]
+                _renew_seal(run)
+            if not isinstance(e, Exception):
+                raise
+
     def close(self) -> None:
-        """Close the file (without finishing: a closed running run stays ``running``) and
-        release the reserve. Never raises: a failure is logged and kept in ``close_error``."""
+        """Write the summary, close the file (without finishing: a closed running run stays
+        ``running``) and release the reserve. Raises nothing but an interruption (Ctrl-C)
+        during the summary, after closing the file: a failure is logged and kept in
+        ``close_error``."""
         self.release_reserve()
         if not self._f:
             return
@@ -536,7 +598,10 @@ class RunWriter:
                 unmark_writer(self._f)
                 _renew_seal(self._f)
         try:
-            self._f.close()
-        except Exception as e:
-            self.close_error = str(self.storage_error("closing the file", e))
-            log.info("%s", self.close_error)
+            self._write_summary()
+        finally:  # closed whatever happens (a Ctrl-C during the summary propagates after)
+            try:
+                self._f.close()
+            except Exception as e:
+                self.close_error = str(self.storage_error("closing the file", e))
+                log.info("%s", self.close_error)

@@ -243,7 +243,8 @@ def test_cli_fit_sindy_on_real_data(tmp_path: Path) -> None:
     run = tmp_path / "real.h5"
     files = [str(REAL / f) for f in ("Model_Vi_Do.dat", "Test_Vi_Do_Di.dat")]
     res = runner.invoke(app, ["import", *files, "--out", str(run), "--voltage", "1",
-                              "--strain", "5", "--rate-hz", "200"])  # fmt: skip
+                              "--strain", "5", "--rate-hz", "200",
+                              "--strain-units", "raw"])  # fmt: skip
     assert res.exit_code == 0, res.stderr
     res = runner.invoke(app, ["fit", str(run), "--model", "sindy", "--json"])
     assert res.exit_code == 0, res.stderr

@@ -26,6 +26,7 @@ from labrig.catalogue.index import INDEX_NAME
 from labrig.catalogue.read import read_metadata_here
 from labrig.cli import app
 from labrig.store import RunWriter
+from labrig.store.format import SEAL_ATTR, seal_of
 from labrig.store.writer import seal_all
 
 STEP_KEYS = {"sine": ("amplitude_V", "frequency_hz"), "hold": ("voltage_V",)}
@@ -263,22 +264,32 @@ def test_damaged_files_are_listed_as_unreadable(tmp_path: Path):
     (tmp_path / "garbage.h5").write_bytes(b"\x89HDF\r\n\x1a\n" + os.urandom(4000))
     data = good.read_bytes()
     (tmp_path / "truncated.h5").write_bytes(data[: len(data) // 3])
-    seal = tmp_path / "tampered.h5"
-    shutil.copy(good, seal)
-    with h5py.File(seal, "a") as f:  # a change the file's seals do not cover
-        f["run/protocol_name"][()] = "changed behind labrig's back"
     result = cli(str(tmp_path), "--json")
     assert result.exit_code == 0, result.output
     runs = {Path(r["path"]).name: r for r in json.loads(result.stdout)["runs"]}
     assert runs["good.h5"]["status"] == "complete"
-    for bad in ("garbage.h5", "truncated.h5", "tampered.h5"):
+    for bad in ("garbage.h5", "truncated.h5"):
         assert runs[bad]["status"] == "unreadable" and runs[bad]["error"], bad
         assert bad in result.stderr
-    assert "checksum" in runs["tampered.h5"]["error"]
-    assert "3 files unreadable" in result.stderr
+    assert "2 files unreadable" in result.stderr
     text = cli(str(tmp_path))
     assert text.exit_code == 0 and "unreadable" in text.stdout
     assert list_runs([tmp_path]).read == 0  # remembered as unreadable, not read again
+
+
+def test_the_listing_shows_a_file_its_data_read_checks(tmp_path: Path):
+    """Seals are checked when the data is read, not when a folder is listed: a run file whose
+    text another program changed is listed from its summary, and ``labrig info`` refuses it."""
+    good = write_run(tmp_path / "good.h5", "fine", [("sine", 10, 1)])
+    with h5py.File(good, "a") as f:  # a change the file's seals do not cover
+        f["run/protocol_name"][()] = "changed behind labrig's back"
+    result = cli(str(tmp_path), "--json")
+    assert result.exit_code == 0, result.output
+    (run,) = json.loads(result.stdout)["runs"]
+    assert run["status"] == "complete" and run["protocol"] == "fine"
+    info = CliRunner().invoke(app, ["info", str(good)])
+    assert info.exit_code == 2, info.output
+    assert "[run/protocol_name]" in info.stderr and "checksum" in info.stderr
 
 
 @pytest.mark.parametrize(
@@ -335,3 +346,194 @@ def test_listing_shows_each_fact_once():
     assert metadata_text({"metadata": {"user/name": "bob"}}) == "operator=bob"
     different = {"metadata/operator": "ana", "user/name": "bob"}
     assert metadata_text({"metadata": different}) == "operator=ana operator=bob"
+
+
+# -- status as printed, exact integers, bad keys and operators ------------------------------
+
+
+def write_unfinished(path: Path, protocol: str = "crashed") -> Path:
+    """A run file whose writer closed it without finishing the run (status ``running``:
+    the listing prints ``incomplete``)."""
+    w = RunWriter(path, f"name: {protocol}\n", "", {"name": "test"}, 1, protocol_name=protocol)
+    e = w.begin_entry("sine_10V_1Hz", {"kind": "sine", "amplitude_V": 10.0}, 100.0, ["strain"])
+    e.append({"strain": np.zeros(20)})
+    w.close()
+    return path
+
+
+@pytest.fixture(scope="module")
+def mixed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """done.h5 complete; crashed.h5 incomplete; two complete runs with 63-bit seeds that one
+    float cannot tell apart (2**63 - 25 and 2**63 - 26 both round to 2**63)."""
+    d = tmp_path_factory.mktemp("mixed")
+    write_run(d / "done.h5", "done", [("sine", 10, 1)])
+    write_unfinished(d / "crashed.h5")
+    for name, seed in (("big25.h5", 2**63 - 25), ("big26.h5", 2**63 - 26)):
+        with RunWriter(d / name, "name: big\n", "", {}, seed, protocol_name="big") as w:
+            e = w.begin_entry("hold_1V", {"kind": "hold", "voltage_V": 1.0}, 100.0, ["strain"])
+            e.append({"strain": np.zeros(5)})
+    return d
+
+
+@pytest.mark.parametrize(
+    ("where", "expected"),
+    [
+        (["status=incomplete"], {"crashed.h5"}),
+        (["status=running"], {"crashed.h5"}),  # as the file stores it and --json prints it
+        (["status!=incomplete"], {"done.h5", "big25.h5", "big26.h5"}),
+        (["status=complete"], {"done.h5", "big25.h5", "big26.h5"}),
+        (["seed=9223372036854775783"], {"big25.h5"}),
+        (["seed=9223372036854775782"], {"big26.h5"}),
+        (["seed>=9223372036854775783"], {"big25.h5"}),
+        (["seed<9223372036854775783", "protocol=big"], {"big26.h5"}),
+    ],
+    ids=str,
+)
+def test_status_as_printed_and_seeds_exactly(mixed: Path, where: list[str], expected: set[str]):
+    args = [str(mixed), "--json"]
+    for w in where:
+        args += ["--where", w]
+    assert listed(cli(*args)) == expected
+
+
+def test_the_listing_prints_incomplete_and_every_digit_of_a_seed(mixed: Path):
+    result = cli(str(mixed))
+    line = next(x for x in result.stdout.splitlines() if "crashed.h5" in x)
+    assert line.split()[1] == "incomplete"
+    runs = {Path(r["path"]).name: r for r in json.loads(cli(str(mixed), "--json").stdout)["runs"]}
+    assert runs["big25.h5"]["seed"] == 2**63 - 25 and runs["big26.h5"]["seed"] == 2**63 - 26
+    assert '"seed": 9223372036854775783' in cli(str(mixed), "--json").stdout
+
+
+@pytest.mark.parametrize(
+    ("bad", "says"),
+    [
+        ("freq<20", ["'freq'", "frequency_hz", "valid keys:", "amplitude_V"]),
+        ("temperature_K<30", ["'temperature_K'", "temperature_C", "valid keys:"]),
+        ("status==complete", ["'==' is not an operator", "!=", ">="]),
+        ("date=>2026-03-01", ["'=>' is not an operator"]),
+        ("amplitude_V<>50", ["'<>' is not an operator"]),
+        ("status=finished", ["'finished' is not a status", "incomplete", "unreadable"]),
+        ("seed=1.5", ["seed is a whole number", "'1.5'"]),
+        ("entries=two", ["entries is a whole number"]),
+        ("cycles=3", ["no run listed has the key 'cycles'"]),  # a step key, but none has it
+    ],
+)
+def test_unknown_keys_operators_and_values_exit_2(folder: Path, bad: str, says: list[str]):
+    result = cli(str(folder), "--where", bad)
+    assert result.exit_code == 2, result.output
+    assert repr(bad) in result.stderr and "Traceback" not in result.output
+    for text in says:
+        assert text in result.stderr, (text, result.stderr)
+
+
+@pytest.mark.parametrize(
+    "good",
+    [
+        "frequency_hz<20",  # just inside each bad case above
+        "temperature_C<30",
+        "status=complete",
+        "status!=complete",
+        "date>=2026-03-01",
+        "amplitude_V<50",
+        "seed=1",
+        "entries=2",
+        "serial_number=SN-3",  # a metadata key one file has
+        "instrument/name=test",  # a key of the index's second part
+        "voltage_V>=80",  # a step key one run has
+    ],
+)
+def test_valid_expressions_next_to_the_bad_ones_are_accepted(folder: Path, good: str):
+    result = cli(str(folder), "--where", good, "--json")
+    assert result.exit_code == 0, result.output
+
+
+# -- the index's stamp, the summary -----------------------------------------------------------
+
+
+def test_a_file_replaced_by_one_of_the_same_size_and_mtime_is_read_again(tmp_path: Path):
+    """Same size, modification time put back (``cp -p``, ``touch -d``, ``os.utime``): the
+    inode and its change time still tell the files apart."""
+    d = tmp_path / "runs"
+    d.mkdir()
+    write_run(d / "x.h5", "first", [("sine", 10, 1)])
+    other = write_run(tmp_path / "other.h5", "secnd", [("sine", 10, 1)])
+    before = os.stat(d / "x.h5")
+    assert other.stat().st_size == before.st_size  # the case at hand: only the content differs
+    assert [r.record["protocol"] for r in list_runs([d]).runs] == ["first"]
+    os.replace(other, d / "x.h5")
+    os.utime(d / "x.h5", ns=(before.st_atime_ns, before.st_mtime_ns))
+    after = list_runs([d])
+    assert after.read == 1 and [r.record["protocol"] for r in after.runs] == ["secnd"]
+    # rewritten in place (same inode), same size, time put back
+    data = (d / "x.h5").read_bytes()
+    write_run(tmp_path / "third.h5", "third", [("sine", 10, 1)])
+    st = os.stat(d / "x.h5")
+    (d / "x.h5").write_bytes((tmp_path / "third.h5").read_bytes())
+    os.utime(d / "x.h5", ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert os.stat(d / "x.h5").st_ino == st.st_ino and len(data) == st.st_size
+    again = list_runs([d])
+    assert again.read == 1 and [r.record["protocol"] for r in again.runs] == ["third"]
+
+
+def records_of(folder: Path, reindex: bool = False) -> dict[str, dict[str, Any]]:
+    listing = list_runs([folder], detail=True, reindex=reindex)
+    return {r.path.name: r.record for r in listing.runs}
+
+
+def drop_summary(path: Path) -> None:
+    """The file as an older labrig, a crash or another program leaves it: no summary."""
+    with h5py.File(path, "a") as f:
+        del f["run/summary"]
+        seal_all(f)
+
+
+def test_a_summary_and_a_full_read_give_the_same_record(folder: Path, mixed: Path, tmp_path):
+    """The listing reads the summary the writer left; files without one (older, interrupted,
+    or a summary another program broke) are read in full: the records are the same."""
+    for source in (folder, mixed):
+        copy = tmp_path / source.name
+        shutil.copytree(source, copy, ignore=shutil.ignore_patterns(".*"))
+        from_summary = records_of(copy)
+        for p in copy.glob("*.h5"):
+            with h5py.File(p, "r") as f:
+                has_summary = "summary" in f["run"]
+            assert has_summary, p.name  # the writer closed every one, finished or not
+            drop_summary(p)
+        from_files = records_of(copy)
+        assert set(from_files) == set(from_summary)
+        for name, record in from_summary.items():
+            assert record == from_files[name], name
+
+
+def test_the_listing_reads_the_summary_and_reindex_reads_the_file(tmp_path: Path):
+    p = write_run(tmp_path / "x.h5", "the file's", [("sine", 10, 1)])
+    with h5py.File(p, "a") as f:  # a summary that says another name, sealed as labrig seals
+        ds = f["run/summary"]
+        summary = json.loads(ds[()])
+        summary["protocol"] = "the summary's"
+        ds[()] = json.dumps(summary)
+        ds.attrs[SEAL_ATTR] = seal_of(ds)
+    assert records_of(tmp_path)["x.h5"]["protocol"] == "the summary's"
+    assert records_of(tmp_path, reindex=True)["x.h5"]["protocol"] == "the file's"
+
+
+def test_a_summary_that_does_not_match_its_seal_is_not_used(tmp_path: Path):
+    p = write_run(tmp_path / "x.h5", "the file's", [("sine", 10, 1)])
+    with h5py.File(p, "a") as f:
+        summary = json.loads(f["run/summary"][()])
+        summary["protocol"] = "changed by another program"
+        f["run/summary"][()] = json.dumps(summary)
+    assert records_of(tmp_path)["x.h5"]["protocol"] == "the file's"
+
+
+def test_the_python_listing_keeps_big_whole_numbers(tmp_path: Path):
+    """``labrig.runs``: an id above 2**53 in one run (absent from the other) keeps its digits."""
+    import labrig
+
+    write_run(tmp_path / "a.h5", "a", [("sine", 10, 1)], run_metadata={"batch_id": 2**62 + 3})
+    write_run(tmp_path / "b.h5", "b", [("sine", 10, 1)])
+    frame = labrig.runs(tmp_path)
+    ids = dict(zip(frame["protocol"], frame["metadata/batch_id"], strict=True))
+    assert ids["a"] == 2**62 + 3 and type(ids["a"]) is int
+    assert ids["b"] is None or ids["b"] != ids["b"]  # absent: None or NaN

@@ -83,7 +83,8 @@ def test_numbers_round_trip(tmp_path: Path, values, style, header: bool, index: 
     f = tmp_path / "table.csv"
     f.write_text("\n".join(lines) + "\n")
     k = 1 if lead else 0
-    (entry,) = read(f, voltage=str(k + 2), strain=str(k + 3), rate_hz=100.0) or [None]
+    columns = {"voltage": str(k + 2), "strain": str(k + 3), "strain_units": "ue"}
+    (entry,) = read(f, rate_hz=100.0, **columns) or [None]
     assert entry is not None
     np.testing.assert_array_equal(entry.voltage_V, table[:, 1])
     np.testing.assert_array_equal(entry.strain, table[:, 2])

@@ -54,6 +54,7 @@ def test_no_header_indices_rate_and_scale(tmp_path: Path) -> None:
     out = tmp_path / "r.h5"
     args = ["import", str(f), str(g), "--out", str(out), "--voltage", "1", "--strain", "3"]
     args += ["--rate-hz", "200", "--strain-scale", "-1", "--voltage-scale", "10"]
+    args += ["--strain-units", "ue"]
     res = runner.invoke(app, args)
     assert res.exit_code == 0, res.output
     run = read_run(out)
@@ -70,7 +71,7 @@ def test_mat_file(tmp_path: Path) -> None:
     savemat(f, {"t": t[:, None], "V": (5 * t)[:, None], "S": (40 * t)[:, None]})
     out = tmp_path / "r.h5"
     args = ["import", str(f), "--out", str(out), "--time", "t", "--voltage", "V", "--strain", "S"]
-    res = runner.invoke(app, args)
+    res = runner.invoke(app, [*args, "--strain-units", "ue"])
     assert res.exit_code == 0, res.output
     e = next(iter(read_run(out)))
     np.testing.assert_allclose(e["strain"], 40 * t)

@@ -32,7 +32,7 @@ pytestmark = pytest.mark.skipif(
 def test_import_fit_report_on_real_data(tmp_path: Path) -> None:
     run = tmp_path / "real.h5"
     res = invoke("import", *(REAL / f for f in FILES), "--out", run, "--voltage", "1",
-                 "--strain", "5", "--rate-hz", "200")  # fmt: skip
+                 "--strain", "5", "--rate-hz", "200", "--strain-units", "raw")  # fmt: skip
     assert res.exit_code == 0, res.stderr
     records = records_from_run(run)
     assert [r.name for r in records] == ["Model_Vi_Do", "Test_Vi_Do_Di"]

@@ -23,6 +23,7 @@ output written, each command within :data:`LIMIT_S`. The default suite runs ever
 from __future__ import annotations
 
 import hashlib
+import json
 import random
 import time
 from collections.abc import Callable
@@ -130,6 +131,10 @@ EDITS: dict[str, Callable[[h5py.File], None]] = {
     "exit_code_text": lambda f: _replace(f, "run/exit_code", "zero"),
     "seed_float": lambda f: _replace(f, "run/seed", 1.5),
 }
+#: edits that add an object: left unsealed ("edited_"), they are another program's additions,
+#: not corruption (read, listed, never taken for labrig's: test below); sealed as labrig's
+#: ("written_"), the reader's checks refuse them
+ADDITIONS = frozenset({"huge_claim", "extra_root_group"})
 
 
 def _truncated(src: bytes, rng: random.Random, k: int) -> bytes:
@@ -164,7 +169,8 @@ class Corpus:
         names = [f"truncated_{k:02d}" for k in range(N_TRUNCATED)]
         names += [f"zeroed_{k:02d}" for k in range(N_ZEROED)]
         names += [f"flipped_{k:02d}" for k in range(N_FLIPPED)]
-        names += [f"edited_{e}" for e in EDITS] + [f"written_{e}" for e in EDITS]
+        names += [f"edited_{e}" for e in EDITS if e not in ADDITIONS]
+        names += [f"written_{e}" for e in EDITS]
         self.names = names
 
     def path(self, name: str) -> Path:
@@ -210,7 +216,7 @@ ALL = (
     [f"truncated_{k:02d}" for k in range(N_TRUNCATED)]
     + [f"zeroed_{k:02d}" for k in range(N_ZEROED)]
     + [f"flipped_{k:02d}" for k in range(N_FLIPPED)]
-    + [f"edited_{e}" for e in EDITS]
+    + [f"edited_{e}" for e in EDITS if e not in ADDITIONS]
     + [f"written_{e}" for e in EDITS]
 )
 FAST = ALL[::FAST_STRIDE]
@@ -256,3 +262,20 @@ def test_corrupted_run_files_fast_subset(corpus: Corpus, name: str, tmp_path: Pa
 @pytest.mark.parametrize("name", [n for n in ALL if n not in FAST])
 def test_corrupted_run_files_all(corpus: Corpus, name: str, tmp_path: Path):
     check_case(corpus, name, tmp_path)
+
+
+@pytest.mark.parametrize("edit", sorted(ADDITIONS))
+def test_an_object_another_program_added_is_an_addition_not_corruption(
+    corpus: Corpus, edit: str, tmp_path: Path
+):
+    """A dataset claiming 10**12 samples added to an entry's data, a group added beside /run:
+    not labrig's (their parents' seals do not name them), so not read as a channel or an
+    entry: the file reads, the addition listed."""
+    path = tmp_path / "added.h5"
+    path.write_bytes(corpus.original)
+    with h5py.File(path, "r+") as f:
+        EDITS[edit](f)
+    res = invoke("info", path, "--json")
+    assert res.exit_code == 0, res.output
+    added = json.loads(res.stdout)["additions"]
+    assert added == ([f"{E}/data/x"] if edit == "huge_claim" else ["notes"])

@@ -19,6 +19,7 @@ import labrig
 from labrig.cli import app
 from labrig.core.metadata import MetadataError, from_options, parse_assignment
 from labrig.store import RunWriter, read_run
+from labrig.store.format import SEAL_ATTR
 from labrig.store.writer import seal_all
 
 pytestmark = pytest.mark.timeout(120)
@@ -87,7 +88,7 @@ def test_run_file_holds_nexus_user_sample_definition_and_program(run_file: Path)
 def test_every_new_object_is_sealed_and_the_file_reads(run_file: Path):
     with h5py.File(run_file) as f:
         unsealed = []
-        f.visititems(lambda n, o: unsealed.append(n) if "labrig_crc32" not in o.attrs else None)
+        f.visititems(lambda n, o: unsealed.append(n) if SEAL_ATTR not in o.attrs else None)
         assert unsealed == []
 
 
@@ -157,7 +158,7 @@ def test_import_records_the_metadata(tmp_path: Path):
     t = np.arange(0, 2, 0.005)
     v = 50 * (1 - np.cos(2 * np.pi * t))
     src = tmp_path / "bench.csv"
-    np.savetxt(src, np.c_[t, v, 9 * v], delimiter=",", header="time,voltage,strain", comments="")
+    np.savetxt(src, np.c_[t, v, 9 * v], delimiter=",", header="time,voltage,strain_ue", comments="")
     out = tmp_path / "imported.h5"
     args = ["import", str(src), "--out", str(out), "--operator", "carol"]
     args += ["--sample", "P-888 #7", "--meta", "actuator_serial=SN-7"]

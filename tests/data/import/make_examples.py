@@ -196,7 +196,21 @@ def mat_examples() -> None:
     write_v73_capture(HERE / "controldesk_v73_bad.mat", "capture_1", x, [amp, gauge_bad])
 
 
+def logical_example() -> None:
+    """A v5 file with a logical variable whose name gives a unit (``enabled_V``, a relay's state
+    sampled with the signals): MATLAB logical values are flags, not measurements, and are left
+    out (scipy stores them as uint8 with a logical flag)."""
+    sig = signals()
+    enabled = (np.arange(N) % 16) < 12
+    savemat(
+        HERE / "logical_v5.mat",
+        {"time_s": sig["time"][:, None], "voltage_V": sig["voltage"][:, None],
+         "strain_ue": sig["strain"][:, None], "enabled_V": enabled[:, None]},
+    )  # fmt: skip
+
+
 if __name__ == "__main__":
     text_examples()
     mat_examples()
+    logical_example()
     sys.stdout.write(f"wrote the examples to {HERE}\n")

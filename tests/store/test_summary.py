@@ -1,0 +1,139 @@
+"""The summary a run file carries for listings (``/run/summary``): written when the writer closes
+the file, absent while it is written or after a writer died, removed by a resume until its
+close, left out when the disk has no room, and always what a full read of the file gives."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from labrig.catalogue.read import file_record_here
+from labrig.core.metadata import RunMetadata
+from labrig.store import RunWriter, read_run
+from labrig.store import writer as writer_module
+from labrig.store.summary import read_summary_here
+
+STEP = {"kind": "sine", "amplitude_V": 20.0, "frequency_hz": 5.0}
+
+
+def begin(path: Path, seed: int = 2**63 - 25) -> RunWriter:
+    meta = RunMetadata({"operator": "ana", "sample": "P-888 #3"})
+    return RunWriter(path, "name: s\n", "", {"daq": {"rate_hz": 100.0}}, seed,
+                     protocol_name="s", planned_entries=["e0", "e1"], metadata=meta)  # fmt: skip
+
+
+def entry(w: RunWriter, name: str, n: int = 50) -> None:
+    e = w.begin_entry(name, STEP, 100.0, ["command_voltage", "strain"])
+    v = np.linspace(0.0, 20.0, n)
+    e.append({"command_voltage": v, "strain": 9.0 * v})
+    e.finish()
+
+
+def has_summary(path: Path) -> bool:
+    """Read by another process, as a reader does while the writer holds the file open."""
+    script = (
+        "import sys, h5py\n"
+        "with h5py.File(sys.argv[1], 'r', locking=False) as f:\n"
+        "    print('summary' in f['run'])\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script, str(path)], capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0, done.stderr
+    return done.stdout.strip() == "True"
+
+
+def test_written_at_the_close_and_equal_to_a_full_read(tmp_path: Path):
+    path = tmp_path / "run.h5"
+    w = begin(path)
+    entry(w, "e0")
+    assert not has_summary(path)  # being written: readers read the file itself
+    entry(w, "e1", 70)
+    w.finish("complete")
+    assert not has_summary(path)
+    w.close()
+    summary = read_summary_here(path)
+    assert summary is not None and summary["seed"] == 2**63 - 25
+    assert [(e["name"], e["samples"]) for e in summary["entries"]] == [("e0", 50), ("e1", 70)]
+    assert summary["metadata"]["sample/name"] == "P-888 #3"
+    assert file_record_here(path) == file_record_here(path, full=True)
+    assert read_run(path).additions == []  # the summary is labrig's own, sealed
+
+
+def test_a_resume_removes_it_until_its_close(tmp_path: Path):
+    path = tmp_path / "run.h5"
+    w = begin(path)
+    entry(w, "e0")
+    w.close()  # closed unfinished: a summary that says so
+    assert read_summary_here(path)["status"] == "running"
+    again = RunWriter.reopen(path)
+    assert not has_summary(path)
+    entry(again, "e1")
+    again.finish("complete")
+    again.close()
+    summary = read_summary_here(path)
+    assert summary["status"] == "complete" and len(summary["entries"]) == 2
+    assert file_record_here(path) == file_record_here(path, full=True)
+
+
+def test_no_room_no_summary_and_the_file_reads(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    path = tmp_path / "run.h5"
+    w = begin(path)
+    entry(w, "e0")
+    w.finish("complete")
+    monkeypatch.setattr(writer_module, "free_bytes", lambda _path: 1000)
+    w.close()
+    assert not has_summary(path)
+    assert read_run(path).status == "complete"  # every seal still matches
+    assert file_record_here(path)["status"] == "complete"  # read in full
+
+
+def test_a_writer_that_dies_leaves_no_summary(tmp_path: Path):
+    path = tmp_path / "run.h5"
+    script = (
+        "import os, sys, numpy as np\n"
+        "from labrig.store import RunWriter\n"
+        "w = RunWriter(sys.argv[1], 'name: s', '', {}, 1, protocol_name='s')\n"
+        "e = w.begin_entry('e0', {'kind': 'hold'}, 100.0, ['strain'])\n"
+        "e.append({'strain': np.zeros(30)})\n"
+        "os._exit(0)\n"  # no close, as after kill -9
+    )
+    subprocess.run([sys.executable, "-c", script, str(path)], check=True, timeout=60)
+    assert not has_summary(path)
+    record = file_record_here(path)
+    assert record["status"] == "running" and record["entries"][0]["samples"] == 30
+
+
+def test_the_summary_is_plain_json_with_exact_integers(tmp_path: Path):
+    path = tmp_path / "run.h5"
+    with begin(path, seed=5400616385192348103) as w:
+        entry(w, "e0")
+    with h5py.File(path, "r") as f:
+        text = f["run/summary"][()].decode()
+    assert '"seed":5400616385192348103' in text
+    assert json.loads(text)["entries"][0]["step"] == STEP
+
+
+def test_ctrl_c_while_the_summary_is_written_closes_the_file_without_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+):
+    path = tmp_path / "run.h5"
+    w = begin(path)
+    entry(w, "e0")
+    w.finish("complete")
+
+    def interrupted(_path: object, f: h5py.File) -> None:
+        f["run"].create_dataset("summary", data="{half")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(writer_module, "write_summary", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        w.close()
+    assert not has_summary(path)
+    assert read_run(path).status == "complete"  # closed, and every seal matches
