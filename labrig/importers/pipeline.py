@@ -97,8 +97,8 @@ def check_distinct(files: list[Path]) -> None:
     """Each input once: the same path twice, two paths to one file (a link, ``./a.csv`` and
     ``a.csv``) or two files of the same content would make two entries of the same data (and a
     leave-one-entry-out score that has seen the entry it scores). An
-    :class:`~labrig.core.errors.InputFileError` names every repeat and the input it repeats. Contents
-    are compared (SHA-256) only between files of the same size."""
+    :class:`~labrig.core.errors.InputFileError` names every repeat and the input it repeats.
+    Contents are compared (SHA-256) only between files of the same size."""
     issues: list[InputIssue] = []
     first: dict[tuple[int, int], Path] = {}
     by_size: dict[int, list[Path]] = {}

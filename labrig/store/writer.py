@@ -27,10 +27,10 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from labrig.core.version import __version__
 from labrig.core.errors import InputFileError, StorageError
 from labrig.core.interrupts import reason_for, signum_of
 from labrig.core.metadata import RunMetadata
+from labrig.core.version import __version__
 from labrig.store.format import (
     FINAL_STATUSES,
     FORMAT_VERSION,
