@@ -64,6 +64,7 @@ __all__ = [
     "fill_rests",
     "pad_to_block",
     "relaxor_output",
+    "relaxor_sensitivities",
     "score_segments",
     "scored_names",
     "scored_sequences",
@@ -335,6 +336,34 @@ def relaxor_output(
     if rest_V == 0.0:
         return run_bank(bank, v_padded, block=BLOCK)[0]
     return rest_V + run_bank(bank, v_padded - rest_V, block=BLOCK)[0]
+
+
+def relaxor_sensitivities(
+    tau_s: float, lam: float, rate_hz: float, hold: str, v_padded: NDArray, rest_V: float = 0.0
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`relaxor_output` and its derivatives with respect to ``log tau`` and ``lam``.
+
+    The bank's modes do not move with ``tau`` and ``lam`` (only their output weights do), so the
+    derivatives are further outputs of the same pass when the model provides them
+    (:meth:`labrig.model.Relaxor.filter_sensitivities`); otherwise central differences of the
+    bank (steps 1e-5)."""
+    with np.errstate(over="ignore"):
+        rel = Relaxor(tau_s, lam)
+    fn = getattr(rel, "filter_sensitivities", None)
+    if fn is not None:
+        with np.errstate(over="ignore"):
+            return fn(v_padded, rate_hz, hold, rest_V)
+    y = relaxor_output(tau_s, lam, rate_hz, hold, v_padded, rest_V)
+    h = 1e-5
+    d_tau = (
+        relaxor_output(tau_s * np.exp(h), lam, rate_hz, hold, v_padded, rest_V)
+        - relaxor_output(tau_s * np.exp(-h), lam, rate_hz, hold, v_padded, rest_V)
+    ) / (2 * h)
+    d_lam = (
+        relaxor_output(tau_s, lam + h, rate_hz, hold, v_padded, rest_V)
+        - relaxor_output(tau_s, lam - h, rate_hz, hold, v_padded, rest_V)
+    ) / (2 * h)
+    return y, d_tau, d_lam
 
 
 @dataclass

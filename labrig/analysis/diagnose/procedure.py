@@ -364,8 +364,7 @@ class _Procedure:
         terms = list(term_library(scales).values())
         with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
             data = regression_data(self.cur_prob, self.cur.base, self.cur.effects, terms)
-            r = self.cur_prob.residual(self.cur.z, self.cur.base)
-            B = jacobian_basis(self.cur_prob.jacobian(self.cur.z, self.cur.base, r))
+            B = jacobian_basis(self.cur_prob.jacobian(self.cur.z, self.cur.base))
         sel = select_terms(data.residual, data.columns, terms, data.weights, B)
         if not sel.terms:
             self.messages.append(

@@ -69,7 +69,7 @@ def rank(
     """(effect, explained share, best probe) for each candidate, best first."""
     with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
         r = cur_prob.residual(cur.z, cur.base)
-        B = jacobian_basis(cur_prob.jacobian(cur.z, cur.base, r))
+        B = jacobian_basis(cur_prob.jacobian(cur.z, cur.base))
         rr = float(r @ r)
         out = []
         for eff in candidates:
