@@ -47,6 +47,7 @@ __all__ = [
     "Coordinate",
     "Coordinates",
     "Problem",
+    "SharedSimulations",
     "base_problem",
     "best_of",
     "offset_basis",
@@ -198,7 +199,7 @@ def orthonormal(C: NDArray) -> NDArray | None:
 
 
 @dataclass
-class _Shared:
+class SharedSimulations:
     """What the problems of one family (a problem and its subsets) share: the simulations."""
 
     cache: OrderedDict = field(default_factory=OrderedDict)  # whole simulations
@@ -229,7 +230,7 @@ class Problem:
         nuisance: Mapping[str, NDArray | None] | None = None,
         with_gd: bool = True,
         lam_gap: bool = True,
-        shared: _Shared | None = None,
+        shared: SharedSimulations | None = None,
     ):
         self.sequences = list(sequences)
         self.segments = [list(s) for s in segments]
@@ -240,7 +241,7 @@ class Problem:
         self.with_gd = with_gd
         self.lam_gap = lam_gap
         self.coords = Coordinates(base_free, self.glob, self.bounds, lam_gap)
-        self._shared = shared or _Shared()
+        self._shared = shared or SharedSimulations()
         self.nfev = 0  # residual evaluations asked of this problem
         self.n_scored = sum(g.measured_ue.size for segs in self.segments for g in segs)
 
