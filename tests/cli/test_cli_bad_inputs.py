@@ -22,8 +22,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from labrig.runner.execute import execute as runner
-from labrig.runner.execute import rigfile
+from labrig.runner import execute as runner
+from labrig.runner import rigfile
 
 from helpers import invoke as run_cli
 

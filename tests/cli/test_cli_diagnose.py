@@ -140,9 +140,9 @@ def test_api_refuses_existing_outputs_without_overwrite(recorded, tmp_path: Path
 
 
 def test_prepare_does_not_import_the_diagnosis() -> None:
-    """``diagnose/run_file.py`` may import ``prepare``; ``prepare`` never imports the diagnosis
-    package (not even inside a function)."""
-    tree = ast.parse((ROOT / "labrig" / "analysis" / "prepare.py").read_text())
+    """``commands/diagnose.py`` imports ``prepare``; ``prepare`` (also read by ``fit`` and
+    ``report``) never imports the diagnosis package, not even inside a function."""
+    tree = ast.parse((ROOT / "labrig" / "commands" / "prepare.py").read_text())
     imported = {
         node.module
         for node in ast.walk(tree)

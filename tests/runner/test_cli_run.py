@@ -19,7 +19,7 @@ import pytest
 from typer.testing import CliRunner
 
 from labrig.cli import app
-from labrig.runner.execute import execute as runner
+from labrig.runner import execute as runner
 from labrig.store import read_run
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -17,7 +17,7 @@ import yaml
 
 from labrig.core.errors import InputFileError
 from labrig.core.metadata import from_options
-from labrig.runner.execute import execute as runner
+from labrig.runner import execute as runner
 from labrig.store import read_run, run_info
 
 pytestmark = pytest.mark.timeout(120)
@@ -145,7 +145,7 @@ def test_a_failed_resume_leaves_the_aborted_file_as_it_was(aborted, tmp_path):
     proto, out = aborted
     before = digest(out)
     code = (
-        "import sys, pathlib; from labrig.runner.execute import execute as runner\n"
+        "import sys, pathlib; from labrig.runner import execute as runner\n"
         "plan, rig = runner.preflight(pathlib.Path(sys.argv[1]), None)\n"
         "def progress(k, n, name, f, left):\n"
         "    if f > 0.3: print('playing', flush=True)\n"

@@ -21,7 +21,7 @@ import pytest
 import yaml
 
 from labrig.core.errors import InputFileError
-from labrig.runner.execute import execute as runner
+from labrig.runner import execute as runner
 from labrig.runner.rigfile import DEFAULT_RIG_YAML
 from labrig.store import read_run
 

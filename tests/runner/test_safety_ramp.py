@@ -27,7 +27,7 @@ import pytest
 import yaml
 
 from labrig.core.errors import DeviceError
-from labrig.runner.execute import execute as runner
+from labrig.runner import execute as runner
 from labrig.runner.rigfile import DEFAULT_RIG_YAML, open_rig
 
 pytestmark = pytest.mark.timeout(60)
