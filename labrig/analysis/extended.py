@@ -24,7 +24,7 @@ like with like.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 
 from labrig.analysis.engine import LAM_GAP, Problem, orthonormal, solve
 from labrig.analysis.metrics import second_half_nrmse_pct
+from labrig.analysis.parallel import map_tasks
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import (
     EXTENDED_CONVERGED,
@@ -205,9 +206,11 @@ class ExtendedProblem(Problem):
         eff0: Mapping[str, Mapping[str, float]] | None = None,
         tight: bool = True,
         max_nfev: int | None = None,
+        sd: bool = True,
     ) -> FitOutcome:
         """Least squares from ``base0`` and ``eff0`` (effects absent from it start at their
-        ``init``); ``tight``: converged (with uncertainties), else loose."""
+        ``init``); ``tight``: converged (with uncertainties unless ``sd`` is false), else
+        loose."""
         eff0 = eff0 or {}
         z0 = self.z_of(base0, eff0)
         n0 = self.nfev
@@ -219,7 +222,7 @@ class ExtendedProblem(Problem):
                 z = z0
             r = self.residual(z, base0)
             base, eff = self.unpack(z, base0)
-            sd_z = self._sd(z, base0, r) if tight and z.size else np.full(z.size, np.nan)
+            sd_z = self._sd(z, base0, r) if tight and sd and z.size else np.full(z.size, np.nan)
             per = self.per_entry(base, eff)
         return self._outcome(z, base, eff, sd_z, per, 0.5 * float(r @ r), self.nfev - n0)
 
@@ -271,15 +274,32 @@ class ExtendedProblem(Problem):
             shared=self._shared,
         )
 
-    def heldout(self, full: FitOutcome, max_nfev: int = 25) -> dict[str, float]:
-        """Leave-one-entry-out NRMSE (module docstring) of each scored entry."""
-        out = {}
-        for name in self.scored:
-            sub = self.fold([n for n in self.scored if n != name])
-            fo = sub.fit(full.base, full.effects, tight=False, max_nfev=max_nfev)
-            self.nfev += sub.nfev
-            out[name] = self.score_second_half(name, fo.base, fo.effects)
-        return out
+    def heldout(
+        self,
+        full: FitOutcome,
+        max_nfev: int = 60,
+        workers: int = 1,
+        progress: Callable[[int, int], Any] | None = None,
+    ) -> dict[str, float]:
+        """Leave-one-entry-out NRMSE (module docstring) of each scored entry: each fold refitted
+        to convergence from the full fit (:data:`~labrig.analysis.simulate.EXTENDED_CONVERGED`,
+        at most ``max_nfev`` evaluations), on ``workers`` processes
+        (:func:`~labrig.analysis.parallel.map_tasks`); ``progress(done, total)`` after each
+        fold (in this process, one worker)."""
+        names = list(self.scored)
+
+        def fold(k: int) -> tuple[float, int]:
+            name = names[k]
+            sub = self.fold([n for n in names if n != name])
+            fo = sub.fit(full.base, full.effects, tight=True, max_nfev=max_nfev, sd=False)
+            score = self.score_second_half(name, fo.base, fo.effects)
+            if progress is not None and workers <= 1:
+                progress(k + 1, len(names))
+            return score, sub.nfev
+
+        results = map_tasks(fold, len(names), workers)
+        self.nfev += sum(n for _, n in results)
+        return {name: score for name, (score, _) in zip(names, results, strict=True)}
 
     def score_second_half(self, name: str, base, eff) -> float:
         """NRMSE of entry ``name`` on the second half of its scored samples, nuisance terms

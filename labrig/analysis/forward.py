@@ -75,8 +75,7 @@ def operator_sensitivities(
     (N x k) with the branch structure held fixed."""
     fn = getattr(op, "sensitivities", None)
     if fn is not None:
-        S, dP, dU = fn(u, held_V, du)
-        return S, (dP if params else None), dU
+        return fn(u, held_V, du, params=params)
     S = op.apply(u, op.held_state(held_V))
     dP = None
     if params:
@@ -103,6 +102,25 @@ def operator_sensitivities(
 def _effect_difference(e: Effect, c, x: NDArray, ctx, p: Mapping[str, float]) -> NDArray:
     """d e.apply(x) / dz for the effect's own coordinate ``c`` (``x`` held fixed)."""
     return _difference(c, c.coordinate(p[c.name]), lambda v: e.apply(x, ctx, {**p, c.name: v}))
+
+
+def _own_columns(
+    e: Effect, coords: Sequence, x: NDArray, ctx, p: Mapping[str, float], J: NDArray, filled
+) -> None:
+    """Fill the Jacobian's columns of effect ``e``'s own coordinates: ``d e.apply(x) / dz``,
+    in closed form when the effect gives it (times ``dvalue/dz`` on a log scale), else by
+    differences."""
+    mine = [(j, c) for j, c in enumerate(coords) if c.who == e.name]
+    if not mine:
+        return
+    closed = e.parameter_derivatives(x, ctx, p)
+    for j, c in mine:
+        if closed is not None and c.name in closed:
+            d = closed[c.name]
+            J[:, j] = d * p[c.name] if c.kind == "log" else d
+        else:
+            J[:, j] = _effect_difference(e, c, x, ctx, p)
+        filled[j] = True
 
 
 def _voltage(v: NDArray, effects: Sequence[Effect], ctx, eff) -> NDArray:
@@ -270,23 +288,19 @@ def simulate_sequence(
             if size > 0:
                 h = scale / size
                 J[:, j] += (e.apply(xd + h * du[:, i], ctx, p) - b) / h
-        for j, c in enumerate(coords):
-            if c.who == e.name:
-                J[:, j] = _effect_difference(e, c, xd, ctx, p)
-                filled[j] = True
+        _own_columns(e, coords, xd, ctx, p, J, filled)
 
-    # 6. output effects: each column through their tangents, their own parameters by difference
+    # 6. output effects: each column through their tangents, their own parameters in closed
+    # form where the effect gives them, else by differences
     y = S
     for e in out:
         p = eff.get(e.name, {})
         y_next = e.apply(y, ctx, p)
         if J is not None:
-            for j in np.flatnonzero(filled):
-                J[:, j] = e.tangent(y, J[:, j], ctx, p)
-            for j, c in enumerate(coords):
-                if c.who == e.name:
-                    J[:, j] = _effect_difference(e, c, y, ctx, p)
-                    filled[j] = True
+            cols = np.flatnonzero(filled)
+            if cols.size:
+                J[:, cols] = e.tangent_columns(y, J[:, cols], ctx, p)
+            _own_columns(e, coords, y, ctx, p, J, filled)
         y = y_next
     names = tuple((c.who, c.name) for c in coords)
     return Forward(np.asarray(y, dtype=float), J, names)

@@ -50,6 +50,7 @@ from labrig.analysis.engine import LAM_GAP, SharedSimulations
 from labrig.analysis.extended import DEFAULT_MAINS_HZ, ExtendedProblem, effect_context
 from labrig.analysis.fit import FitResult, fit_model
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic
+from labrig.analysis.parallel import map_tasks
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import build_sequences
 from labrig.analysis.spectra import detect_mains_hz
@@ -147,6 +148,7 @@ def diagnose(
     mains_hz: float | None = None,
     always: Sequence[str] = (),
     progress: Progress | None = None,
+    workers: int = 1,
 ) -> Diagnosis:
     """Diagnose what the dynamic model misses in ``records`` (module docstring).
 
@@ -159,6 +161,8 @@ def diagnose(
       without one, ``mains_pickup`` is not tried).
     - ``always``: names tried even where the records cannot identify them (``--also``):
       ``viscoelastic_creep`` is otherwise left out without a long, slow entry.
+    - ``workers``: processes for the held-out folds and the candidates of a round
+      (:func:`~labrig.analysis.parallel.map_tasks`); the result does not depend on it.
     """
     t0 = time.perf_counter()
     if len(records) < 3:
@@ -172,6 +176,7 @@ def diagnose(
         shape=params.shape if params is not None else "exponential",
         memory=params.memory if params is not None else "return_point",
         initial=params,
+        workers=max(1, int(workers)),
     )
     say = progress or (lambda _msg: None)
     messages: list[str] = []
@@ -266,7 +271,7 @@ def fit_base(
     prob = setup.problem(settings, [])
     fo = prob.fit(base0)
     say("cross-validating the base model")
-    held = prob.heldout(fo)
+    held = prob.heldout(fo, workers=settings.workers)
     return setup, Model.of([], prob, fo, held, records, settings.warmup_s)
 
 
@@ -316,25 +321,43 @@ def next_round(
         return [], None, None
     say(f"round {rnd + 1}: ranking {len(remaining)} candidates")
     ranked = rank(current.effects, current.fit, current.problem, remaining, setup, settings)
-    cands: list[Candidate] = []
-    problems: dict[str, ExtendedProblem] = {}
-    for k, (eff, score, probe) in enumerate(ranked):
-        if k >= settings.top_k:
-            c = Candidate(eff.name, rnd, score)
-            c.evidence = (
-                f"ranked {k + 1} of {len(ranked)}: its direction explains "
-                f"{100 * score:.1f} % of the residual; not refitted"
-            )
-            cands.append(c)
-            continue
-        c, problems[eff.name] = try_candidate(setup, settings, current, eff, probe, rnd, score, say)
+    chosen = ranked[: settings.top_k]
+    if settings.workers > 1 and len(chosen) > 1:
+        say(f"round {rnd + 1}: fitting and cross-validating {len(chosen)} candidates on "
+            f"{min(settings.workers, len(chosen))} processes")  # fmt: skip
+
+    def trial(k: int) -> Candidate:
+        eff, score, probe = chosen[k]
+        quiet = settings.workers > 1 and len(chosen) > 1
+        c, _ = try_candidate(
+            setup,
+            settings,
+            current,
+            eff,
+            probe,
+            rnd,
+            score,
+            (lambda _m: None) if quiet else say,
+            1 if quiet else settings.workers,
+        )
+        return c
+
+    workers = settings.workers if len(chosen) > 1 else 1
+    cands = map_tasks(trial, len(chosen), workers)
+    for k, (eff, score, _probe) in enumerate(ranked[settings.top_k :], start=settings.top_k):
+        c = Candidate(eff.name, rnd, score)
+        c.evidence = (
+            f"ranked {k + 1} of {len(ranked)}: its direction explains "
+            f"{100 * score:.1f} % of the residual; not refitted"
+        )
         cands.append(c)
     passed = [c for c in cands if c.accepted]
     if not passed:
         return cands, None, None
     best = min(passed, key=lambda c: c.heldout_nrmse_pct or np.inf)
     eff = setup.library[best.effect]
-    return cands, best, _extended(current, best, eff, problems[best.effect])
+    prob = setup.problem(settings, [*current.effects, eff])
+    return cands, best, _extended(current, best, eff, prob)
 
 
 # -- when no named effect passes: terms found in the data ------------------------------------
@@ -370,7 +393,9 @@ def empirical_round(
         return [], None, None
     eff = empirical_effect(sel.keys, scales)
     found = ", ".join(f"{t.name} ({t.coefficient_ue:+.3g} ue at full scale)" for t in sel.terms)
-    c, eprob = try_candidate(setup, settings, current, eff, sel.start(), rnd, sel.share, say)
+    c, eprob = try_candidate(
+        setup, settings, current, eff, sel.start(), rnd, sel.share, say, settings.workers
+    )
     c.evidence = (
         f"sparse regression of the residual selects {found} "
         f"({100 * sel.share:.0f} % of the residual); " + c.evidence

@@ -43,6 +43,8 @@ class Settings:
     shape: str = "exponential"
     memory: str = "return_point"
     initial: ModelParams | None = None
+    #: processes for the independent pieces (held-out folds, the candidates of a round)
+    workers: int = 1
 
     def fit_kwargs(self) -> dict[str, Any]:
         """The keyword arguments of :func:`~labrig.analysis.fit.fit_model` for the base."""

@@ -20,8 +20,6 @@ from labrig.analysis.diagnose.acceptance import Candidate, accept
 from labrig.analysis.diagnose.state import Model, Settings, Setup, mean_of
 from labrig.analysis.diagnose.verdict import signature_clause
 from labrig.analysis.extended import LAM_GAP, ExtendedProblem, FitOutcome
-from labrig.analysis.fit import fit_model
-from labrig.analysis.records import Record
 from labrig.analysis.simulate import PARAM_NAMES
 from labrig.model.effects import Effect
 
@@ -40,24 +38,37 @@ def numeric(params) -> dict[str, float]:
     return {n: float(getattr(params, n)) for n in PARAM_NAMES}
 
 
+class FixedVoltage(Effect):
+    """A voltage effect with its parameters held at given values (no free parameter): the
+    records driven through it, for :func:`voltage_start`."""
+
+    where = "voltage"
+
+    def __init__(self, effect: Effect, values: Mapping[str, float]):
+        self.effect = effect
+        self.values = dict(values)
+        # a name per value set: the engine's shared simulations are keyed by effect names
+        self.name = f"{effect.name}@" + ",".join(f"{k}={v!r}" for k, v in sorted(values.items()))
+        self.params = ()
+
+    def apply(self, x, ctx, p):
+        return self.effect.apply(x, ctx, self.values)
+
+
 def voltage_start(
-    setup: Setup, settings: Settings, eff: Effect, probe: Mapping[str, float]
+    setup: Setup, settings: Settings, current: Model, eff: Effect, probe: Mapping[str, float]
 ) -> dict[str, float] | None:
-    """Base parameters fitted (``fit_model``) to the records driven by the voltage effect at
-    ``probe``: a start for base + a voltage effect (``None`` if that fit fails)."""
-    new = []
-    for seq in setup.sequences:
-        v = eff.apply(seq.voltage_V, seq.context, probe)
-        for r in seq.records:
-            sl = seq.entries[r.name]
-            new.append(
-                Record(r.name, r.rate_hz, r.time_s, v[sl], r.strain_ue, {}, r.hold, dict(r.meta))
-            )
+    """Base parameters refitted to the records driven by the voltage effect at ``probe`` (the
+    other effects of the current model absent), from the current base, to convergence: a start
+    for base + a voltage effect (``None`` if that fit fails)."""
+    prob = setup.problem(settings, [FixedVoltage(eff, probe)])
     try:
-        fr = fit_model(new, **settings.fit_kwargs())
-    except (ValueError, RuntimeError):
+        fo = prob.fit(current.fit.base, tight=True)
+    except (ValueError, RuntimeError, np.linalg.LinAlgError):
         return None
-    b = numeric(fr.params)
+    if not np.isfinite(fo.cost):
+        return None
+    b = dict(fo.base)
     if abs(b["lam_d"] - 1.0) < LAM_GAP:
         b["lam_d"] = 1.0 + LAM_GAP
     return b
@@ -75,7 +86,7 @@ def _start(
     start = dict(current.fit.base)
     if eff.where != "voltage":
         return start
-    alt = voltage_start(setup, settings, eff, probe)
+    alt = voltage_start(setup, settings, current, eff, probe)
     if alt is None:
         return start
     e0 = {**current.fit.effects, eff.name: dict(probe)}
@@ -118,9 +129,11 @@ def try_candidate(
     rnd: int,
     score: float,
     say: Callable[[str], Any],
+    workers: int = 1,
 ) -> tuple[Candidate, ExtendedProblem]:
-    """Refit one candidate, cross-validate it if it gains enough in-sample, judge it; returns
-    the candidate (with its evidence sentence) and its problem."""
+    """Refit one candidate, cross-validate it if it gains enough in-sample (its folds on
+    ``workers`` processes), judge it; returns the candidate (with its evidence sentence) and
+    its problem."""
     c = Candidate(eff.name, rnd, score)
     say(f"round {rnd + 1}: fitting base + {eff.name}")
     prob = setup.problem(settings, [*current.effects, eff])
@@ -137,7 +150,7 @@ def try_candidate(
         )
         return c, prob
     say(f"round {rnd + 1}: cross-validating base + {eff.name}")
-    c.heldout_per_entry = prob.heldout(fo)
+    c.heldout_per_entry = prob.heldout(fo, workers=workers)
     c.heldout_nrmse_pct = mean_of(c.heldout_per_entry)
     a = accept(eff, fo, c.heldout_per_entry, current.heldout, settings.min_gain, setup.span_s)
     c.judged(a)
