@@ -1,0 +1,232 @@
+"""Compiled kernels of the model (numba, ``@njit(cache=True)``).
+
+Imported only through :func:`labrig.model.accel.kernels`, never at ``import labrig`` time:
+importing this module imports numba. Each kernel here has a numpy counterpart in the module
+that calls it (the reference of the tests, and the fallback without numba):
+
+- :func:`operator_pass`: the quasi-static hysteresis operator of
+  :mod:`labrig.model.hysteresis` in one sequential pass (the branch structure, the branch
+  values and, on request, their derivatives together), for the builtin shapes;
+- :func:`bank_run`: the relaxor banks of :mod:`labrig.model.modal`, one sample at a time over
+  all modes (the recursion itself, in place of the numpy block form).
+
+Shapes are passed as integer codes (their index in ``labrig.model.hysteresis.SHAPES``:
+exponential 0, linear 1, gaussian 2), memory rules as a flag; every array argument is
+C-contiguous float64, so each kernel compiles once.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_SQRT_PI = math.sqrt(math.pi)
+
+
+# -- the hysteresis operator -------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _branch(x: float, shape: int, a0: float, g: float, vc: float) -> float:
+    """``F(x) = alpha0 x + int_0^x h`` (ue) for ``x >= 0`` (V), numpy's formulas.
+
+    The exponential shape uses ``exp(-x/vc) - 1`` where numpy uses ``expm1`` (3x faster here):
+    for ``x << vc`` that loses relative precision in ``H``, but its absolute error stays below
+    ``gamma vc eps`` (~1e-13 ue for the paper's values), far below 1e-12 of full scale.
+    """
+    if shape == 0:
+        return a0 * x + g * (x + vc * (math.exp(-x / vc) - 1.0))
+    if shape == 1:
+        return a0 * x + 0.5 * g * x * x
+    return a0 * x + g * (x - vc * _SQRT_PI / 2 * math.erf(x / vc))
+
+
+@njit(cache=True)
+def _odd(d: float, shape: int, a0: float, g: float, vc: float) -> float:
+    """``sign(d) F(|d|)``: strain change (ue) along a branch over ``d`` (V)."""
+    if d > 0.0:
+        return _branch(d, shape, a0, g, vc)
+    if d < 0.0:
+        return -_branch(-d, shape, a0, g, vc)
+    return 0.0
+
+
+@njit(cache=True)
+def _slope(x: float, shape: int, a0: float, g: float, vc: float) -> float:
+    """``alpha = alpha0 + h(x)`` (ue/V) at distance ``x >= 0`` (V) from the turning point."""
+    if shape == 0:
+        return a0 - g * math.expm1(-x / vc)
+    if shape == 1:
+        return a0 + g * x
+    return a0 - g * math.expm1(-((x / vc) ** 2))
+
+
+@njit(cache=True)
+def _odd_dparams(d: float, shape: int, g: float, vc: float, out: np.ndarray) -> None:
+    """``d sign(d) F(|d|) / d(alpha0, gamma, vc)`` into ``out[0:3]``.
+
+    ``dF/dalpha0 = x``; ``dF/dgamma = H(x)/gamma`` (written without dividing by gamma);
+    ``dF/dvc``: exponential ``gamma (expm1(-z) + z e^-z)``, gaussian
+    ``gamma (z e^(-z^2) - sqrt(pi)/2 erf(z))`` with ``z = x/vc``, linear 0.
+    """
+    x = abs(d)
+    s = 1.0 if d > 0.0 else (-1.0 if d < 0.0 else 0.0)
+    out[0] = d
+    if shape == 0:
+        z = x / vc
+        out[1] = s * (x + vc * math.expm1(-z))
+        out[2] = s * g * (math.expm1(-z) + z * math.exp(-z))
+    elif shape == 1:
+        out[1] = s * 0.5 * x * x
+        out[2] = 0.0
+    else:
+        z = x / vc
+        out[1] = s * (x - vc * _SQRT_PI / 2 * math.erf(z))
+        out[2] = s * g * (z * math.exp(-z * z) - _SQRT_PI / 2 * math.erf(z))
+
+
+_INF = math.inf
+
+
+@njit(cache=True)
+def _copy_rows(src: np.ndarray, dst: np.ndarray, n: int) -> None:
+    """``dst[:n] = src[:n]`` for 1-D arrays (an explicit loop compiles much faster)."""
+    for i in range(n):
+        dst[i] = src[i]
+
+
+@njit(cache=True)
+def _copy_rows2(src: np.ndarray, dst: np.ndarray, n: int) -> None:
+    """``dst[:n] = src[:n]`` for 2-D arrays."""
+    for i in range(n):
+        for j in range(src.shape[1]):
+            dst[i, j] = src[i, j]
+
+
+@njit(cache=True)
+def _pass(u, k, prev, cur, sx, sy, sp, su, sd, top, wipe, shape, a0, g, vc, want_p, du,
+          out, dp, dq, tmp):  # fmt: skip
+    """Samples ``k ..`` of :func:`operator_pass` until the end of ``u`` or until a turning point
+    needs more room than the stack has; returns ``(k, prev, cur, top)`` to resume from.
+
+    The current branch's turning point ``(xa, ya)`` and the input at which the next minor loop
+    closes (``thr``, in the direction of travel) stay in registers: most samples are neither a
+    reversal nor a closing and cost one branch value.
+    """
+    n = u.shape[0]
+    kc = du.shape[1]
+    xa, ya = sx[top - 1], sy[top - 1]
+    thr = cur * sx[top - 2] if wipe and top >= 2 and cur != 0.0 else _INF
+    while k < n:
+        x = u[k]
+        if (x - prev) * cur < 0.0 or (cur == 0.0 and x != prev) or cur * x >= thr:
+            if (x - prev) * cur < 0.0:  # prev is a turning point
+                if wipe and top == sx.shape[0]:
+                    return k, prev, cur, top  # grow the stack, then resume at k
+                a = top - 1
+                d = prev - xa
+                t = top if wipe else 0
+                if want_p:
+                    _odd_dparams(d, shape, g, vc, tmp)
+                    for j in range(3):
+                        sp[t, j] = sp[a, j] + tmp[j]
+                if kc:
+                    sl = _slope(abs(d), shape, a0, g, vc)
+                    for j in range(kc):
+                        dxt = du[k - 1, j] if k >= 1 else 0.0
+                        su[t, j] = su[a, j] + sl * (dxt - sd[a, j])
+                        sd[t, j] = dxt
+                sy[t] = ya + _odd(d, shape, a0, g, vc)
+                sx[t] = prev
+                top = t + 1
+                cur = -cur
+            elif cur == 0.0 and x != prev:  # first move
+                cur = 1.0 if x > prev else -1.0
+            if wipe and cur != 0.0:  # close the minor loops the input reaches
+                while top >= 2 and cur * x >= cur * sx[top - 2]:
+                    top -= 2 if top >= 3 else 1
+            xa, ya = sx[top - 1], sy[top - 1]
+            thr = cur * sx[top - 2] if wipe and top >= 2 and cur != 0.0 else _INF
+        d = x - xa
+        out[k] = ya + _odd(d, shape, a0, g, vc)
+        if want_p:
+            _odd_dparams(d, shape, g, vc, tmp)
+            for j in range(3):
+                dp[k, j] = sp[top - 1, j] + tmp[j]
+        if kc:
+            sl = _slope(abs(d), shape, a0, g, vc)
+            for j in range(kc):
+                dq[k, j] = su[top - 1, j] + sl * (du[k, j] - sd[top - 1, j])
+        prev = x
+        k += 1
+    return k, prev, cur, top
+
+
+@njit(cache=True)
+def operator_pass(
+    u: np.ndarray,
+    stack_x: np.ndarray,
+    stack_y: np.ndarray,
+    u_last: float,
+    direction: float,
+    wipe: bool,
+    shape: int,
+    a0: float,
+    g: float,
+    vc: float,
+    want_params: bool,
+    du: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """The operator over ``u`` (V) in one sequential pass: strain (ue), its derivatives, the
+    new memory.
+
+    The memory is the remembered turning points ``(stack_x, stack_y)`` (oldest first, the last
+    the current branch's), the last input ``u_last`` and the ``direction`` of travel. At each
+    sample, a change of direction makes the previous sample (or ``u_last``) a turning point, its
+    strain the current branch's value there; with return-point memory (``wipe``) the point is
+    pushed and every minor loop the input reaches is closed (its two turning points popped; the
+    bottom one, the rest point, stays), else it replaces the memory. Flat samples keep the
+    direction.
+
+    Along the same pass, if ``want_params``, the derivatives of the strain with respect to
+    ``(alpha0, gamma, vc)`` (N, 3), and along each column of ``du`` (N, k) with the branch
+    structure held fixed (N, k). Each turning point carries its strain's derivatives:
+    ``dS_t = dS_a + d/dp sign F(|x_t - x_a|)`` from the turning point ``a`` whose branch reached
+    it, and along ``du`` ``dS_t = dS_a + alpha(|x_t - x_a|) (du_t - du_a)``, ``du_t`` the
+    input's derivative at the turning point's sample; the carried-in turning points (and
+    ``u_last``) have zero derivatives. Returns ``(S, dS_dparams, dS_du, stack_x, stack_y,
+    direction)``.
+    """
+    n = u.shape[0]
+    kc = du.shape[1]
+    m = stack_x.shape[0]
+    cap = max(64, 2 * m)
+    sx, sy = np.empty(cap), np.empty(cap)
+    sp, su, sd = np.zeros((cap, 3)), np.zeros((cap, kc)), np.zeros((cap, kc))
+    _copy_rows(stack_x, sx, m)
+    _copy_rows(stack_y, sy, m)
+    out = np.empty(n)
+    dp = np.empty((n if want_params else 0, 3))
+    dq = np.empty((n, kc))
+    tmp = np.empty(3)
+    k, prev, cur, top = 0, u_last, direction, m
+    while True:
+        k, prev, cur, top = _pass(u, k, prev, cur, sx, sy, sp, su, sd, top, wipe, shape,
+                                  a0, g, vc, want_params, du, out, dp, dq, tmp)  # fmt: skip
+        if k >= n:
+            break
+        c2 = 2 * sx.shape[0]
+        nx, ny = np.empty(c2), np.empty(c2)
+        npp, nu, nd = np.zeros((c2, 3)), np.zeros((c2, kc)), np.zeros((c2, kc))
+        _copy_rows(sx, nx, top)
+        _copy_rows(sy, ny, top)
+        _copy_rows2(sp, npp, top)
+        _copy_rows2(su, nu, top)
+        _copy_rows2(sd, nd, top)
+        sx, sy, sp, su, sd = nx, ny, npp, nu, nd
+    rx, ry = np.empty(top), np.empty(top)
+    _copy_rows(sx, rx, top)
+    _copy_rows(sy, ry, top)
+    return out, dp, dq, rx, ry, cur
