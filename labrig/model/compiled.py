@@ -230,3 +230,104 @@ def operator_pass(
     _copy_rows(sx, rx, top)
     _copy_rows(sy, ry, top)
     return out, dp, dq, rx, ry, cur
+
+
+# -- the relaxor banks -------------------------------------------------------------------------
+
+
+@njit(cache=True, fastmath=True)
+def bank_run(
+    a: np.ndarray,
+    cw: np.ndarray,
+    ca: np.ndarray,
+    ccw: np.ndarray,
+    feed: np.ndarray,
+    u: np.ndarray,
+    w: np.ndarray,
+    wc: np.ndarray,
+    u_prev: np.ndarray,
+) -> np.ndarray:
+    """Run a bank of first-order modes over the columns of ``u`` (N, k); ``y`` (N, k, r).
+
+    Each mode is kept in scaled form ``w = z / b``: ``w[n] = a w[n-1] + u[n-1]``, and output
+    row ``q`` is ``y_q[n] = sum_i cw[q, i] w_i[n] + feed[q] u[n]`` (``cw = c b``: the bank's
+    output weights times the folded input gains; :mod:`labrig.model.modal`). Real modes:
+    ``a`` (M,), ``cw`` (r, M), state ``w`` (k, M); complex modes: ``ca`` (Mc,), ``ccw``
+    (r, Mc), state ``wc`` (k, Mc), their output the real part. ``u_prev`` (k,): each column's
+    input before its first sample. The states are updated in place. Four samples per sweep
+    over the modes (each mode's coefficients read once per four samples); ``fastmath`` lets
+    the compiler reorder the sums over modes (rounding-level differences only).
+    """
+    n, kc = u.shape
+    r = cw.shape[0]
+    m = a.shape[0]
+    mc = ca.shape[0]
+    y = np.empty((n, kc, r))
+    acc = np.zeros((r, 4))
+    for j in range(kc):
+        up = u_prev[j]
+        k = 0
+        while k < n:
+            nb = min(4, n - k)
+            u0 = up
+            u1 = u[k, j] if nb > 1 else 0.0
+            u2 = u[k + 1, j] if nb > 2 else 0.0
+            u3 = u[k + 2, j] if nb > 3 else 0.0
+            if r == 1 and nb == 4:
+                s0 = 0.0
+                s1 = 0.0
+                s2 = 0.0
+                s3 = 0.0
+                for i in range(m):
+                    ai = a[i]
+                    ci = cw[0, i]
+                    w0 = ai * w[j, i] + u0
+                    w1 = ai * w0 + u1
+                    w2 = ai * w1 + u2
+                    w3 = ai * w2 + u3
+                    w[j, i] = w3
+                    s0 += ci * w0
+                    s1 += ci * w1
+                    s2 += ci * w2
+                    s3 += ci * w3
+                acc[0, 0] = s0
+                acc[0, 1] = s1
+                acc[0, 2] = s2
+                acc[0, 3] = s3
+            else:
+                acc[:, :] = 0.0
+                for i in range(m):
+                    ai = a[i]
+                    w0 = ai * w[j, i] + u0
+                    w1 = ai * w0 + u1
+                    w2 = ai * w1 + u2
+                    w3 = ai * w2 + u3
+                    last = w0 if nb == 1 else (w1 if nb == 2 else (w2 if nb == 3 else w3))
+                    w[j, i] = last
+                    for q in range(r):
+                        ci = cw[q, i]
+                        acc[q, 0] += ci * w0
+                        acc[q, 1] += ci * w1
+                        acc[q, 2] += ci * w2
+                        acc[q, 3] += ci * w3
+            for i in range(mc):
+                ai = ca[i]
+                w0 = ai * wc[j, i] + u0
+                w1 = ai * w0 + u1
+                w2 = ai * w1 + u2
+                w3 = ai * w2 + u3
+                last = w0 if nb == 1 else (w1 if nb == 2 else (w2 if nb == 3 else w3))
+                wc[j, i] = last
+                for q in range(r):
+                    ci = ccw[q, i]
+                    acc[q, 0] += (ci * w0).real
+                    acc[q, 1] += (ci * w1).real
+                    acc[q, 2] += (ci * w2).real
+                    acc[q, 3] += (ci * w3).real
+            for t in range(nb):
+                ut = u[k + t, j]
+                for q in range(r):
+                    y[k + t, j, q] = acc[q, t] + feed[q] * ut
+            up = u[k + nb - 1, j]
+            k += nb
+    return y

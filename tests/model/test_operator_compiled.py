@@ -299,6 +299,33 @@ np.save(sys.argv[1], np.concatenate([a, s, dp.ravel(), du.ravel(), y]))
 """
 
 
+def test_numba_hidden_in_process(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the fast equivalent of the subprocess test below: numba's import fails, the loader warns
+    # once and every "auto" call runs the numpy code
+    from labrig.model import Relaxor, accel
+    from labrig.model.modal import run_bank
+
+    op = QuasiStaticHysteresis(8.9, 7.8, 65.0)
+    u = 50 * (1 - np.cos(np.arange(3000) / 50.0))
+    bank = Relaxor(2e-3, 1.35).bank(1e3, "linear")
+    monkeypatch.setitem(sys.modules, "numba", None)
+    accel.reset()
+    try:
+        with pytest.warns(RuntimeWarning, match="numba is not available"):
+            assert accel.kernels() is None
+        np.testing.assert_array_equal(op.apply(u), op.apply(u, engine="numpy"))
+        np.testing.assert_array_equal(run_bank(bank, u)[0], run_bank(bank, u, engine="numpy")[0])
+        with pytest.raises(RuntimeError, match="needs numba"):
+            op.apply(u, engine="compiled")
+        with pytest.raises(RuntimeError, match="needs numba"):
+            run_bank(bank, u, engine="compiled")
+    finally:
+        monkeypatch.undo()
+        accel.reset()
+    assert accel.kernels() is not None
+
+
+@pytest.mark.slow
 def test_numba_hidden_falls_back_to_numpy(tmp_path) -> None:
     out = tmp_path / "hidden.npy"
     env = {**os.environ, "PYTHONWARNINGS": "default"}
