@@ -38,6 +38,7 @@ Methods
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -47,6 +48,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
 from labrig.model import diffusive
+from labrig.model.accel import kernels
 from labrig.model.diffusive import ModeDerivatives
 from labrig.model.mittag_leffler import (
     pole_pair,
@@ -292,15 +294,30 @@ class _LogChebyshevStep:
 
             self.coeffs.append(C.chebinterpolate(f, _CHEB_NODES - 1))
 
-    def __call__(self, t: NDArray) -> NDArray:
+    def branch(self, t: NDArray) -> NDArray:
+        """The branch-cut part of the step response at ``t`` (s); compiled Clenshaw sums when
+        numba is available, else one numpy ``chebval`` per panel."""
+        t = np.ascontiguousarray(t, dtype=np.float64)
+        coeffs = np.ascontiguousarray(self.coeffs)
+        kern = kernels()
+        if kern is not None:
+            return kern.chebyshev_panels(t, self.u0, self.width, coeffs)
         u = np.log10(t)
         pan = np.clip(((u - self.u0) / self.width).astype(int), 0, len(self.coeffs) - 1)
         x = 2.0 * (u - (self.u0 + pan * self.width)) / self.width - 1.0
         out = np.empty_like(t)
+        if np.all(pan[1:] >= pan[:-1]):  # sorted times (the kernels'): contiguous panels
+            cuts = np.r_[0, np.flatnonzero(np.diff(pan)) + 1, pan.size]
+            for i, j in itertools.pairwise(cuts):
+                out[i:j] = C.chebval(x[i:j], coeffs[pan[i]])
+            return out
         for p in np.unique(pan):
             sel = pan == p
-            out[sel] = C.chebval(x[sel], self.coeffs[p])
-        return out + relaxor_step_pole_part(t, self.tau_s, self.lam)
+            out[sel] = C.chebval(x[sel], coeffs[p])
+        return out
+
+    def __call__(self, t: NDArray) -> NDArray:
+        return self.branch(t) + relaxor_step_pole_part(t, self.tau_s, self.lam)
 
 
 def _step_grid(tau_s: float, lam: float, dt: float, n: int) -> NDArray[np.float64]:
@@ -315,7 +332,9 @@ def _step_grid(tau_s: float, lam: float, dt: float, n: int) -> NDArray[np.float6
     return out
 
 
-_GL3_X, _GL3_W = np.polynomial.legendre.leggauss(3)
+# Gauss-Legendre with 2 points per interval: for m >= 2048 samples the error of an interval
+# mean is about (dt/t)^4 t^4 |s^(4)| / 4320 < 1e-16 of the step response
+_GL2_X, _GL2_W = np.polynomial.legendre.leggauss(2)
 
 
 def _interval_means(tau_s: float, lam: float, dt: float, n: int) -> NDArray[np.float64]:
@@ -329,14 +348,15 @@ def _interval_means(tau_s: float, lam: float, dt: float, n: int) -> NDArray[np.f
         m = np.arange(k, n, dtype=np.float64)
         interp = _LogChebyshevStep(tau_s, lam, k * dt, (n + 1) * dt)
         acc = np.zeros(m.size)
-        for x, w in zip(_GL3_X, _GL3_W, strict=True):
-            t = (m + 0.5 + 0.5 * x) * dt
-            acc += 0.5 * w * (interp(t) - relaxor_step_pole_part(t, tau_s, lam))
-        # pole part integrated in closed form: mean of -(2/lam) Re e^{pt} over the interval
+        for x, w in zip(_GL2_X, _GL2_W, strict=True):
+            acc += 0.5 * w * interp.branch((m + 0.5 + 0.5 * x) * dt)
+        # pole part integrated in closed form: mean of -(2/lam) Re e^{pt} over the interval,
+        # where it has not yet decayed below 1e-30
         p = pole_pair(tau_s, lam)
         if p is not None:
-            ta, tb = m * dt, (m + 1) * dt
-            acc += -(2.0 / lam) * ((np.exp(p * tb) - np.exp(p * ta)) / (p * dt)).real
+            live = m * dt * p.real > -70.0
+            ta, tb = m[live] * dt, (m[live] + 1) * dt
+            acc[live] += -(2.0 / lam) * ((np.exp(p * tb) - np.exp(p * ta)) / (p * dt)).real
         out[k:] = acc
     return out
 
