@@ -237,7 +237,7 @@ def operator_pass(
 # -- the relaxor banks -------------------------------------------------------------------------
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath={"reassoc", "contract"})
 def bank_run(
     a: np.ndarray,
     cw: np.ndarray,
@@ -397,7 +397,7 @@ def _bank_block(a, cw, feed, ca, ccw, w, wc, u, n, up, y):  # fmt: skip
         k += nb
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath={"reassoc", "contract"})
 def _sweep8(a, cw, w, us):  # fmt: skip
     """Eight samples of inputs ``us`` through the real modes, output sums (see bank_run)."""
     u0, u1, u2, u3, u4, u5, u6, u7 = us[0], us[1], us[2], us[3], us[4], us[5], us[6], us[7]
