@@ -237,7 +237,7 @@ def operator_pass(
 # -- the relaxor banks -------------------------------------------------------------------------
 
 
-@njit(cache=True, fastmath={"reassoc", "contract"})
+@njit(cache=True)
 def bank_run(
     a: np.ndarray,
     cw: np.ndarray,
@@ -256,56 +256,53 @@ def bank_run(
     output weights times the folded input gains; :mod:`labrig.model.modal`). Real modes:
     ``a`` (M,), ``cw`` (r, M), state ``w`` (k, M); complex modes: ``ca`` (Mc,), ``ccw``
     (r, Mc), state ``wc`` (k, Mc), their output the real part. ``u_prev`` (k,): each column's
-    input before its first sample. The states are updated in place. Several samples per sweep
-    over the modes (eight for a single output row, else four: each mode's coefficients are read
-    once per sweep); ``fastmath`` lets the compiler reorder the sums over modes (rounding-level
-    differences only).
+    input before its first sample. The states are updated in place. One pass per column and
+    output row (each row's pass costs what a single-output bank does: the states are cheaper to
+    recompute than to keep), eight samples per sweep over the modes.
     """
     n, kc = u.shape
     r = cw.shape[0]
-    m = a.shape[0]
-    mc = ca.shape[0]
     y = np.empty((n, kc, r))
-    acc = np.zeros((r, 8))
-    us = np.zeros(8)  # the inputs u[k-1 .. k+6] of a sweep
-    cw0 = cw[0]
+    yc = np.empty(n)
     for j in range(kc):
-        up = u_prev[j]
-        k = 0
-        while k < n:
-            nb = min(8, n - k)
-            us[0] = up
-            for t in range(1, nb):
-                us[t] = u[k + t - 1, j]
-            if r == 1 and nb == 8:
-                s = _sweep8(a, cw0, w[j], us)
-                for t in range(8):
-                    acc[0, t] = s[t]
-            else:
-                acc[:, :nb] = 0.0
-                for i in range(m):
-                    ai = a[i]
-                    wt = w[j, i]
-                    for t in range(nb):
-                        wt = ai * wt + us[t]
-                        for q in range(r):
-                            acc[q, t] += cw[q, i] * wt
-                    w[j, i] = wt
-            for i in range(mc):  # the complex modes (a few), in real arithmetic
-                ar, ai = ca[i].real, ca[i].imag
-                wr, wi = wc[j, i].real, wc[j, i].imag
-                for t in range(nb):
-                    wr, wi = ar * wr - ai * wi + us[t], ar * wi + ai * wr
-                    for q in range(r):
-                        acc[q, t] += ccw[q, i].real * wr - ccw[q, i].imag * wi
-                wc[j, i] = complex(wr, wi)
-            for t in range(nb):
-                ut = u[k + t, j]
-                for q in range(r):
-                    y[k + t, j, q] = acc[q, t] + feed[q] * ut
-            up = u[k + nb - 1, j]
-            k += nb
+        uc = np.ascontiguousarray(u[:, j])
+        w0, wc0 = w[j].copy(), wc[j].copy()
+        for q in range(r):  # one pass per output row, each from the column's initial state
+            wq, wcq = w0.copy(), wc0.copy()
+            _bank_block(a, cw[q], feed[q], ca, ccw[q], wq, wcq, uc, n, u_prev[j], yc)
+            for k in range(n):
+                y[k, j, q] = yc[k]
+            if q == 0:
+                w[j] = wq
+                wc[j] = wcq
     return y
+
+
+@njit(cache=True)
+def mode_derivative(
+    u: np.ndarray,
+    a: complex,
+    b0: complex,
+    b1: complex,
+    da: complex,
+    db0: complex,
+    db1: complex,
+    g: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """Add ``Re(g[p] dx/dq)`` to ``out[:, p]`` for a mode ``x[n] = a x[n-1] + b0 u[n-1] +
+    b1 u[n]`` at rest before ``u``: ``dx/dq`` follows ``z[n] = a z[n-1] + a' x[n-1] +
+    b0' u[n-1] + b1' u[n]`` (the derivative of the exact discretisation; ``'`` = d/dq)."""
+    x = 0.0 + 0.0j
+    z = 0.0 + 0.0j
+    up = 0.0
+    for k in range(u.shape[0]):
+        uk = u[k]
+        z = a * z + da * x + db0 * up + db1 * uk
+        x = a * x + b0 * up + b1 * uk
+        for p in range(g.shape[0]):
+            out[k, p] += (g[p] * z).real
+        up = uk
 
 
 # -- the exact method's interpolant ------------------------------------------------------------

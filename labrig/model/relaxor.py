@@ -168,8 +168,9 @@ class Relaxor:
         moving = np.flatnonzero(np.any(der.dq != 0, axis=0))
         if moving.size:
             da, db0, db1 = hold_gain_derivatives(modes.q[moving], dt, hold)
-            up = np.r_[0.0, u[:-1]]
             q, c = modes.q, modes.c
+            kern = kernels()
+            dy = np.ascontiguousarray(y[:, 1:])
             done: set[int] = set()
             for j, i in enumerate(moving.tolist()):
                 if i in done:
@@ -179,11 +180,15 @@ class Relaxor:
                 if k < q.size and q[k] == np.conj(q[i]) and c[k] == np.conj(c[i]):
                     weight = 2.0
                     done.add(k)
+                g = weight * c[i] * der.dq[:, i]
+                if kern is not None:
+                    kern.mode_derivative(u, a[i], b0[i], b1[i], da[j], db0[j], db1[j], g, dy)
+                    continue
                 x = signal.lfilter([b1[i], b0[i]], [1.0, -a[i]], u)
-                xp = np.r_[0.0, x[:-1]]
-                z = signal.lfilter([1.0], [1.0, -a[i]], da[j] * xp + db0[j] * up + db1[j] * u)
-                for p in range(2):
-                    y[:, 1 + p] += weight * (modes.c[i] * der.dq[p, i] * z).real
+                rhs = da[j] * np.r_[0.0, x[:-1]] + db0[j] * np.r_[0.0, u[:-1]] + db1[j] * u
+                z = signal.lfilter([1.0], [1.0, -a[i]], rhs)
+                dy += (g[None, :] * z[:, None]).real
+            y[:, 1:] = dy
         return y[:, 0] + rest_V, y[:, 1], y[:, 2]
 
     def kernel(self, n: int, rate_hz: float, hold: str = "zoh") -> NDArray[np.float64]:
