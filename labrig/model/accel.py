@@ -10,8 +10,9 @@ Compiled machine code is cached on disk (``@njit(cache=True)``): numba writes it
 user-wide cache folder (``$NUMBA_CACHE_DIR`` if set, else ``~/.cache/numba`` or the platform's
 equivalent). The first use on a machine compiles (seconds); later processes load the cache.
 
-If numba cannot be imported (or its kernels fail to compile), :func:`kernels` warns once and
-returns ``None``; every caller then runs its numpy code, which gives the same results.
+If numba cannot be imported, or its kernels cannot be loaded (with no writable cache folder
+numba refuses ``cache=True`` functions), :func:`kernels` warns once and returns ``None``; every
+caller then runs its numpy code, which gives the same results.
 """
 
 from __future__ import annotations
@@ -26,12 +27,21 @@ def kernels() -> ModuleType | None:
     """The module of compiled kernels, or ``None`` (one warning per process) without numba."""
     try:
         import numba  # noqa: F401
-
-        from labrig.model import compiled
     except Exception as exc:  # ImportError, or numba's own errors on an unsupported platform
         warnings.warn(
             f"numba is not available ({type(exc).__name__}: {exc}); the model runs its "
             "numpy code instead (same results, several times slower)",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return None
+    try:
+        from labrig.model import compiled
+    except Exception as exc:  # e.g. no writable folder for numba's cache
+        warnings.warn(
+            f"the model's compiled kernels could not be loaded ({type(exc).__name__}: {exc}); "
+            "if numba found no writable folder for its cache, set NUMBA_CACHE_DIR to one. "
+            "The model runs its numpy code instead (same results, several times slower)",
             RuntimeWarning,
             stacklevel=3,
         )

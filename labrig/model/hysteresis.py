@@ -38,6 +38,12 @@ Shapes of ``h`` (``gamma`` in ue/V, ``vc`` in V):
 Inversion (strain to voltage) solves ``F(x) = y`` on each branch: Lambert W for the exponential
 shape, the quadratic formula for the linear one, and safeguarded Newton iterations otherwise,
 finished by Newton steps to machine precision.
+
+Evaluation: for the builtin shapes :meth:`~QuasiStaticHysteresis.apply` and
+:meth:`~QuasiStaticHysteresis.sensitivities` run one sequential compiled pass
+(:func:`labrig.model.compiled.operator_pass`: structure, values and derivatives together);
+``engine="numpy"``, a user :class:`Shape` or a missing numba run the numpy code below, which
+finds the branch structure vectorised (one Python step per monotone run) and is the reference.
 """
 
 from __future__ import annotations

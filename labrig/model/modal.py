@@ -322,29 +322,56 @@ def run_bank_multi(
         if len(bank._cache) > 16:  # extra outputs differ per call: do not pile them up
             bank._cache.clear()
         bank._cache[key] = _scaled(bank, extra)
-    a_r, cw_r, a_c, cw_c, feed, parts = bank._cache[key]
-    # scaled states w = (x - b1 u_prev) / b for the modes that are driven
+    a_r, cw_r, a_c, cw_c, feed, _ = bank._cache[key]
     w_r = np.zeros((kc, a_r.size))
     w_c = np.zeros((kc, a_c.size), dtype=np.complex128)
     for j in range(kc):
-        for gi, (g, _, b, live) in enumerate(parts):
-            w = (states[j][gi] - g.b1 * up[j])[live] / b[live]
-            if np.iscomplexobj(g.a):
-                w_c[j] = w
-            else:
-                w_r[j] = w
+        w_r[j], w_c[j] = scaled_state(bank, states[j], float(up[j]))
     y = kern.bank_run(a_r, cw_r, a_c, cw_c, feed, np.ascontiguousarray(u), w_r, w_c, up)
     u_last = u[-1] if n else up
-    out_states = []
-    for j in range(kc):
-        st = []
-        for g, _, b, live in parts:
-            x = np.zeros(g.size, dtype=g.a.dtype)
-            w = w_c[j] if np.iscomplexobj(g.a) else w_r[j]
-            x[live] = w * b[live]
-            st.append(x + g.b1 * u_last[j])
-        out_states.append(st)
+    out_states = [unscaled_state(bank, w_r[j], w_c[j], float(u_last[j])) for j in range(kc)]
     return y, out_states
+
+
+def scaled_form(bank: DiscreteBank) -> tuple:
+    """``(a, cw, feed, ca, ccw)``: the bank as the compiled kernels run it (real modes' poles and
+    output weights ``c (a b1 + b0)``, the feedthrough, complex modes' poles and weights)."""
+    key = ("scaled", None)
+    if key not in bank._cache:
+        bank._cache[key] = _scaled(bank, None)
+    a_r, cw_r, a_c, cw_c, feed, _ = bank._cache[key]
+    return a_r, cw_r[0], float(feed[0]), a_c, cw_c[0]
+
+
+def scaled_state(
+    bank: DiscreteBank, state: list[NDArray], u_prev: float
+) -> tuple[NDArray, NDArray]:
+    """A state of :meth:`DiscreteBank.initial_state`'s form as the compiled kernels keep it:
+    ``w = (x - b1 u_prev) / b`` for the modes that are driven, real and complex apart."""
+    if ("scaled", None) not in bank._cache:
+        bank._cache[("scaled", None)] = _scaled(bank, None)
+    parts = bank._cache[("scaled", None)][5]
+    w_r, w_c = np.zeros(0), np.zeros(0, dtype=np.complex128)
+    for gi, (g, _, b, live) in enumerate(parts):
+        w = (state[gi] - g.b1 * u_prev)[live] / b[live]
+        if np.iscomplexobj(g.a):
+            w_c = np.ascontiguousarray(w, dtype=np.complex128)
+        else:
+            w_r = np.ascontiguousarray(w.real, dtype=np.float64)
+    return w_r, w_c
+
+
+def unscaled_state(bank: DiscreteBank, w_r: NDArray, w_c: NDArray, u_last: float) -> list[NDArray]:
+    """The inverse of :func:`scaled_state` after a record whose last input was ``u_last``."""
+    if ("scaled", None) not in bank._cache:
+        bank._cache[("scaled", None)] = _scaled(bank, None)
+    parts = bank._cache[("scaled", None)][5]
+    out = []
+    for g, _, b, live in parts:
+        x = np.zeros(g.size, dtype=g.a.dtype)
+        x[live] = (w_c if np.iscomplexobj(g.a) else w_r) * b[live]
+        out.append(x + g.b1 * u_last)
+    return out
 
 
 def _run_bank_multi_numpy(bank, u, extra, states, up):

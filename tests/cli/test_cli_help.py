@@ -143,7 +143,7 @@ def test_batch_summary_counts_in_words(tmp_path: Path) -> None:
 def test_python_dash_m_labrig_is_the_command():
     """``python -m labrig`` runs the same command line as the ``labrig`` script (usage errors
     exit 64 there too)."""
-    from labrig import __version__
+    from labrig.core.version import __version__
 
     ok = subprocess.run(
         [sys.executable, "-m", "labrig", "--version"], capture_output=True, text=True, timeout=60

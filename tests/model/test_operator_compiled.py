@@ -347,3 +347,41 @@ def test_numba_hidden_falls_back_to_numpy(tmp_path) -> None:
     y = DynamicHysteresisModel(PAPER_TABLE1).predict(u, 1000.0)
     want = np.concatenate([op.apply(u, engine="compiled"), s, dp.ravel(), du.ravel(), y])
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+
+
+# -- the whole fast model in one compiled pass ---------------------------------------------------
+
+
+def _numpy_predict(model, v: np.ndarray, rate: float, rest: float) -> np.ndarray:
+    """The fast model as separate numpy stages (run_bank blocks, the numpy operator)."""
+    from labrig.model.modal import run_bank
+
+    bt, bd = model.g_t.bank(rate, "zoh"), model.g_d.bank(rate, "linear")
+    vt = run_bank(bt, v - rest, engine="numpy")[0]
+    vd = run_bank(bd, vt, engine="numpy")[0] + rest
+    op = model.operator
+    return op.apply(vd, op.held_state(rest), engine="numpy")
+
+
+@pytest.mark.parametrize("memory", MEMORIES)
+@pytest.mark.parametrize("shape", list(SHAPES))
+def test_predict_in_one_pass_equals_the_stages(shape: str, memory: str) -> None:
+    from labrig.model import PAPER_TABLE1, DynamicHysteresisModel
+
+    p = PAPER_TABLE1.model_copy(update={"shape": shape, "memory": memory,
+                                        "gamma_ue_per_V": SHAPES[shape]})  # fmt: skip
+    model = DynamicHysteresisModel(p)
+    rng = np.random.default_rng(9)
+    t = np.arange(30_001) / 1e3
+    v = 50 * (1 - np.cos(2 * np.pi * 7 * t)) * np.exp(-t / 10) + rng.standard_normal(t.size)
+    for rest in (0.0, -20.0):
+        want = _numpy_predict(model, v + rest, 1e3, rest)
+        assert_close(model.predict(v + rest, 1e3, rest_V=rest), want)
+    # streamed in uneven blocks (chunk edges of the kernel: 4096 samples) with the memory
+    # carried between them
+    stream = model.stream(1e3)
+    cuts = [1, 5, 4096, 4100, 9000, 20_000]
+    parts = [stream.process(b) for b in np.split(v, cuts)]
+    assert_close(np.concatenate(parts), _numpy_predict(model, v, 1e3, 0.0))
+    with pytest.raises(ValueError, match="finite"):
+        model.predict(np.array([1.0, np.nan]), 1e3)
