@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from labrig.analysis.engine import LAM_GAP, Problem, orthonormal, solve
+from labrig.analysis.engine import LAM_GAP, Problem, chord_refit, orthonormal, solve
 from labrig.analysis.metrics import second_half_nrmse_pct
 from labrig.analysis.parallel import map_tasks
 from labrig.analysis.records import Record
@@ -282,8 +282,10 @@ class ExtendedProblem(Problem):
         progress: Callable[[int, int], Any] | None = None,
     ) -> dict[str, float]:
         """Leave-one-entry-out NRMSE (module docstring) of each scored entry: each fold refitted
-        to convergence from the full fit (:data:`~labrig.analysis.simulate.EXTENDED_CONVERGED`,
-        at most ``max_nfev`` evaluations), on ``workers`` processes
+        to convergence from the full fit (by the chord method on the full fit's Jacobian,
+        :func:`~labrig.analysis.engine.chord_refit`, else by trust-region least squares to
+        :data:`~labrig.analysis.simulate.EXTENDED_CONVERGED`, at most ``max_nfev``
+        evaluations), on ``workers`` processes
         (:func:`~labrig.analysis.parallel.map_tasks`); ``progress(done, total)`` after each
         fold (in this process, one worker)."""
         names = list(self.scored)
@@ -291,8 +293,14 @@ class ExtendedProblem(Problem):
         def fold(k: int) -> tuple[float, int]:
             name = names[k]
             sub = self.fold([n for n in names if n != name])
-            fo = sub.fit(full.base, full.effects, tight=True, max_nfev=max_nfev, sd=False)
-            score = self.score_second_half(name, fo.base, fo.effects)
+            with single_thread_blas(), np.errstate(over="ignore"):
+                got = chord_refit(sub, sub.z_of(full.base, full.effects), full.base)
+            if got is not None:
+                base, eff = sub.unpack(got[0], full.base)
+            else:
+                fo = sub.fit(full.base, full.effects, tight=True, max_nfev=max_nfev, sd=False)
+                base, eff = fo.base, fo.effects
+            score = self.score_second_half(name, base, eff)
             if progress is not None and workers <= 1:
                 progress(k + 1, len(names))
             return score, sub.nfev

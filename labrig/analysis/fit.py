@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from labrig.analysis.engine import Coordinates, Problem, base_problem, best_of
+from labrig.analysis.engine import Coordinates, Problem, base_problem, best_of, chord_refit
 from labrig.analysis.metrics import nrmse_pct, scores_json, second_half_nrmse_pct
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import (
@@ -375,7 +375,9 @@ def _heldout(
         if progress:
             progress("heldout", k, len(scored))
         rest = [n for n in scored if n != name]
-        th_k, *_ = _fit_once(records, rest, *common, [], warm=th, tight=True, parent=parent)
+        th_k = _chord_fold(parent, records, rest, th, common)
+        if th_k is None:
+            th_k, *_ = _fit_once(records, rest, *common, [], warm=th, tight=True, parent=parent)
         rec = records[names.index(name)]
         held_per[name] = _score_heldout(
             family.params(th_k), rec, records, chain, warmup_s, offset, parent
@@ -383,6 +385,25 @@ def _heldout(
     if progress:
         progress("heldout", len(scored), len(scored))
     return held_per
+
+
+def _chord_fold(
+    parent: Problem,
+    records: Sequence[Record],
+    rest: list[str],
+    th: dict[str, float],
+    common: tuple,
+) -> dict[str, float] | None:
+    """A held-out fold refitted from the full fit ``th`` by the chord method
+    (:func:`~labrig.analysis.engine.chord_refit`), or ``None`` (then by least squares)."""
+    family = common[2]
+    free = [n for n in PARAM_NAMES if not (family.shape == "linear" and n == "vc_V")]
+    keep = set(rest)
+    if _one_frequency([r for r in records if r.name in keep]) is not None and common[1] == "global":
+        free = [n for n in free if n not in ("lam_d", "tau_d_s")]
+    sub = parent.subset(rest, free)
+    got = chord_refit(sub, sub.coords.z(th, strict=True), th)
+    return None if got is None else sub.coords.unpack(got[0], th)[0]
 
 
 def _optimality(

@@ -341,20 +341,12 @@ def relaxor_output(
 def relaxor_sensitivities(
     tau_s: float, lam: float, rate_hz: float, hold: str, v_padded: NDArray, rest_V: float = 0.0
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """:func:`relaxor_output` and its derivatives with respect to ``log tau`` and ``lam``, by
-    central differences of the bank (steps 1e-5; about 1e-10 relative, far below what the
-    least-squares steps need)."""
-    y = relaxor_output(tau_s, lam, rate_hz, hold, v_padded, rest_V)
-    h = 1e-5
-    d_tau = (
-        relaxor_output(tau_s * np.exp(h), lam, rate_hz, hold, v_padded, rest_V)
-        - relaxor_output(tau_s * np.exp(-h), lam, rate_hz, hold, v_padded, rest_V)
-    ) / (2 * h)
-    d_lam = (
-        relaxor_output(tau_s, lam + h, rate_hz, hold, v_padded, rest_V)
-        - relaxor_output(tau_s, lam - h, rate_hz, hold, v_padded, rest_V)
-    ) / (2 * h)
-    return y, d_tau, d_lam
+    """:func:`relaxor_output` and its derivatives with respect to ``log tau`` and ``lam``: the
+    bank's modes do not move with ``tau`` and ``lam`` (only their output weights do), so the
+    derivatives are further outputs of the same pass
+    (:meth:`labrig.model.Relaxor.filter_sensitivities`)."""
+    with np.errstate(over="ignore"):
+        return Relaxor(tau_s, lam).filter_sensitivities(v_padded, rate_hz, hold, rest_V)
 
 
 @dataclass
