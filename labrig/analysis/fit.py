@@ -41,6 +41,7 @@ from scipy import optimize
 
 from labrig.analysis.engine import Coordinates, Problem, base_problem, best_of, chord_refit
 from labrig.analysis.metrics import nrmse_pct, scores_json, second_half_nrmse_pct
+from labrig.analysis.parallel import map_tasks
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import (
     DEFAULT_BOUNDS,
@@ -272,6 +273,7 @@ def fit_model(
     scored: Sequence[str] | None = None,
     offset: bool = False,
     bounds: dict[str, tuple[float, float]] | None = None,
+    workers: int = 1,
 ) -> FitResult:
     """Identify :class:`ModelParams` from ``records`` (module docstring for the method).
 
@@ -286,6 +288,8 @@ def fit_model(
       drive the simulation as history.
     - ``offset``: fit one constant strain offset per entry (sensors with an arbitrary zero).
     - ``bounds``: native-unit bounds overriding :data:`DEFAULT_BOUNDS` per parameter.
+    - ``workers``: processes for the leave-one-entry-out folds (the result does not depend on
+      it).
     """
     if method not in ("global", "staged"):
         raise ValueError(f"method must be 'global' or 'staged', got {method!r}")
@@ -311,7 +315,7 @@ def fit_model(
         t1 = time.perf_counter()
         held_per = None
         if heldout and len(scored) >= 2:
-            held_per = _heldout(records, scored, common, th, progress, camp)
+            held_per = _heldout(records, scored, common, th, progress, camp, workers)
         held_elapsed = time.perf_counter() - t1
     optimality = _optimality(J, r, camp.coords, th, messages)  # notes parameters on a bound
     if res is None:  # the staged procedure ends with no converged least-squares run
@@ -365,26 +369,29 @@ def _heldout(
     th: dict[str, float],
     progress: Progress | None,
     parent: Problem,
+    workers: int = 1,
 ) -> dict[str, float]:
     """Leave-one-entry-out NRMSE of each scored entry, refitted from ``th`` (each fold shares
-    the full fit's simulations, so its first step costs none)."""
+    the full fit's simulations and starts with its Jacobian: :func:`_chord_fold`), the folds
+    on ``workers`` processes."""
     chain, _method, family, _initial, warmup_s, offset, _bounds = common
     names = [r.name for r in records]
-    held_per = {}
-    for k, name in enumerate(scored):
-        if progress:
+
+    def fold(k: int) -> float:
+        name = scored[k]
+        if progress and workers <= 1:
             progress("heldout", k, len(scored))
         rest = [n for n in scored if n != name]
         th_k = _chord_fold(parent, records, rest, th, common)
         if th_k is None:
             th_k, *_ = _fit_once(records, rest, *common, [], warm=th, tight=True, parent=parent)
         rec = records[names.index(name)]
-        held_per[name] = _score_heldout(
-            family.params(th_k), rec, records, chain, warmup_s, offset, parent
-        )
+        return _score_heldout(family.params(th_k), rec, records, chain, warmup_s, offset, parent)
+
+    scores = map_tasks(fold, len(scored), workers)
     if progress:
         progress("heldout", len(scored), len(scored))
-    return held_per
+    return dict(zip(scored, scores, strict=True))
 
 
 def _chord_fold(
