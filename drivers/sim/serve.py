@@ -26,6 +26,7 @@ from labrig.drivers.sim.modbus_server import ModbusConditionerServer
 
 from labrig.core.errors import InputFileError, InputIssue, LabrigError
 from labrig.core.interrupts import interrupt_once
+from labrig.model.accel import warm as warm_model
 from labrig.rig.instruments import SimulatorInfo
 from labrig.rig.limits import RigLimits
 from labrig.rig.rigspec import RigSpec, load_rig
@@ -79,6 +80,9 @@ class Simulators:
         self._clock_stop = threading.Event()
 
     def start(self) -> Simulators:
+        # the truth's compiled kernels loaded before any server answers (a first block must
+        # not hold the bench past a driver's answer timeout)
+        warm_model()
         kinds = {"gcs": self.gcs, "modbus_tcp": self.modbus_tcp, "modbus_rtu": self.modbus_rtu}
         try:
             for kind, srv in kinds.items():

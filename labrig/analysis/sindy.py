@@ -36,9 +36,8 @@ Fitting (pysindy)
   weighted alike (each segment's rows by ``1 / (RMS(dS/dt) sqrt(rows))``), columns and target
   normalised to unit RMS, with the STLSQ of pysindy (``pysindy.optimizers.STLSQ``, ridge
   1e-6, unbiased on its support; :func:`stlsq`) for each threshold of :data:`THRESHOLDS`.
-  pysindy's own derivative and STLSQ are the tests' references: labrig reproduces them step for
-  step, because importing pysindy (and scikit-learn) costs about 1 s of CPU and each call of its
-  STLSQ about 5 ms, more than the whole fit here.
+  The derivative is pysindy's ``SmoothedFiniteDifference`` written with the scipy function it
+  calls (the tests check it against pysindy's).
 - A held-out fold reuses the full fit's work (:class:`SindyCache`): each segment's regression
   rows and their QR factor; the fold's system is the QR of its segments' stacked factors.
 - **Selection by free run**: each distinct support is simulated from rest over the training
@@ -77,6 +76,7 @@ span is held there (diverged).
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -310,9 +310,6 @@ Items = Sequence[tuple[SimSequence, Sequence[Segment]]]
 #: STLSQ's ridge (pysindy's ``alpha``) and iteration limit (``max_iter``)
 RIDGE = 1e-6
 MAX_ITER = 20
-#: singular values below this fraction of the largest are cut in the unbiasing least squares
-#: (``tol`` of scikit-learn's ``LinearRegression``, which pysindy's unbiasing calls)
-UNBIAS_RCOND = 1e-6
 
 
 def smoothing_window(rate_hz: float, frequency_hz: float | None) -> int:
@@ -443,72 +440,29 @@ def _system(
     return r / cs, (q.T @ np.concatenate([f[1] for f in fs])) / ys, cs, ys
 
 
-def _ridge(x: NDArray, y: NDArray) -> NDArray:
-    """Ridge regression of ``y`` on the columns of ``x`` with :data:`RIDGE`, as scikit-learn's
-    ``ridge_regression`` solves it for STLSQ (Cholesky of the normal equations; SVD if that
-    fails)."""
-    from scipy import linalg
-
-    A = x.T @ x
-    xy = x.T @ y[:, None]
-    A.flat[:: x.shape[1] + 1] += RIDGE
-    _, sol, info = linalg.lapack.dposv(A, xy)  # Cholesky, as linalg.solve(assume_a="pos")
-    if info == 0:
-        return sol.ravel()
-    u, sv, vt = linalg.svd(x, full_matrices=False)  # not positive definite: scikit-learn's SVD
-    idx = sv > 1e-15
-    d = np.zeros((sv.size, 1))
-    d[idx] = sv[idx][:, None] / (sv[idx][:, None] ** 2 + RIDGE)
-    return (vt.T @ (d * (u.T @ y[:, None]))).ravel()
-
-
 def stlsq(
     x: ArrayLike, y: ArrayLike, thresholds: Sequence[float]
 ) -> list[tuple[float, NDArray[np.float64]]]:
     """Sequentially thresholded least squares of ``y`` on the columns of ``x`` for each
     threshold: pysindy's ``STLSQ(threshold, alpha=RIDGE, unbias=True, max_iter=MAX_ITER)``
-    (pysindy 2.1), step for step: ridge on the kept columns, drop the coefficients below the
-    threshold, until nothing is dropped, the kept set repeats or ``MAX_ITER`` steps; then the
-    kept columns refitted by least squares (singular values below :data:`UNBIAS_RCOND` of the
-    largest cut). The tests check it against pysindy's; here each kept set's ridge and
-    refit are solved once for all the thresholds (pysindy's own call costs about 5 ms for this
-    10-column problem, mostly input validation).
+    (imported here, on first use: pysindy and scikit-learn cost about a second to import),
+    with scikit-learn's input checks off (the rows are finite and the parameters fixed here;
+    those checks are most of the cost of a call on this 10-column problem).
 
     Returns ``(threshold, coefficients)`` for every threshold."""
+    import sklearn
+    from pysindy.optimizers import STLSQ
+
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
-    n = x.shape[1]
-    ridge: dict[bytes, NDArray] = {}
-    refit: dict[bytes, NDArray] = {}
-    first = np.linalg.lstsq(x, y, rcond=None)[0] != 0  # the history's start (its support)
     out = []
-    for lam in thresholds:
-        ind = np.ones(n, dtype=bool)
-        coef, prev = np.zeros(n), first
-        for _ in range(MAX_ITER):
-            if not ind.any():
-                coef = np.zeros(n)
-                break
-            key = ind.tobytes()
-            if key not in ridge:
-                ridge[key] = _ridge(x[:, ind], y)
-            c = np.zeros(n)
-            c[ind] = ridge[key]
-            big = np.abs(c) >= lam
-            c[~big] = 0.0
-            coef, ind = c, big
-            support = c != 0
-            if ind.sum() == n or np.array_equal(support, prev):
-                break
-            prev = support
-        keep = np.abs(coef) > 1e-14
-        xi = np.zeros(n)
-        if keep.any():
-            key = keep.tobytes()
-            if key not in refit:
-                refit[key] = np.linalg.lstsq(x[:, keep], y, rcond=UNBIAS_RCOND)[0]
-            xi[keep] = refit[key]
-        out.append((float(lam), xi))
+    with sklearn.config_context(assume_finite=True, skip_parameter_validation=True):
+        for lam in thresholds:
+            opt = STLSQ(threshold=float(lam), alpha=RIDGE, max_iter=MAX_ITER, unbias=True)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                opt.fit(x, y)
+            out.append((float(lam), np.asarray(opt.coef_, dtype=float).ravel()))
     return out
 
 
