@@ -41,6 +41,7 @@ from labrig.analysis.simulate import (
     bounded_least_squares,
 )
 from labrig.model.effects import Effect
+from labrig.model.hysteresis import BUILTIN_SHAPES
 
 __all__ = [
     "LAM_GAP",
@@ -100,10 +101,55 @@ class Coordinate:
         return float(x)
 
 
+#: the operator's coordinates when its loop is parametrised by width and curvature
+LOOP_WIDTH = "loop_width_ue"
+LOOP_CURVATURE = "loop_curvature"
+
+
+@dataclass(frozen=True)
+class LoopScale:
+    """How the operator's ``gamma`` and ``vc`` are reparametrised for fitting (module
+    docstring of :class:`Coordinates`): ``span_V`` is the stroke of the reference loop (the
+    records' largest peak-to-peak voltage), ``shape`` the operator's shape."""
+
+    span_V: float
+    shape: str
+
+    def _opening(self, vc: float) -> tuple[float, float]:
+        """``D = H1(2A) - 2 H1(A)`` per unit ``gamma`` (``A`` half the span) and ``dD/dvc``."""
+        shp = BUILTIN_SHAPES[self.shape]
+        a = np.array([self.span_V, 0.5 * self.span_V])
+        h = shp.integral(a, 1.0, vc)
+        dh = shp.integral_derivatives(a, 1.0, vc)[1]
+        return float(h[0] - 2.0 * h[1]), float(dh[0] - 2.0 * dh[1])
+
+    def to_loop(self, gamma: float, vc: float) -> tuple[float, float]:
+        """``(W, q)``: the loop's opening (ue) at mid-stroke and ``q = span / vc``."""
+        return gamma * self._opening(vc)[0], self.span_V / vc
+
+    def to_native(self, width: float, q: float) -> tuple[float, float]:
+        """``(gamma, vc)`` of a loop of opening ``width`` (ue) and curvature ``q``."""
+        vc = self.span_V / q
+        return width / self._opening(vc)[0], vc
+
+    def jacobian(self, width: float, q: float) -> NDArray:
+        """``d(gamma, vc) / d(W, ln q)`` (2 x 2)."""
+        vc = self.span_V / q
+        d, dd = self._opening(vc)
+        return np.array([[1.0 / d, width * vc * dd / (d * d)], [0.0, -vc]])
+
+
 class Coordinates:
     """The free parameters of a problem in the order of the parameter vector ``z``: the base
     parameters ``base_free`` (``vc`` and the time constants on a log scale; ``lam_d`` skipping
-    the gap around 1 when ``lam_gap``), then each global effect's parameters."""
+    the gap around 1 when ``lam_gap``), then each global effect's parameters.
+
+    With ``loop`` (a :class:`LoopScale`) and both ``gamma`` and ``vc`` free, those two are
+    fitted as the loop's opening ``W`` (ue, at the middle of a loop spanning the records'
+    stroke) and its curvature ``q = span / vc`` (log scale): a narrow loop (``vc`` far above the
+    stroke, where ``F(x) ~ alpha0 x + (gamma / 2 vc) x^2`` and only ``gamma / vc`` is seen) is
+    then the well-conditioned limit ``q -> 0`` of a loop whose width is determined, instead of
+    ``gamma`` and ``vc`` running away together."""
 
     def __init__(
         self,
@@ -111,11 +157,31 @@ class Coordinates:
         effects: Sequence[Effect],
         bounds: Mapping[str, tuple[float, float]],
         lam_gap: bool,
+        loop: LoopScale | None = None,
     ):
+        self.base_free = tuple(base_free)
+        self.loop = (
+            loop
+            if loop is not None
+            and loop.shape in BUILTIN_SHAPES
+            and loop.shape != "linear"
+            and loop.span_V > 0
+            and {"gamma_ue_per_V", "vc_V"} <= set(base_free)
+            else None
+        )
         out: list[Coordinate] = []
         for n in base_free:
             a, b = bounds[n]
-            if n in LOG_PARAMS:
+            if self.loop is not None and n == "gamma_ue_per_V":
+                out.append(Coordinate("base", LOOP_WIDTH, "linear", 0.0, 1e12))
+            elif self.loop is not None and n == "vc_V":
+                s = self.loop.span_V
+                out.append(
+                    Coordinate(
+                        "base", LOOP_CURVATURE, "log", float(np.log(s / b)), float(np.log(s / a))
+                    )
+                )
+            elif n in LOG_PARAMS:
                 out.append(Coordinate("base", n, "log", float(np.log(a)), float(np.log(b))))
             elif n == "lam_d" and lam_gap:
                 hi = b - 2 * LAM_GAP if b > 1.0 + LAM_GAP else b
@@ -132,16 +198,56 @@ class Coordinates:
         self.hi = np.array([c.hi for c in out], dtype=float)
         self._effects = {e.name: e for e in effects}
 
+    def operator_map(self, base: Mapping[str, float]) -> tuple[list[int], NDArray]:
+        """The operator's coordinates (their indices) and ``d(alpha0, gamma, vc) / dz`` for
+        them (3 x k): what turns the operator's native sensitivities into Jacobian columns."""
+        idx = [
+            j
+            for j, c in enumerate(self.items)
+            if c.who == "base"
+            and c.name in ("alpha0_ue_per_V", "gamma_ue_per_V", "vc_V", LOOP_WIDTH, LOOP_CURVATURE)
+        ]
+        M = np.zeros((3, len(idx)))
+        col = {self.items[j].name: i for i, j in enumerate(idx)}
+        if "alpha0_ue_per_V" in col:
+            M[0, col["alpha0_ue_per_V"]] = 1.0
+        if "gamma_ue_per_V" in col:
+            M[1, col["gamma_ue_per_V"]] = 1.0
+        if "vc_V" in col:
+            M[2, col["vc_V"]] = base["vc_V"]  # log scale
+        if self.loop is not None:
+            w, q = self.loop.to_loop(base["gamma_ue_per_V"], base["vc_V"])
+            T = self.loop.jacobian(w, q)
+            M[1:, [col[LOOP_WIDTH], col[LOOP_CURVATURE]]] = T
+        return idx, M
+
+    def native_jacobian(self, z: NDArray, base0: Mapping[str, float]) -> NDArray:
+        """``d(native free parameters) / dz`` (square): the base's free parameters in the
+        order of :attr:`base_free`, then the effects' parameters (native units)."""
+        base, _ = self.unpack(z, base0)
+        k = len(self.items)
+        T = np.zeros((k, k))
+        pos = {n: i for i, n in enumerate(self.base_free)}
+        for j, c in enumerate(self.items):
+            i = pos.get(c.name, j) if c.who == "base" else j
+            if c.who == "base" and c.name in (LOOP_WIDTH, LOOP_CURVATURE):
+                continue
+            T[i, j] = c.value(z[j]) if c.kind == "log" else 1.0
+        if self.loop is not None:
+            jw = next(j for j, c in enumerate(self.items) if c.name == LOOP_WIDTH)
+            jq = next(j for j, c in enumerate(self.items) if c.name == LOOP_CURVATURE)
+            w, q = self.loop.to_loop(base["gamma_ue_per_V"], base["vc_V"])
+            G = self.loop.jacobian(w, q)
+            ig, iv = pos["gamma_ue_per_V"], pos["vc_V"]
+            T[np.ix_([ig, iv], [jw, jq])] = G
+        return T
+
     def __len__(self) -> int:
         return len(self.items)
 
     @property
     def names(self) -> list[tuple[str, str]]:
         return [(c.who, c.name) for c in self.items]
-
-    @property
-    def base_free(self) -> tuple[str, ...]:
-        return tuple(c.name for c in self.items if c.who == "base")
 
     def z(
         self,
@@ -153,8 +259,17 @@ class Coordinates:
         ``init``), clipped to the bounds (``strict``: strictly inside, as a start must be)."""
         eff = eff or {}
         z = []
+        loop = (
+            self.loop.to_loop(float(base["gamma_ue_per_V"]), float(base["vc_V"]))
+            if self.loop is not None
+            else None
+        )
         for c in self.items:
-            if c.who == "base":
+            if c.who == "base" and loop is not None and c.name == LOOP_WIDTH:
+                x = loop[0]
+            elif c.who == "base" and loop is not None and c.name == LOOP_CURVATURE:
+                x = loop[1]
+            elif c.who == "base":
                 x = float(base[c.name])
             else:
                 q = next(p for p in self._effects[c.who].params if p.name == c.name)
@@ -178,6 +293,9 @@ class Coordinates:
                 base[c.name] = c.value(x)
             else:
                 eff[c.who][c.name] = c.value(x)
+        if self.loop is not None:
+            width, q = base.pop(LOOP_WIDTH), base.pop(LOOP_CURVATURE)
+            base["gamma_ue_per_V"], base["vc_V"] = self.loop.to_native(width, q)
         return base, eff
 
     def _params(self, name: str) -> bool:
@@ -232,6 +350,7 @@ class Problem:
         with_gd: bool = True,
         lam_gap: bool = True,
         shared: SharedSimulations | None = None,
+        loop: LoopScale | None = None,
     ):
         self.sequences = list(sequences)
         self.segments = [list(s) for s in segments]
@@ -241,7 +360,11 @@ class Problem:
         self.nuisance = dict(nuisance or {})
         self.with_gd = with_gd
         self.lam_gap = lam_gap
-        self.coords = Coordinates(base_free, self.glob, self.bounds, lam_gap)
+        if loop is None and self.sequences:
+            span = max(float(np.ptp(s.voltage_V)) if s.n else 0.0 for s in self.sequences)
+            loop = LoopScale(span, family.shape) if span > 0 else None
+        self.loop = loop
+        self.coords = Coordinates(base_free, self.glob, self.bounds, lam_gap, loop)
         self._shared = shared or SharedSimulations()
         self.nfev = 0  # residual evaluations asked of this problem
         self.n_scored = sum(g.measured_ue.size for segs in self.segments for g in segs)
@@ -283,6 +406,7 @@ class Problem:
             with_gd=self.with_gd,
             lam_gap=self.lam_gap,
             shared=self._shared,
+            loop=self.loop,
         )
 
     # -- evaluation ----------------------------------------------------------------------------
@@ -294,7 +418,7 @@ class Problem:
     ) -> list[Forward]:
         """Each sequence's modelled strain (before nuisance terms) and, with ``jacobian``, its
         derivative with respect to the free coordinates (cached by the parameter values)."""
-        names = tuple(self.coords.names) if jacobian else ()
+        names = (*self.coords.names, ("loop", repr(self.coords.loop))) if jacobian else ()
         key_params = (
             tuple(float(base[n]) for n in PARAM_NAMES),
             tuple(
@@ -336,7 +460,9 @@ class Problem:
                     coords,
                     with_gd=self.with_gd,
                     relaxed=relaxed,
+                    operator_map=self.coords.operator_map(base) if jacobian else None,
                 )
+                hit.names = names
                 self._shared.evaluations += 1
                 cache[key] = hit
                 while len(cache) > CACHE_SIZE * max(1, len(self.sequences)):

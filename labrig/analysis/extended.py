@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from labrig.analysis.engine import LAM_GAP, Problem, chord_refit, orthonormal, solve
+from labrig.analysis.engine import LAM_GAP, LoopScale, Problem, chord_refit, orthonormal, solve
 from labrig.analysis.metrics import second_half_nrmse_pct
 from labrig.analysis.parallel import map_tasks
 from labrig.analysis.records import Record
@@ -146,6 +146,7 @@ class ExtendedProblem(Problem):
             if chosen:
                 seqs.append(seq)
                 segs.append(chosen)
+        span = max((float(np.ptp(s.voltage_V)) for s in self.all_sequences if s.n), default=0.0)
         super().__init__(
             seqs,
             segs,
@@ -157,6 +158,7 @@ class ExtendedProblem(Problem):
             with_gd=True,
             lam_gap=True,
             shared=shared,
+            loop=LoopScale(span, shape) if span > 0 else None,
         )
 
     # -- parameters ---------------------------------------------------------------------------
@@ -196,9 +198,6 @@ class ExtendedProblem(Problem):
         """Base parameters (the fixed ones from ``base0``) and effect parameters at ``z``."""
         return self.coords.unpack(z, base0)
 
-    def _is_log(self, who: str, n: str) -> bool:
-        return next(c for c in self.coords.items if (c.who, c.name) == (who, n)).kind == "log"
-
     # -- fitting ------------------------------------------------------------------------------
     def fit(
         self,
@@ -226,25 +225,30 @@ class ExtendedProblem(Problem):
             per = self.per_entry(base, eff)
         return self._outcome(z, base, eff, sd_z, per, 0.5 * float(r @ r), self.nfev - n0)
 
-    def _outcome(self, z, base, eff, sd_z, per, cost, nfev) -> FitOutcome:
-        """A :class:`FitOutcome`: uncertainties in native units, effect parameters on bounds."""
+    def _outcome(self, z, base, eff, sd_native, per, cost, nfev) -> FitOutcome:
+        """A :class:`FitOutcome`: uncertainties in native units (``sd_native`` in the order of
+        :meth:`~labrig.analysis.engine.Coordinates.native_jacobian`), effect parameters on
+        bounds."""
         sd: dict[str, dict[str, float | None]] = {e.name: {} for e in self.glob}
         base_sd: dict[str, float | None] = dict.fromkeys(PARAM_NAMES)
         at_bound: dict[str, list[str]] = {}
         span = self.hi - self.lo
+        nb = len(self.base_free)
+        for i, n in enumerate(self.base_free):
+            s = float(sd_native[i])
+            base_sd[n] = s if np.isfinite(s) else None
         for j, (who, n) in enumerate(self.names):
-            is_log = self._is_log(who, n)
-            s = float(sd_z[j] * np.exp(z[j])) if is_log else float(sd_z[j])
-            s = s if np.isfinite(s) else None
             if who == "base":
-                base_sd[n] = s
-            else:
-                sd[who][n] = s
-                if min(z[j] - self.lo[j], self.hi[j] - z[j]) <= 1e-3 * span[j]:
-                    at_bound.setdefault(who, []).append(n)
+                continue
+            s = float(sd_native[j]) if j >= nb else float("nan")
+            sd[who][n] = s if np.isfinite(s) else None
+            if min(z[j] - self.lo[j], self.hi[j] - z[j]) <= 1e-3 * span[j]:
+                at_bound.setdefault(who, []).append(n)
         return FitOutcome(base, eff, sd, base_sd, per, cost, at_bound, z, nfev)
 
     def _sd(self, z, base0, r) -> NDArray:
+        """1-sigma of the free parameters in native units (base first, then the effects'):
+        ``s^2 (J^T J)^-1`` in the coordinates, carried to native units by ``T``."""
         J = self.jacobian(z, base0)
         dof = max(r.size - z.size, 1)
         s2 = float(r @ r) / dof
@@ -252,7 +256,8 @@ class ExtendedProblem(Problem):
             scale = np.linalg.norm(J, axis=0)
             scale[scale == 0] = 1.0
             cov = np.linalg.pinv((J / scale).T @ (J / scale)) / np.outer(scale, scale)
-            return np.sqrt(np.clip(np.diag(cov) * s2, 0, None))
+            T = self.coords.native_jacobian(z, base0)
+            return np.sqrt(np.clip(np.diag(T @ cov @ T.T) * s2, 0, None))
         except np.linalg.LinAlgError:
             return np.full(z.size, np.nan)
 

@@ -45,7 +45,6 @@ from labrig.analysis.parallel import map_tasks
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import (
     DEFAULT_BOUNDS,
-    LOG_PARAMS,
     PARAM_NAMES,
     OperatorFamily,
     scored_names,
@@ -135,10 +134,12 @@ def _uncertainty(
     r: NDArray,
     sizes: Sequence[int],
     free: Sequence[str],
-    th: dict[str, float],
     nuisance_per_entry: int,
+    T: NDArray,
 ) -> tuple[dict[str, float | None], dict[str, dict[str, float]]]:
-    """1-sigma and correlations in native units from the z-space Jacobian (module doc).
+    """1-sigma and correlations in native units from the z-space Jacobian (module doc);
+    ``T = d(native parameters) / dz`` (:meth:`~labrig.analysis.engine.Coordinates
+    .native_jacobian`), so the native Jacobian is ``J T^-1``.
 
     The weighted residual's variance differs between entries (each is scaled by its span and
     length), so the covariance is the per-entry sandwich ``A^-1 (sum_e s_e^2 J_e^T J_e) A^-1``,
@@ -146,8 +147,7 @@ def _uncertainty(
     for the degrees of freedom the fit used (its share of the parameters, and its nuisance
     offset if any).
     """
-    chain = np.array([th[n] if n in LOG_PARAMS else 1.0 for n in free])
-    Jn = J / chain[None, :]
+    Jn = J @ np.linalg.inv(T)
     p, n_tot = len(free), r.size
     # pseudo-inverse of A through the SVD of a column-scaled Jacobian (well conditioned)
     scale = np.linalg.norm(Jn, axis=0)
@@ -303,11 +303,13 @@ def fit_model(
         family = OperatorFamily(shape, memory)
         common = (chain, method, family, initial, warmup_s, offset, bnd)
         th, camp, res, nfev = _fit_once(records, scored, *common, messages)
-        J = camp.jacobian(camp.coords.z(th, strict=True), th)
+        z = camp.coords.z(th, strict=True)
+        J = camp.jacobian(z, th)
         r = camp.residual_at(th)
         sizes = [g.measured_ue.size for segs in camp.segments for g in segs]
         free = camp.coords.base_free
-        unc, corr = _uncertainty(J, r, sizes, free, th, 1 if offset else 0)
+        T = camp.coords.native_jacobian(z, th)
+        unc, corr = _uncertainty(J, r, sizes, free, 1 if offset else 0, T)
         per_entry, offsets, preds = _in_sample(camp, th, offset)
         elapsed = time.perf_counter() - t0
         if progress:

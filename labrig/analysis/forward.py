@@ -244,10 +244,13 @@ def simulate_sequence(
     coords: Sequence,
     with_gd: bool = True,
     relaxed: Relaxed | None = None,
+    operator_map: tuple[list[int], NDArray] | None = None,
 ) -> Forward:
     """``seq`` simulated with ``effects`` (module docstring); the derivatives with respect to
     the coordinates ``coords`` (none: the strain only). ``relaxed``: steps 1-3 already done
-    (:func:`relaxed_input` for the same parameters and coordinates)."""
+    (:func:`relaxed_input` for the same parameters and coordinates); ``operator_map``: the
+    operator's coordinates and ``d(alpha0, gamma, vc) / dz`` for them
+    (:meth:`~labrig.analysis.engine.Coordinates.operator_map`)."""
     ctx = seq.context
     vol = [e for e in effects if e.where == "voltage"]
     opr = [e for e in effects if e.where == "operator"]
@@ -261,16 +264,14 @@ def simulate_sequence(
     du = np.column_stack(list(relaxed.dx.values())) if order else None
     # 4. the operator and its sensitivities
     op = family.operator(base["alpha0_ue_per_V"], base["gamma_ue_per_V"], base["vc_V"])
-    want_op = any(c.who == "base" and c.name in OPERATOR_PARAMS for c in coords)
-    S, dP, dU = operator_sensitivities(op, xd, rest, du if k else None, want_op and k > 0)
-    J = np.zeros((n, k)) if k else None
+    op_idx, op_M = operator_map if operator_map is not None else ([], np.zeros((3, 0)))
+    S, dP, dU = operator_sensitivities(op, xd, rest, du if k else None, bool(op_idx) and k > 0)
+    J = np.zeros((n, k), order="F") if k else None
     filled = np.zeros(k, dtype=bool)
     if J is not None:
-        for j, c in enumerate(coords):
-            if c.who == "base" and c.name in OPERATOR_PARAMS and dP is not None:
-                col = dP[:, OPERATOR_PARAMS.index(c.name)]
-                J[:, j] = col * base[c.name] if c.kind == "log" else col
-                filled[j] = True
+        if op_idx and dP is not None:
+            J[:, op_idx] = dP @ op_M
+            filled[op_idx] = True
         for i, j in enumerate(order):
             J[:, j] = dU[:, i]
             filled[j] = True

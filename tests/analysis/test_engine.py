@@ -14,12 +14,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from labrig.analysis.engine import base_problem
+from labrig.analysis.engine import LOOP_CURVATURE, LOOP_WIDTH, LoopScale, base_problem
 from labrig.analysis.extended import ExtendedProblem
 from labrig.analysis.metrics import nrmse_pct
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import PARAM_NAMES, OperatorFamily, scored_sequences
-from labrig.model import PAPER_TABLE1, DynamicHysteresisModel
+from labrig.model import PAPER_TABLE1, DynamicHysteresisModel, QuasiStaticHysteresis
 from labrig.model.effects import library
 
 RATE = 1000.0
@@ -150,5 +150,56 @@ def test_every_base_parameter_has_a_column() -> None:
         scored_sequences(recs, [r.name for r in recs], 0.0, True), OperatorFamily(), False
     )
     J = prob.jacobian(prob.coords.z(START, strict=True), START)
-    assert [n for _, n in prob.coords.names] == list(PARAM_NAMES)
+    loop = [LOOP_WIDTH if n == "gamma_ue_per_V" else LOOP_CURVATURE if n == "vc_V" else n
+            for n in PARAM_NAMES]  # fmt: skip
+    assert [n for _, n in prob.coords.names] == loop
+    assert prob.coords.base_free == PARAM_NAMES
     assert np.all(np.linalg.norm(J, axis=0) > 0)
+
+
+def _opening_by_simulation(op, span: float) -> float:
+    """The opening at mid-stroke of a unipolar loop 0 V -> ``span`` -> 0 V, by running the
+    operator over two cycles of a triangle (no closed form used): the falling branch minus the
+    rising branch, both at ``span / 2`` (a sample of each branch)."""
+    n = 4001  # odd: mid-stroke is a sample
+    up = np.linspace(0.0, span, n)
+    u = np.concatenate([up, up[::-1], up, up[::-1]])
+    s = op.apply(u)
+    rising = s[2 * n : 3 * n][n // 2]
+    falling = s[3 * n :][n // 2]
+    return float(falling - rising)
+
+
+@pytest.mark.parametrize("shape", ["exponential", "gaussian"])
+@pytest.mark.parametrize("vc", [5.0, 65.0, 5000.0])
+def test_loop_width_is_the_operators_opening(shape: str, vc: float) -> None:
+    """The width coordinate is the opening of a full-stroke loop at mid-stroke, checked by
+    running the operator itself; (W, q) -> (gamma, vc) round-trips; its Jacobian matches
+    differences."""
+    span = 100.0
+    scale = LoopScale(span, shape)
+    gamma = 7.8
+    w, q = scale.to_loop(gamma, vc)
+    op = QuasiStaticHysteresis(8.9, gamma, vc, shape)
+    assert w == pytest.approx(_opening_by_simulation(op, span), rel=1e-6)
+    assert q == pytest.approx(span / vc)
+    g2, v2 = scale.to_native(w, q)
+    assert g2 == pytest.approx(gamma, rel=1e-12) and v2 == pytest.approx(vc, rel=1e-12)
+    T = scale.jacobian(w, q)
+    h = 1e-6
+    for j, (dw, dq) in enumerate(((h * w, 0.0), (0.0, h))):
+        plus = np.array(scale.to_native(w + dw, q * np.exp(dq)))
+        minus = np.array(scale.to_native(w - dw, q * np.exp(-dq)))
+        col = (plus - minus) / (2 * (dw if j == 0 else dq))
+        np.testing.assert_allclose(T[:, j], col, rtol=1e-5, atol=1e-12 * abs(col).max())
+
+
+def test_a_narrow_loop_keeps_its_width() -> None:
+    """vc 1000 times the stroke: gamma and vc alone are nearly one direction (only gamma / vc
+    is seen), but the width coordinate is the loop's own opening and stays well determined."""
+    scale = LoopScale(100.0, "exponential")
+    gamma, vc = 7.8e3, 1e5
+    w, q = scale.to_loop(gamma, vc)
+    assert q == pytest.approx(1e-3)
+    # the Rayleigh limit: opening = gamma / vc * A^2 with A half the stroke
+    assert w == pytest.approx(gamma / vc * 50.0**2, rel=1e-3)
