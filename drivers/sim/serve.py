@@ -27,7 +27,6 @@ from labrig.drivers.sim.modbus_server import ModbusConditionerServer
 from labrig.core.errors import InputFileError, InputIssue, LabrigError
 from labrig.core.interrupts import interrupt_once
 from labrig.model.accel import warm as warm_model
-from labrig.rig.instruments import SimulatorInfo
 from labrig.rig.limits import RigLimits
 from labrig.rig.rigspec import RigSpec, load_rig
 
@@ -191,6 +190,3 @@ def start_for_rig(spec: RigSpec, seed: int | None) -> Simulators:
     except SimulatorPortError as e:
         raise InputFileError([InputIssue(spec.source, None, e.field, e.detail)]) from None
 
-
-#: the virtual bench, registered under the ``labrig.simulators`` entry points (pyproject.toml)
-SIMULATOR = SimulatorInfo(name="bench", config=BenchConfig, start=start_for_rig)
