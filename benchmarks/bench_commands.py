@@ -136,8 +136,14 @@ def main() -> int:
     commands = {
         "help": lambda f: ["--help"],
         "fit": lambda f: ["fit", str(f), "--json"],
-        "report": lambda f: ["report", str(f), "--json", "--out", str(work / "r.html"),
-                             "--overwrite"],  # fmt: skip
+        "report": lambda f: [
+            "report",
+            str(f),
+            "--json",
+            "--out",
+            str(work / "r.html"),
+            "--overwrite",
+        ],
         "diagnose": lambda f: ["diagnose", str(f), "--json"],
     }
     only = [c for c in args.only.split(",") if c] or list(commands)
@@ -170,9 +176,12 @@ def main() -> int:
             print(f"  {cname} {dname}: {med}", file=sys.stderr)
     y1 = yardstick_s()
     load1 = os.getloadavg()
-    print(f"Run {datetime.now(UTC):%Y-%m-%d %H:%M} UTC on {platform.processor() or platform.machine()}"
-          f", {os.cpu_count()} cores; load average {load0[0]:.2f} at the start, {load1[0]:.2f} at "
-          f"the end; yardstick (np.sort of 1e6 floats) {1e3 * y0:.1f} / {1e3 * y1:.1f} ms CPU.\n")  # fmt: skip
+    cpu = platform.processor() or platform.machine()
+    print(
+        f"Run {datetime.now(UTC):%Y-%m-%d %H:%M} UTC on {cpu}, {os.cpu_count()} cores; load "
+        f"average {load0[0]:.2f} at the start, {load1[0]:.2f} at the end; yardstick (np.sort of "
+        f"1e6 floats) {1e3 * y0:.1f} / {1e3 * y1:.1f} ms CPU.\n"
+    )
     print("| command | data | CPU s (median / min) | previous CPU s | previous / this | "
           "results against the previous |")  # fmt: skip
     print("|---|---|---|---|---|---|")

@@ -45,7 +45,6 @@ from functools import lru_cache
 import numpy as np
 from numpy.polynomial import chebyshev as C
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal
 
 from labrig.model import diffusive
 from labrig.model.accel import kernels
@@ -66,6 +65,15 @@ from labrig.model.modal import (
     run_bank,
     run_bank_multi,
 )
+
+
+def _scipy_signal():
+    """``scipy.signal``, imported on first use: it costs about a second of CPU to import (it
+    loads scipy.stats), which the fast paths never need."""
+    from scipy import signal
+
+    return signal
+
 
 METHODS = ("exact", "fast")
 
@@ -123,7 +131,7 @@ class Relaxor:
             if v.size == 0:
                 return v.copy()
             k = sampled_kernel(self.tau_s, self.lam, dt, v.size, hold)
-            return signal.fftconvolve(v, k)[: v.size]
+            return _scipy_signal().fftconvolve(v, k)[: v.size]
         if method == "fast":
             return run_bank(self.bank(rate_hz, hold), v)[0]
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
@@ -184,9 +192,9 @@ class Relaxor:
                 if kern is not None:
                     kern.mode_derivative(u, a[i], b0[i], b1[i], da[j], db0[j], db1[j], g, dy)
                     continue
-                x = signal.lfilter([b1[i], b0[i]], [1.0, -a[i]], u)
+                x = _scipy_signal().lfilter([b1[i], b0[i]], [1.0, -a[i]], u)
                 rhs = da[j] * np.r_[0.0, x[:-1]] + db0[j] * np.r_[0.0, u[:-1]] + db1[j] * u
-                z = signal.lfilter([1.0], [1.0, -a[i]], rhs)
+                z = _scipy_signal().lfilter([1.0], [1.0, -a[i]], rhs)
                 dy += (g[None, :] * z[:, None]).real
             y[:, 1:] = dy
         return y[:, 0] + rest_V, y[:, 1], y[:, 2]
@@ -241,10 +249,10 @@ class Relaxor:
             # exact discrete inverse of the ZOH kernel: y[n+1] = sum_k h[n+1-k] v[k]
             h = sampled_kernel(self.tau_s, self.lam, dt, y.size + 1, "zoh")[1:]
             y_next = np.append(y[1:], y[-1])
-            return signal.fftconvolve(y_next, series_reciprocal(h))[: y.size]
+            return _scipy_signal().fftconvolve(y_next, series_reciprocal(h))[: y.size]
         y_ext = np.append(y, y[-1])
         w = power_ramp_kernel(self.lam - 1.0, dt, y_ext.size)
-        phi = signal.fftconvolve(y_ext, w)[: y_ext.size]
+        phi = _scipy_signal().fftconvolve(y_ext, w)[: y_ext.size]
         mean_y = 0.5 * (y_ext[:-1] + y_ext[1:])
         return mean_y + self.tau_s**self.lam * np.diff(phi) / dt
 
@@ -389,9 +397,9 @@ def series_reciprocal(h: NDArray) -> NDArray:
     m = 1
     while m < n:
         m = min(2 * m, n)
-        e = -signal.fftconvolve(h[:m], r)[:m]
+        e = -_scipy_signal().fftconvolve(h[:m], r)[:m]
         e[0] += 2.0
-        r = signal.fftconvolve(r, e)[:m]
+        r = _scipy_signal().fftconvolve(r, e)[:m]
     return r
 
 
