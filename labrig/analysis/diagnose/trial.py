@@ -160,7 +160,15 @@ def try_candidate(
     say(f"round {rnd + 1}: cross-validating base + {eff.name}")
     c.heldout_per_entry = prob.heldout(fo, workers=workers)
     c.heldout_nrmse_pct = mean_of(c.heldout_per_entry)
-    a = accept(eff, fo, c.heldout_per_entry, current.heldout, settings.min_gain, setup.span_s)
+    a = accept(
+        eff,
+        fo,
+        c.heldout_per_entry,
+        current.heldout,
+        settings.min_gain,
+        setup.span_s,
+        current.evidence.floor_pct,
+    )
     c.judged(a)
     verb = "cuts" if a.gain > 0 else "raises"
     c.evidence = (
