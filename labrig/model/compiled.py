@@ -120,7 +120,7 @@ def _pass(u, k, prev, cur, sx, sy, sp, su, sd, top, wipe, shape, a0, g, vc, want
     n = u.shape[0]
     kc = du.shape[1]
     xa, ya = sx[top - 1], sy[top - 1]
-    thr = cur * sx[top - 2] if wipe and top >= 2 and cur != 0.0 else _INF
+    thr = cur * sx[top - 2] if wipe and top >= wipe and cur != 0.0 else _INF
     while k < n:
         x = u[k]
         if (x - prev) * cur < 0.0 or (cur == 0.0 and x != prev) or cur * x >= thr:
@@ -147,10 +147,10 @@ def _pass(u, k, prev, cur, sx, sy, sp, su, sd, top, wipe, shape, a0, g, vc, want
             elif cur == 0.0 and x != prev:  # first move
                 cur = 1.0 if x > prev else -1.0
             if wipe and cur != 0.0:  # close the minor loops the input reaches
-                while top >= 2 and cur * x >= cur * sx[top - 2]:
+                while top >= wipe and cur * x >= cur * sx[top - 2]:
                     top -= 2 if top >= 3 else 1
             xa, ya = sx[top - 1], sy[top - 1]
-            thr = cur * sx[top - 2] if wipe and top >= 2 and cur != 0.0 else _INF
+            thr = cur * sx[top - 2] if wipe and top >= wipe and cur != 0.0 else _INF
         d = x - xa
         out[k] = ya + _odd(d, shape, a0, g, vc)
         if want_p:
@@ -173,7 +173,7 @@ def operator_pass(
     stack_y: np.ndarray,
     u_last: float,
     direction: float,
-    wipe: bool,
+    wipe: int,
     shape: int,
     a0: float,
     g: float,
@@ -187,10 +187,11 @@ def operator_pass(
     The memory is the remembered turning points ``(stack_x, stack_y)`` (oldest first, the last
     the current branch's), the last input ``u_last`` and the ``direction`` of travel. At each
     sample, a change of direction makes the previous sample (or ``u_last``) a turning point, its
-    strain the current branch's value there; with return-point memory (``wipe``) the point is
-    pushed and every minor loop the input reaches is closed (its two turning points popped; the
-    bottom one, the rest point, stays), else it replaces the memory. Flat samples keep the
-    direction.
+    strain the current branch's value there; with return-point memory (``wipe`` 2 or 3) the
+    point is pushed and every minor loop the input reaches is closed (its two turning points
+    popped) while at least ``wipe`` turning points are remembered (the bottom one, the rest
+    point, stays; with 3 no loop closes onto it), else (0) it replaces the memory. Flat samples
+    keep the direction.
 
     Along the same pass, if ``want_params``, the derivatives of the strain with respect to
     ``(alpha0, gamma, vc)`` (N, 3), and along each column of ``du`` (N, k) with the branch
@@ -433,7 +434,7 @@ def model_run(
     stack_y: np.ndarray,
     u_last: float,
     direction: float,
-    wipe: bool,
+    wipe: int,
     shape: int,
     a0: float,
     g: float,

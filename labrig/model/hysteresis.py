@@ -21,6 +21,13 @@ Which reversal is the memory (``memory``):
   interrupted continues. Because a branch from ``(u_s, S_s)`` and back closes exactly at
   ``(u_s, S_s)`` (``S_s + F(x) - F(x)``), the strain is continuous there and the operator is
   continuous in its input: a tiny wiggle of ``u`` makes a tiny minor loop and nothing else.
+- ``"return_point_open"``: return-point memory in which the rest point only anchors the first
+  branch: no loop closes onto it. With ``"return_point"`` a branch that reaches 0 V after an
+  excursion from rest closes the excursion's loop there and goes on along the initial curve,
+  so the loops of a bipolar drive (or any drive crossing 0 V) are pinched at 0 V; here the
+  branch from a reversal goes on through 0 V, and a bipolar loop is open there (its width at
+  0 V, ``F(2A) - 2F(A)`` for amplitude ``A``). For a drive that never goes below 0 V (the
+  paper's) the two agree: a branch that returns to 0 V meets the initial curve there.
 - ``"last_reversal"``: the spec's literal single memory, ``u_s`` = the last extremum. It agrees
   with ``"return_point"`` whenever no extremum passes an earlier turning point (steady sines,
   vanishing envelopes), but a reversal of any size, even 1e-7 V, forgets the whole history: a
@@ -59,7 +66,11 @@ from scipy import special
 from labrig.model.accel import kernels
 
 SHAPES = ("exponential", "linear", "gaussian")
-MEMORY_RULES = ("return_point", "last_reversal")
+MEMORY_RULES = ("return_point", "last_reversal", "return_point_open")
+#: each memory rule as the operator's kernels read it: the least number of remembered turning
+#: points a minor loop may close onto (2: down to the rest point; 3: never onto the rest point),
+#: 0 for the last reversal only
+_CLOSE_FLOOR = {"return_point": 2, "return_point_open": 3, "last_reversal": 0}
 _GL48_X, _GL48_W = np.polynomial.legendre.leggauss(48)
 
 
@@ -242,8 +253,9 @@ class QuasiStaticHysteresis:
 
     # -- operator -----------------------------------------------------------------------------
     @property
-    def _wipe(self) -> bool:
-        return self.memory == "return_point"
+    def _wipe(self) -> int:
+        """The memory rule for the kernels (:data:`_CLOSE_FLOOR`)."""
+        return _CLOSE_FLOOR[self.memory]
 
     def _along(self, a: NDArray, b: NDArray) -> NDArray:
         """Strain change (ue) along a branch from input ``a`` to ``b`` (V)."""
@@ -531,13 +543,15 @@ def _branches(
     x_last: float,
     direction: float,
     delta: Callable[[NDArray, NDArray], NDArray],
-    wipe: bool,
+    wipe: int,
 ) -> tuple[_Branches, list[tuple[float, float]], float]:
     """Find the branch structure of ``x`` (module docstring, memory rules).
 
     ``stack``: the remembered turning points ``(x, y)``, oldest first, the last one the current
     branch's; ``delta(x_a, x_b)``: the output change along a branch from ``x_a`` to ``x_b``;
-    ``wipe``: return-point memory (close and forget minor loops), else the last reversal only.
+    ``wipe``: return-point memory (close and forget minor loops onto any of the remembered
+    turning points while at least ``wipe`` are remembered: 2 down to the rest point, 3 never
+    onto it), else (0) the last reversal only.
     Returns the structure, the new stack and the new direction. A reversal detected at sample
     ``n`` has its extremum at ``n - 1`` (or at ``x_last``); flat stretches are not reversals.
     One Python step per monotone run; where branches start and the branches themselves are
@@ -569,9 +583,10 @@ def _branches(
                 live[:] = [node]
         if wipe and dj != 0.0:
             far = dj * x_far  # a run is monotone: its last sample is its farthest
-            while len(live) >= 2 and far >= dj * xs[live[-2]]:
+            while len(live) >= wipe and far >= dj * xs[live[-2]]:
                 # the run reaches the turning point where the current minor loop began: close
-                # the loop and forget it (the rest point at the bottom stays). Closing on
+                # the loop and forget it (the rest point at the bottom stays; with
+                # "return_point_open" no loop closes onto it). Closing on
                 # reaching, not passing, gives the same strain (the branches meet there) and
                 # keeps the stack from growing under exactly repeated extrema
                 cross_run.append(j)

@@ -26,7 +26,7 @@ from labrig.model.accel import kernels
 from reference.hysteresis_ref import polyline
 
 SHAPES = {"exponential": 7.8, "linear": 0.12, "gaussian": 7.8}  # gamma (ue/V or ue/V^2)
-MEMORIES = ("return_point", "last_reversal")
+MEMORIES = ("return_point", "last_reversal", "return_point_open")
 REL = 1e-12  # of full scale
 
 pytestmark = pytest.mark.skipif(kernels() is None, reason="numba is not installed")
