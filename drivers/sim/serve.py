@@ -26,7 +26,7 @@ from labrig.drivers.sim.modbus_server import ModbusConditionerServer
 
 from labrig.core.errors import InputFileError, InputIssue, LabrigError
 from labrig.core.interrupts import interrupt_once
-from labrig.model.accel import warm as warm_model
+from labrig.model.warm import warm as warm_model
 from labrig.rig.limits import RigLimits
 from labrig.rig.rigspec import RigSpec, load_rig
 

@@ -53,7 +53,7 @@ WORKERS_OPTION = typer.Option(
     "--workers",
     min=1,
     max=256,
-    metavar="N",
+    metavar="COUNT",
     help="Processes for the held-out folds and the candidates of a round (default: the "
     "processors this process may use); the result does not depend on it.",
 )
