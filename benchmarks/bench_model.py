@@ -1,57 +1,62 @@
 """Measured performance of :mod:`labrig.model` (benchmarks, not timed tests).
 
-Run from the repository root (about 3-4 minutes on a 2-core machine; ~1.5 GB peak memory at
-N = 1e7 with the exact method):
+Run from the repository root (about 6-10 minutes on a loaded 2-core machine; ~1.5 GB peak
+memory at N = 1e7 with the exact method):
 
     .venv/bin/python benchmarks/bench_model.py            # full run, rewrites benchmarks/RESULTS.md
     .venv/bin/python benchmarks/bench_model.py --quick    # smoke run (small N), stdout only
     .venv/bin/python -m benchmarks                         # same as the full run
     benchmarks/run.sh                                      # same as the full run
 
+Every time is CPU time of this process (``time.process_time``, one BLAS thread) unless said
+otherwise, and every predict timing is paired with a **yardstick** timed right after it in the
+same loop: ``numpy.sort`` of 1e6 random floats. On a shared machine the CPU time still moves
+with the load (cache and memory bandwidth, a busy sibling hyperthread); the ratio to the
+yardstick moves much less, and is what to compare across runs and machines.
+
 What is measured (each section of RESULTS.md is produced here, nothing is typed by hand):
 
-1. ``DynamicHysteresisModel(PAPER_TABLE1).predict`` with ``method="fast"`` and ``"exact"`` at
-   N = 1e4, 1e6, 1e7 samples of a 0-100 V unipolar sine sweep (1 -> 40 Hz, linear chirp
-   repeated every 10 s) sampled at 1 kHz: samples per second, best and median of repeats,
-   plus the split of one fast run into G_t, G_d and the hysteresis operator and a cProfile of
-   one fast run at N = 1e6.
-2. The Grunwald-Letnikov scheme FOMCON's ``lsim`` uses (full memory, implicit, first order),
+1. ``DynamicHysteresisModel(PAPER_TABLE1).predict`` with ``method="fast"`` (the compiled model
+   in one pass), the same through ``ModelStream`` blocks, the **previous fast path** (the
+   Gauss-Legendre banks of ``previous_quadrature.py``, 242 + 285 modes, run by the numpy block
+   realisation, and the numpy operator) and ``method="exact"``, at N = 1e4, 1e6, 1e7 samples of
+   a 0-100 V unipolar sine sweep (1 -> 40 Hz, linear chirp repeated every 10 s) at 1 kHz;
+   agreement of fast with the numpy stages, with exact and with the previous banks; the cost of
+   each stage alone; the banks' recursion compiled against the numpy (BLAS) blocks at the new
+   and the previous bank sizes.
+2. The relaxor banks: mode counts and max error against ``exact`` (unit step, 1e5 samples;
+   zero-order and linear hold) for lam in {0.1, 0.15, 0.3, 0.5, 0.8, 0.95, 1.05, 1.2, 1.5,
+   1.8} at 1 kHz and 10 kHz, new quadrature and previous.
+3. Compilation: numba's cold compile and cached load in fresh processes (a temporary
+   ``NUMBA_CACHE_DIR``), where the cache goes by default, and ``labrig --help``'s start.
+4. The Grunwald-Letnikov scheme FOMCON's ``lsim`` uses (full memory, implicit, first order),
    written plainly below (:func:`gl_relaxor`), against our ``exact`` and ``fast`` filters on
-   the paper's G_t (tau = 15.5e-5 s, lam = 0.15) and G_d (tau = 2e-3 s, lam = 1.35) at 1 kHz:
-   time and max error against the closed-form step response (a unit step) and against an
-   oversampled exact reference (a 0-100 V unipolar 5 Hz sine). GL is O(N^2); it runs up to
-   N = 5e4 and its time at N = 1e6 is extrapolated as ``t(5e4) * 400`` (said so in the table).
-   A convergence check of the GL code against the exact step response as h shrinks comes first.
-3. Per-sample cost of ``Relaxor.stepper(rate).step(x)`` for G_t and G_d (a Python loop), of the
-   hysteresis operator on one sample, and of ``ModelStream.process`` on one-sample blocks (the
-   whole model), at 1 kHz and 10 kHz, against the 100 us budget of a 10 kHz loop.
+   the paper's G_t and G_d at 1 kHz (time and error), after a convergence check of the GL code.
+5. Per-sample cost of the steppers, the operator and ``ModelStream.process`` on one-sample
+   blocks, against the 100 us budget of a 10 kHz loop.
 """
 
 from __future__ import annotations
 
 import argparse
-import cProfile
 import datetime as _dt
 import gc
-import inspect
-import io
 import json
 import math
 import os
 import platform
-import pstats
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-# One BLAS thread unless --blas-default: the fast method's matrix products are small (256 x 242)
-# and gain little from threads, while on a shared 2-core machine OpenBLAS threads that compete
-# with another process slow it down by up to 3x, which makes the numbers unreproducible. Section 1
-# also reports the default-thread run (a subprocess). Must be set before numpy is imported.
+# One BLAS thread unless --blas-default: the numpy block realisation's matrix products are
+# small and gain little from threads, while on a shared 2-core machine OpenBLAS threads that
+# compete with another process slow it down by up to 3x. Must be set before numpy is imported.
 BLAS_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 if "--blas-default" not in sys.argv and "numpy" not in sys.modules:
     for _var in BLAS_VARS:
@@ -63,6 +68,10 @@ import scipy  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:  # run as a script from anywhere
     sys.path.insert(0, str(ROOT))
+if str(ROOT / "benchmarks") not in sys.path:
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from previous_quadrature import previous_modes  # noqa: E402
 
 from labrig.model import (  # noqa: E402
     PAPER_TABLE1,
@@ -70,12 +79,15 @@ from labrig.model import (  # noqa: E402
     HysteresisState,
     Relaxor,
 )
+from labrig.model.modal import run_bank  # noqa: E402
 
 RATE_HZ = 1000.0
 G_T = Relaxor(PAPER_TABLE1.tau_t_s, PAPER_TABLE1.lam_t)  # 15.5e-5 s, 0.15
 G_D = Relaxor(PAPER_TABLE1.tau_d_s, PAPER_TABLE1.lam_d)  # 2e-3 s, 1.35
-GOAL_FAST = 5e6  # samples/s at N = 1e6
-GOAL_EXACT = 5e5
+GOAL_FAST = 2e7  # samples/s at N = 1e6 and 1e7 (labrig issue 25)
+GOAL_EXACT = 2e6
+YARDSTICK_N = 1_000_000
+FULL_SCALE_V = 100.0
 
 
 # -- helpers -------------------------------------------------------------------------------------
@@ -170,219 +182,264 @@ def machine_info() -> dict[str, str]:
         + (" + uncommitted changes in labrig/model" if dirty else ""),
         "load": " / ".join(f"{x:.2f}" for x in os.getloadavg()),
         "blas threads": os.environ.get("OPENBLAS_NUM_THREADS", "default"),
+        "numba": _numba_version(),
     }
+
+
+def _numba_version() -> str:
+    try:
+        import numba
+
+        return str(numba.__version__)
+    except ImportError:
+        return "not installed (numpy fallback)"
 
 
 # -- 1. predict throughput -----------------------------------------------------------------------
 
+_YARD = np.random.default_rng(0).random(YARDSTICK_N)
 
-CHUNK = 65_536  # block size of the chunked variant (fits the working set in cache)
+
+def yardstick() -> float:
+    """CPU seconds of one ``numpy.sort`` of 1e6 random floats."""
+    c0 = time.process_time()
+    np.sort(_YARD)
+    return time.process_time() - c0
 
 
-def predict_chunked(model: DynamicHysteresisModel, v: np.ndarray) -> np.ndarray:
-    """The fast prediction through the public ``ModelStream`` in ``CHUNK``-sample blocks."""
-    stream = model.stream(RATE_HZ)
-    return np.concatenate([stream.process(v[i : i + CHUNK]) for i in range(0, v.size, CHUNK)])
+@dataclass
+class Paired:
+    cpu: list[float]  # CPU seconds of the call
+    wall: list[float]
+    yard: list[float]  # the yardstick right after each call
+
+    def row(self, n: int) -> dict:
+        cb, cm = min(self.cpu), statistics.median(self.cpu)
+        yb, ym = min(self.yard), statistics.median(self.yard)
+        return {"n": n, "repeats": len(self.cpu), "cpu_best": cb, "cpu_median": cm,
+                "wall_best": min(self.wall), "rate_cpu": n / cb, "rate_cpu_median": n / cm,
+                "yard_best": yb, "yard_median": ym, "ratio": cm / ym}  # fmt: skip
+
+
+def paired(fn: Callable[[], object], repeats: int) -> Paired:
+    out = Paired([], [], [])
+    for _ in range(repeats):
+        gc.collect()
+        c0, t0 = time.process_time(), time.perf_counter()
+        fn()
+        out.wall.append(time.perf_counter() - t0)
+        out.cpu.append(time.process_time() - c0)
+        out.yard.append(yardstick())
+    return out
+
+
+CHUNK = 65_536  # block size of the streamed variant
+
+
+def previous_predict(v: np.ndarray, rest: float = 0.0) -> np.ndarray:
+    """The previous fast path: the previous banks by numpy blocks, then the numpy operator."""
+    bt = previous_modes(G_T.tau_s, G_T.lam, 1 / RATE_HZ).discretise(1 / RATE_HZ, "zoh")
+    bd = previous_modes(G_D.tau_s, G_D.lam, 1 / RATE_HZ).discretise(1 / RATE_HZ, "linear")
+    op = PREVIOUS_OP
+    vt = run_bank(bt, v - rest, engine="numpy")[0]
+    vd = run_bank(bd, vt, engine="numpy")[0] + rest
+    return op.apply(vd, op.held_state(rest), engine="numpy")
+
+
+PREVIOUS_OP = DynamicHysteresisModel(PAPER_TABLE1).operator
+_PREV_BANKS: dict = {}
 
 
 def bench_predict(sizes: list[int], repeats: dict[int, int]) -> tuple[list[dict], dict]:
     model = DynamicHysteresisModel(PAPER_TABLE1)
     rows = []
     cold = {}
+    t0 = time.process_time()
+    model.predict(sweep_input(10_000), RATE_HZ)  # builds the banks (kernels already loaded)
+    cold["fast"] = time.process_time() - t0
+
+    def chunked(v: np.ndarray) -> np.ndarray:
+        stream = model.stream(RATE_HZ)
+        return np.concatenate([stream.process(v[i : i + CHUNK]) for i in range(0, v.size, CHUNK)])
+
     variants: dict[str, Callable[[np.ndarray], np.ndarray]] = {
         "fast": lambda v: model.predict(v, RATE_HZ, method="fast"),
-        f"fast, ModelStream in {CHUNK}-sample blocks": lambda v: predict_chunked(model, v),
+        f"fast, ModelStream in {CHUNK}-sample blocks": chunked,
+        "previous fast (numpy blocks, 242 + 285 modes, numpy operator)": previous_predict,
         "exact": lambda v: model.predict(v, RATE_HZ, method="exact"),
     }
-    for method, fn in variants.items():
-        if method in ("fast", "exact"):
-            # first call ever: builds the modal banks (quadrature) or nothing cached for exact
-            t0 = time.perf_counter()
-            fn(sweep_input(10_000))
-            cold[method] = time.perf_counter() - t0
+    for name, fn in variants.items():
         for n in sizes:
-            if method.startswith("fast,") and n <= CHUNK:
+            if name.startswith("fast,") and n <= CHUNK:
+                continue
+            if name.startswith("previous") and n > 1_000_000:
                 continue
             v = sweep_input(n)
-            y = fn(v)  # warm caches (block matrices per size)
-            if method.startswith("fast,"):
-                ref = model.predict(v, RATE_HZ, method="fast")
-                dev = float(np.max(np.abs(y - ref)))
-                if dev > 1e-6:
-                    print(f"  {method}: differs from predict by {dev:.1e} ue", flush=True)
-            tm = timeit(lambda fn=fn, v=v: fn(v), repeats[n])
-            rows.append(
-                {
-                    "method": method,
-                    "n": n,
-                    "best_s": tm.best,
-                    "median_s": tm.median,
-                    "rate_best": n / tm.best,
-                    "rate_median": n / tm.median,
-                    "rate_cpu": n / tm.cpu_best,
-                    "repeats": len(tm.times),
-                }
-            )
-            print(
-                f"  predict {method:5s} N={n:>9d}: best {fmt_time(tm.best)}, "
-                f"median {fmt_time(tm.median)}, {fmt_rate(n / tm.best)} samples/s",
-                flush=True,
-            )
+            fn(v)  # warm (banks, kernels, block matrices for this size)
+            row = paired(lambda fn=fn, v=v: fn(v), repeats[n]).row(n)
+            rows.append({"method": name, **row})
+            print(f"  predict {name[:30]:30s} N={n:>9d}: CPU best {fmt_time(row['cpu_best'])}, "
+                  f"{fmt_rate(row['rate_cpu'])} samples/s, {row['ratio']:.2f} yardsticks",
+                  flush=True)  # fmt: skip
     return rows, cold
 
 
+def agreement(n: int) -> dict[str, float]:
+    """Max differences on the benchmark sweep, as fractions of the strain's or voltage's
+    full scale."""
+    from labrig.model.modal import run_bank as rb
+
+    model = DynamicHysteresisModel(PAPER_TABLE1)
+    v = sweep_input(n)
+    fast = model.predict(v, RATE_HZ)
+    fs_strain = float(np.max(np.abs(fast)))
+    vt = rb(model.g_t.bank(RATE_HZ, "zoh"), v, engine="numpy")[0]
+    vd = rb(model.g_d.bank(RATE_HZ, "linear"), vt, engine="numpy")[0]
+    op = model.operator
+    stages = op.apply(vd, engine="numpy")
+    exact_vd = model.equivalent_static_voltage(v, RATE_HZ, method="exact")
+    prev = previous_predict(v)
+    return {
+        "fast (one compiled pass) vs the numpy stages (numpy blocks, numpy operator)":
+            float(np.max(np.abs(fast - stages))) / fs_strain,
+        "compiled operator vs numpy operator on the same V*":
+            float(np.max(np.abs(op.apply(vd, engine="compiled") - stages))) / fs_strain,
+        "V* of the banks vs V* of exact": float(np.max(np.abs(vd - exact_vd))) / FULL_SCALE_V,
+        "strain of fast vs strain of exact":
+            float(np.max(np.abs(fast - op.apply(exact_vd)))) / fs_strain,
+        "strain of fast vs strain of the previous fast path":
+            float(np.max(np.abs(fast - prev))) / fs_strain,
+    }  # fmt: skip
+
+
 def split_fast(n: int, repeats: int) -> dict[str, float]:
-    """Time each stage of one fast prediction (best of ``repeats``)."""
+    """CPU best of each stage alone (compiled), and of the whole fused prediction."""
     model = DynamicHysteresisModel(PAPER_TABLE1)
     v = sweep_input(n)
-    vt = model.g_t.filter(v, RATE_HZ, method="fast", hold="zoh")
-    vd = model.g_d.filter(vt, RATE_HZ, method="fast", hold="linear")
-    out = {
-        "G_t (zoh, fast)": timeit(
-            lambda: model.g_t.filter(v, RATE_HZ, method="fast", hold="zoh"), repeats
-        ).best,
-        "G_d (linear, fast)": timeit(
-            lambda: model.g_d.filter(vt, RATE_HZ, method="fast", hold="linear"), repeats
-        ).best,
-        "hysteresis operator": timeit(lambda: model.operator.apply(vd), repeats).best,
-        "G_t (zoh, exact)": timeit(
-            lambda: model.g_t.filter(v, RATE_HZ, method="exact", hold="zoh"), repeats
-        ).best,
-        "G_d (linear, exact)": timeit(
-            lambda: model.g_d.filter(vt, RATE_HZ, method="exact", hold="linear"), repeats
-        ).best,
+    bt, bd = model.g_t.bank(RATE_HZ, "zoh"), model.g_d.bank(RATE_HZ, "linear")
+    vt = run_bank(bt, v)[0]
+    vd = run_bank(bd, vt)[0]
+    op = model.operator
+    stages = {
+        f"G_t bank alone ({bt.size} modes, zoh)": lambda: run_bank(bt, v),
+        f"G_d bank alone ({bd.size} modes, linear)": lambda: run_bank(bd, vt),
+        "operator alone (compiled)": lambda: op.apply(vd),
+        "operator alone (numpy)": lambda: op.apply(vd, engine="numpy"),
+        "the whole prediction (one pass)": lambda: model.predict(v, RATE_HZ),
     }
-    return out
-
-
-def profile_fast(n: int, top: int = 12) -> list[tuple[str, int, float, float]]:
-    model = DynamicHysteresisModel(PAPER_TABLE1)
-    v = sweep_input(n)
-    model.predict(v[:10_000], RATE_HZ, method="fast")
-    prof = cProfile.Profile()
-    prof.enable()
-    model.predict(v, RATE_HZ, method="fast")
-    prof.disable()
-    st = pstats.Stats(prof, stream=io.StringIO())
-    rows = []
-    for (file, line, func), (_cc, nc, tt, ct, _callers) in st.stats.items():  # type: ignore[attr-defined]
-        short = file.replace(str(ROOT) + "/", "")
-        if "site-packages" in short or short.startswith("<") or short.startswith("~"):
-            short = short.split("site-packages/")[-1]
-        rows.append((f"{short}:{line}({func})", nc, tt, ct))
-    rows.sort(key=lambda r: r[2], reverse=True)
-    return rows[:top]
-
-
-def predict_json(n: int, repeats: int) -> dict:
-    """Fast and exact prediction at size ``n`` (run in a subprocess with other BLAS threads)."""
-    model = DynamicHysteresisModel(PAPER_TABLE1)
-    v = sweep_input(n)
     out = {}
-    for method in ("fast", "exact"):
-        model.predict(v, RATE_HZ, method=method)
-        tm = timeit(lambda m=method: model.predict(v, RATE_HZ, method=m), repeats)
-        out[method] = {"best_s": tm.best, "median_s": tm.median, "cpu_s": tm.cpu_best,
-                       "repeats": repeats}  # fmt: skip
+    for k, fn in stages.items():
+        fn()
+        out[k] = min(paired(fn, repeats).cpu)
     return out
 
 
-def predict_default_threads(n: int, repeats: int) -> dict | None:
-    """``predict_json`` in a subprocess with the BLAS library's default thread count."""
-    env = {k: v for k, v in os.environ.items() if k not in BLAS_VARS}
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--predict-json", str(n),
-           "--repeats", str(repeats), "--blas-default"]  # fmt: skip
-    try:
-        res = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
-        return json.loads(res.stdout.strip().splitlines()[-1])
-    except (subprocess.CalledProcessError, ValueError, IndexError) as exc:
-        print(f"  default-thread run failed: {exc}", flush=True)
-        return None
-
-
-def anatomy_fast(n: int, repeats: int = 3) -> list[dict] | None:
-    """Where ``run_bank`` spends its time: a replica of ``modal._run_group``, timed op by op.
-
-    Replicates the arithmetic of ``labrig.model.modal._run_group`` (matrices from its private
-    ``_block_matrices``) and checks that the replica's output equals ``run_bank``'s before
-    reporting; if the internals have changed, the section is skipped.
-    """
-    try:
-        from labrig.model import modal
-    except ImportError:
-        return None
-    block = inspect.signature(modal.run_bank).parameters["block"].default
-    u = sweep_input(n)
+def bench_recursion(n: int, repeats: int) -> list[dict]:
+    """run_bank compiled (per sample, all modes) vs numpy blocks (BLAS), new and previous banks."""
+    v = sweep_input(n)
     rows = []
-    for name, r, hold, inp in (("G_t", G_T, "zoh", u), ("G_d", G_D, "linear", None)):
-        if inp is None:
-            inp = G_T.filter(u, RATE_HZ, method="fast", hold="zoh")
-        bank = r.bank(RATE_HZ, hold)
-        y_ref = modal.run_bank(bank, inp)[0]
-        y_rep = np.zeros(n)
-        for gi, g in enumerate(bank.groups):
-            acc: dict[str, float] = {}
-            for rep in range(repeats):
-                tt: dict[str, float] = {}
-                try:
-                    yg = _replica_group(modal, g, inp, block, tt, bank._cache)
-                except Exception as exc:  # internals changed: do not report a wrong anatomy
-                    print(f"  anatomy skipped: {exc!r}", flush=True)
-                    return None
-                for k, v in tt.items():
-                    acc[k] = min(acc.get(k, np.inf), v) if rep else v
-            y_rep += yg
-            rows.append({"relaxor": name, "hold": hold, "group": gi, "modes": g.size,
-                         "dtype": g.a.dtype.name, "block": block, **acc})  # fmt: skip
-        err = float(np.max(np.abs(y_rep - y_ref)) / max(1.0, float(np.max(np.abs(y_ref)))))
-        if err > 1e-9:
-            print(f"  anatomy skipped: replica differs from run_bank by {err:.1e}", flush=True)
-            return None
+    dt = 1 / RATE_HZ
+    banks = {
+        "G_t, new": G_T.bank(RATE_HZ, "zoh"),
+        "G_d, new": G_D.bank(RATE_HZ, "linear"),
+        "G_t, previous": previous_modes(G_T.tau_s, G_T.lam, dt).discretise(dt, "zoh"),
+        "G_d, previous": previous_modes(G_D.tau_s, G_D.lam, dt).discretise(dt, "linear"),
+    }
+    for name, bank in banks.items():
+        res = {}
+        for engine in ("compiled", "numpy"):
+            run_bank(bank, v, engine=engine)
+            res[engine] = min(paired(lambda b=bank, e=engine: run_bank(b, v, engine=e),
+                                     repeats).cpu)  # fmt: skip
+        rows.append({"bank": name, "modes": bank.size, **res})
+        print(f"  recursion {name}: {bank.size} modes, compiled {fmt_time(res['compiled'])}, "
+              f"numpy blocks {fmt_time(res['numpy'])}", flush=True)  # fmt: skip
     return rows
 
 
-def _replica_group(
-    modal, g, u: np.ndarray, B: int, tt: dict[str, float], cache: dict
-) -> np.ndarray:
-    t = time.perf_counter()
+# -- 2. the banks: modes and accuracy ------------------------------------------------------------
 
-    def lap(key: str) -> None:
-        nonlocal t
-        now = time.perf_counter()
-        tt[key] = tt.get(key, 0.0) + now - t
-        t = now
+BANK_LAMS = (0.1, 0.15, 0.3, 0.5, 0.8, 0.95, 1.05, 1.2, 1.5, 1.8)
 
-    n = u.size
-    up = np.concatenate(([0.0], u[:-1]))
-    key = (id(g), B)  # run_bank's cache of block matrices
-    if key not in cache:
-        cache[key] = modal._block_matrices(g, B)
-    Q, T0m, T1m, P0, P1, aB = cache[key]
-    nb = n // B
-    U, Up = u[: nb * B].reshape(nb, B), up[: nb * B].reshape(nb, B)
-    inj = np.zeros((nb, g.size), dtype=np.result_type(g.a, float))
-    yb = np.zeros((nb, B))
-    lap("setup")
-    for has, Ux, P, T in ((np.any(g.b0 != 0), Up, P0, T0m), (np.any(g.b1 != 0), U, P1, T1m)):
-        if has:
-            inj = inj + Ux @ P
-            lap("P: inputs -> block-end states")
-            yb += Ux @ (T.real if np.iscomplexobj(T) else T)
-            lap("T: intra-block Toeplitz (B x B)")
-    X = np.empty((nb, g.size), dtype=inj.dtype)
-    x = np.zeros(g.size, dtype=inj.dtype)
-    for j in range(nb):
-        X[j] = x
-        x = aB * x + inj[j]
-    lap("state recursion (Python loop over blocks)")
-    yb += (X @ Q.T).real
-    lap("Q: states -> outputs")
-    y = np.zeros(n)
-    y[: nb * B] = yb.ravel()
-    if n % B:  # remainder block: not timed, reuse run_bank for exactness of the check
-        y[nb * B :] = modal._run_group(g, u[nb * B :], float(u[nb * B - 1]), x, B, cache)[0]
-    lap("setup")
-    return y
+
+def bench_banks(n: int, rates: list[float], tau_s: float = 1e-3) -> list[dict]:
+    rows = []
+    for rate in rates:
+        dt = 1 / rate
+        step = np.ones(n)
+        for lam in BANK_LAMS:
+            r = Relaxor(tau_s, lam)
+            row = {"lam": lam, "rate": rate}
+            for hold in ("zoh", "linear"):
+                exact = r.filter(step, rate, method="exact", hold=hold)
+                new = r.bank(rate, hold)
+                prev = previous_modes(tau_s, lam, dt).discretise(dt, hold)
+                row[f"modes_{hold}"] = new.size
+                row[f"modes_prev_{hold}"] = prev.size
+                row[f"err_{hold}"] = float(np.max(np.abs(run_bank(new, step)[0] - exact)))
+                row[f"err_prev_{hold}"] = float(np.max(np.abs(
+                    run_bank(prev, step, engine="numpy")[0] - exact)))  # fmt: skip
+            rows.append(row)
+            print(f"  banks {rate:g} Hz lam {lam}: {row['modes_zoh']} modes (previous "
+                  f"{row['modes_prev_zoh']}), err zoh {row['err_zoh']:.1e} (previous "
+                  f"{row['err_prev_zoh']:.1e})", flush=True)  # fmt: skip
+    return rows
+
+
+# -- 3. compilation and start-up -----------------------------------------------------------------
+
+_COLD_SCRIPT = """
+import json, time
+c0 = time.process_time(); w0 = time.perf_counter()
+import numpy as np
+from labrig.model import PAPER_TABLE1, DynamicHysteresisModel, Relaxor
+c1 = time.process_time()
+import numba
+c2 = time.process_time()
+m = DynamicHysteresisModel(PAPER_TABLE1)
+v = 50 * (1 - np.cos(np.arange(2000) / 50.0))
+m.predict(v, 1000.0)
+c3 = time.process_time()
+m.operator.sensitivities(v, 0.0, np.ones((v.size, 2)))
+Relaxor(2e-3, 1.35).filter_sensitivities(v, 1000.0, "linear")
+m.predict(v, 1000.0, method="exact")
+c4 = time.process_time()
+print(json.dumps({"import labrig.model": c1 - c0, "import numba": c2 - c1,
+                  "first predict (kernels)": c3 - c2,
+                  "sensitivities and exact kernels": c4 - c3,
+                  "wall": time.perf_counter() - w0}))
+"""
+
+
+def bench_compile() -> dict:
+    """Cold compile and cached load of the kernels, in fresh processes with a fresh cache."""
+    out: dict = {}
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        for label in ("cold (empty cache)", "cached (second process)"):
+            res = subprocess.run([sys.executable, "-c", _COLD_SCRIPT], env=env, cwd=ROOT,
+                                 capture_output=True, text=True, check=True)  # fmt: skip
+            out[label] = json.loads(res.stdout.strip().splitlines()[-1])
+            print(f"  compile {label}: {out[label]}", flush=True)
+    cli = ROOT / ".venv" / "bin" / "labrig"
+    times = []
+    if cli.exists():
+        for _ in range(5):
+            r0 = os.times()
+            t0 = time.perf_counter()
+            subprocess.run([str(cli), "--help"], capture_output=True, check=True, cwd=ROOT)
+            r1 = os.times()
+            times.append((time.perf_counter() - t0, (r1.children_user - r0.children_user)
+                          + (r1.children_system - r0.children_system)))  # fmt: skip
+    probe = subprocess.run(
+        [sys.executable, "-c", "import sys, labrig.cli; print('numba' in sys.modules)"],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
+    )
+    out["cli"] = {"runs": times, "numba imported": probe.stdout.strip()}
+    return out
 
 
 # -- 2. Grunwald-Letnikov (FOMCON lsim) versus exact and fast --------------------------------------
@@ -603,51 +660,75 @@ def bench_stepper(n_samples: int, rates: list[float]) -> list[dict]:
 # -- report --------------------------------------------------------------------------------------
 
 
-def goal_status(r: dict, goal: float) -> str:
-    """Met / missed on the best wall time (the least disturbed repeat), said with the number."""
-    if r["rate_best"] >= goal:
-        extra = "" if r["rate_median"] >= goal else " on the best run; the median is below"
-        return f"met{extra}"
-    return f"**missed** (best run {r['rate_best'] / goal:.0%} of the goal)"
+def goal_verdict(rate: float, goal: float) -> str:
+    return "met" if rate >= goal else f"**missed** ({rate / goal:.0%} of the goal)"
 
 
-def summary(a, info: dict, predict_rows: list[dict], gl_rows: list[dict], step_rows: list[dict]):
+def summary(a, rows: list[dict], agree: dict, banks: list[dict], comp: dict,
+            gl_rows: list[dict], step_rows: list[dict]) -> None:  # fmt: skip
     """The table the README can copy."""
     a("## Summary")
     a("")
     a("| measurement | result | goal | status |")
     a("|---|---|---|---|")
-    by = {(r["method"], r["n"]): r for r in predict_rows}
-    for method, goal in (("fast", GOAL_FAST), ("exact", GOAL_EXACT)):
-        r = by.get((method, 1_000_000))
-        if r is not None:
+    by = {(r["method"], r["n"]): r for r in rows}
+    for method, goal, ns in (("fast", GOAL_FAST, (1_000_000, 10_000_000)),
+                             ("exact", GOAL_EXACT, (1_000_000,))):  # fmt: skip
+        for n in ns:
+            r = by.get((method, n))
+            if r is None:
+                continue
             a(
-                f'| `predict(method="{method}")`, N = 1e6, samples/s (best / median wall; '
-                f"CPU) | {fmt_rate(r['rate_best'])} / {fmt_rate(r['rate_median'])}; "
-                f"{fmt_rate(r['rate_cpu'])} | >= {goal:.0e} | {goal_status(r, goal)} |"
+                f'| `predict(method="{method}")`, N = {n:.0e}: samples/s, CPU time best '
+                f"(median); median time in yardsticks | {fmt_rate(r['rate_cpu'])} "
+                f"({fmt_rate(r['rate_cpu_median'])}); {r['ratio']:.2f} | >= {goal:.0e} | "
+                f"{goal_verdict(r['rate_cpu'], goal)} on the best run, "
+                f"{goal_verdict(r['rate_cpu_median'], goal)} on the median |"
             )
-    for n in (1_000_000, 10_000_000):
-        chunk = [r for r in predict_rows if r["method"].startswith("fast,") and r["n"] == n]
-        if chunk and ("fast", n) in by:
-            r0, r1 = by[("fast", n)], chunk[0]
-            a(
-                f"| fast at N = {n:.0e}, one call vs {CHUNK}-sample `ModelStream` blocks, "
-                f"samples/s (CPU; best wall) | {fmt_rate(r0['rate_cpu'])} vs "
-                f"{fmt_rate(r1['rate_cpu'])}; {fmt_rate(r0['rate_best'])} vs "
-                f"{fmt_rate(r1['rate_best'])} | - | blocks x{r1['rate_cpu'] / r0['rate_cpu']:.2g} "
-                "in CPU time |"
-            )
-    ex = [r for r in predict_rows if r["method"] == "exact"]
-    if len(ex) >= 2:
-        r0, r1 = ex[-2], ex[-1]
-        ratio = r1["best_s"] / r0["best_s"]
-        nlogn = (r1["n"] * np.log(r1["n"])) / (r0["n"] * np.log(r0["n"]))
+    prev = [r for r in rows if r["method"].startswith("previous") and r["n"] == 1_000_000]
+    if prev and ("fast", 1_000_000) in by:
+        f, p = by[("fast", 1_000_000)], prev[0]
         a(
-            f"| exact, time ratio N = {r0['n']:.0e} -> {r1['n']:.0e} | x{ratio:.1f} "
-            f"(N log N: x{nlogn:.1f}) | O(N log N) | "
-            + ("consistent" if ratio < 2 * nlogn else "**worse than N log N**")
-            + " |"
+            f"| fast vs the previous fast path, N = 1e6, same run: median time in yardsticks | "
+            f"{f['ratio']:.2f} vs {p['ratio']:.2f} | - | x{p['ratio'] / f['ratio']:.1f} |"
         )
+    key = "fast (one compiled pass) vs the numpy stages (numpy blocks, numpy operator)"
+    if key in agree:
+        a(
+            f"| fast (compiled) vs the same maths in numpy, max difference / full scale | "
+            f"{agree[key]:.1e} | <= 1e-12 | {'met' if agree[key] <= 1e-12 else '**missed**'} |"
+        )
+    if banks:
+        worst = max(max(r["err_zoh"], r["err_linear"]) for r in banks)
+        worst_zoh = max(r["err_zoh"] for r in banks)
+        modes = sorted({r["modes_zoh"] for r in banks} | {r["modes_linear"] for r in banks})
+        prev_modes = sorted({r["modes_prev_zoh"] for r in banks})
+        a(
+            f"| relaxor banks, lam 0.1..1.8, 1 and 10 kHz: modes (previous) | {modes[0]}-"
+            f"{modes[-1]} ({prev_modes[0]}-{prev_modes[-1]}) | as few as the accuracy needs | - |"
+        )
+        a(
+            f"| relaxor banks: max error on a unit step vs exact, zoh (zoh and linear) | "
+            f"{worst_zoh:.1e} ({worst:.1e}) | 1e-12 | "
+            f"{'met' if worst_zoh <= 1e-12 else '**missed**'} (zoh; the linear hold's exact "
+            "kernel is the limit) |"
+        )
+    if comp:
+        cold, warm = comp["cold (empty cache)"], comp["cached (second process)"]
+        kc = cold["first predict (kernels)"] + cold["sensitivities and exact kernels"]
+        kw = warm["first predict (kernels)"] + warm["sensitivities and exact kernels"]
+        a(
+            f"| numba kernels: cold compile / cached load (CPU s, fresh processes) | {kc:.1f} / "
+            f"{kw:.2f} | no compile after the first run | {'met' if kw < 2 else '**missed**'} |"
+        )
+        runs = comp["cli"]["runs"]
+        if runs:
+            a(
+                f"| `labrig --help`: wall / CPU, best of {len(runs)} | "
+                f"{min(r[0] for r in runs):.2f} s / {min(r[1] for r in runs):.2f} s | <= 0.5 s; "
+                f"numba not imported | {'met' if min(r[1] for r in runs) <= 0.5 else '**missed**'}"
+                f" (CPU); numba imported: {comp['cli']['numba imported']} |"
+            )
     for name in ("G_t", "G_d"):
         rr = [r for r in gl_rows if r["relaxor"] == name]
         if rr:
@@ -659,54 +740,34 @@ def summary(a, info: dict, predict_rows: list[dict], gl_rows: list[dict], step_r
                 f"GL x{g['time'] / e['time']:.2g} the time of exact, x{g['time'] / f['time']:.2g}"
                 " that of fast |"
             )
-            a(
-                f"| {name} unit step at 1 kHz: max error GL (t >= 10 ms) / exact / fast | "
-                f"{g['err_step_late']:.1e} / {e['err_step']:.1e} / {f['err_step']:.1e} | - | - |"
-            )
     rr = {r["what"]: r["ns"] for r in step_rows if r["rate"] == 10000.0}
     if rr:
-        steppers = (
-            rr["G_t stepper (zoh, as in the model)"] + rr["G_d stepper (linear, as in the model)"]
+        ns = rr["`ModelStream.process` on 1-sample blocks"]
+        a(
+            f"| 10 kHz loop, `ModelStream.process` per sample | {ns / 1e3:.0f} us | <= 100 us | "
+            + ("fits" if ns < 50e3 else "only just" if ns < 100e3 else "**does not fit**")
+            + " |"
         )
-        for label, ns in (
-            ("steppers + hysteresis `apply`",
-             steppers + rr["hysteresis `apply` on a 1-sample array"]),
-            ("steppers + scalar hysteresis step",
-             steppers + rr["scalar hysteresis step (sketch in this file, same output)"]),
-        ):  # fmt: skip
-            a(
-                f"| 10 kHz loop, G_t + G_d {label}, per sample | {ns / 1e3:.0f} us | <= 100 us | "
-                + ("fits" if ns < 50e3 else "only just" if ns < 100e3 else "**does not fit**")
-                + " |"
-            )
     a("")
 
 
-def render(
-    info: dict,
-    predict_rows: list[dict],
-    cold: dict,
-    split: dict,
-    split_n: int,
-    prof: list,
-    single: dict | None,
-    anatomy: list[dict] | None,
-    conv: dict,
-    gl_rows: list[dict],
-    step_rows: list[dict],
-    elapsed: float,
-) -> str:
+def render(info: dict, rows: list[dict], cold: dict, agree: dict, split: dict, split_n: int,
+           recursion: list[dict], banks: list[dict], bank_n: int, comp: dict, conv: dict,
+           gl_rows: list[dict], step_rows: list[dict], elapsed: float) -> str:  # fmt: skip
     L: list[str] = []
     a = L.append
     a("# labrig model benchmarks")
     a("")
-    a("Reproduce (from the repository root; about 3-4 minutes, rewrites this file):")
+    a("Reproduce (from the repository root; 6-10 minutes on a loaded 2-core machine, rewrites")
+    a("this file):")
     a("")
     a("    .venv/bin/python benchmarks/bench_model.py        # or: .venv/bin/python -m benchmarks")
     a("")
     a("Every number below is produced by `benchmarks/bench_model.py` in one run; the prose that")
-    a("states goals met or missed is generated from the same numbers. Wall-clock times with")
-    a("`time.perf_counter`, `gc.collect()` before each repeat, one BLAS thread (see below).")
+    a("states goals met or missed is generated from the same numbers. Times are CPU time of the")
+    a("process (`time.process_time`; `gc.collect()` before each repeat, one BLAS thread) unless")
+    a("said otherwise. Each predict timing is followed, in the same loop, by the **yardstick**:")
+    a("`numpy.sort` of 1e6 random floats; *yardsticks* = median time / median yardstick.")
     a("")
     a("## Machine")
     a("")
@@ -714,115 +775,121 @@ def render(
     a("|---|---|")
     labels = {"load": "load average at start (1/5/15 min)", "load_end": "load average at end",
               "commit": "labrig commit"}  # fmt: skip
-    for k in ("date", "cpu", "cores", "os", "python", "numpy", "scipy", "blas", "blas threads",
-              "commit", "load", "load_end"):  # fmt: skip
-        label = labels.get(k, k)
-        a(f"| {label} | {info[k]} |")
+    for k in ("date", "cpu", "cores", "os", "python", "numpy", "scipy", "numba", "blas",
+              "blas threads", "commit", "load", "load_end"):  # fmt: skip
+        a(f"| {labels.get(k, k)} | {info[k]} |")
     a(f"| total benchmark run time | {elapsed:.0f} s |")
     a("")
-    a("The machine is shared (other jobs ran during the measurement when the load average is")
-    a("above ~1 on these 2 cores): wall-clock medians move by 30-100% between runs under load.")
-    a("Goals are judged on the *best* wall time (the least disturbed repeat); the CPU-time")
-    a("column (`time.process_time`, one BLAS thread) is not inflated by waiting for a core,")
-    a("though it still pays for cache and memory-bandwidth contention.")
+    a("The machine is shared: with the load average above ~2 on these 2 cores, CPU times move")
+    a("by 20-50 % between repeats (a busy sibling hyperthread, cache and memory bandwidth);")
+    a("the yardstick moves with them, and the ratios to it are what to compare across runs.")
     a("")
-    summary(a, info, predict_rows, gl_rows, step_rows)
+    summary(a, rows, agree, banks, comp, gl_rows, step_rows)
     a("## 1. `DynamicHysteresisModel(PAPER_TABLE1).predict` throughput")
     a("")
     a("Input: 0-100 V unipolar sine whose frequency sweeps linearly 1 -> 40 Hz every 10 s,")
-    a("sampled at 1 kHz (so N = 1e7 is 2.8 h of signal). Caches warmed first (the one-off cost")
-    a(
-        f"of the first call at N = 1e4, which builds the modal banks, is {fmt_time(cold['fast'])}"
-        f" for fast and {fmt_time(cold['exact'])} for exact)."
-    )
+    a("sampled at 1 kHz (N = 1e7 is 2.8 h of signal). Kernels loaded and banks built first (the")
+    a(f"first call at N = 1e4 in this process: {fmt_time(cold['fast'])} CPU; compilation is in")
+    a("section 3). *fast* runs the compiled model in one pass (`compiled.model_run`: both banks")
+    a("and the operator in chunks of 4096 samples); the *ModelStream* row feeds the same")
+    a(f"computation in {CHUNK}-sample blocks; the *previous fast path* is what `fast` was before")
+    a("this change, timed in this run: the Gauss-Legendre banks (`benchmarks/previous_quadrature")
+    a(".py`, 242 + 285 modes) run by the numpy block realisation, then the numpy operator.")
     a("")
-    a("The *chunked* row is the same fast computation fed through the public `ModelStream` in")
-    a(f"{CHUNK}-sample blocks (identical output), to show what working-set size costs at large N.")
+    a("| method | N | repeats | CPU best | CPU median | samples/s (CPU best) | samples/s "
+      "(CPU median) | yardstick best / median | yardsticks |")  # fmt: skip
+    a("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for r in rows:
+        a(f"| {r['method']} | {r['n']:.0e} | {r['repeats']} | {fmt_time(r['cpu_best'])} | "
+          f"{fmt_time(r['cpu_median'])} | {fmt_rate(r['rate_cpu'])} | "
+          f"{fmt_rate(r['rate_cpu_median'])} | {fmt_time(r['yard_best'])} / "
+          f"{fmt_time(r['yard_median'])} | {r['ratio']:.2f} |")  # fmt: skip
     a("")
-    a(
-        "| method | N | repeats | best | median | samples/s (best) | samples/s (median) "
-        "| samples/s (CPU time, best) |"
-    )
-    a("|---|---:|---:|---:|---:|---:|---:|---:|")
-    for r in predict_rows:
+    by = {(r["method"], r["n"]): r for r in rows}
+    for method, goal, ns in (("fast", GOAL_FAST, (1_000_000, 10_000_000)),
+                             ("exact", GOAL_EXACT, (1_000_000,))):  # fmt: skip
+        for n in ns:
+            r = by.get((method, n))
+            if r:
+                a(
+                    f"- **{method}**, N = {n:.0e}, goal >= {goal:.0e} samples/s: "
+                    f"{goal_verdict(r['rate_cpu'], goal)} on the best run "
+                    f"({fmt_rate(r['rate_cpu'])}), "
+                    f"{goal_verdict(r['rate_cpu_median'], goal)} on the median "
+                    f"({fmt_rate(r['rate_cpu_median'])}); {r['ratio']:.2f} yardsticks."
+                )
+    a("")
+    a(f"Agreement on the same sweep (N = {split_n:.0e}; strain full scale = its maximum, V* "
+      "full scale 100 V):")  # fmt: skip
+    a("")
+    a("| comparison | max difference / full scale |")
+    a("|---|---:|")
+    for k, x in agree.items():
+        a(f"| {k} | {x:.1e} |")
+    a("")
+    a(f"Each stage alone at N = {split_n:.0e} (compiled unless said; CPU best of 5):")
+    a("")
+    a("| stage | CPU | samples/s |")
+    a("|---|---:|---:|")
+    for k, x in split.items():
+        a(f"| {k} | {fmt_time(x)} | {fmt_rate(split_n / x)} |")
+    a("")
+    a(f"The banks' recursion, N = {split_n:.0e}: compiled (one sample at a time over all modes,")
+    a("eight samples per sweep) against the numpy block realisation (blocks of 256 samples,")
+    a("BLAS matrix products), at the new and the previous bank sizes; CPU best of 3:")
+    a("")
+    a("| bank | modes | compiled | numpy blocks | blocks / compiled |")
+    a("|---|---:|---:|---:|---:|")
+    for r in recursion:
         a(
-            f"| {r['method']} | {r['n']:.0e} | {r['repeats']} | {fmt_time(r['best_s'])} | "
-            f"{fmt_time(r['median_s'])} | {fmt_rate(r['rate_best'])} | "
-            f"{fmt_rate(r['rate_median'])} | {fmt_rate(r['rate_cpu'])} |"
+            f"| {r['bank']} | {r['modes']} | {fmt_time(r['compiled'])} | {fmt_time(r['numpy'])} "
+            f"| {r['numpy'] / r['compiled']:.1f} |"
         )
     a("")
-    by = {(r["method"], r["n"]): r for r in predict_rows}
-    for method, goal in (("fast", GOAL_FAST), ("exact", GOAL_EXACT)):
-        r = by.get((method, 1_000_000))
-        if r is None:
-            continue
+    a("## 2. The relaxor banks: modes and accuracy")
+    a("")
+    a(f"`Relaxor(1e-3 s, lam)`, unit-step record of {bank_n:.0e} samples, max |fast - exact|")
+    a("(full scale 1). *New*: the pole-corrected trapezoidal rule of `labrig/model/diffusive.py`")
+    a("(node positions fixed for the rate; same count for every lam); *previous*: the")
+    a("Gauss-Legendre panels. The exact linear-hold kernel (differences of interval means) is")
+    a("itself good to a few 1e-12, which bounds the linear columns.")
+    a("")
+    a("| rate | lam | modes zoh / linear | previous | error zoh | previous | error linear | "
+      "previous |")  # fmt: skip
+    a("|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for r in banks:
         a(
-            f"- **{method}** goal >= {goal:.0e} samples/s at N = 1e6: {goal_status(r, goal)} "
-            f"(best wall {fmt_rate(r['rate_best'])}, median wall {fmt_rate(r['rate_median'])}, "
-            f"CPU time {fmt_rate(r['rate_cpu'])} samples/s)."
-        )
-    ex = [r for r in predict_rows if r["method"] == "exact"]
-    if len(ex) >= 2:
-        r0, r1 = ex[-2], ex[-1]
-        ratio = r1["best_s"] / r0["best_s"]
-        nlogn = (r1["n"] * np.log(r1["n"])) / (r0["n"] * np.log(r0["n"]))
-        a(
-            f"- **exact** scaling N = {r0['n']:.0e} -> {r1['n']:.0e}: time x{ratio:.1f}; "
-            f"O(N log N) predicts x{nlogn:.1f}, O(N^2) x{(r1['n'] / r0['n']) ** 2:.0f}."
+            f"| {r['rate']:g} Hz | {r['lam']} | {r['modes_zoh']} / {r['modes_linear']} | "
+            f"{r['modes_prev_zoh']} / {r['modes_prev_linear']} | {r['err_zoh']:.1e} | "
+            f"{r['err_prev_zoh']:.1e} | {r['err_linear']:.1e} | {r['err_prev_linear']:.1e} |"
         )
     a("")
-    a(f"Split of one prediction at N = {split_n:.0e} (best of 3):")
+    a("## 3. Compilation, the cache and start-up")
     a("")
-    a("| stage | time | share of fast total | samples/s |")
-    a("|---|---:|---:|---:|")
-    fast_total = sum(split[k] for k in ("G_t (zoh, fast)", "G_d (linear, fast)",
-                                        "hysteresis operator"))  # fmt: skip
-    for k, s in split.items():
-        share = f"{s / fast_total:.0%}" if "exact" not in k else "-"
-        a(f"| {k} | {fmt_time(s)} | {share} | {fmt_rate(split_n / s)} |")
-    a("")
-    if single is not None:
-        a(f"Same N = {split_n:.0e} prediction in a subprocess with the BLAS library's default")
-        a(f"thread count ({info['cores']} here; everything else in this file uses one thread):")
+    if comp:
+        a("Fresh Python processes with an empty `NUMBA_CACHE_DIR` (cold) and then the same one")
+        a("again (cached), CPU seconds of each step (`wall` is the whole script's wall time):")
         a("")
-        a(
-            "| method | BLAS threads | repeats | best | median | samples/s (best) "
-            "| samples/s (median) | CPU time / wall (best) |"
-        )
-        a("|---|---:|---:|---:|---:|---:|---:|---:|")
-        for method, r in single.items():
+        keys = list(comp["cold (empty cache)"])
+        a("| run | " + " | ".join(keys) + " |")
+        a("|---|" + "---:|" * len(keys))
+        for label in ("cold (empty cache)", "cached (second process)"):
+            a(f"| {label} | " + " | ".join(f"{comp[label][k]:.2f}" for k in keys) + " |")
+        a("")
+        a("Without `NUMBA_CACHE_DIR`, numba writes the cache to `labrig/model/__pycache__` when")
+        a("that folder is writable, else to its user-wide folder (`~/.cache/numba` on Linux);")
+        a("with no writable folder at all it refuses `cache=True` kernels, and labrig falls back")
+        a("to its numpy code with a warning naming `NUMBA_CACHE_DIR` (docs/model.md).")
+        a("")
+        runs = comp["cli"]["runs"]
+        if runs:
             a(
-                f"| {method} | default | {r['repeats']} | {fmt_time(r['best_s'])} | "
-                f"{fmt_time(r['median_s'])} | {fmt_rate(split_n / r['best_s'])} | "
-                f"{fmt_rate(split_n / r['median_s'])} | {r['cpu_s'] / r['best_s']:.2f} |"
+                f"`labrig --help`, {len(runs)} runs (wall s, CPU s): "
+                + ", ".join(f"{w:.2f}/{c:.2f}" for w, c in runs)
+                + f"; `import labrig.cli` imports numba: {comp['cli']['numba imported']}."
             )
-        a("")
-    if anatomy:
-        a(f"Where `run_bank` spends its time (N = {split_n:.0e}, block B = {anatomy[0]['block']};")
-        a("a replica of `modal._run_group` timed operation by operation, best of 3, checked to")
-        a("reproduce `run_bank`'s output; the matrix products are BLAS calls):")
-        a("")
-        keys = [k for k in anatomy[0] if k not in
-                ("relaxor", "hold", "group", "modes", "dtype", "block")]  # fmt: skip
-        a("| relaxor (hold) | mode group | " + " | ".join(keys) + " | total |")
-        a("|---|---|" + "---:|" * (len(keys) + 1))
-        for r in anatomy:
-            tot = sum(r.get(k, 0.0) for k in keys)
-            a(
-                f"| {r['relaxor']} ({r['hold']}) | {r['modes']} {r['dtype']} | "
-                + " | ".join(fmt_time(r[k]) if k in r else "-" for k in keys)
-                + f" | {fmt_time(tot)} |"
-            )
-        a("")
-    a(f"cProfile of one fast prediction at N = {split_n:.0e} (top functions by own time; the")
-    a("profiler's overhead inflates Python-level calls):")
-    a("")
-    a("| function | calls | own time | cumulative |")
-    a("|---|---:|---:|---:|")
-    for name, nc, tt, ct in prof:
-        a(f"| `{name}` | {nc} | {fmt_time(tt)} | {fmt_time(ct)} |")
-    a("")
-    a("## 2. Grunwald-Letnikov (FOMCON `lsim`) versus `exact` and `fast`")
+            a("")
+    a("## 4. Grunwald-Letnikov (FOMCON `lsim`) versus `exact` and `fast`")
     a("")
     a("The GL scheme, as FOMCON's `lsim` discretises `(1 + (tau D)^lam) y = v` (full memory,")
     a("implicit, first order): `y_n = (v_n - c sum_{j=1..n} w_j y_{n-j}) / (1 + c)`,")
@@ -885,11 +952,11 @@ def render(
             f"{fmt_time(big['fast']['time'])} (fast) at N = {big['n']:.0e}."
         )
     a("")
-    a("## 3. Per-sample cost (control loop)")
+    a("## 5. Per-sample cost (control loop)")
     a("")
     a("A Python loop calling `step(x)` (or the named call) once per sample (5 Hz 0-100 V sine,")
-    a("2e4 samples, best of 3). `modes` is the size of the modal bank, which grows slowly with")
-    a("the rate (the fastest mode resolved is 40/dt). The budget of a 10 kHz loop is 100 us per")
+    a("2e4 samples, best of 3). `modes` is the size of the modal bank (the same at every rate:")
+    a("the nodes span the same e-folds below 40/dt). The budget of a 10 kHz loop is 100 us per")
     a("sample for everything (two relaxors, hysteresis, control law, I/O); a 1 kHz loop has")
     a("1000 us. Verdicts use the CPU time (on an idle core it equals the wall time; under load")
     a("the wall time of these loops moved by up to 2x between runs).")
@@ -942,62 +1009,57 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="small sizes; print, do not write")
     ap.add_argument("--out", type=Path, default=Path(__file__).with_name("RESULTS.md"))
-    ap.add_argument("--predict-json", type=int, metavar="N", help=argparse.SUPPRESS)
-    ap.add_argument("--repeats", type=int, default=5, help=argparse.SUPPRESS)
     ap.add_argument("--blas-default", action="store_true", help="keep the default BLAS threads")
     args = ap.parse_args(argv)
-    if args.predict_json:
-        print(json.dumps(predict_json(args.predict_json, args.repeats)))
-        return 0
     t_start = time.perf_counter()
     info = machine_info()
     print(f"machine: {info['cpu']}, {info['cores']} cores, load {info['load']}", flush=True)
-
     if args.quick:
-        sizes, reps = [10_000, 100_000], {10_000: 3, 100_000: 2}
-        gl_sizes, split_n, conv_k, step_n = [2_000, 5_000], 100_000, [1, 2, 4], 2_000
-    else:
-        sizes = [10_000, 1_000_000, 10_000_000]
-        reps = {10_000: 20, 1_000_000: 11, 10_000_000: 3}
-        gl_sizes, split_n, conv_k, step_n = (
-            [10_000, 20_000, 50_000],
-            1_000_000,
-            [1, 2, 4, 8, 16],
+        sizes, reps = [10_000, 100_000], {10_000: 3, 100_000: 3}
+        gl_sizes, split_n, conv_k, step_n, bank_n = (
+            [2_000, 5_000],
+            100_000,
+            [1, 2, 4],
+            2_000,
             20_000,
         )
+    else:
+        sizes = [10_000, 1_000_000, 10_000_000]
+        reps = {10_000: 21, 1_000_000: 11, 10_000_000: 3}
+        gl_sizes, split_n, conv_k, step_n, bank_n = (
+            [10_000, 20_000, 50_000], 1_000_000, [1, 2, 4, 8, 16], 20_000, 100_000)  # fmt: skip
 
     print("1. predict throughput", flush=True)
-    predict_rows, cold = bench_predict(sizes, reps)
-    split = split_fast(split_n, 3)
-    prof = profile_fast(split_n)
-    single = predict_default_threads(split_n, 5 if not args.quick else 2)
-    anatomy = anatomy_fast(split_n)
-
-    print("2. GL convergence and comparison", flush=True)
+    rows, cold = bench_predict(sizes, reps)
+    agree = agreement(split_n)
+    split = split_fast(split_n, 5)
+    recursion = bench_recursion(split_n, 3)
+    print("2. banks", flush=True)
+    banks = bench_banks(bank_n, [1000.0, 10000.0])
+    print("3. compilation", flush=True)
+    comp = {} if args.quick else bench_compile()
+    print("4. GL convergence and comparison", flush=True)
     conv = {
         "G_t": ("10 ms <= t <= 1 s", gl_convergence(G_T, 1.0, 0.01, conv_k)),
         "G_d": ("10 ms <= t <= 0.2 s", gl_convergence(G_D, 0.2, 0.01, conv_k)),
     }
-    for name, (_w, rows) in conv.items():
-        for r in rows:
-            print(f"  {name} h={r['h_s']:.2e}: max err {r['err_late']:.2e}", flush=True)
     gl_rows = bench_gl(gl_sizes, 5)
-
-    print("3. per-sample cost", flush=True)
+    print("5. per-sample cost", flush=True)
     step_rows = bench_stepper(step_n, [1000.0, 10000.0])
 
     elapsed = time.perf_counter() - t_start
     info["load_end"] = " / ".join(f"{x:.2f}" for x in os.getloadavg())
-    text = render(info, predict_rows, cold, split, split_n, prof, single, anatomy, conv,
+    text = render(info, rows, cold, agree, split, split_n, recursion, banks, bank_n, comp, conv,
                   gl_rows, step_rows, elapsed)  # fmt: skip
     if args.quick:
         print(text)
     else:
-        # keep the hand-recorded sections of the other benchmarks (below the marker)
         old = args.out.read_text() if args.out.exists() else ""
         if OTHER_MARKER in old:
             text = text.rstrip("\n") + "\n\n" + old[old.index(OTHER_MARKER) :]
-        args.out.write_text(text)
+        tmp = args.out.with_suffix(".md.tmp")
+        tmp.write_text(text)
+        tmp.replace(args.out)
         print(f"wrote {args.out}")
     return 0
 

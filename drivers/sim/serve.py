@@ -26,7 +26,7 @@ from labrig.drivers.sim.modbus_server import ModbusConditionerServer
 
 from labrig.core.errors import InputFileError, InputIssue, LabrigError
 from labrig.core.interrupts import interrupt_once
-from labrig.rig.instruments import SimulatorInfo
+from labrig.model.warm import warm as warm_model
 from labrig.rig.limits import RigLimits
 from labrig.rig.rigspec import RigSpec, load_rig
 
@@ -79,6 +79,9 @@ class Simulators:
         self._clock_stop = threading.Event()
 
     def start(self) -> Simulators:
+        # the truth's compiled kernels loaded before any server answers (a first block must
+        # not hold the bench past a driver's answer timeout)
+        warm_model()
         kinds = {"gcs": self.gcs, "modbus_tcp": self.modbus_tcp, "modbus_rtu": self.modbus_rtu}
         try:
             for kind, srv in kinds.items():
@@ -187,6 +190,3 @@ def start_for_rig(spec: RigSpec, seed: int | None) -> Simulators:
     except SimulatorPortError as e:
         raise InputFileError([InputIssue(spec.source, None, e.field, e.detail)]) from None
 
-
-#: the virtual bench, registered under the ``labrig.simulators`` entry points (pyproject.toml)
-SIMULATOR = SimulatorInfo(name="bench", config=BenchConfig, start=start_for_rig)

@@ -39,12 +39,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from labrig.analysis.base_problem import BaseProblem, ParameterSpace, best_of
+from labrig.analysis.engine import Coordinates, Problem, base_problem, best_of, chord_refit
 from labrig.analysis.metrics import nrmse_pct, scores_json, second_half_nrmse_pct
+from labrig.analysis.parallel import map_tasks
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import (
     DEFAULT_BOUNDS,
-    LOG_PARAMS,
     PARAM_NAMES,
     OperatorFamily,
     scored_names,
@@ -133,11 +133,13 @@ def _uncertainty(
     J: NDArray,
     r: NDArray,
     sizes: Sequence[int],
-    space: ParameterSpace,
-    th: dict[str, float],
+    free: Sequence[str],
     nuisance_per_entry: int,
+    T: NDArray,
 ) -> tuple[dict[str, float | None], dict[str, dict[str, float]]]:
-    """1-sigma and correlations in native units from the z-space Jacobian (module doc).
+    """1-sigma and correlations in native units from the z-space Jacobian (module doc);
+    ``T = d(native parameters) / dz`` (:meth:`~labrig.analysis.engine.Coordinates
+    .native_jacobian`), so the native Jacobian is ``J T^-1``.
 
     The weighted residual's variance differs between entries (each is scaled by its span and
     length), so the covariance is the per-entry sandwich ``A^-1 (sum_e s_e^2 J_e^T J_e) A^-1``,
@@ -145,9 +147,8 @@ def _uncertainty(
     for the degrees of freedom the fit used (its share of the parameters, and its nuisance
     offset if any).
     """
-    chain = np.array([th[n] if n in LOG_PARAMS else 1.0 for n in space.free])
-    Jn = J / chain[None, :]
-    p, n_tot = len(space.free), r.size
+    Jn = J @ np.linalg.inv(T)
+    p, n_tot = len(free), r.size
     # pseudo-inverse of A through the SVD of a column-scaled Jacobian (well conditioned)
     scale = np.linalg.norm(Jn, axis=0)
     scale[scale == 0] = 1.0
@@ -165,11 +166,11 @@ def _uncertainty(
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     unc: dict[str, float | None] = dict.fromkeys(PARAM_NAMES)
     corr: dict[str, dict[str, float]] = {}
-    for i, a in enumerate(space.free):
+    for i, a in enumerate(free):
         unc[a] = float(sd[i])
         corr[a] = {
             b: float(cov[i, j] / (sd[i] * sd[j])) if sd[i] > 0 and sd[j] > 0 else 0.0
-            for j, b in enumerate(space.free)
+            for j, b in enumerate(free)
         }
     return unc, corr
 
@@ -197,10 +198,11 @@ def _fit_once(
     messages: list[str],
     warm: dict[str, float] | None = None,
     tight: bool = True,
-) -> tuple[dict[str, float], BaseProblem, ParameterSpace, optimize.OptimizeResult | None, int]:
-    """One identification on the ``scored`` records; returns the parameters, the campaign, the
-    space, the final least-squares result (global) and the evaluations used."""
-    camp = BaseProblem(scored_sequences(records, scored, warmup_s, chain), family, offset)
+    parent: Problem | None = None,
+) -> tuple[dict[str, float], Problem, optimize.OptimizeResult | None, int]:
+    """One identification on the ``scored`` records; returns the parameters, the problem, the
+    final least-squares result (global) and the evaluations used. ``parent``: the problem of a
+    fit on more entries whose simulations this one shares (a held-out fold)."""
     free = [n for n in PARAM_NAMES if not (family.shape == "linear" and n == "vc_V")]
     keep = set(scored)
     f_one = _one_frequency([r for r in records if r.name in keep])
@@ -214,12 +216,17 @@ def _fit_once(
                 f"every entry is periodic at {f_one:.3g} Hz: G_d is not identifiable and stays "
                 "fixed (lam_d = 1.2, tau_d = 1e-5 s, negligible)"
             )
+    if parent is not None:
+        camp = parent.subset(scored, free)
+    else:
+        camp = base_problem(
+            scored_sequences(records, scored, warmup_s, chain), family, offset, free, bounds
+        )
     nfev = 0
     if warm is not None and method == "global":
         starts = [warm]
     else:
         # the staged procedure and the generic starts look at each record on its own
-        keep = set(scored)
         srecs = [r for r in records if r.name in keep]
         singles = scored_sequences(srecs, [r.name for r in srecs], warmup_s, False)
         starts = []
@@ -241,17 +248,15 @@ def _fit_once(
                 raise
             messages.append(f"no staged start: {exc}")
         if method == "staged":
-            space = ParameterSpace(free, starts[0], bounds)
-            return starts[0], camp, space, None, nfev
+            return starts[0], camp, None, nfev
         if initial is not None:
             starts.append(initial.model_dump())
         if not starts:
             starts = generic_starts(srecs, singles, family, bounds)
-    space = ParameterSpace(free, starts[0], bounds)
-    th, res = best_of(camp, space, starts, short_nfev=8, polish_nfev=300, tight=tight)
+    th, res = best_of(camp, starts, short_nfev=8, polish_nfev=300, tight=tight)
     if res.status == 0:
         messages.append(f"global fit stopped at the evaluation limit ({res.nfev})")
-    return th, camp, space, res, nfev + camp.nfev
+    return th, camp, res, nfev + camp.nfev
 
 
 def fit_model(
@@ -268,6 +273,7 @@ def fit_model(
     scored: Sequence[str] | None = None,
     offset: bool = False,
     bounds: dict[str, tuple[float, float]] | None = None,
+    workers: int = 1,
 ) -> FitResult:
     """Identify :class:`ModelParams` from ``records`` (module docstring for the method).
 
@@ -282,6 +288,8 @@ def fit_model(
       drive the simulation as history.
     - ``offset``: fit one constant strain offset per entry (sensors with an arbitrary zero).
     - ``bounds``: native-unit bounds overriding :data:`DEFAULT_BOUNDS` per parameter.
+    - ``workers``: processes for the leave-one-entry-out folds (the result does not depend on
+      it).
     """
     if method not in ("global", "staged"):
         raise ValueError(f"method must be 'global' or 'staged', got {method!r}")
@@ -294,11 +302,14 @@ def fit_model(
             progress("fit", 0, 1)
         family = OperatorFamily(shape, memory)
         common = (chain, method, family, initial, warmup_s, offset, bnd)
-        th, camp, space, res, nfev = _fit_once(records, scored, *common, messages)
-        J = camp.jacobian(space, space.z(th), central=True)
-        r = camp.residuals(th)
-        sizes = [g.measured_ue.size for g in camp.segments]
-        unc, corr = _uncertainty(J, r, sizes, space, th, 1 if offset else 0)
+        th, camp, res, nfev = _fit_once(records, scored, *common, messages)
+        z = camp.coords.z(th, strict=True)
+        J = camp.jacobian(z, th)
+        r = camp.residual_at(th)
+        sizes = [g.measured_ue.size for segs in camp.segments for g in segs]
+        free = camp.coords.base_free
+        T = camp.coords.native_jacobian(z, th)
+        unc, corr = _uncertainty(J, r, sizes, free, 1 if offset else 0, T)
         per_entry, offsets, preds = _in_sample(camp, th, offset)
         elapsed = time.perf_counter() - t0
         if progress:
@@ -306,9 +317,9 @@ def fit_model(
         t1 = time.perf_counter()
         held_per = None
         if heldout and len(scored) >= 2:
-            held_per = _heldout(records, scored, common, th, progress)
+            held_per = _heldout(records, scored, common, th, progress, camp, workers)
         held_elapsed = time.perf_counter() - t1
-    optimality = _optimality(J, r, space, th, messages)  # notes parameters on a bound
+    optimality = _optimality(J, r, camp.coords, th, messages)  # notes parameters on a bound
     if res is None:  # the staged procedure ends with no converged least-squares run
         optimality = float("nan")
     return FitResult(
@@ -332,18 +343,18 @@ def fit_model(
         messages=messages,
         predictions=preds,
         jacobian=J,
-        free=space.free,
+        free=free,
     )
 
 
 def _in_sample(
-    camp: BaseProblem, th: dict[str, float], offset: bool
+    camp: Problem, th: dict[str, float], offset: bool
 ) -> tuple[dict[str, float], dict[str, float] | None, dict[str, NDArray]]:
     """NRMSE per scored entry, the fitted offsets (``offset``) and the predictions (offsets
     included)."""
-    preds = camp.predictions(th)
+    preds = camp.predictions(th, nuisance=False)
     per_entry, offsets = {}, {} if offset else None
-    for g in camp.segments:
+    for g in (g for segs in camp.segments for g in segs):
         p = preds[g.name]
         c = float(np.mean(g.measured_ue - p[g.i0 :])) if offset else 0.0
         if offsets is not None:
@@ -359,35 +370,63 @@ def _heldout(
     common: tuple,
     th: dict[str, float],
     progress: Progress | None,
+    parent: Problem,
+    workers: int = 1,
 ) -> dict[str, float]:
-    """Leave-one-entry-out NRMSE of each scored entry, refitted from ``th``."""
+    """Leave-one-entry-out NRMSE of each scored entry, refitted from ``th`` (each fold shares
+    the full fit's simulations and starts with its Jacobian: :func:`_chord_fold`), the folds
+    on ``workers`` processes."""
     chain, _method, family, _initial, warmup_s, offset, _bounds = common
     names = [r.name for r in records]
-    held_per = {}
-    for k, name in enumerate(scored):
-        if progress:
+
+    def fold(k: int) -> float:
+        name = scored[k]
+        if progress and workers <= 1:
             progress("heldout", k, len(scored))
         rest = [n for n in scored if n != name]
-        th_k, *_ = _fit_once(records, rest, *common, [], warm=th, tight=True)
+        th_k = _chord_fold(parent, records, rest, th, common)
+        if th_k is None:
+            th_k, *_ = _fit_once(records, rest, *common, [], warm=th, tight=True, parent=parent)
         rec = records[names.index(name)]
-        held_per[name] = _score_heldout(family.params(th_k), rec, records, chain, warmup_s, offset)
+        return _score_heldout(family.params(th_k), rec, records, chain, warmup_s, offset, parent)
+
+    scores = map_tasks(fold, len(scored), workers)
     if progress:
         progress("heldout", len(scored), len(scored))
-    return held_per
+    return dict(zip(scored, scores, strict=True))
+
+
+def _chord_fold(
+    parent: Problem,
+    records: Sequence[Record],
+    rest: list[str],
+    th: dict[str, float],
+    common: tuple,
+) -> dict[str, float] | None:
+    """A held-out fold refitted from the full fit ``th`` by the chord method
+    (:func:`~labrig.analysis.engine.chord_refit`), or ``None`` (then by least squares)."""
+    family = common[2]
+    free = [n for n in PARAM_NAMES if not (family.shape == "linear" and n == "vc_V")]
+    keep = set(rest)
+    if _one_frequency([r for r in records if r.name in keep]) is not None and common[1] == "global":
+        free = [n for n in free if n not in ("lam_d", "tau_d_s")]
+    sub = parent.subset(rest, free)
+    got = chord_refit(sub, sub.coords.z(th, strict=True), th)
+    return None if got is None else sub.coords.unpack(got[0], th)[0]
 
 
 def _optimality(
-    J: NDArray, r: NDArray, space: ParameterSpace, th: dict[str, float], messages: list[str]
+    J: NDArray, r: NDArray, coords: Coordinates, th: dict[str, float], messages: list[str]
 ) -> float:
     """First-order optimality (largest gradient component, those pushing against an active
     bound excluded); notes each parameter that ended on a bound."""
     g = J.T @ r
-    z = space.z(th)
-    on = space.at_bound(z)
-    mid = 0.5 * (space.lo + space.hi)
+    z = coords.z(th, strict=True)
+    on = coords.at_bound(z)
+    mid = 0.5 * (coords.lo + coords.hi)
     # a gradient pushing against an active bound is optimal (J^T r > 0 means "decrease z")
     g[on & (((z < mid) & (g > 0)) | ((z > mid) & (g < 0)))] = 0.0
-    for j, name in enumerate(space.free):
+    for j, name in enumerate(coords.base_free):
         if on[j]:
             messages.append(
                 f"{name} ended at a bound ({th[name]:.4g}): the data do not determine it "
@@ -403,13 +442,11 @@ def _score_heldout(
     chain: bool,
     warmup_s: float,
     offset: bool,
+    parent: Problem,
 ) -> float:
     if chain:
-        camp = BaseProblem(
-            scored_sequences(records, [rec.name], warmup_s, True),
-            OperatorFamily(params.shape, params.memory),
-        )
-        p = camp.predictions(params.model_dump())[rec.name]
+        # the whole run at the fold's parameters: its last simulation
+        p = parent.subset([rec.name]).predictions(params.model_dump(), nuisance=False)[rec.name]
     else:
         p = predict_record(params, rec)
     i0 = round(max(warmup_s, 0.0) * rec.rate_hz)

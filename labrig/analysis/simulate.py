@@ -64,6 +64,7 @@ __all__ = [
     "fill_rests",
     "pad_to_block",
     "relaxor_output",
+    "relaxor_sensitivities",
     "score_segments",
     "scored_names",
     "scored_sequences",
@@ -335,6 +336,17 @@ def relaxor_output(
     if rest_V == 0.0:
         return run_bank(bank, v_padded, block=BLOCK)[0]
     return rest_V + run_bank(bank, v_padded - rest_V, block=BLOCK)[0]
+
+
+def relaxor_sensitivities(
+    tau_s: float, lam: float, rate_hz: float, hold: str, v_padded: NDArray, rest_V: float = 0.0
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`relaxor_output` and its derivatives with respect to ``log tau`` and ``lam``: the
+    bank's modes do not move with ``tau`` and ``lam`` (only their output weights do), so the
+    derivatives are further outputs of the same pass
+    (:meth:`labrig.model.Relaxor.filter_sensitivities`)."""
+    with np.errstate(over="ignore"):
+        return Relaxor(tau_s, lam).filter_sensitivities(v_padded, rate_hz, hold, rest_V)
 
 
 @dataclass

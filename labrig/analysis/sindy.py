@@ -27,14 +27,19 @@ h(S, V) |dV|`` is a Duhem model); ``S`` and ``V`` make the response depend on th
 
 Fitting (pysindy)
 -----------------
-- ``dS/dt`` of the measured strain: ``pysindy.SmoothedFiniteDifference`` (a cubic
-  Savitzky-Golay smoother, then centred differences), on each scored segment, with a window of
-  1/8 of the entry's drive period (odd, 5 to 101 samples; 10 ms without a drive frequency); half
-  a window is dropped at each end. ``V'`` by centred differences of the sequence's voltage.
+- ``dS/dt`` of the measured strain: what ``pysindy.SmoothedFiniteDifference`` computes (a
+  cubic Savitzky-Golay smoother, then centred differences; :func:`smoothed_derivative`), on each
+  scored segment, with a window of 1/8 of the entry's drive period (odd, 5 to 101 samples; 10 ms
+  without a drive frequency); half a window is dropped at each end. ``V'`` by centred
+  differences of the sequence's voltage.
 - The regression ``dS/dt = Theta xi`` on the measured strain (equation error), every entry
   weighted alike (each segment's rows by ``1 / (RMS(dS/dt) sqrt(rows))``), columns and target
-  normalised to unit RMS, with ``pysindy.optimizers.STLSQ`` (ridge 1e-6, unbiased on its
-  support) for each threshold of :data:`THRESHOLDS`.
+  normalised to unit RMS, with the STLSQ of pysindy (``pysindy.optimizers.STLSQ``, ridge
+  1e-6, unbiased on its support; :func:`stlsq`) for each threshold of :data:`THRESHOLDS`.
+  The derivative is pysindy's ``SmoothedFiniteDifference`` written with the scipy function it
+  calls (the tests check it against pysindy's).
+- A held-out fold reuses the full fit's work (:class:`SindyCache`): each segment's regression
+  rows and their QR factor; the fold's system is the QR of its segments' stacked factors.
 - **Selection by free run**: each distinct support is simulated from rest over the training
   sequences and scored by labrig's mean NRMSE (with one offset per entry when ``offset``); the
   sparsest support within 5 % of the best score is kept (:data:`TOLERANCE`). A model whose free
@@ -49,8 +54,8 @@ Fitting (pysindy)
   micromanipulator data the line wins, on a simulated chained run the equation; either alone
   loses the other.)
 
-Free run (:func:`free_run`)
----------------------------
+Free run (:func:`free_run`, compiled; :func:`free_run_numpy` the reference)
+--------------------------------------------------------------------------
 Fixed step, one step per sample interval, ``V`` linear between samples (so ``V'`` is constant on
 each interval). The library is built so that the equation reads ``dS/dt = a(t) + b S +
 c S|S|`` with ``b`` a function of ``V'`` only (constant on the interval) and ``a`` affine in
@@ -73,13 +78,14 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from labrig.analysis.metrics import drive_frequency_hz, nrmse_pct
+from labrig.analysis.baseline_kernels import sindy_free_run
+from labrig.analysis.metrics import drive_frequency_hz
 from labrig.analysis.simulate import Segment, SimSequence
 
 __all__ = [
@@ -87,12 +93,16 @@ __all__ = [
     "THRESHOLDS",
     "TOLERANCE",
     "SindyBaseline",
+    "SindyCache",
     "SindyTerm",
     "equilibrium",
     "fit_sindy",
     "free_run",
+    "free_run_numpy",
     "library_matrix",
+    "smoothed_derivative",
     "smoothing_window",
+    "stlsq",
 ]
 
 Factor = Callable[[NDArray, NDArray], NDArray]
@@ -194,7 +204,20 @@ def free_run(
 ) -> NDArray[np.float64]:
     """The strain (ue) of ``dS/dt = Theta(S, V, V') xi`` driven by ``v`` (V) sampled at
     ``rate_hz``, from rest at ``rest_V`` (module docstring: exponential Rosenbrock-Euler, one
-    step per sample, ``V`` linear between samples); held at ``+- limit_ue`` once it leaves it."""
+    step per sample, ``V`` linear between samples); held at ``+- limit_ue`` once it leaves it.
+    Compiled (:func:`labrig.analysis.baseline_kernels.sindy_free_run`); without numba
+    :func:`free_run_numpy`."""
+    xi = np.asarray(xi, dtype=float)
+    vp = np.concatenate(([float(rest_V)], np.asarray(v, dtype=float)))
+    out = sindy_free_run(xi, vp, rate_hz, equilibrium(xi, vp[0]), limit_ue)
+    return free_run_numpy(xi, v, rate_hz, rest_V, limit_ue) if out is None else out
+
+
+def free_run_numpy(
+    xi: ArrayLike, v: ArrayLike, rate_hz: float, rest_V: float = 0.0, limit_ue: float = math.inf
+) -> NDArray[np.float64]:
+    """:func:`free_run` with the step factors prepared by NumPy and the recursion in Python
+    (the reference of the compiled form)."""
     xi = np.asarray(xi, dtype=float)
     vp = np.concatenate(([float(rest_V)], np.asarray(v, dtype=float)))
     n = vp.size - 1
@@ -284,6 +307,10 @@ class SindyBaseline:
 
 Items = Sequence[tuple[SimSequence, Sequence[Segment]]]
 
+#: STLSQ's ridge (pysindy's ``alpha``) and iteration limit (``max_iter``)
+RIDGE = 1e-6
+MAX_ITER = 20
+
 
 def smoothing_window(rate_hz: float, frequency_hz: float | None) -> int:
     """Savitzky-Golay window (samples, odd): 1/8 of the drive period, 5 to 101 samples; 10 ms
@@ -293,11 +320,38 @@ def smoothing_window(rate_hz: float, frequency_hz: float | None) -> int:
     return w if w % 2 else w + 1
 
 
-def _derivative(x: NDArray, rate_hz: float, window: int) -> NDArray:
-    from pysindy import SmoothedFiniteDifference
+def _stencil(offsets: NDArray, dt: float) -> NDArray:
+    """Weights of the first derivative at offset 0 from samples at ``offsets * dt`` (s): the
+    solution of ``sum_k w_k (offset_k dt)^p = [p == 1]``, ``p = 0, 1, 2``."""
+    m = (dt * offsets)[None, :] ** np.arange(offsets.size)[:, None]
+    b = np.zeros(offsets.size)
+    b[1] = 1.0
+    return np.linalg.solve(m, b)
 
-    sfd = SmoothedFiniteDifference(smoother_kws={"window_length": window, "polyorder": 3})
-    return np.asarray(sfd(x, t=1.0 / rate_hz), dtype=float).ravel()
+
+def smoothed_derivative(x: ArrayLike, rate_hz: float, window: int) -> NDArray[np.float64]:
+    """``dx/dt`` (per s) of samples at ``rate_hz``: a cubic Savitzky-Golay smoother of
+    ``window`` samples (``scipy.signal.savgol_filter``), then second-order finite differences,
+    centred inside and one-sided (3 points) at the two ends: what
+    ``pysindy.SmoothedFiniteDifference(smoother_kws={"window_length": window, "polyorder": 3})``
+    computes (the tests check it against pysindy), without importing pysindy and scikit-learn
+    (about 1 s of CPU at start-up)."""
+    from scipy.signal import savgol_filter
+
+    xs = savgol_filter(np.asarray(x, dtype=float), window_length=window, polyorder=3, axis=0)
+    dt = 1.0 / float(rate_hz)
+    n = xs.size
+    out = np.full(n, np.nan)
+    c = _stencil(np.array([-1.0, 0.0, 1.0]), dt)
+    interior = np.zeros(n - 2)
+    for i in range(3):
+        if abs(c[i]) > 0:
+            interior = interior + xs[i : n - 2 + i] * c[i]
+    out[1:-1] = interior
+    fwd, bwd = _stencil(np.array([0.0, 1.0, 2.0]), dt), _stencil(np.array([0.0, -1.0, -2.0]), dt)
+    out[0] = xs[:3] @ fwd
+    out[-1] = xs[::-1][:3] @ bwd
+    return out
 
 
 @dataclass
@@ -317,46 +371,107 @@ class _Block:
 
 
 @dataclass
-class _Rows:
-    """The regression's rows: library, target ``dS/dt``, row weights."""
+class SindyCache:
+    """Work shared by the fits of one :func:`~labrig.analysis.baselines.fit_baseline` call (the
+    full fit and its leave-one-entry-out folds, on the same sequences): each segment's
+    regression rows (:class:`_Block`, ``None`` when too short) by entry name, and the QR
+    factors of its weighted rows by ``(name, offset)``."""
 
-    theta: NDArray
-    target: NDArray
-    weight: NDArray
+    blocks: dict[str, _Block | None] = field(default_factory=dict)
+    factors: dict[tuple[str, float], tuple[NDArray, NDArray, NDArray, float, int]] = field(
+        default_factory=dict
+    )
 
 
-def _blocks(items: Items) -> list[_Block]:
+def _blocks(items: Items, cache: SindyCache) -> list[_Block]:
     """Every scored segment long enough to differentiate, as regression rows."""
-    out = []
     for seq, segs in items:
+        todo = [g for g in segs if g.name not in cache.blocks]
+        if not todo:
+            continue
         d_all = np.gradient(seq.voltage_V) * seq.rate_hz if seq.n > 1 else np.zeros(seq.n)
         recs = {r.name: r for r in seq.records}
-        for g in segs:
+        for g in todo:
+            cache.blocks[g.name] = None
             w = smoothing_window(seq.rate_hz, drive_frequency_hz(recs[g.name]))
             m = g.measured_ue
             if m.size < 3 * w:
                 continue
             sl = slice(w // 2, m.size - w // 2)
-            tg = _derivative(m, seq.rate_hz, w)[sl]
+            tg = smoothed_derivative(m, seq.rate_hz, w)[sl]
             rms = float(np.sqrt(np.mean(tg * tg)))
             if rms > 0:
                 v, d = seq.voltage_V[g.lo : g.hi][sl], d_all[g.lo : g.hi][sl]
-                out.append(_Block(g.name, m[sl], v, d, tg, 1.0 / (rms * np.sqrt(tg.size))))
+                cache.blocks[g.name] = _Block(
+                    g.name, m[sl], v, d, tg, 1.0 / (rms * np.sqrt(tg.size))
+                )
+    out = [b for _, segs in items for g in segs if (b := cache.blocks[g.name]) is not None]
     if not out:
         raise ValueError("no segment long enough to differentiate for the SINDy baseline")
     return out
 
 
-def _rows(blocks: Sequence[_Block], offsets: dict[str, float]) -> _Rows:
-    return _Rows(
-        np.vstack([b.theta(offsets.get(b.name, 0.0)) for b in blocks]),
-        np.concatenate([b.target for b in blocks]),
-        np.concatenate([np.full(b.target.size, b.weight) for b in blocks]),
-    )
+def _factor(b: _Block, offset: float, cache: SindyCache) -> tuple:
+    """``(R, Q^T y, column sums of squares, sum of y^2, rows)`` of the block's weighted rows
+    ``X = Theta w`` (``Q R`` their reduced QR) and weighted target ``y``."""
+    key = (b.name, float(offset))
+    if key not in cache.factors:
+        X = b.theta(offset) * b.weight
+        y = b.target * b.weight
+        q, r = np.linalg.qr(X, mode="reduced")
+        cache.factors[key] = (r, q.T @ y, np.sum(X * X, axis=0), float(y @ y), y.size)
+    return cache.factors[key]
+
+
+def _system(
+    blocks: Sequence[_Block], offsets: dict[str, float], cache: SindyCache
+) -> tuple[NDArray, NDArray, NDArray, float]:
+    """The regression as STLSQ sees it: ``(r, qty, cs, ys)`` with ``Q r`` the reduced QR of
+    the stacked weighted rows with columns divided by their RMS ``cs`` and ``qty = Q^T y / ys``
+    (``ys`` the target's RMS): ``|X b - y|^2 = |r b - qty|^2 + const``. Made from the blocks'
+    own factors (a QR of their stacked ``R``, equal to the QR of every row up to the signs of
+    its rows, which no least-squares solution depends on)."""
+    fs = [_factor(b, offsets.get(b.name, 0.0), cache) for b in blocks]
+    rows = sum(f[4] for f in fs)
+    cs = np.sqrt(sum(f[2] for f in fs) / rows)
+    cs[cs == 0] = 1.0
+    ys = float(np.sqrt(sum(f[3] for f in fs) / rows)) or 1.0
+    q, r = np.linalg.qr(np.vstack([f[0] for f in fs]), mode="reduced")
+    return r / cs, (q.T @ np.concatenate([f[1] for f in fs])) / ys, cs, ys
+
+
+def stlsq(
+    x: ArrayLike, y: ArrayLike, thresholds: Sequence[float]
+) -> list[tuple[float, NDArray[np.float64]]]:
+    """Sequentially thresholded least squares of ``y`` on the columns of ``x`` for each
+    threshold: pysindy's ``STLSQ(threshold, alpha=RIDGE, unbias=True, max_iter=MAX_ITER)``
+    (imported here, on first use: pysindy and scikit-learn cost about a second to import),
+    with scikit-learn's input checks off (the rows are finite and the parameters fixed here;
+    those checks are most of the cost of a call on this 10-column problem).
+
+    Returns ``(threshold, coefficients)`` for every threshold."""
+    import sklearn
+    from pysindy.optimizers import STLSQ
+
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    out = []
+    with sklearn.config_context(assume_finite=True, skip_parameter_validation=True):
+        for lam in thresholds:
+            opt = STLSQ(threshold=float(lam), alpha=RIDGE, max_iter=MAX_ITER, unbias=True)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                opt.fit(x, y)
+            out.append((float(lam), np.asarray(opt.coef_, dtype=float).ravel()))
+    return out
 
 
 def _equation_offsets(
-    blocks: Sequence[_Block], offsets: dict[str, float], span: float, rounds: int = 30
+    blocks: Sequence[_Block],
+    offsets: dict[str, float],
+    span: float,
+    cache: SindyCache,
+    rounds: int = 30,
 ) -> dict[str, float]:
     """Each entry's strain zero from the equation itself: alternately the fullest model on the
     current zeros (STLSQ at the smallest threshold) and, per entry, the Gauss-Newton step of
@@ -364,7 +479,7 @@ def _equation_offsets(
     all shifted so that the fullest model rests at zero strain at 0 V."""
     out = dict(offsets)
     for _ in range(rounds):
-        xi = _regress(_rows(blocks, out), THRESHOLDS[:1])[0][1]
+        xi = _regress(blocks, out, THRESHOLDS[:1], cache)[0][1]
         _, b_terms, c = _split(xi)
         moved = 0.0
         for b in blocks:
@@ -380,29 +495,22 @@ def _equation_offsets(
             break
     # a common shift of every zero is absorbed by the constant and rate terms: fix it so the
     # strain is zero at rest at 0 V (the fullest model's equilibrium)
-    s0 = equilibrium(_regress(_rows(blocks, out), THRESHOLDS[:1])[0][1], 0.0)
+    s0 = equilibrium(_regress(blocks, out, THRESHOLDS[:1], cache)[0][1], 0.0)
     return {k: o + s0 for k, o in out.items()}
 
 
-def _regress(rows: _Rows, thresholds: Sequence[float]) -> list[tuple[float, NDArray]]:
-    """(threshold, xi) for each threshold giving a new support (pysindy's STLSQ)."""
-    from pysindy.optimizers import STLSQ
-
-    X = rows.theta * rows.weight[:, None]
-    y = rows.target * rows.weight
-    cs = np.sqrt(np.mean(X * X, axis=0))
-    cs[cs == 0] = 1.0
-    ys = float(np.sqrt(np.mean(y * y))) or 1.0
-    # the same minimiser on the small triangular system: |X b - y|^2 = |R b - Q^T y|^2 + const
-    q, r = np.linalg.qr(X / cs, mode="reduced")
-    qty = q.T @ (y / ys)
+def _regress(
+    blocks: Sequence[_Block],
+    offsets: dict[str, float],
+    thresholds: Sequence[float],
+    cache: SindyCache,
+) -> list[tuple[float, NDArray]]:
+    """(threshold, xi) for each threshold giving a new support (:func:`stlsq` on the
+    normalised system of :func:`_system`; ``xi`` in the library's units)."""
+    r, qty, cs, ys = _system(blocks, offsets, cache)
     out, seen = [], set()
-    for lam in thresholds:
-        opt = STLSQ(threshold=lam, alpha=1e-6, unbias=True, max_iter=20)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            opt.fit(r, qty)
-        xi = np.asarray(opt.coef_, dtype=float).ravel() * ys / cs
+    for lam, coef in stlsq(r, qty, thresholds):
+        xi = coef * ys / cs
         key = tuple(np.flatnonzero(xi))
         if key not in seen:
             seen.add(key)
@@ -410,16 +518,35 @@ def _regress(rows: _Rows, thresholds: Sequence[float]) -> list[tuple[float, NDAr
     return out
 
 
-def _score(model: SindyBaseline, items: Items, offset: bool) -> tuple[float, dict[str, float]]:
-    """Mean training NRMSE (%) of the free run and each entry's offset (0 without ``offset``)."""
-    vals, offs = [], {}
-    for seq, segs in items:
-        p = model.predict(seq.voltage_V, seq.rest_V, seq.rate_hz)
-        for g in segs:
-            pg = p[g.lo : g.hi]
-            offs[g.name] = float(np.mean(g.measured_ue - pg)) if offset else 0.0
-            vals.append(nrmse_pct(g.measured_ue, pg + offs[g.name]))
-    return float(np.mean(vals)), offs
+class _Scorer:
+    """The training free run's score of a candidate on ``items``: each sequence's scored
+    samples gathered once, then per segment its offset (with ``offset``) and NRMSE."""
+
+    def __init__(self, items: Items, offset: bool) -> None:
+        self.offset = offset
+        self.parts = []
+        for seq, segs in items:
+            idx = np.concatenate([np.arange(g.lo, g.hi) for g in segs])
+            n = np.array([g.measured_ue.size for g in segs])
+            starts = np.concatenate(([0], np.cumsum(n)[:-1]))
+            meas = np.concatenate([g.measured_ue for g in segs])
+            span = np.array([float(np.max(g.measured_ue) - np.min(g.measured_ue)) for g in segs])
+            self.parts.append((seq, [g.name for g in segs], idx, n, starts, meas, span))
+
+    def __call__(self, model: SindyBaseline) -> tuple[float, dict[str, float]]:
+        """Mean training NRMSE (%) of the free run (:func:`~labrig.analysis.metrics.nrmse_pct`
+        per segment) and each entry's offset (0 without ``offset``)."""
+        vals, offs = [], {}
+        for seq, names, idx, n, starts, meas, span in self.parts:
+            res = meas - model.predict(seq.voltage_V, seq.rest_V, seq.rate_hz)[idx]
+            if self.offset:
+                off = np.add.reduceat(res, starts) / n
+                res = res - np.repeat(off, n)
+            else:
+                off = np.zeros(n.size)
+            vals.append(100.0 * np.sqrt(np.add.reduceat(res * res, starts) / n) / span)
+            offs.update(zip(names, off.tolist(), strict=True))
+        return float(np.mean(np.concatenate(vals))), offs
 
 
 def _line_offsets(items: Items) -> dict[str, float]:
@@ -446,36 +573,41 @@ def _select(
     offset: bool,
     rate: float,
     limit: float,
+    cache: SindyCache,
 ) -> tuple[float, SindyBaseline, dict[str, float]]:
     """Fit the threshold path and keep the sparsest model within :data:`TOLERANCE` of the best
     training free run: its score (mean NRMSE, %), the model and its free run's offsets."""
     cands = []
-    for lam, xi in _regress(_rows(blocks, offsets), THRESHOLDS):
+    score_of = _Scorer(items, offset)
+    for lam, xi in _regress(blocks, offsets, THRESHOLDS, cache):
         m = SindyBaseline(tuple(float(x) for x in xi), rate, lam, limit)
-        score, offs = _score(m, items, offset)
+        score, offs = score_of(m)
         cands.append((score if np.isfinite(score) else math.inf, m, offs))
     best = min(c[0] for c in cands)
     ok = [c for c in cands if c[0] <= (1.0 + TOLERANCE) * best]
     return min(ok, key=lambda c: (len(c[1].support), c[0]))
 
 
-def fit_sindy(items: Items, offset: bool = False) -> SindyBaseline:
+def fit_sindy(items: Items, offset: bool = False, cache: SindyCache | None = None) -> SindyBaseline:
     """The SINDy baseline fitted on the scored segments of ``items`` (module docstring).
+    ``cache``: work shared with other fits on the same sequences (the folds of a held-out
+    score); a fresh one by default.
 
     Raises ``ValueError`` when the sequences differ in sample rate or no segment is long enough
     to differentiate."""
+    cache = SindyCache() if cache is None else cache
     items = [(seq, list(segs)) for seq, segs in items if segs]
     rates = {seq.rate_hz for seq, _ in items}
     if len(rates) != 1:
         raise ValueError(f"the SINDy baseline needs one sample rate, got {sorted(rates)} Hz")
     rate = rates.pop()
     span = max(float(np.ptp(g.measured_ue)) for _, segs in items for g in segs)
-    blocks = _blocks(items)
+    blocks = _blocks(items, cache)
     if not offset:
-        return _select(items, blocks, {}, False, rate, DIVERGED * span)[1]
+        return _select(items, blocks, {}, False, rate, DIVERGED * span, cache)[1]
     line = _line_offsets(items)
     fits = []
-    for start in (line, _equation_offsets(blocks, line, span)):
-        _, _, offs = _select(items, blocks, start, True, rate, DIVERGED * span)
-        fits.append(_select(items, blocks, offs, True, rate, DIVERGED * span))
+    for start in (line, _equation_offsets(blocks, line, span, cache)):
+        _, _, offs = _select(items, blocks, start, True, rate, DIVERGED * span, cache)
+        fits.append(_select(items, blocks, offs, True, rate, DIVERGED * span, cache))
     return min(fits, key=lambda f: f[0])[1]

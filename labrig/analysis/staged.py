@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize
 
-from labrig.analysis.base_problem import BaseProblem, ParameterSpace, best_of
+from labrig.analysis.engine import base_problem, best_of
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic, last_period
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import OperatorFamily, Scored, build_sequences, score_segments
@@ -195,12 +195,16 @@ def staged_fit(
     # 2. transient: lam_t, tau_t and the refined static part from the whole low records; in a
     # run each entry's residual is taken about its mean (module docstring)
     off2 = offset or run is not None
-    prob2 = BaseProblem(
-        _stage_problem_input(records, singles, low, run, warmup_s), family, off2, False
+    prob2 = base_problem(
+        _stage_problem_input(records, singles, low, run, warmup_s),
+        family,
+        off2,
+        [*free_static, "lam_t", "tau_t_s"],
+        bounds,
+        with_gd=False,
     )
     starts = _transient_starts(static, f_low, bounds)
-    space2 = ParameterSpace([*free_static, "lam_t", "tau_t_s"], starts[0], bounds)
-    th2, _ = best_of(prob2, space2, starts, short_nfev=0, polish_nfev=40, tight=False)
+    th2, _ = best_of(prob2, starts, short_nfev=0, polish_nfev=40, tight=False)
 
     # 3. harmonic: lam_d, tau_d from the higher-frequency entries
     nfev = prob2.nfev
@@ -212,14 +216,19 @@ def staged_fit(
         return dict(th2, **NEGLIGIBLE_GD), nfev
     f_high = max(kinds[i].f_hz for i in high)
     w_high = 2 * np.pi * f_high
-    prob3 = BaseProblem(_stage_problem_input(records, singles, high, run, warmup_s), family, offset)
+    prob3 = base_problem(
+        _stage_problem_input(records, singles, high, run, warmup_s),
+        family,
+        offset,
+        ["lam_d", "tau_d_s"],
+        bounds,
+    )
     starts = []
     for lam in (0.7, 1.0, 1.35):
         for ratio in (0.1, 0.3, 0.6):
             tau = float(np.clip(ratio ** (1 / lam) / w_high, *bounds["tau_d_s"]))
             starts.append(dict(th2, lam_d=lam, tau_d_s=tau))
-    space3 = ParameterSpace(["lam_d", "tau_d_s"], starts[0], bounds)
-    th, _ = best_of(prob3, space3, starts, short_nfev=0, polish_nfev=40, tight=False)
+    th, _ = best_of(prob3, starts, short_nfev=0, polish_nfev=40, tight=False)
     return th, nfev + prob3.nfev
 
 

@@ -70,6 +70,7 @@ class Memory(StrEnum):
 
     RETURN_POINT = "return_point"
     LAST_REVERSAL = "last_reversal"
+    RETURN_POINT_OPEN = "return_point_open"
 
 
 class FitEffect(StrEnum):

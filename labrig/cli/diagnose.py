@@ -31,6 +31,7 @@ __all__ = [
     "ALSO_OPTION",
     "MAINS_HZ_OPTION",
     "MAX_EFFECTS_OPTION",
+    "WORKERS_OPTION",
     "diagnose",
     "diagnose_command",
 ]
@@ -46,6 +47,15 @@ ALSO_OPTION = typer.Option(
 )
 MAX_EFFECTS_OPTION = typer.Option(
     2, "--max-effects", min=1, max=4, help="Add at most this many effects (1-4)."
+)
+WORKERS_OPTION = typer.Option(
+    None,
+    "--workers",
+    min=1,
+    max=256,
+    metavar="COUNT",
+    help="Processes for the held-out folds and the candidates of a round (default: the "
+    "processors this process may use); the result does not depend on it.",
 )
 MAINS_HZ_OPTION = typer.Option(
     None,
@@ -72,10 +82,13 @@ def diagnose(
     also: list[StructuralEffect] = ALSO_OPTION,
     max_effects: int = MAX_EFFECTS_OPTION,
     mains_hz: float | None = MAINS_HZ_OPTION,
+    workers: int | None = WORKERS_OPTION,
 ) -> None:
     """Find what the model misses: residual evidence, candidate effects, held-out before/after."""
     names = tuple(dict.fromkeys(a.value for a in also))
-    code = diagnose_command(run_file, params, out, as_json, names, max_effects, overwrite, mains_hz)
+    code = diagnose_command(
+        run_file, params, out, as_json, names, max_effects, overwrite, mains_hz, workers
+    )
     raise typer.Exit(code)
 
 
@@ -88,6 +101,7 @@ def diagnose_command(
     max_effects: int = 2,
     overwrite: bool = False,
     mains_hz: float | None = None,
+    workers: int | None = None,
 ) -> int:
     """Run the diagnosis of ``run_file`` and print / write it; returns the exit code.
 
@@ -95,6 +109,7 @@ def diagnose_command(
     many effects are added; ``mains_hz``: the mains frequency (Hz, default: detected). The
     files in ``out_dir`` are checked before the work and written beside their targets, then
     renamed into place (:func:`~labrig.commands.diagnose.diagnose_run_file`)."""
+    from labrig.analysis.parallel import available_workers
     from labrig.commands.diagnose import diagnose_run_file
 
     err = Console(stderr=True)
@@ -108,6 +123,7 @@ def diagnose_command(
         overwrite=overwrite,
         say=err.print,
         progress=lambda msg: err.print(f"[dim]{msg}[/dim]"),
+        workers=available_workers() if workers is None else workers,
     )
     hint = result.hint()
     if hint:

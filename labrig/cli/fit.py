@@ -75,7 +75,9 @@ MEMORY_OPTION = typer.Option(
     parser=choice(Memory, "a memory rule"),
     metavar="RULE",
     help="The hysteresis operator's memory: return_point (minor loops close and are "
-    "forgotten) or last_reversal (the paper's single memory); docs/analysis.md.",
+    "forgotten), return_point_open (the same, but no loop closes onto the rest point at 0 V: "
+    "bipolar loops stay open there) or last_reversal (the paper's single memory); "
+    "docs/analysis.md.",
 )
 
 

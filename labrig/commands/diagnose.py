@@ -99,6 +99,7 @@ def diagnose_run_file(
     overwrite: bool = False,
     say: Say = _quiet,
     progress: Say | None = None,
+    workers: int = 1,
 ) -> RunDiagnosis:
     """Diagnose the run file ``path`` (module docstring).
 
@@ -107,7 +108,8 @@ def diagnose_run_file(
     ``max_effects``: at most this many effects added; ``mains_hz``: the mains frequency (Hz;
     default: the line the strain shows at 50 or 60 Hz); ``out``: a folder for
     :data:`OUTPUT_NAMES` (replaced only with ``overwrite``); ``say``: notes (a file of one
-    entry cut into parts, parameters not used); ``progress``: the diagnosis' steps."""
+    entry cut into parts, parameters not used); ``progress``: the diagnosis' steps;
+    ``workers``: processes for its folds and candidates (the result does not depend on it)."""
     path = Path(path)
     also = tuple(dict.fromkeys(also))
 
@@ -122,6 +124,7 @@ def diagnose_run_file(
             mains_hz=mains_hz,
             always=also,
             progress=progress,
+            workers=workers,
         )
         return RunDiagnosis(path, setup.records, also, d)
 

@@ -22,11 +22,19 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal
 
 from labrig.model import DynamicHysteresisModel, ModelParams
 from labrig.model.bouc_wen import bouc_wen_exact, max_slope
 from labrig.model.effects import kelvin_voigt_filter, library
+
+
+def _scipy_signal():
+    """``scipy.signal``, imported on first use: it costs about a second of CPU to import (it
+    loads scipy.stats), which the fast paths never need."""
+    from scipy import signal
+
+    return signal
+
 
 __all__ = [
     "INVERTIBLE_EFFECTS",
@@ -90,7 +98,7 @@ class ControlModel:
         if self.remanence is not None:
             y = y - bouc_wen_exact(np.concatenate(([0.0], x)), *self.remanence)[1:]
         ba = self.creep_filter(rate_hz)
-        return y if ba is None else signal.lfilter(ba[0], ba[1], y)
+        return y if ba is None else _scipy_signal().lfilter(ba[0], ba[1], y)
 
     def creep_filter(self, rate_hz: float) -> tuple[Array, Array] | None:
         """``(b, a)`` of the creep filter at ``rate_hz`` (None without creep)."""

@@ -51,7 +51,6 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal
 
 from labrig.control.control_model import ControlModel, as_control_model
 from labrig.control.drive_check import check_drive
@@ -60,6 +59,15 @@ from labrig.control.static_inverse import static_stepper
 from labrig.model import ModelParams
 from labrig.model.relaxor import sampled_kernel, series_reciprocal
 from labrig.rig.limits import RigLimits
+
+
+def _scipy_signal():
+    """``scipy.signal``, imported on first use: it costs about a second of CPU to import (it
+    loads scipy.stats), which the fast paths never need."""
+    from scipy import signal
+
+    return signal
+
 
 __all__ = [
     "CONTROLS",
@@ -135,16 +143,16 @@ def _deconvolve(h: Array, y: Array, zeros: list[complex]) -> Array:
     for zeta in zeros:
         # kernel: m[k-1] = (m[k] - h[k]) / zeta, backwards from m[L-1] = 0
         rev = m[::-1]
-        mm = signal.lfilter([0.0, -1.0 / zeta], [1.0, -1.0 / zeta], rev)
+        mm = _scipy_signal().lfilter([0.0, -1.0 / zeta], [1.0, -1.0 / zeta], rev)
         m = mm[::-1]
         # signal: w[k-1] = (w[k] - y[k]) / zeta, from w[n-1] = y[-1] / (1 - zeta) (the bounded
         # solution for y continued at its last value); reversed: out[r] = (out[r-1] - rev[r-1])
         # / zeta, and with b[0] = 0 lfilter's out[0] is its initial state
         last = w[-1] / (1.0 - zeta)
         zi = np.array([last], dtype=complex)
-        w = signal.lfilter([0.0, -1.0 / zeta], [1.0, -1.0 / zeta], w[::-1], zi=zi)[0][::-1]
+        w = _scipy_signal().lfilter([0.0, -1.0 / zeta], [1.0, -1.0 / zeta], w[::-1], zi=zi)[0][::-1]
     r = series_reciprocal(m[:n]) if not zeros else _series_reciprocal_complex(m[:n])
-    v = signal.fftconvolve(w, r)[:n]
+    v = _scipy_signal().fftconvolve(w, r)[:n]
     return v.real.copy()
 
 
@@ -211,7 +219,7 @@ def compensated_drive(
             _tail(outside_zeros(tau, lam, rate_hz, hold))
             for tau, lam, hold in ((p.tau_d_s, p.lam_d, "linear"), (p.tau_t_s, p.lam_t, "zoh"))
         )
-        s = signal.lfilter(ba[1], ba[0], np.append(s, np.full(ahead, s[-1])))
+        s = _scipy_signal().lfilter(ba[1], ba[0], np.append(s, np.full(ahead, s[-1])))
     if cm.remanence is None:
         u = p.operator().invert(s)
     else:

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from labrig.model.hysteresis import HysteresisState, QuasiStaticHysteresis
-from labrig.model.modal import run_bank
+from labrig.model.modal import DiscreteBank, run_bank, scaled_form
 from labrig.model.params import ModelParams
 from labrig.model.relaxor import Relaxor
 
@@ -65,24 +65,51 @@ class DynamicHysteresisModel:
         """Strain (ue) for the voltage record ``v`` (V) sampled at ``rate_hz``, the actuator held
         at ``rest_V`` before it (brought there from rest at 0 V, its relaxors settled:
         :meth:`~labrig.model.QuasiStaticHysteresis.held_state`)."""
-        x = self.equivalent_static_voltage(v, rate_hz, method, hold, rest_V)
-        return self.operator.apply(x, self.operator.held_state(rest_V))
+        op = self.operator
+        kern = op._kernels("auto") if method == "fast" else None
+        if kern is None:  # the exact method, a user shape, or no numba
+            x = self.equivalent_static_voltage(v, rate_hz, method, hold, rest_V)
+            return op.apply(x, op.held_state(rest_V))
+        v = np.ascontiguousarray(v, dtype=np.float64)
+        if v.ndim != 1:
+            raise ValueError("v must be a 1-D record")
+        bt, bd = self.g_t.bank(rate_hz, hold), self.g_d.bank(rate_hz, "linear")
+        if not np.all(np.isfinite(v)):
+            raise ValueError("the voltage record must be finite (found NaN or infinity)")
+        if v.size == 0:
+            return np.zeros(0)
+        held = op.held_state(rest_V)
+        out = kern.model_run(
+            v, float(rest_V), _fresh(bt), _fresh(bd), np.zeros(2), np.zeros(1), np.zeros(1),
+            held.u_last, held.direction, op._wipe, op._code, float(op.alpha0), float(op.gamma),
+            float(op.vc),
+        )[0]  # fmt: skip
+        return out
 
     def stream(self, rate_hz: float, hold: str = "zoh") -> ModelStream:
         """A stateful evaluator for records that arrive in blocks (simulators, control loops)."""
         return ModelStream(self, rate_hz, hold)
 
 
+def _fresh(bank: DiscreteBank) -> tuple:
+    """A bank in the compiled kernels' form with zero (rest) states."""
+    a, cw, feed, ca, ccw = scaled_form(bank)
+    return a, cw, feed, ca, ccw, np.zeros(a.size), np.zeros(ca.size, dtype=np.complex128)
+
+
 class ModelStream:
     """Block-by-block evaluation of :class:`DynamicHysteresisModel` (the fast realisation).
 
-    Feeding a record in any split gives the same result as ``predict(..., method="fast")``.
+    Feeding a record in any split gives the same result as ``predict(..., method="fast")``:
+    with numba, the banks' states stay in the compiled kernels' form between blocks
+    (:func:`~labrig.model.compiled.model_run`); without, the numpy code carries them.
     """
 
     def __init__(self, model: DynamicHysteresisModel, rate_hz: float, hold: str = "zoh"):
         self.model = model
         self._bank_t = model.g_t.bank(rate_hz, hold)
         self._bank_d = model.g_d.bank(rate_hz, "linear")
+        self._kern = model.operator._kernels("auto")
         self.reset()
 
     def reset(self) -> None:
@@ -91,12 +118,29 @@ class ModelStream:
         self._v_prev = 0.0
         self._vt_prev = 0.0
         self._hyst = HysteresisState()
+        if self._kern is not None:
+            self._bt, self._bd = _fresh(self._bank_t), _fresh(self._bank_d)
+            self._ups = np.zeros(2)
 
     def process(self, v_block: ArrayLike) -> NDArray[np.float64]:
-        v = np.asarray(v_block, dtype=np.float64)
+        v = np.ascontiguousarray(v_block, dtype=np.float64)
         if v.size == 0:
             return np.zeros(0)
-        vt, self._xt = run_bank(self._bank_t, v, self._xt, self._v_prev)
-        vd, self._xd = run_bank(self._bank_d, vt, self._xd, self._vt_prev)
-        self._v_prev, self._vt_prev = float(v[-1]), float(vt[-1])
-        return self.model.operator.apply(vd, self._hyst)
+        if self._kern is None:
+            vt, self._xt = run_bank(self._bank_t, v, self._xt, self._v_prev)
+            vd, self._xd = run_bank(self._bank_d, vt, self._xd, self._vt_prev)
+            self._v_prev, self._vt_prev = float(v[-1]), float(vt[-1])
+            return self.model.operator.apply(vd, self._hyst)
+        if not np.all(np.isfinite(v)):
+            raise ValueError("the voltage record must be finite (found NaN or infinity)")
+        op, st = self.model.operator, self._hyst
+        xs = np.array([p[0] for p in st.older] + [st.u_s], dtype=np.float64)
+        ys = np.array([p[1] for p in st.older] + [st.s_s], dtype=np.float64)
+        out, xs, ys, d, last = self._kern.model_run(
+            v, 0.0, self._bt, self._bd, self._ups, xs, ys, float(st.u_last), float(st.direction),
+            op._wipe, op._code, float(op.alpha0), float(op.gamma), float(op.vc),
+        )  # fmt: skip
+        pts = list(zip(xs.tolist(), ys.tolist(), strict=True))
+        st.older, (st.u_s, st.s_s), st.direction = pts[:-1], pts[-1], float(d)
+        st.u_last, st.s_last = float(last), float(out[-1])
+        return out

@@ -21,6 +21,13 @@ Which reversal is the memory (``memory``):
   interrupted continues. Because a branch from ``(u_s, S_s)`` and back closes exactly at
   ``(u_s, S_s)`` (``S_s + F(x) - F(x)``), the strain is continuous there and the operator is
   continuous in its input: a tiny wiggle of ``u`` makes a tiny minor loop and nothing else.
+- ``"return_point_open"``: return-point memory in which the rest point only anchors the first
+  branch: no loop closes onto it. With ``"return_point"`` a branch that reaches 0 V after an
+  excursion from rest closes the excursion's loop there and goes on along the initial curve,
+  so the loops of a bipolar drive (or any drive crossing 0 V) are pinched at 0 V; here the
+  branch from a reversal goes on through 0 V, and a bipolar loop is open there (its width at
+  0 V, ``F(2A) - 2F(A)`` for amplitude ``A``). For a drive that never goes below 0 V (the
+  paper's) the two agree: a branch that returns to 0 V meets the initial curve there.
 - ``"last_reversal"``: the spec's literal single memory, ``u_s`` = the last extremum. It agrees
   with ``"return_point"`` whenever no extremum passes an earlier turning point (steady sines,
   vanishing envelopes), but a reversal of any size, even 1e-7 V, forgets the whole history: a
@@ -38,29 +45,52 @@ Shapes of ``h`` (``gamma`` in ue/V, ``vc`` in V):
 Inversion (strain to voltage) solves ``F(x) = y`` on each branch: Lambert W for the exponential
 shape, the quadratic formula for the linear one, and safeguarded Newton iterations otherwise,
 finished by Newton steps to machine precision.
+
+Evaluation: for the builtin shapes :meth:`~QuasiStaticHysteresis.apply` and
+:meth:`~QuasiStaticHysteresis.sensitivities` run one sequential compiled pass
+(:func:`labrig.model.compiled.operator_pass`: structure, values and derivatives together);
+``engine="numpy"``, a user :class:`Shape` or a missing numba run the numpy code below, which
+finds the branch structure vectorised (one Python step per monotone run) and is the reference.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import special
 
+from labrig.model.accel import kernels
+
 SHAPES = ("exponential", "linear", "gaussian")
-MEMORY_RULES = ("return_point", "last_reversal")
+MEMORY_RULES = ("return_point", "last_reversal", "return_point_open")
+#: each memory rule as the operator's kernels read it: the least number of remembered turning
+#: points a minor loop may close onto (2: down to the rest point; 3: never onto the rest point),
+#: 0 for the last reversal only
+_CLOSE_FLOOR = {"return_point": 2, "return_point_open": 3, "last_reversal": 0}
 _GL48_X, _GL48_W = np.polynomial.legendre.leggauss(48)
+
+
+#: relative step of the central differences that give a user shape's ``dH/dgamma``, ``dH/dvc``
+#: when it does not state them (rounding ~1e-10 relative; exact in gamma for ``h`` linear in it)
+FD_STEP = 1e-6
+
+Fn = Callable[[NDArray, float, float], NDArray]
 
 
 @dataclass(frozen=True)
 class Shape:
-    """A hysteretic slope ``h(x; gamma, vc)`` and (optionally) its integral ``H(x) = int_0^x h``."""
+    """A hysteretic slope ``h(x; gamma, vc)``, optionally its integral ``H(x) = int_0^x h`` and
+    the integral's derivatives ``dH/dgamma`` and ``dH/dvc`` (for :meth:`sensitivities`)."""
 
     name: str
-    h: Callable[[NDArray, float, float], NDArray]
-    H: Callable[[NDArray, float, float], NDArray] | None = None
+    h: Fn
+    H: Fn | None = None
+    dH_dgamma: Fn | None = None
+    dH_dvc: Fn | None = None
 
     def integral(self, x: NDArray, gamma: float, vc: float) -> NDArray:
         if self.H is not None:
@@ -69,20 +99,66 @@ class Shape:
         nodes = 0.5 * x[..., None] * (_GL48_X + 1.0)
         return 0.5 * x * np.sum(_GL48_W * self.h(nodes, gamma, vc), axis=-1)
 
+    def integral_derivatives(self, x: NDArray, gamma: float, vc: float) -> tuple[NDArray, NDArray]:
+        """``(dH/dgamma, dH/dvc)`` at ``x >= 0``: the stated closed forms, else central
+        differences of :meth:`integral` with relative step :data:`FD_STEP`."""
+        x = np.asarray(x, dtype=float)
+        if self.dH_dgamma is not None:
+            dg = self.dH_dgamma(x, gamma, vc)
+        else:
+            e = FD_STEP * max(abs(gamma), 1.0)
+            dg = (self.integral(x, gamma + e, vc) - self.integral(x, gamma - e, vc)) / (2 * e)
+        if self.dH_dvc is not None:
+            dv = self.dH_dvc(x, gamma, vc)
+        else:
+            e = FD_STEP * vc
+            dv = (self.integral(x, gamma, vc + e) - self.integral(x, gamma, vc - e)) / (2 * e)
+        return dg, dv
+
 
 def _exp_H(x, g, vc):
     return g * (x + vc * np.expm1(-x / vc))
+
+
+def _exp_dH_dvc(x, g, vc):
+    z = x / vc
+    return g * (np.expm1(-z) + z * np.exp(-z))
 
 
 def _gauss_H(x, g, vc):
     return g * (x - vc * np.sqrt(np.pi) / 2 * special.erf(x / vc))
 
 
+def _gauss_dH_dvc(x, g, vc):
+    z = x / vc
+    return g * (z * np.exp(-z * z) - np.sqrt(np.pi) / 2 * special.erf(z))
+
+
 BUILTIN_SHAPES: dict[str, Shape] = {
-    "exponential": Shape("exponential", lambda x, g, vc: -g * np.expm1(-x / vc), _exp_H),
-    "linear": Shape("linear", lambda x, g, vc: g * x, lambda x, g, vc: 0.5 * g * x * x),
-    "gaussian": Shape("gaussian", lambda x, g, vc: -g * np.expm1(-((x / vc) ** 2)), _gauss_H),
+    "exponential": Shape(
+        "exponential",
+        lambda x, g, vc: -g * np.expm1(-x / vc),
+        _exp_H,
+        lambda x, g, vc: x + vc * np.expm1(-x / vc),
+        _exp_dH_dvc,
+    ),
+    "linear": Shape(
+        "linear",
+        lambda x, g, vc: g * x,
+        lambda x, g, vc: 0.5 * g * x * x,
+        lambda x, g, vc: 0.5 * x * x,
+        lambda x, g, vc: np.zeros_like(x),
+    ),
+    "gaussian": Shape(
+        "gaussian",
+        lambda x, g, vc: -g * np.expm1(-((x / vc) ** 2)),
+        _gauss_H,
+        lambda x, g, vc: x - vc * np.sqrt(np.pi) / 2 * special.erf(x / vc),
+        _gauss_dH_dvc,
+    ),
 }
+
+ENGINES = ("auto", "compiled", "numpy")
 
 
 @dataclass
@@ -177,8 +253,9 @@ class QuasiStaticHysteresis:
 
     # -- operator -----------------------------------------------------------------------------
     @property
-    def _wipe(self) -> bool:
-        return self.memory == "return_point"
+    def _wipe(self) -> int:
+        """The memory rule for the kernels (:data:`_CLOSE_FLOOR`)."""
+        return _CLOSE_FLOOR[self.memory]
 
     def _along(self, a: NDArray, b: NDArray) -> NDArray:
         """Strain change (ue) along a branch from input ``a`` to ``b`` (V)."""
@@ -193,12 +270,58 @@ class QuasiStaticHysteresis:
         d = float(np.sign(u0))
         return HysteresisState(0.0, 0.0, u0, d * float(self.branch(abs(u0))), d)
 
-    def apply(self, u: ArrayLike, state: HysteresisState | None = None) -> NDArray[np.float64]:
-        """Strain (ue) for the voltage record ``u`` (V). ``state`` is updated in place if given."""
+    def _kernels(self, engine: str) -> ModuleType | None:
+        """The compiled kernels for ``engine`` (``None``: run the numpy code).
+
+        ``"auto"``: compiled for the builtin shapes when numba is available, numpy otherwise;
+        ``"compiled"``: compiled or an error; ``"numpy"``: the numpy code (the reference)."""
+        if engine not in ENGINES:
+            raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+        if engine == "numpy":
+            return None
+        if self._code < 0:
+            if engine == "compiled":
+                raise ValueError(f"no compiled code for the user shape {self._shape.name!r}")
+            return None
+        k = kernels()
+        if k is None and engine == "compiled":
+            raise RuntimeError("the compiled engine needs numba, which could not be imported")
+        return k
+
+    @property
+    def _code(self) -> int:
+        """Kernel code of a builtin shape (its index in :data:`SHAPES`), -1 for a user shape."""
+        for i, name in enumerate(SHAPES):
+            if self._shape is BUILTIN_SHAPES[name]:
+                return i
+        return -1
+
+    def apply(
+        self, u: ArrayLike, state: HysteresisState | None = None, engine: str = "auto"
+    ) -> NDArray[np.float64]:
+        """Strain (ue) for the voltage record ``u`` (V). ``state`` is updated in place if given.
+
+        ``engine``: ``"auto"`` (compiled for the builtin shapes when numba is available),
+        ``"compiled"`` or ``"numpy"`` (the vectorised branch search, the reference); the two
+        agree to rounding (the same closed forms, summed in the same order).
+        """
         u = _finite(u, "voltage")
+        kern = self._kernels(engine)
         st = HysteresisState() if state is None else state
         if u.size == 0:
             return np.zeros(0)
+        if kern is not None:
+            xs = np.array([p[0] for p in st.older] + [st.u_s], dtype=np.float64)
+            ys = np.array([p[1] for p in st.older] + [st.s_s], dtype=np.float64)
+            a0, g, vc = float(self.alpha0), float(self.gamma), float(self.vc)
+            out, _, _, xs, ys, d = kern.operator_pass(
+                u, xs, ys, float(st.u_last), float(st.direction), self._wipe, self._code,
+                a0, g, vc, False, np.empty((u.size, 0)),
+            )  # fmt: skip
+            pts = list(zip(xs.tolist(), ys.tolist(), strict=True))
+            st.older, (st.u_s, st.s_s), st.direction = pts[:-1], pts[-1], float(d)
+            st.u_last, st.s_last = float(u[-1]), float(out[-1])
+            return out
         br, stack, d = _branches(
             u, [*st.older, (st.u_s, st.s_s)], st.u_last, st.direction, self._along, self._wipe
         )
@@ -207,7 +330,9 @@ class QuasiStaticHysteresis:
         st.u_last, st.s_last = float(u[-1]), float(out[-1])
         return out
 
-    def tangent(self, u: ArrayLike, du: ArrayLike, held_V: float = 0.0) -> NDArray[np.float64]:
+    def tangent(
+        self, u: ArrayLike, du: ArrayLike, held_V: float = 0.0, engine: str = "auto"
+    ) -> NDArray[np.float64]:
         """Derivative of ``apply(u, self.held_state(held_V))`` along ``du`` (the voltage it was
         held at does not move), with the branch structure (which samples are turning points,
         which minor loops close where) held fixed (ue per unit of ``du``'s scale).
@@ -217,25 +342,102 @@ class QuasiStaticHysteresis:
         ``k``, so ``dS[n] = dS_k + alpha(|u[n] - u_k|) (du[n] - du_k)`` and ``dS_k = dS_p +
         alpha(|u_k - u_p|) (du_k - du_p)``, ``alpha = F'``; the rest point does not move. For
         the ``"last_reversal"`` memory the structure changes when a tiny wiggle appears, which
-        is why differences of ``apply`` itself are no derivative there.
+        is why differences of ``apply`` itself are no derivative there. One column of
+        :meth:`sensitivities`' ``dS_du``.
         """
-        u = np.asarray(u, dtype=float)
         du = np.asarray(du, dtype=float)
-        if u.size == 0:
-            return np.zeros(0)
+        return self.sensitivities(u, held_V, du, params=False, engine=engine)[2]
+
+    def sensitivities(
+        self,
+        u: ArrayLike,
+        held_V: float = 0.0,
+        du: ArrayLike | None = None,
+        params: bool = True,
+        engine: str = "auto",
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None, NDArray[np.float64] | None]:
+        """``(S, dS_dparams, dS_du)`` in one pass over the record ``u`` (V), the actuator held
+        at ``held_V`` before it (:meth:`held_state`).
+
+        - ``S`` (N,): ``apply(u, self.held_state(held_V))`` (ue);
+        - ``dS_dparams`` (N, 3): exact derivatives with respect to ``alpha0`` (ue per ue/V),
+          ``gamma`` (ue per ue/V, or per ue/V^2 for the linear shape) and ``vc`` (ue/V; zero
+          for the linear shape). Every turning point's input is a sample of ``u``, which the
+          parameters do not move, so ``S`` is a sum of branch increments
+          ``sign F(|x_b - x_a|)`` and its derivative the sum of ``d/dp sign F``. ``None`` when
+          ``params`` is false;
+        - ``dS_du`` (N, k) for ``du`` of shape (N, k) (or (N,) for ``du`` (N,)): the tangent of
+          :meth:`tangent` along each column, the branch structure held fixed. ``None`` without
+          ``du``.
+
+        ``engine`` as for :meth:`apply`. For a user :class:`Shape`, ``dH/dgamma`` and
+        ``dH/dvc`` come from the shape if it states them, else from central differences
+        (:meth:`Shape.integral_derivatives`).
+        """
+        u = _finite(u, "voltage")
+        n = u.size
+        one_col = du is not None and np.ndim(du) == 1
+        if du is None:
+            dcols = np.zeros((n, 0))
+        else:
+            dcols = np.asarray(du, dtype=np.float64)
+            dcols = dcols[:, None] if one_col else dcols
+            if dcols.ndim != 2 or dcols.shape[0] != n:
+                raise ValueError(f"du must have shape ({n},) or ({n}, k), got {np.shape(du)}")
+            dcols = np.ascontiguousarray(dcols)
+        kern = self._kernels(engine)
         h = float(held_V)
-        br, _, _ = _branches(u, [(0.0, 0.0)], h, float(np.sign(h)), self._along, self._wipe)
-        dx0 = np.where(br.at >= 0, du[np.maximum(br.at, 0)], 0.0)
-        dy0 = np.zeros(br.x0.size)
+        if n == 0:
+            S, dP, dU = np.zeros(0), np.zeros((0, 3)), np.zeros((0, dcols.shape[1]))
+        elif kern is not None:
+            rest = np.zeros(1)
+            S, dP, dU, _, _, _ = kern.operator_pass(
+                u, rest, rest, h, float(np.sign(h)), self._wipe, self._code, float(self.alpha0),
+                float(self.gamma), float(self.vc), bool(params), dcols,
+            )  # fmt: skip
+        else:
+            S, dP, dU = self._sensitivities_numpy(u, h, dcols, params)
+        out_p = dP if params else None
+        out_u = None if du is None else (dU[:, 0] if one_col else dU)
+        return S, out_p, out_u
+
+    def _odd_dparams(self, d: NDArray) -> NDArray:
+        """``d sign(d) F(|d|) / d(alpha0, gamma, vc)`` (len(d), 3)."""
+        dg, dv = self._shape.integral_derivatives(np.abs(d), self.gamma, self.vc)
+        sg = np.sign(d)
+        return np.column_stack((d, sg * dg, sg * dv))
+
+    def _sensitivities_numpy(
+        self, u: NDArray, held: float, du: NDArray, params: bool
+    ) -> tuple[NDArray, NDArray, NDArray]:
+        br, _, _ = _branches(u, [(0.0, 0.0)], held, float(np.sign(held)), self._along, self._wipe)
+        x0 = br.per_sample(br.x0)
+        S = br.per_sample(br.y0) + self._odd_branch(u - x0)
         new = np.flatnonzero(br.parent >= 0)
         par = br.parent[new]
-        step = (self.slope(np.abs(br.x0[new] - br.x0[par])) * (dx0[new] - dx0[par])).tolist()
-        acc = dy0.tolist()
-        for k, p, dk in zip(new.tolist(), par.tolist(), step, strict=True):
-            acc[k] = acc[p] + dk
-        dy0 = np.asarray(acc)
-        x0 = br.per_sample(br.x0)
-        return br.per_sample(dy0) + self.slope(np.abs(u - x0)) * (du - br.per_sample(dx0))
+        dnode = br.x0[new] - br.x0[par]
+
+        def accumulate(step: NDArray, width: int) -> NDArray:
+            # each turning point's value: its parent's plus the step (parents come first)
+            out = np.zeros((br.x0.size, width))
+            for j in range(width):
+                acc = [0.0] * br.x0.size
+                for k, p, dk in zip(new.tolist(), par.tolist(), step[:, j].tolist(), strict=True):
+                    acc[k] = acc[p] + dk
+                out[:, j] = acc
+            return out
+
+        dP = np.zeros((u.size, 3))
+        if params:
+            dy = accumulate(self._odd_dparams(dnode), 3)
+            dP = dy[np.repeat(br.seg_anchor, br.counts)] + self._odd_dparams(u - x0)
+        k = du.shape[1]
+        dx0 = np.where((br.at >= 0)[:, None], du[np.maximum(br.at, 0)], 0.0)
+        step = self.slope(np.abs(dnode))[:, None] * (dx0[new] - dx0[par])
+        dy = accumulate(step, k)
+        idx = np.repeat(br.seg_anchor, br.counts)
+        dU = dy[idx] + self.slope(np.abs(u - x0))[:, None] * (du - dx0[idx])
+        return S, dP, dU
 
     def invert(self, strain: ArrayLike, state: HysteresisState | None = None) -> NDArray:
         """Voltage (V) whose :meth:`apply` gives ``strain`` (ue), branch by branch.
@@ -341,13 +543,15 @@ def _branches(
     x_last: float,
     direction: float,
     delta: Callable[[NDArray, NDArray], NDArray],
-    wipe: bool,
+    wipe: int,
 ) -> tuple[_Branches, list[tuple[float, float]], float]:
     """Find the branch structure of ``x`` (module docstring, memory rules).
 
     ``stack``: the remembered turning points ``(x, y)``, oldest first, the last one the current
     branch's; ``delta(x_a, x_b)``: the output change along a branch from ``x_a`` to ``x_b``;
-    ``wipe``: return-point memory (close and forget minor loops), else the last reversal only.
+    ``wipe``: return-point memory (close and forget minor loops onto any of the remembered
+    turning points while at least ``wipe`` are remembered: 2 down to the rest point, 3 never
+    onto it), else (0) the last reversal only.
     Returns the structure, the new stack and the new direction. A reversal detected at sample
     ``n`` has its extremum at ``n - 1`` (or at ``x_last``); flat stretches are not reversals.
     One Python step per monotone run; where branches start and the branches themselves are
@@ -379,9 +583,10 @@ def _branches(
                 live[:] = [node]
         if wipe and dj != 0.0:
             far = dj * x_far  # a run is monotone: its last sample is its farthest
-            while len(live) >= 2 and far >= dj * xs[live[-2]]:
+            while len(live) >= wipe and far >= dj * xs[live[-2]]:
                 # the run reaches the turning point where the current minor loop began: close
-                # the loop and forget it (the rest point at the bottom stays). Closing on
+                # the loop and forget it (the rest point at the bottom stays; with
+                # "return_point_open" no loop closes onto it). Closing on
                 # reaching, not passing, gives the same strain (the branches meet there) and
                 # keeps the stack from growing under exactly repeated extrema
                 cross_run.append(j)

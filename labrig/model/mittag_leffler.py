@@ -62,6 +62,9 @@ def relaxor_step_pole_part(t_s: ArrayLike, tau_s: float, lam: float) -> NDArray[
     """The poles' share ``-(2/lam) Re exp(p t)`` of the step response (0 when ``lam <= 1``)."""
     t = np.asarray(t_s, dtype=np.float64)
     p = pole_pair(tau_s, lam)
+    out = np.zeros(t.shape)
     if p is None:
-        return np.zeros(t.shape)
-    return np.where(t > 0, -(2.0 / lam) * np.exp(p * np.maximum(t, 0.0)).real, 0.0)
+        return out
+    live = (t > 0) & (t * p.real > -70.0)  # e^(Re p t) < 4e-31 beyond: exactly 0 here
+    out[live] = -(2.0 / lam) * np.exp(p * t[live]).real
+    return out

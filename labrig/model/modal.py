@@ -15,30 +15,36 @@ For a continuous mode ``x' = q x + u`` sampled every ``dt`` (``w = q dt``):
 with ``phi1(w) = (e^w - 1)/w`` and ``phi2(w) = (e^w - 1 - w)/w^2``. There is no approximation in
 this step: the discrete recursion reproduces the continuous modes exactly under the hold.
 
-:func:`run_bank` evaluates the recursion for a whole record in blocks of ``B`` samples with
-matrix products (the same arithmetic as the per-sample loop, reordered), which makes the O(1)-per-
-sample realisation fast in numpy; :class:`BankStepper` runs it one sample at a time for a control
-loop.
+:func:`run_bank` evaluates the recursion for a whole record: compiled, one sample at a time
+over all modes (:func:`labrig.model.compiled.bank_run`), or, without numba or with
+``engine="numpy"``, in blocks of ``B`` samples with matrix products (the same arithmetic as the
+per-sample loop, reordered). :func:`run_bank_multi` runs several input columns and several
+output weight vectors in one pass (a bank's output and its derivatives with respect to its
+weights). :class:`BankStepper` runs a bank one sample at a time for a control loop.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import NDArray
 
 from labrig.core.blas import single_thread_blas
+from labrig.model.accel import kernels
 
 HOLDS = ("zoh", "linear")
+ENGINES = ("auto", "compiled", "numpy")
 
 _SERIES_RADIUS = 0.1
 _N_SERIES = 14
 
 
 def _phi(w: NDArray[np.complex128], order: int) -> NDArray[np.complex128]:
-    """``phi1`` or ``phi2`` of complex arguments, by series near 0 and closed form elsewhere."""
+    """``phi_k(w) = sum_j w^j / (j + k)!`` (k = 1, 2, 3) of complex arguments, by series near 0
+    and closed form elsewhere (``(e^w - sum_{j<k} w^j/j!) / w^k``)."""
     w = np.asarray(w, dtype=np.complex128)
     out = np.empty_like(w)
     small = np.abs(w) < _SERIES_RADIUS
@@ -59,9 +65,38 @@ def _phi(w: NDArray[np.complex128], order: int) -> NDArray[np.complex128]:
     )
     if order == 1:
         out[~small] = em1 / wb
-    else:
+    elif order == 2:
         out[~small] = (em1 - wb) / wb**2
+    else:
+        out[~small] = (em1 - wb - wb**2 / 2) / wb**3
     return out
+
+
+def hold_gains(q: NDArray, dt: float, hold: str) -> tuple[NDArray, NDArray, NDArray]:
+    """``(a, beta0, beta1)`` of the modes ``x' = q x + u`` sampled every ``dt`` (s) under
+    ``hold`` (module docstring): exact discretisation."""
+    if hold not in HOLDS:
+        raise ValueError(f"hold must be one of {HOLDS}, got {hold!r}")
+    w = np.asarray(q, dtype=np.complex128) * dt
+    p1 = _phi(w, 1)
+    if hold == "zoh":
+        return np.exp(w), dt * p1, np.zeros_like(p1)
+    p2 = _phi(w, 2)
+    return np.exp(w), dt * (p1 - p2), dt * p2
+
+
+def hold_gain_derivatives(q: NDArray, dt: float, hold: str) -> tuple[NDArray, NDArray, NDArray]:
+    """``d(a, beta0, beta1)/dq`` for :func:`hold_gains`, from ``phi_k' = phi_k - k phi_(k+1)``:
+    ``da = dt a``; zoh ``dbeta0 = dt^2 (phi1 - phi2)``; linear ``dbeta0 = dt^2 (phi1 - 2 phi2 +
+    2 phi3)``, ``dbeta1 = dt^2 (phi2 - 2 phi3)``."""
+    if hold not in HOLDS:
+        raise ValueError(f"hold must be one of {HOLDS}, got {hold!r}")
+    w = np.asarray(q, dtype=np.complex128) * dt
+    p1, p2 = _phi(w, 1), _phi(w, 2)
+    if hold == "zoh":
+        return dt * np.exp(w), dt * dt * (p1 - p2), np.zeros_like(p1)
+    p3 = _phi(w, 3)
+    return dt * np.exp(w), dt * dt * (p1 - 2 * p2 + 2 * p3), dt * dt * (p2 - 2 * p3)
 
 
 @dataclass(frozen=True)
@@ -84,16 +119,7 @@ class ContinuousModes:
         return np.sum(self.c / (s - self.q), axis=-1) + self.direct_m1
 
     def discretise(self, dt: float, hold: str) -> DiscreteBank:
-        if hold not in HOLDS:
-            raise ValueError(f"hold must be one of {HOLDS}, got {hold!r}")
-        w = self.q * dt
-        a = np.exp(w)
-        p1 = _phi(w, 1)
-        if hold == "zoh":
-            b0, b1 = dt * p1, np.zeros_like(p1)
-        else:
-            p2 = _phi(w, 2)
-            b0, b1 = dt * (p1 - p2), dt * p2
+        a, b0, b1 = hold_gains(self.q, dt, hold)
         c = self.c
         # instantaneous part as one extra mode with a = 0 (exact to e^-40)
         if self.direct_m1 != 0.0 or self.direct_m2 != 0.0:
@@ -124,24 +150,30 @@ class _Group:
 
 @dataclass(frozen=True)
 class DiscreteBank:
-    """A bank of exactly discretised first-order modes (see module docstring)."""
+    """A bank of exactly discretised first-order modes (see module docstring).
+
+    ``order[g]`` holds the positions, in the arrays given to :meth:`from_arrays`, of group
+    ``g``'s modes (extra output rows of :func:`run_bank_multi` are given in that order)."""
 
     groups: tuple[_Group, ...]
     _cache: dict = field(default_factory=dict, compare=False, repr=False)
+    order: tuple[NDArray[np.intp], ...] = ()
 
     @classmethod
     def from_arrays(cls, a, b0, b1, c) -> DiscreteBank:
         a, b0, b1, c = (np.asarray(x, dtype=np.complex128) for x in (a, b0, b1, c))
         is_real = (np.abs(a.imag) == 0) & (np.abs(b0.imag) == 0) & (np.abs(b1.imag) == 0)
         is_real &= np.abs(c.imag) == 0
-        groups = []
+        groups, order = [], []
         if np.any(is_real):
             r = is_real
             groups.append(_Group(a[r].real, b0[r].real, b1[r].real, c[r].real))
+            order.append(np.flatnonzero(r))
         if np.any(~is_real):
             r = ~is_real
             groups.append(_Group(a[r], b0[r], b1[r], c[r]))
-        return cls(tuple(groups))
+            order.append(np.flatnonzero(r))
+        return cls(tuple(groups), order=tuple(order))
 
     @property
     def size(self) -> int:
@@ -191,21 +223,176 @@ def _block_matrices(bank: DiscreteBank, B: int) -> tuple:
 _CHUNK = 1 << 16  # samples per pass: keeps the working arrays in cache
 
 
+def _engine_kernels(engine: str) -> ModuleType | None:
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    if engine == "numpy":
+        return None
+    k = kernels()
+    if k is None and engine == "compiled":
+        raise RuntimeError("the compiled engine needs numba, which could not be imported")
+    return k
+
+
 def run_bank(
     bank: DiscreteBank,
     u: NDArray,
     state: list[NDArray] | None = None,
     u_prev: float = 0.0,
     block: int = 256,
+    engine: str = "auto",
 ) -> tuple[NDArray[np.float64], list[NDArray]]:
     """Run the bank over a record ``u``; returns ``(y, final_state)``.
 
     ``state`` and ``u_prev`` carry the recursion across calls (streaming); ``None`` and 0 mean
-    the system is at rest with zero input before the first sample. The record is processed in
-    blocks of ``block`` samples with matrix products (the same recursion, reordered).
+    the system is at rest with zero input before the first sample. ``engine``: ``"auto"``
+    (compiled when numba is available), ``"compiled"`` (the recursion sample by sample), or
+    ``"numpy"`` (blocks of ``block`` samples with matrix products: the same recursion,
+    reordered). The two agree to rounding.
     """
+    u = np.ascontiguousarray(u, dtype=np.float64)
+    kern = _engine_kernels(engine)
+    if kern is not None:
+        y, st = run_bank_multi(bank, u[:, None], None, None if state is None else [state],
+                               np.array([u_prev]), engine="compiled")  # fmt: skip
+        return y[:, 0, 0], st[0]
     with single_thread_blas():
-        return _run_bank(bank, np.ascontiguousarray(u, dtype=np.float64), state, u_prev, block)
+        return _run_bank(bank, u, state, u_prev, block)
+
+
+def _scaled(bank: DiscreteBank, extra: NDArray | None) -> tuple:
+    """The compiled kernel's form of the bank: poles ``a``, output weights ``cw = c b`` with
+    ``b = a b1 + b0`` the folded input gain (rows: the bank's ``c``, then ``extra``), and the
+    feedthrough of each row ``Re sum c b1``; real and complex modes apart."""
+    parts = []
+    for g, idx in zip(bank.groups, bank.order, strict=True):
+        rows = g.c[None, :] if extra is None else np.vstack([g.c[None, :], extra[:, idx]])
+        b = g.a * g.b1 + g.b0
+        live = b != 0  # b = 0: the mode is never driven (a pure feedthrough, in `feed`)
+        parts.append((g, rows, b, live))
+    feed = sum(np.sum(rows * g.b1[None, :], axis=1).real for g, rows, _, _ in parts)
+    real = [p for p in parts if not np.iscomplexobj(p[0].a)]
+    cplx = [p for p in parts if np.iscomplexobj(p[0].a)]
+
+    def pack(ps: list, dtype: type) -> tuple[NDArray, NDArray]:
+        if not ps:
+            return np.zeros(0, dtype), np.zeros((feed.size, 0), dtype)
+        g, rows, b, live = ps[0]
+        cw = (rows * b[None, :])[:, live]
+        cw = cw.real if dtype is np.float64 else cw  # a real mode's output is Re(c) x
+        return (np.ascontiguousarray(g.a[live], dtype=dtype),
+                np.ascontiguousarray(cw, dtype=dtype))  # fmt: skip
+
+    a_r, cw_r = pack(real, np.float64)
+    a_c, cw_c = pack(cplx, np.complex128)
+    return a_r, cw_r, a_c, cw_c, np.ascontiguousarray(feed, dtype=np.float64), parts
+
+
+def run_bank_multi(
+    bank: DiscreteBank,
+    u: NDArray,
+    extra_outputs: NDArray | None = None,
+    state: list[list[NDArray]] | None = None,
+    u_prev: NDArray | None = None,
+    engine: str = "auto",
+) -> tuple[NDArray[np.float64], list[list[NDArray]]]:
+    """Run the bank over each column of ``u`` (N, k) and read several outputs in one pass.
+
+    Output row 0 is the bank's own ``y = Re sum c x``; rows ``1..r`` are
+    ``Re sum extra_outputs[q - 1] x`` for the weight vectors ``extra_outputs`` (r, M), given in
+    the order of the modes passed to :meth:`DiscreteBank.from_arrays` (each row's feedthrough
+    follows from its weights). Returns ``y`` (N, k, 1 + r) and each column's final state.
+    ``state`` (one :meth:`DiscreteBank.initial_state`-like list per column) and ``u_prev`` (k,)
+    carry the recursion across calls; ``None``: at rest with zero input before the record.
+    """
+    u = np.asarray(u, dtype=np.float64)
+    if u.ndim != 2:
+        raise ValueError(f"u must have shape (N, k), got {u.shape}")
+    n, kc = u.shape
+    extra = None if extra_outputs is None else np.atleast_2d(np.asarray(extra_outputs))
+    if extra is not None and extra.shape[1] != bank.size:
+        raise ValueError(f"extra_outputs must have {bank.size} columns, got {extra.shape}")
+    up = np.zeros(kc) if u_prev is None else np.asarray(u_prev, dtype=np.float64).reshape(kc)
+    states = [bank.initial_state() for _ in range(kc)] if state is None else state
+    kern = _engine_kernels(engine)
+    if kern is None:
+        return _run_bank_multi_numpy(bank, u, extra, states, up)
+    key = ("scaled", None if extra is None else extra.tobytes())
+    if key not in bank._cache:
+        if len(bank._cache) > 16:  # extra outputs differ per call: do not pile them up
+            bank._cache.clear()
+        bank._cache[key] = _scaled(bank, extra)
+    a_r, cw_r, a_c, cw_c, feed, _ = bank._cache[key]
+    w_r = np.zeros((kc, a_r.size))
+    w_c = np.zeros((kc, a_c.size), dtype=np.complex128)
+    for j in range(kc):
+        w_r[j], w_c[j] = scaled_state(bank, states[j], float(up[j]))
+    y = kern.bank_run(a_r, cw_r, a_c, cw_c, feed, np.ascontiguousarray(u), w_r, w_c, up)
+    u_last = u[-1] if n else up
+    out_states = [unscaled_state(bank, w_r[j], w_c[j], float(u_last[j])) for j in range(kc)]
+    return y, out_states
+
+
+def scaled_form(bank: DiscreteBank) -> tuple:
+    """``(a, cw, feed, ca, ccw)``: the bank as the compiled kernels run it (real modes' poles and
+    output weights ``c (a b1 + b0)``, the feedthrough, complex modes' poles and weights)."""
+    key = ("scaled", None)
+    if key not in bank._cache:
+        bank._cache[key] = _scaled(bank, None)
+    a_r, cw_r, a_c, cw_c, feed, _ = bank._cache[key]
+    return a_r, cw_r[0], float(feed[0]), a_c, cw_c[0]
+
+
+def scaled_state(
+    bank: DiscreteBank, state: list[NDArray], u_prev: float
+) -> tuple[NDArray, NDArray]:
+    """A state of :meth:`DiscreteBank.initial_state`'s form as the compiled kernels keep it:
+    ``w = (x - b1 u_prev) / b`` for the modes that are driven, real and complex apart."""
+    if ("scaled", None) not in bank._cache:
+        bank._cache[("scaled", None)] = _scaled(bank, None)
+    parts = bank._cache[("scaled", None)][5]
+    w_r, w_c = np.zeros(0), np.zeros(0, dtype=np.complex128)
+    for gi, (g, _, b, live) in enumerate(parts):
+        w = (state[gi] - g.b1 * u_prev)[live] / b[live]
+        if np.iscomplexobj(g.a):
+            w_c = np.ascontiguousarray(w, dtype=np.complex128)
+        else:
+            w_r = np.ascontiguousarray(w.real, dtype=np.float64)
+    return w_r, w_c
+
+
+def unscaled_state(bank: DiscreteBank, w_r: NDArray, w_c: NDArray, u_last: float) -> list[NDArray]:
+    """The inverse of :func:`scaled_state` after a record whose last input was ``u_last``."""
+    if ("scaled", None) not in bank._cache:
+        bank._cache[("scaled", None)] = _scaled(bank, None)
+    parts = bank._cache[("scaled", None)][5]
+    out = []
+    for g, _, b, live in parts:
+        x = np.zeros(g.size, dtype=g.a.dtype)
+        x[live] = (w_c if np.iscomplexobj(g.a) else w_r) * b[live]
+        out.append(x + g.b1 * u_last)
+    return out
+
+
+def _run_bank_multi_numpy(bank, u, extra, states, up):
+    """:func:`run_bank_multi` with the numpy block realisation, one output row at a time."""
+    rows = [None] if extra is None else [None, *list(extra)]
+    n, kc = u.shape
+    y = np.empty((n, kc, len(rows)))
+    out_states = []
+    for j in range(kc):
+        for q, row in enumerate(rows):
+            b = bank
+            if row is not None:
+                cs = [row[idx] if np.iscomplexobj(g.a) else row[idx].real
+                      for g, idx in zip(bank.groups, bank.order, strict=True)]  # fmt: skip
+                b = DiscreteBank(tuple(_Group(g.a, g.b0, g.b1, c) for g, c in zip(
+                    bank.groups, cs, strict=True)), order=bank.order)  # fmt: skip
+            yq, st = run_bank(b, u[:, j], states[j], float(up[j]), engine="numpy")
+            y[:, j, q] = yq
+            if q == 0:
+                out_states.append(st)
+    return y, out_states
 
 
 def _run_bank(bank, u, state, u_prev, block):

@@ -9,7 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from labrig.model.hysteresis import QuasiStaticHysteresis
 
 Shape = Literal["exponential", "linear", "gaussian"]
-Memory = Literal["return_point", "last_reversal"]
+Memory = Literal["return_point", "last_reversal", "return_point_open"]
 
 
 class ModelParams(BaseModel):

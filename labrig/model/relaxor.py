@@ -26,42 +26,60 @@ Methods
 - ``"fast"``: the diffusive representation
   ``G(s) = int_0^inf mu(xi) / (s + xi) dxi (+ pole pair -(p/lam)/(s-p) for lam > 1)`` with
   ``mu(xi) = (1/pi) r sin(pi lam) / (1 + 2 r cos(pi lam) + r^2)``, ``r = (tau xi)^lam``,
-  discretised by Gauss-Legendre panels in ``log xi`` on ``[1e-10 rad/s, 40/dt]``; the mass
-  below is one moment-matched slow mode (memory kept for years), the mass above is exactly an
-  instantaneous gain at this sampling rate. Each mode is discretised exactly for the hold
-  (:mod:`labrig.model.modal`), so the only error is the quadrature (measured against
-  ``"exact"``: ~1e-13 of full scale for the paper's ``lam_t``, ~2e-11 for ``lam_d``, < 1e-8
-  for ``|lam - 1| >= 0.01``; at most ~2e-5 for ``0 < |lam - 1| < 0.01``, where ``mu`` is a
-  spike narrower than the panels and its mass goes into one mode at ``xi = 1/tau``).
-  O(M) work per sample with M ~ 250-300 modes, no history.
+  discretised by a pole-corrected trapezoidal rule in ``log xi`` on nodes fixed for the
+  sample rate (:mod:`labrig.model.diffusive`): the mass below the nodes is one moment-matched
+  slow mode, the mass above ``40/dt`` exactly an instantaneous gain. Each mode is discretised
+  exactly for the hold (:mod:`labrig.model.modal`), so the only error is the quadrature:
+  ~1e-13 of full scale against ``"exact"`` for every ``0 < lam < 2`` (through ``lam = 1``) over
+  records up to 1e7 samples (``benchmarks/RESULTS.md``). O(M) work per sample with M ~ 80
+  modes at 1 kHz, no history. :meth:`Relaxor.filter_sensitivities` gives the derivatives with
+  respect to ``ln tau`` and ``lam`` from the same pass.
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 from numpy.polynomial import chebyshev as C
 from numpy.typing import ArrayLike, NDArray
-from scipy import signal
 
+from labrig.model import diffusive
+from labrig.model.accel import kernels
+from labrig.model.diffusive import ModeDerivatives
 from labrig.model.mittag_leffler import (
     pole_pair,
     relaxor_ramp,
     relaxor_step,
     relaxor_step_pole_part,
 )
-from labrig.model.modal import HOLDS, BankStepper, ContinuousModes, DiscreteBank, run_bank
+from labrig.model.modal import (
+    HOLDS,
+    BankStepper,
+    ContinuousModes,
+    DiscreteBank,
+    hold_gain_derivatives,
+    hold_gains,
+    run_bank,
+    run_bank_multi,
+)
+
+
+def _scipy_signal():
+    """``scipy.signal``, imported on first use: it costs about a second of CPU to import (it
+    loads scipy.stats), which the fast paths never need."""
+    from scipy import signal
+
+    return signal
+
 
 METHODS = ("exact", "fast")
 
-XI_MIN_RAD_S = 1e-10  # slowest resolved mode (time constant ~300 years)
 _EXACT_SAMPLES = 2048  # kernel samples evaluated directly before switching to the interpolant
 _PANELS_PER_DECADE = 2
 _CHEB_NODES = 24
-_PANELS_PER_DECADE_FAST = 2  # log-xi panels per decade of the diffusive quadrature
-_GL_NODES = 8  # Gauss-Legendre nodes per log-xi panel of the diffusive quadrature
 
 
 def _validate(tau_s: float, lam: float) -> None:
@@ -113,10 +131,73 @@ class Relaxor:
             if v.size == 0:
                 return v.copy()
             k = sampled_kernel(self.tau_s, self.lam, dt, v.size, hold)
-            return signal.fftconvolve(v, k)[: v.size]
+            return _scipy_signal().fftconvolve(v, k)[: v.size]
         if method == "fast":
             return run_bank(self.bank(rate_hz, hold), v)[0]
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+
+    def filter_sensitivities(
+        self, v: ArrayLike, rate_hz: float, hold: str = "zoh", rest_V: float = 0.0
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """``(y, dy/d ln tau, dy/d lam)`` of the fast realisation, the relaxor at rest at
+        ``rest_V`` (V) before the record (``y = rest_V + G (v - rest_V)``).
+
+        At fixed node positions only the modes' output weights depend on ``tau`` and ``lam``,
+        so the derivatives are further output rows of the same pass over the modes
+        (:func:`~labrig.model.modal.run_bank_multi`); the instantaneous part's two gains are
+        two more modes. The few special modes whose poles move with the parameters (the
+        complex pair, the slow-tail mode) add ``Re(c dq dx/dq)``, ``dx/dq`` the derivative of
+        the exactly discretised mode: ``z[n] = a z[n-1] + a' x[n-1] + beta0' u[n-1] +
+        beta1' u[n]`` (:func:`~labrig.model.modal.hold_gain_derivatives`; the mode applied to
+        its own state). Exact up to rounding: it differentiates what ``filter(method="fast")``
+        computes, and agrees with its central differences (tests/model/test_sensitivities.py).
+        """
+        v = np.asarray(v, dtype=np.float64)
+        if v.ndim != 1:
+            raise ValueError("v must be a 1-D record")
+        dt = _check_rate(rate_hz)
+        if hold not in HOLDS:
+            raise ValueError(f"hold must be one of {HOLDS}, got {hold!r}")
+        u = v - float(rest_V)
+        if u.size == 0:
+            return u.copy(), u.copy(), u.copy()
+        modes, der = _modes(self.tau_s, self.lam, dt)
+        a, b0, b1 = hold_gains(modes.q, dt, hold)
+        m1, m2, dm1, dm2 = modes.direct_m1, modes.direct_m2, der.dm1, der.dm2
+        if hold == "zoh":  # the instantaneous gains on u[n-1] and u[n]
+            d0, d1, dd0, dd1 = m1, 0.0, dm1, np.zeros(2)
+        else:
+            d0, d1, dd0, dd1 = m2 / dt, m1 - m2 / dt, dm2 / dt, dm1 - dm2 / dt
+        bank = DiscreteBank.from_arrays(
+            np.r_[a, 0.0, 0.0], np.r_[b0, 1.0, 0.0], np.r_[b1, 0.0, 1.0], np.r_[modes.c, d0, d1]
+        )
+        extra = np.hstack([der.dc, dd0[:, None], dd1[:, None]])
+        y = run_bank_multi(bank, u[:, None], extra)[0][:, 0, :]
+        moving = np.flatnonzero(np.any(der.dq != 0, axis=0))
+        if moving.size:
+            da, db0, db1 = hold_gain_derivatives(modes.q[moving], dt, hold)
+            q, c = modes.q, modes.c
+            kern = kernels()
+            dy = np.ascontiguousarray(y[:, 1:])
+            done: set[int] = set()
+            for j, i in enumerate(moving.tolist()):
+                if i in done:
+                    continue
+                weight = 1.0  # a conjugate pair adds twice the real part of one member
+                k = i + 1
+                if k < q.size and q[k] == np.conj(q[i]) and c[k] == np.conj(c[i]):
+                    weight = 2.0
+                    done.add(k)
+                g = weight * c[i] * der.dq[:, i]
+                if kern is not None:
+                    kern.mode_derivative(u, a[i], b0[i], b1[i], da[j], db0[j], db1[j], g, dy)
+                    continue
+                x = _scipy_signal().lfilter([b1[i], b0[i]], [1.0, -a[i]], u)
+                rhs = da[j] * np.r_[0.0, x[:-1]] + db0[j] * np.r_[0.0, u[:-1]] + db1[j] * u
+                z = _scipy_signal().lfilter([1.0], [1.0, -a[i]], rhs)
+                dy += (g[None, :] * z[:, None]).real
+            y[:, 1:] = dy
+        return y[:, 0] + rest_V, y[:, 1], y[:, 2]
 
     def kernel(self, n: int, rate_hz: float, hold: str = "zoh") -> NDArray[np.float64]:
         """Exact sampled kernel ``k`` with ``y = k * v`` (length ``n``)."""
@@ -168,10 +249,10 @@ class Relaxor:
             # exact discrete inverse of the ZOH kernel: y[n+1] = sum_k h[n+1-k] v[k]
             h = sampled_kernel(self.tau_s, self.lam, dt, y.size + 1, "zoh")[1:]
             y_next = np.append(y[1:], y[-1])
-            return signal.fftconvolve(y_next, series_reciprocal(h))[: y.size]
+            return _scipy_signal().fftconvolve(y_next, series_reciprocal(h))[: y.size]
         y_ext = np.append(y, y[-1])
         w = power_ramp_kernel(self.lam - 1.0, dt, y_ext.size)
-        phi = signal.fftconvolve(y_ext, w)[: y_ext.size]
+        phi = _scipy_signal().fftconvolve(y_ext, w)[: y_ext.size]
         mean_y = 0.5 * (y_ext[:-1] + y_ext[1:])
         return mean_y + self.tau_s**self.lam * np.diff(phi) / dt
 
@@ -226,15 +307,30 @@ class _LogChebyshevStep:
 
             self.coeffs.append(C.chebinterpolate(f, _CHEB_NODES - 1))
 
-    def __call__(self, t: NDArray) -> NDArray:
+    def branch(self, t: NDArray) -> NDArray:
+        """The branch-cut part of the step response at ``t`` (s); compiled Clenshaw sums when
+        numba is available, else one numpy ``chebval`` per panel."""
+        t = np.ascontiguousarray(t, dtype=np.float64)
+        coeffs = np.ascontiguousarray(self.coeffs)
+        kern = kernels()
+        if kern is not None:
+            return kern.chebyshev_panels(t, self.u0, self.width, coeffs)
         u = np.log10(t)
         pan = np.clip(((u - self.u0) / self.width).astype(int), 0, len(self.coeffs) - 1)
         x = 2.0 * (u - (self.u0 + pan * self.width)) / self.width - 1.0
         out = np.empty_like(t)
+        if np.all(pan[1:] >= pan[:-1]):  # sorted times (the kernels'): contiguous panels
+            cuts = np.r_[0, np.flatnonzero(np.diff(pan)) + 1, pan.size]
+            for i, j in itertools.pairwise(cuts):
+                out[i:j] = C.chebval(x[i:j], coeffs[pan[i]])
+            return out
         for p in np.unique(pan):
             sel = pan == p
-            out[sel] = C.chebval(x[sel], self.coeffs[p])
-        return out + relaxor_step_pole_part(t, self.tau_s, self.lam)
+            out[sel] = C.chebval(x[sel], coeffs[p])
+        return out
+
+    def __call__(self, t: NDArray) -> NDArray:
+        return self.branch(t) + relaxor_step_pole_part(t, self.tau_s, self.lam)
 
 
 def _step_grid(tau_s: float, lam: float, dt: float, n: int) -> NDArray[np.float64]:
@@ -249,7 +345,9 @@ def _step_grid(tau_s: float, lam: float, dt: float, n: int) -> NDArray[np.float6
     return out
 
 
-_GL3_X, _GL3_W = np.polynomial.legendre.leggauss(3)
+# Gauss-Legendre with 2 points per interval: for m >= 2048 samples the error of an interval
+# mean is about (dt/t)^4 t^4 |s^(4)| / 4320 < 1e-16 of the step response
+_GL2_X, _GL2_W = np.polynomial.legendre.leggauss(2)
 
 
 def _interval_means(tau_s: float, lam: float, dt: float, n: int) -> NDArray[np.float64]:
@@ -263,14 +361,15 @@ def _interval_means(tau_s: float, lam: float, dt: float, n: int) -> NDArray[np.f
         m = np.arange(k, n, dtype=np.float64)
         interp = _LogChebyshevStep(tau_s, lam, k * dt, (n + 1) * dt)
         acc = np.zeros(m.size)
-        for x, w in zip(_GL3_X, _GL3_W, strict=True):
-            t = (m + 0.5 + 0.5 * x) * dt
-            acc += 0.5 * w * (interp(t) - relaxor_step_pole_part(t, tau_s, lam))
-        # pole part integrated in closed form: mean of -(2/lam) Re e^{pt} over the interval
+        for x, w in zip(_GL2_X, _GL2_W, strict=True):
+            acc += 0.5 * w * interp.branch((m + 0.5 + 0.5 * x) * dt)
+        # pole part integrated in closed form: mean of -(2/lam) Re e^{pt} over the interval,
+        # where it has not yet decayed below 1e-30
         p = pole_pair(tau_s, lam)
         if p is not None:
-            ta, tb = m * dt, (m + 1) * dt
-            acc += -(2.0 / lam) * ((np.exp(p * tb) - np.exp(p * ta)) / (p * dt)).real
+            live = m * dt * p.real > -70.0
+            ta, tb = m[live] * dt, (m[live] + 1) * dt
+            acc[live] += -(2.0 / lam) * ((np.exp(p * tb) - np.exp(p * ta)) / (p * dt)).real
         out[k:] = acc
     return out
 
@@ -298,9 +397,9 @@ def series_reciprocal(h: NDArray) -> NDArray:
     m = 1
     while m < n:
         m = min(2 * m, n)
-        e = -signal.fftconvolve(h[:m], r)[:m]
+        e = -_scipy_signal().fftconvolve(h[:m], r)[:m]
         e[0] += 2.0
-        r = signal.fftconvolve(r, e)[:m]
+        r = _scipy_signal().fftconvolve(r, e)[:m]
     return r
 
 
@@ -330,96 +429,15 @@ def power_ramp_kernel(mu: float, dt: float, n: int) -> NDArray[np.float64]:
 # -- diffusive (modal) realisation ------------------------------------------------------------
 
 
-def _mu(xi: NDArray, tau_s: float, lam: float) -> NDArray:
-    # r / (1 + 2 r cos + r^2) written as 1 / (1/r + 2 cos + r): no overflow for huge or tiny r
-    with np.errstate(divide="ignore", over="ignore"):
-        r = (tau_s * np.asarray(xi, dtype=float)) ** lam
-        return np.sin(np.pi * lam) / (np.pi * (1.0 / r + 2.0 * np.cos(np.pi * lam) + r))
-
-
-_TAIL_GL_X, _TAIL_GL_W = np.polynomial.legendre.leggauss(16)
-
-
-def _mu_moment(tau_s: float, lam: float, lo: float, hi: float, power: int) -> float:
-    """``int_lo^hi mu(xi) xi^power dxi`` (``lo = 0`` or ``hi = inf`` allowed), in log xi.
-
-    Fixed 16-point Gauss-Legendre panels of unit width in ``x = ln xi`` (``mu``'s singularities
-    are at least ``pi |1 - lam| / lam`` or ``pi/2`` away from the real axis, so each panel
-    converges to rounding for ``|lam - 1| > 0.05``); an infinite end is cut where the
-    integrand has decayed by ``e^-50`` (it falls like ``exp(-|power + 1 +- lam| |x - x0|)``).
-    """
-    x0 = -np.log(tau_s)
-    lo_x = np.log(lo) if lo > 0 else None
-    hi_x = np.log(hi) if np.isfinite(hi) else None
-    if lo_x is None:  # integrand ~ exp((power + 1 + lam) x) as x -> -inf
-        rate = power + 1 + lam
-        lo_x = min(hi_x, x0) - 50.0 / rate
-    if hi_x is None:  # integrand ~ exp((power + 1 - lam) x) as x -> +inf
-        rate = lam - power - 1
-        hi_x = max(lo_x, x0) + 50.0 / rate
-    if hi_x <= lo_x:
-        return 0.0
-    n = max(1, int(np.ceil(hi_x - lo_x)))
-    edges = np.linspace(lo_x, hi_x, n + 1)
-    mid, half = (edges[1:] + edges[:-1]) / 2, (edges[1:] - edges[:-1]) / 2
-    x = (mid[:, None] + half[:, None] * _TAIL_GL_X[None, :]).ravel()
-    w = (half[:, None] * _TAIL_GL_W[None, :]).ravel()
-    # mu(xi) xi^(power + 1) from x directly: xi = e^x overflows for a small lam (the upper cut
-    # is 50 / lam e-folds above x0), r = (tau xi)^lam = e^(lam (x - x0)) does not
-    r = np.exp(lam * (x - x0))
-    mu = np.sin(np.pi * lam) / (np.pi * (1.0 / r + 2.0 * np.cos(np.pi * lam) + r))
-    return float(np.sum(w * mu * np.exp((power + 1) * x)))
-
-
 @lru_cache(maxsize=64)
-def diffusive_modes(tau_s: float, lam: float, dt: float) -> ContinuousModes:
-    """Modal approximation of the relaxor at sample period ``dt`` (module docstring)."""
+def _modes(tau_s: float, lam: float, dt: float) -> tuple[ContinuousModes, ModeDerivatives]:
     _validate(tau_s, lam)
-    if lam == 1.0:
-        return ContinuousModes(q=np.array([-1.0 / tau_s + 0j]), c=np.array([1.0 / tau_s + 0j]))
-    xi_lo, xi_hi = XI_MIN_RAD_S, 40.0 / dt
-    q_list: list[NDArray] = []
-    c_list: list[NDArray] = []
-    if xi_hi > xi_lo:
-        # distance of mu's poles from the real log-xi axis sets the panel width (Bernstein ellipse)
-        d = min(np.pi / 2, np.pi * abs(1.0 - lam) / lam)
-        # half-width 0.6 d puts the singularity on a Bernstein ellipse of rho = 3.6: 8 Gauss
-        # nodes then converge like 3.6^-16 ~ 1e-9 (far better where panels are narrower than d)
-        half = min(np.log(10) / (2 * _PANELS_PER_DECADE_FAST), max(0.6 * d, 0.02))
-        n_pan = int(np.ceil((np.log(xi_hi) - np.log(xi_lo)) / (2 * half)))
-        edges = np.linspace(np.log(xi_lo), np.log(xi_hi), n_pan + 1)
-        gx, gw = np.polynomial.legendre.leggauss(_GL_NODES)
-        mid, hw = (edges[1:] + edges[:-1]) / 2, (edges[1:] - edges[:-1]) / 2
-        x = (mid[:, None] + hw[:, None] * gx[None, :]).ravel()
-        w = (hw[:, None] * gw[None, :]).ravel()
-        xi = np.exp(x)
-        q_list.append(-xi + 0j)
-        c_list.append(w * _mu(xi, tau_s, lam) * xi + 0j)
-        # slow tail: one mode matching int mu and int mu/xi below xi_lo
-        m0 = _mu_moment(tau_s, lam, 0.0, xi_lo, 0)
-        m_1 = _mu_moment(tau_s, lam, 0.0, xi_lo, -1)
-        if m0 != 0.0 and m_1 != 0.0:
-            xi_eff = m0 / m_1
-            q_list.append(np.array([-xi_eff + 0j]))
-            c_list.append(np.array([m0 + 0j]))
-    # fast tail: instantaneous at this sampling rate
-    m1 = _mu_moment(tau_s, lam, xi_hi, np.inf, -1)
-    m2 = _mu_moment(tau_s, lam, xi_hi, np.inf, -2)
-    p = pole_pair(tau_s, lam)
-    if p is not None:
-        r = -p / lam
-        q_list.append(np.array([p, np.conj(p)]))
-        c_list.append(np.array([r, np.conj(r)]))
-    q, c = np.concatenate(q_list), np.concatenate(c_list)
-    # Near lam = 1 the density mu is a spike at xi = 1/tau, narrower than any panel (its mass
-    # changes sign across lam = 1), which the quadrature misses. Put the missing
-    # DC gain (G(0) = 1 exactly) in one mode at xi = 1/tau, where the spike sits: exact in
-    # the limit of a narrow spike, and a ~1e-10 correction elsewhere.
-    missing = 1.0 - (float(np.sum(c / -q).real) + m1)
-    if abs(missing) > 1e-12:
-        q = np.append(q, -1.0 / tau_s + 0j)
-        c = np.append(c, missing / tau_s + 0j)
-    return ContinuousModes(q=q, c=c, direct_m1=m1, direct_m2=m2)
+    return diffusive.modes(tau_s, lam, dt)
+
+
+def diffusive_modes(tau_s: float, lam: float, dt: float) -> ContinuousModes:
+    """Modal realisation of the relaxor at sample period ``dt`` (s) (labrig.model.diffusive)."""
+    return _modes(tau_s, lam, dt)[0]
 
 
 @lru_cache(maxsize=64)

@@ -17,6 +17,7 @@ from labrig.analysis.baselines import (
     fit_baseline,
     play_operator,
     play_operators,
+    play_operators_numpy,
 )
 from labrig.analysis.metrics import nrmse_pct
 from labrig.analysis.records import Record
@@ -175,3 +176,275 @@ def test_chained_run_for_both_baselines() -> None:
         # simulated from rest, the later entries miss their history
         alone = fit_baseline(recs, kind, heldout=False)
         assert alone.nrmse_pct > 100 * chained.nrmse_pct + 0.05, kind
+
+
+# -- compiled kernels against their NumPy references -------------------------------------------
+
+
+def edge_records() -> dict[str, tuple[np.ndarray, float]]:
+    """Voltages (V) with the rest each starts from: minor loops with flat stretches, a held
+    start (rest_V != 0), a ramp down through zero, one sample, no sample, all flat."""
+    rng = np.random.default_rng(3)
+    walk = np.cumsum(rng.normal(0, 2.0, 3000))
+    walk[100:180] = walk[99]  # flat stretch inside a run
+    walk[1000:1001] = walk[999]  # a single repeated sample
+    loops = unipolar(100.0, 2.0, 1.5) * (1 + 0.3 * np.sin(np.arange(1500) / 100))
+    return {
+        "walk": (walk, 0.0),
+        "loops_held": (30.0 + loops, 30.0),
+        "ramp_through_zero": (np.linspace(40.0, -60.0, 500), 40.0),
+        "one_sample": (np.array([12.0]), 0.0),
+        "empty": (np.zeros(0), 0.0),
+        "all_flat": (np.full(50, 7.0), 7.0),
+        "flat_then_step": (np.concatenate([np.zeros(20), np.full(20, 5.0)]), 0.0),
+    }
+
+
+def test_compiled_play_operators_equal_the_run_by_run_form() -> None:
+    """Each output is one of ``V - r``, ``V + r`` or the previous one: the sample recursion and
+    the run-by-run closed form agree exactly."""
+    r = np.array([0.0, 0.5, 3.0, 17.0, 400.0])
+    for name, (v, rest) in edge_records().items():
+        got = play_operators(v, r, rest)
+        ref = play_operators_numpy(v, r, rest)
+        assert got.shape == ref.shape == (v.size, r.size), name
+        np.testing.assert_array_equal(got, ref, err_msg=name)
+        if v.size:  # relaxed at the rest: the widest operator never leaves it
+            assert np.all(got[:, -1] == rest), name
+    with pytest.raises(ValueError, match="non-negative"):
+        play_operators([1.0, 2.0], [-1.0])
+
+
+@pytest.mark.parametrize(
+    ("A", "beta", "gamma"),
+    [(4.0, 0.03, 0.01), (4.0, 0.03, -0.02), (-2.0, 0.04, 0.03), (1.0, 1e-6, 5e-7)],
+)
+def test_compiled_bouc_wen_equals_the_closed_form(A: float, beta: float, gamma: float) -> None:
+    """The compiled response against :func:`bouc_wen_exact` (the NumPy closed form), within
+    rounding (the same formulas; ``A h_1`` for the compiled form)."""
+    from labrig.model.bouc_wen import bouc_wen_exact
+
+    for name, (v, rest) in edge_records().items():
+        got = bouc_wen_response(v, A, beta, gamma, rest_V=rest)
+        ref = bouc_wen_exact(np.concatenate(([rest], v)), A, beta, gamma)[1:]
+        scale = max(float(np.max(np.abs(ref), initial=0.0)), 1e-300)
+        assert got.shape == ref.shape, name
+        assert np.max(np.abs(got - ref), initial=0.0) <= 1e-13 * scale, name
+
+
+def test_bouc_wen_derivatives_against_central_differences() -> None:
+    """``dh/dks`` and ``dh/dko`` of the compiled kernel against central differences of the
+    NumPy closed form (step 1e-5 relative: truncation and rounding both below 1e-8 of the
+    scale), on runs that cross zero, runs that do not, and tiny ``k u`` (the series)."""
+    from labrig.analysis import baseline_kernels as kern
+    from labrig.model.bouc_wen import bouc_wen_exact, monotone_runs
+
+    for (ks, ko), name in [((0.04, 0.02), "walk"), ((0.04, -0.03), "walk"),
+                           ((0.05, 0.9), "loops_held"), ((2e-6, 1e-6), "loops_held"),
+                           ((0.03, 0.01), "ramp_through_zero")]:  # fmt: skip
+        v, rest = edge_records()[name]
+        vp = np.concatenate(([rest], v))
+        runs = monotone_runs(vp)
+        h, hks, hko = kern.bouc_wen_h1(vp, runs, ks, ko, sens=True)
+
+        def h_of(ks_: float, ko_: float, vp=vp, runs=runs) -> np.ndarray:
+            return bouc_wen_exact(vp, 1.0, 0.5 * (ks_ + ko_), 0.5 * (ks_ - ko_), runs)
+
+        np.testing.assert_allclose(h, h_of(ks, ko), rtol=0, atol=1e-13 * np.max(np.abs(h)))
+        for got, (dks, dko) in ((hks, (1e-5 * ks, 0.0)), (hko, (0.0, 1e-5 * max(ks, abs(ko))))):
+            step = dks + dko
+            fd = (h_of(ks + dks, ko + dko) - h_of(ks - dks, ko - dko)) / (2 * step)
+            assert np.max(np.abs(got - fd)) <= 1e-7 * np.max(np.abs(fd)), (ks, ko, name)
+        # without derivatives they are zero and h is the same
+        h2, z1, z2 = kern.bouc_wen_h1(vp, runs, ks, ko, sens=False)
+        np.testing.assert_array_equal(h2, h)
+        assert not z1.any() and not z2.any()
+
+
+def test_bouc_wen_derivative_on_one_run_against_mpmath() -> None:
+    """From ``h = 0`` along one rising run ``h = phi(ks, u)`` and ``dh/dks = psi(ks, u)``: both
+    against 40-digit mpmath on both sides of ``|ks u| = 0.01`` (the series' switch), relative
+    error below 1e-12."""
+    import mpmath
+
+    from labrig.analysis import baseline_kernels as kern
+    from labrig.model.bouc_wen import monotone_runs
+
+    mpmath.mp.dps = 40
+    u = np.concatenate(([0.0], np.geomspace(1e-4, 200.0, 400)))
+    for ks in (1e-5, 4.9e-5, 5.1e-5, 0.05, 2.0):
+        h, hks, _ = kern.bouc_wen_h1(u, monotone_runs(u), ks, 0.3 * ks, sens=True)
+        k = mpmath.mpf(ks)
+        for i in range(1, u.size):
+            x = mpmath.mpf(u[i])
+            phi = -mpmath.expm1(-k * x) / k
+            psi = (x * mpmath.exp(-k * x) - phi) / k
+            assert abs(h[i] - phi) <= 1e-12 * abs(phi), (ks, u[i])
+            assert abs(hks[i] - psi) <= 1e-12 * abs(psi), (ks, u[i])
+
+
+def test_segment_sums_against_numpy(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The compiled sums of the Bouc-Wen fit against their NumPy forms and a direct
+    centred product."""
+    from labrig.analysis import baseline_kernels as kern
+
+    rng = np.random.default_rng(5)
+    cols = rng.normal(3.0, 2.0, (4, 400))
+    meas = rng.normal(-50.0, 10.0, 300)
+    lo, n = np.array([10, 150, 399]), np.array([100, 199, 1])
+    m0 = np.array([0, 100, 299])
+    coef = rng.normal(size=(3, 3, 5))
+    got = {}
+    for compiled in (True, False):
+        if not compiled:
+            monkeypatch.setattr(kern, "kernel", lambda name: None)
+        for centre in (True, False):
+            mom = kern.segment_moments(cols, meas, lo, m0, n, centre)
+            gram = kern.residual_gram(cols, meas, lo, m0, n, np.ascontiguousarray(mom[:, 0]), coef)
+            got[compiled, centre] = (mom, gram)
+    for centre in (True, False):
+        for a, b in zip(got[True, centre], got[False, centre], strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-9)
+        mom, gram = got[True, centre]
+        for g in range(3):  # direct: the centred columns' products
+            y = np.vstack((cols[:, lo[g] : lo[g] + n[g]], meas[m0[g] : m0[g] + n[g]]))
+            yc = y - (y.mean(axis=1, keepdims=True) if centre else 0.0)
+            np.testing.assert_allclose(mom[g, 1:], yc @ yc.T, rtol=1e-12, atol=1e-9)
+        q = np.hstack([coef[g] @ (np.vstack((cols[:, lo[g] : lo[g] + n[g]],
+                                             meas[m0[g] : m0[g] + n[g]])) - mom[g, 0][:, None])
+                       for g in range(3)])  # fmt: skip
+        np.testing.assert_allclose(gram, q @ q.T, rtol=1e-12, atol=1e-9)
+
+
+# -- the fits against the previous algorithm ---------------------------------------------------
+
+
+def reference_bouc_wen(records: list[Record], **kw) -> tuple[BoucWen, float]:
+    """The Bouc-Wen fit as it was computed before the compiled kernels (an independent path to
+    the same optimum): the full weighted residual vector from :func:`bouc_wen_exact`, ``(d, A)``
+    by least squares, Jacobian by scipy's differences; the same start grid, bounds and
+    tolerances. Returns the model and its cost, ``sum_e (NRMSE_e / 100)^2``."""
+    from scipy import optimize
+
+    from labrig.analysis.simulate import CONVERGED, scored_names, scored_sequences
+    from labrig.model.bouc_wen import bouc_wen_exact
+
+    offset, warmup, chain = kw.get("offset", False), kw.get("warmup_s", 0.0), kw.get("chain", False)
+    seqs = scored_sequences(records, scored_names(records, None), warmup, chain)
+    vps = [np.concatenate(([s.seq.rest_V], s.seq.voltage_V)) for s in seqs]
+    vr = max(float(np.ptp(vp)) for vp in vps)
+
+    def cen(x: np.ndarray) -> np.ndarray:
+        return x - x.mean() if offset else x
+
+    def columns(beta: float, gamma: float):
+        c0, c1, b = [], [], []
+        for s, vp in zip(seqs, vps, strict=True):
+            h1 = bouc_wen_exact(vp, 1.0, beta, gamma)[1:]
+            for g in s.segments:
+                c0.append(g.weight * cen(s.seq.voltage_V[g.lo : g.hi]))
+                c1.append(-g.weight * cen(h1[g.lo : g.hi]))
+                b.append(g.weight * cen(g.measured_ue))
+        C = np.column_stack([np.concatenate(c0), np.concatenate(c1)])
+        return C, np.concatenate(b)
+
+    def unpack(z):
+        ks = float(np.exp(z[0])) / vr
+        return 0.5 * (ks + z[1] * ks), 0.5 * (ks - z[1] * ks)
+
+    def fun(z):
+        C, b = columns(*unpack(z))
+        return C @ np.linalg.lstsq(C, b, rcond=None)[0] - b
+
+    lo, hi = np.array([np.log(1e-3), -0.95]), np.array([np.log(1e3), 20.0])
+    grid = [(np.log(x), y) for x in (0.3, 1.0, 3.0, 10.0) for y in (-0.5, 0.3, 1.0, 3.0)]
+    z0 = np.array(min(grid, key=lambda z: float(np.sum(fun(np.array(z)) ** 2))))
+    res = optimize.least_squares(fun, z0, bounds=(lo, hi), x_scale="jac", **CONVERGED)
+    beta, gamma = unpack(res.x)
+    C, b = columns(beta, gamma)
+    d, A = np.linalg.lstsq(C, b, rcond=None)[0]
+    return BoucWen(float(d), float(A), beta, gamma), float(res.fun @ res.fun)
+
+
+def bw_cases() -> dict[str, tuple[list[Record], dict]]:
+    """A chained run (history in the rests) and imported-style records with offsets, a warm-up
+    and a held start."""
+    truth = BoucWen(d=13.0, A=4.0, beta=0.03, gamma=0.012)
+    rng = np.random.default_rng(8)
+    volts = [unipolar(a, f, 1.0) for a, f in ((100.0, 1.0), (40.0, 5.0), (70.0, 2.0))]
+    rest = np.zeros(300)
+    whole = truth.predict(np.concatenate([np.concatenate([v, rest]) for v in volts]))
+    chained, pos = [], 0
+    for k, v in enumerate(volts):
+        s = whole[pos : pos + v.size] + rng.normal(0, 1.0, v.size)
+        chained.append(Record.from_arrays(f"e{k}", RATE, v, s, rest_after_s=0.3))
+        pos += v.size + rest.size
+    held = []
+    for k, (a, f) in enumerate(((60.0, 1.0), (90.0, 3.0))):
+        v = 20.0 + unipolar(a, f, 2.0)
+        s = truth.predict(v, rest_V=20.0) + 30.0 * k + rng.normal(0, 1.0, v.size)
+        held.append(Record.from_arrays(f"h{k}", RATE, v, s, hold="linear", rest_V=20.0))
+    return {
+        "chain": (chained, {"chain": True}),
+        "offsets": (held, {"offset": True, "warmup_s": 0.3}),
+    }
+
+
+@pytest.mark.parametrize("case", ["chain", "offsets"])
+def test_bouc_wen_fit_equals_the_previous_algorithm(case: str) -> None:
+    """Exact derivatives and the 3-row least-squares form reach the optimum the difference-based
+    fit on the full residual reaches: parameters within 1e-5 (the optimiser's own tolerance
+    leaves them about 1e-5 from the exact optimum), the objective (the sum of squared
+    per-entry NRMSE, with offsets each entry about its mean) within 1e-8 relative."""
+    records, kw = bw_cases()[case]
+    res = fit_baseline(records, "bouc_wen", heldout=False, **kw)
+    ref, cost = reference_bouc_wen(records, **kw)
+    for k in ("d", "A", "beta", "gamma"):
+        assert getattr(res.model, k) == pytest.approx(getattr(ref, k), rel=1e-5), k
+    assert sum((p / 100) ** 2 for p in res.per_entry.values()) == pytest.approx(cost, rel=1e-8)
+
+
+def test_pi_fit_equals_one_qr_of_every_row() -> None:
+    """The segments' factors stacked (shared by the folds) give the weights of the NNLS on all
+    rows at once, in-sample and for every fold."""
+    from scipy import optimize
+
+    recs = [
+        *bw_cases()["offsets"][0],
+        *bw_cases()["chain"][0],
+    ]  # four records on their own, with offsets
+    res = fit_baseline(recs, "prandtl_ishlinskii", offset=True, warmup_s=0.3)
+    r = np.asarray(res.model.thresholds)
+    rows, rhs = [], []
+    for rec in recs:
+        i0 = round(0.3 * RATE)
+        B = play_operators(rec.voltage_V, r, rec.rest_V)[i0:]
+        m = rec.strain_ue[i0:]
+        w = 1.0 / (np.ptp(m) * np.sqrt(m.size))
+        rows.append((B - B.mean(axis=0)) * w)
+        rhs.append((m - m.mean()) * w)
+    w_ref, _ = optimize.nnls(np.vstack(rows), np.concatenate(rhs), maxiter=50 * r.size)
+    np.testing.assert_allclose(res.model.weights, w_ref, rtol=1e-9, atol=1e-9 * np.max(w_ref))
+    assert res.heldout_nrmse_pct is not None and res.heldout_nrmse_pct > res.nrmse_pct
+
+
+def test_numpy_fallback_without_numba(monkeypatch: pytest.MonkeyPatch) -> None:
+    """numba missing: one warning, and the NumPy forms give the same fits."""
+    import sys
+
+    from labrig.analysis import baseline_kernels as kern
+
+    records, kw = bw_cases()["chain"]
+    compiled = {k: fit_baseline(records, k, **kw) for k in ("prandtl_ishlinskii", "bouc_wen")}
+    monkeypatch.setitem(sys.modules, "numba", None)  # import numba -> ImportError
+    monkeypatch.setattr(kern, "COMPILED", {})
+    with pytest.warns(RuntimeWarning, match="numba cannot be imported") as rec:
+        plain = {k: fit_baseline(records, k, **kw) for k in ("prandtl_ishlinskii", "bouc_wen")}
+    assert len(rec) == 1
+    assert all(v is None for v in kern.COMPILED.values())
+    for k, a in compiled.items():
+        b = plain[k]
+        assert b.nrmse_pct == pytest.approx(a.nrmse_pct, rel=1e-8), k
+        assert b.heldout_nrmse_pct == pytest.approx(a.heldout_nrmse_pct, rel=1e-7), k
+        for name, x in a.params.items():
+            assert b.params[name] == pytest.approx(x, rel=1e-5), (k, name)

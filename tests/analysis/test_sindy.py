@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -23,11 +25,15 @@ from labrig.analysis.baselines import fit_baseline
 from labrig.analysis.records import Record
 from labrig.analysis.sindy import (
     LIBRARY,
+    THRESHOLDS,
     SindyBaseline,
     equilibrium,
     free_run,
+    free_run_numpy,
     library_matrix,
+    smoothed_derivative,
     smoothing_window,
+    stlsq,
 )
 from labrig.cli import app
 
@@ -260,3 +266,171 @@ def test_cli_fit_sindy_on_real_data(tmp_path: Path) -> None:
     assert res.exit_code == 0, res.stderr
     assert "sindy parameters" in res.stdout and "dS/dt = " in res.stdout
     assert "coefficient_units" in res.stdout and "1/s" in res.stdout
+
+
+# -- compiled and reproduced parts against their references -------------------------------------
+
+
+def test_compiled_free_run_equals_the_numpy_form() -> None:
+    """Each library term alone, all of them, a diverging model held at its limit, flat
+    stretches, a held start, one sample and none: the compiled run against
+    :func:`free_run_numpy` (the same steps; the transcendental functions' last bits aside)."""
+    rate = 1000.0
+    t = np.arange(3000) / rate
+    v = 40.0 + 50.0 * (1 - np.cos(2 * np.pi * 3.0 * t)) * np.clip(1.5 - t, 0.0, 1.0)
+    v[500:700] = v[499]  # a flat stretch
+    cases = [(NONLINEAR, v, 40.0, math.inf), (xi_of(S=5.0, V=10.0, S_absS=1e-3), v, 0.0, 1e4)]
+    for k, name in enumerate(NAMES):  # each term alone, with a lag so it stays bounded
+        xi = np.zeros(len(NAMES))
+        xi[k] = NONLINEAR[k]
+        if name != "S":
+            xi[NAMES.index("S")] = -30.0
+        cases.append((xi, v, 40.0, math.inf))
+    cases += [(NONLINEAR, v[:1], 40.0, math.inf), (NONLINEAR, v[:0], 0.0, math.inf)]
+    for xi, vv, rest, limit in cases:
+        got = free_run(xi, vv, rate, rest, limit)
+        ref = free_run_numpy(xi, vv, rate, rest, limit)
+        assert got.shape == ref.shape == vv.shape
+        scale = max(float(np.max(np.abs(ref), initial=0.0)), 1.0)
+        assert np.max(np.abs(got - ref), initial=0.0) <= 1e-12 * scale, xi
+    held = free_run(xi_of(S=5.0, V=10.0, S_absS=1e-3), v, rate, 0.0, 1e4)
+    assert held[-1] == 1e4
+
+
+@pytest.mark.parametrize("window", [5, 11, 101])
+def test_smoothed_derivative_equals_pysindy(window: int) -> None:
+    from pysindy import SmoothedFiniteDifference
+
+    rng = np.random.default_rng(2)
+    rate = 1000.0
+    t = np.arange(1500) / rate
+    x = 300.0 * np.sin(2 * np.pi * 2.0 * t) ** 3 + rng.normal(0.0, 2.0, t.size)
+    sfd = SmoothedFiniteDifference(smoother_kws={"window_length": window, "polyorder": 3})
+    ref = np.asarray(sfd(x, t=1.0 / rate), dtype=float).ravel()
+    got = smoothed_derivative(x, rate, window)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * np.max(np.abs(ref)))
+
+
+def regression_systems() -> list[tuple[np.ndarray, np.ndarray]]:
+    """STLSQ's inputs as the fit makes them (the library on a simulated drive, columns and
+    target at unit RMS, reduced to the triangular system), a random one, and one with two
+    equal columns (rank-deficient: the ridge keeps it solvable, the refit cuts a singular
+    value)."""
+    rng = np.random.default_rng(4)
+    rate = 1000.0
+    t = np.arange(4000) / rate
+    v = 50.0 * (1 - np.cos(2 * np.pi * 2.0 * t))
+    s = free_run(NONLINEAR, v, rate) + rng.normal(0.0, 0.5, t.size)
+    d = np.gradient(v) * rate
+    X = library_matrix(s, v, d)
+    y = smoothed_derivative(s, rate, 63)
+    out = []
+    for a, b in ((X, y), (rng.normal(size=(200, 10)), rng.normal(size=200))):
+        a = a / np.sqrt(np.mean(a * a, axis=0))
+        q, r = np.linalg.qr(a, mode="reduced")
+        out.append((r, q.T @ (b / np.sqrt(np.mean(b * b)))))
+    r, qty = out[-1]
+    dup = r.copy()
+    dup[:, 3] = dup[:, 2]
+    out.append((dup, qty))
+    return out
+
+
+def test_stlsq_equals_pysindy() -> None:
+    """Every threshold of the fit's path (and one that drops every term) against pysindy's
+    STLSQ with the same settings."""
+    from pysindy.optimizers import STLSQ
+
+    for x, y in regression_systems():
+        thresholds = (*THRESHOLDS, 1e6)
+        got = stlsq(x, y, thresholds)
+        assert [lam for lam, _ in got] == list(thresholds)
+        supports = set()
+        for lam, xi in got:
+            opt = STLSQ(threshold=lam, alpha=1e-6, unbias=True, max_iter=20)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                opt.fit(x, y)
+            ref = np.asarray(opt.coef_, dtype=float).ravel()
+            np.testing.assert_array_equal(xi != 0, ref != 0, err_msg=str(lam))
+            np.testing.assert_allclose(xi, ref, rtol=1e-10, atol=1e-12 * np.max(np.abs(ref)))
+            supports.add(tuple(np.flatnonzero(xi)))
+        assert len(supports) >= 4 and () in supports  # a path, down to nothing
+
+
+def reference_sindy(records: list[Record], chain: bool, leave_out: str | None = None):
+    """The SINDy fit as it was computed with pysindy (no offsets): pysindy's smoothed
+    derivative per segment, one QR of every weighted row, pysindy's STLSQ per threshold, each
+    support scored in free run by :func:`free_run_numpy`, the sparsest within the tolerance
+    kept. ``leave_out``: fitted without that entry; returns the model and the free-run
+    prediction of every record's sequence."""
+    from pysindy import SmoothedFiniteDifference
+    from pysindy.optimizers import STLSQ
+
+    from labrig.analysis.metrics import drive_frequency_hz, nrmse_pct
+    from labrig.analysis.simulate import scored_sequences
+
+    names = [r.name for r in records]
+    seqs = scored_sequences(records, names, 0.0, chain)
+    items = [(s.seq, [g for g in s.segments if g.name != leave_out]) for s in seqs]
+    items = [(q, gs) for q, gs in items if gs]
+    rate = items[0][0].rate_hz
+    X, Y = [], []
+    for seq, segs in items:
+        d_all = np.gradient(seq.voltage_V) * seq.rate_hz
+        recs = {r.name: r for r in seq.records}
+        for g in segs:
+            w = smoothing_window(rate, drive_frequency_hz(recs[g.name]))
+            sfd = SmoothedFiniteDifference(smoother_kws={"window_length": w, "polyorder": 3})
+            sl = slice(w // 2, g.measured_ue.size - w // 2)
+            tg = np.asarray(sfd(g.measured_ue, t=1.0 / rate), dtype=float).ravel()[sl]
+            wt = 1.0 / (np.sqrt(np.mean(tg * tg)) * np.sqrt(tg.size))
+            v, d = seq.voltage_V[g.lo : g.hi][sl], d_all[g.lo : g.hi][sl]
+            X.append(library_matrix(g.measured_ue[sl], v, d) * wt)
+            Y.append(tg * wt)
+    X, y = np.vstack(X), np.concatenate(Y)
+    cs, ys = np.sqrt(np.mean(X * X, axis=0)), float(np.sqrt(np.mean(y * y)))
+    q, r = np.linalg.qr(X / cs, mode="reduced")
+    span = max(float(np.ptp(g.measured_ue)) for _, gs in items for g in gs)
+    cands, seen = [], set()
+    for lam in THRESHOLDS:
+        opt = STLSQ(threshold=lam, alpha=1e-6, unbias=True, max_iter=20)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            opt.fit(r, q.T @ (y / ys))
+        xi = np.asarray(opt.coef_, dtype=float).ravel() * ys / cs
+        if tuple(np.flatnonzero(xi)) in seen:
+            continue
+        seen.add(tuple(np.flatnonzero(xi)))
+        scores = []
+        for seq, segs in items:
+            p = free_run_numpy(xi, seq.voltage_V, rate, seq.rest_V, 100.0 * span)
+            scores += [nrmse_pct(g.measured_ue, p[g.lo : g.hi]) for g in segs]
+        cands.append((float(np.mean(scores)), xi))
+    best = min(c[0] for c in cands)
+    ok = [c for c in cands if c[0] <= 1.05 * best]
+    xi = min(ok, key=lambda c: (np.count_nonzero(c[1]), c[0]))[1]
+    preds = {s.seq.records[0].name if not chain else "chain":
+             free_run_numpy(xi, s.seq.voltage_V, rate, s.seq.rest_V, 100.0 * span)
+             for s in seqs}  # fmt: skip
+    return xi, preds, seqs
+
+
+@pytest.mark.parametrize("chain", [False, True])
+def test_fit_and_folds_equal_the_pysindy_fit(chain: bool) -> None:
+    """The fit with the reproduced derivative and STLSQ, the shared per-segment factors and the
+    compiled free run: the coefficients of the pysindy-based fit (relative 1e-9), in-sample and
+    for every leave-one-entry-out fold (held-out NRMSE relative 1e-9)."""
+    from labrig.analysis.metrics import nrmse_pct
+
+    records = [r for r in known_records(noise=0.5, rest_s=0.5 if chain else None)
+               if r.name.endswith(("_1Hz", "_5Hz"))]  # fmt: skip
+    res = fit_baseline(records, "sindy", chain=chain)
+    xi, _, _ = reference_sindy(records, chain)
+    np.testing.assert_allclose(res.model.coefficients, xi, rtol=1e-9, atol=0)
+    for name, held in res.heldout_per_entry.items():
+        xi, preds, seqs = reference_sindy(records, chain, leave_out=name)
+        k = next(i for i, s in enumerate(seqs) if any(g.name == name for g in s.segments))
+        g = next(g for g in seqs[k].segments if g.name == name)
+        p = preds["chain" if chain else name][g.lo : g.hi]
+        assert held == pytest.approx(nrmse_pct(g.measured_ue, p), rel=1e-9), name

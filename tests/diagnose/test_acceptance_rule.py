@@ -104,3 +104,47 @@ def test_a_gain_within_rounding_is_no_gain():
     assert any("numerical precision" in r for r in verdict.reasons)
     held, ref = folds([0.5] * 6, ref=2e-3)  # 1e-3 % is a real gain
     assert accept(library()["time_delay"], outcome(), held, ref).accepted
+
+
+# -- near the noise floor ------------------------------------------------------------------------
+
+REF = 2.0  # every fold's held-out NRMSE of the current model (%)
+
+
+@pytest.mark.parametrize(
+    ("floor", "cand", "accepted", "why"),
+    [
+        # excess 0.4 (ratio 1.25): a 10 % gain (0.2) removes 50 %; 9 % removes 45 %
+        (1.6, 1.80, True, "half the excess removed"),
+        (1.6, 1.82, False, "under half the excess"),
+        # ratio just over / under 1.1: the route is open / closed, same share of the excess
+        (1.80, 1.89, True, "ratio 1.11, 55 % of the excess, 5.5 % of the total"),
+        (1.83, 1.90, False, "ratio 1.09: at the floor, no excess worth explaining"),
+        # the total gain must still be at least 5 % (it binds for a ratio of 1.100-1.111):
+        # ratio 1.102, 4.75 % of the total removing 51 % of the excess refused; 5.25 % removing
+        # 57 % accepted
+        (1.815, 1.905, False, "4.75 % of the total"),
+        (1.815, 1.895, True, "5.25 % of the total, 57 % of the excess"),
+    ],
+)
+def test_the_rule_near_the_floor(floor: float, cand: float, accepted: bool, why: str):
+    held, ref = folds([cand / REF] * 5, REF)
+    a = accept(EFFECT, outcome(), held, ref, floor_pct=floor)
+    assert a.gain < MIN_GAIN  # never by the 15 % rule: only the rule near the floor
+    assert a.accepted is accepted, (why, a.reasons)
+    if not accepted:
+        assert any("below the 15 % minimum" in r for r in a.reasons)
+
+
+def test_without_a_floor_the_near_floor_route_is_closed():
+    held, ref = folds([1.80 / REF] * 5, REF)
+    assert accept(EFFECT, outcome(), held, ref, floor_pct=1.6).accepted
+    assert not accept(EFFECT, outcome(), held, ref).accepted
+    assert not accept(EFFECT, outcome(), held, ref, floor_pct=0.0).accepted
+
+
+def test_the_fold_rule_still_holds_near_the_floor():
+    # half the excess on average, but from one fold only: refused by the fold rule
+    held, ref = folds([1.0, 1.0, 1.0, 1.0, 0.5], REF)
+    a = accept(EFFECT, outcome(), held, ref, floor_pct=1.6)
+    assert not a.accepted and any("better in 1" in r for r in a.reasons)

@@ -49,7 +49,7 @@ OPERATORS = {
     ),
 }
 NAMES = list(OPERATORS)
-MEMORIES = ("return_point", "last_reversal")
+MEMORIES = ("return_point", "last_reversal", "return_point_open")
 
 
 def op_for(name: str, memory: str) -> QuasiStaticHysteresis:
@@ -175,7 +175,7 @@ def test_a_tiny_wiggle_moves_the_strain_only_with_return_point_memory_continuous
     wiggle = np.r_[down[:500], down[499] + 1e-6, down[500:]]
     s0, s1 = op.apply(down), op.apply(wiggle)
     diff = abs(s1[-1] - s0[-1])
-    if memory == "return_point":
+    if memory in ("return_point", "return_point_open"):
         assert diff < 1e-4
     else:
         assert diff > 10.0
@@ -386,3 +386,42 @@ def test_non_positive_gamma(shape: str, gamma: float, memory: str) -> None:
 def test_rejects_invalid_parameters(kwargs: dict) -> None:
     with pytest.raises(ValueError):
         QuasiStaticHysteresis(**kwargs)
+
+
+# -- the rest point on a bipolar drive -------------------------------------------------------------
+
+
+def _bipolar_cycles(amplitude: float, n: int = 2001) -> tuple[np.ndarray, int]:
+    """From rest up to ``amplitude``, then two bipolar cycles (n odd: 0 V is a sample of each
+    branch)."""
+    rise = np.linspace(-amplitude, amplitude, n)
+    return np.concatenate([np.linspace(0, amplitude, n), rise[::-1], rise, rise[::-1], rise]), n
+
+
+@pytest.mark.parametrize("shape", ["exponential", "gaussian", "linear"])
+def test_open_rest_point_keeps_a_bipolar_loop_open_at_0V(shape: str) -> None:
+    """With ``"return_point"`` a branch through 0 V after an excursion from rest closes onto the
+    rest point, so a bipolar loop is pinched at 0 V; ``"return_point_open"`` keeps it open by
+    ``F(2A) - 2F(A)``, the opening of a loop of amplitude ``A`` (as the single memory gives)."""
+    amp = 50.0
+    u, n = _bipolar_cycles(amp)
+    ops = {m: QuasiStaticHysteresis(8.9, 7.8, 65.0, shape, m) for m in MEMORIES}
+    out = {m: op.apply(u) for m, op in ops.items()}
+    width = {m: s[-2 * n : -n][n // 2] - s[-n:][n // 2] for m, s in out.items()}
+    F = ops["return_point"].branch
+    expected = float(F(2 * amp) - 2 * F(amp))
+    assert expected > 1.0
+    assert width["return_point"] == pytest.approx(0.0, abs=1e-9)
+    assert width["return_point_open"] == pytest.approx(expected, rel=1e-12)
+    assert width["last_reversal"] == pytest.approx(expected, rel=1e-12)
+
+
+def test_open_rest_point_changes_nothing_on_a_unipolar_drive() -> None:
+    """A drive that never goes below 0 V: a branch returning to 0 V meets the initial curve
+    there, so both return-point rules give the same strain, sample for sample."""
+    rng = np.random.default_rng(5)
+    u = np.abs(np.cumsum(rng.normal(0, 2.0, 5000)))
+    u = np.concatenate([u, np.linspace(u[-1], 0, 50), np.linspace(0, 80, 200)])
+    a = QuasiStaticHysteresis(8.9, 7.8, 65.0, memory="return_point").apply(u)
+    b = QuasiStaticHysteresis(8.9, 7.8, 65.0, memory="return_point_open").apply(u)
+    np.testing.assert_array_equal(a, b)

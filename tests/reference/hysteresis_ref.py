@@ -50,13 +50,15 @@ def hysteresis_ref(
         if step != 0:
             if direction != 0 and step != direction:
                 # the previous sample was a local extremum
-                if memory == "return_point":
+                if memory in ("return_point", "return_point_open"):
                     turning.append(u_prev)
                 else:
                     turning = [u_prev]
             direction = step
             a = u_prev
-            while len(turning) >= 2 and step * (x - turning[-2]) > 0:
+            # the open rule never closes a loop onto the rest state (the bottom turning point)
+            floor = 3 if memory == "return_point_open" else 2
+            while len(turning) >= floor and step * (x - turning[-2]) > 0:
                 # passes the turning point where the current minor loop began: integrate up to
                 # it, forget the loop (the bottom turning point, the rest state, stays)
                 c = turning[-2]

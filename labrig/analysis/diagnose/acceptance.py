@@ -4,7 +4,12 @@ A candidate is added when, on held-out data (leave-one-entry-out, scored on the 
 each held-out entry):
 
 - the mean held-out NRMSE drops by at least :data:`MIN_GAIN` (15 %) relative to the current
-  model, and by more than rounding (:data:`NUMERICAL_PCT`, for noise-free data);
+  model, and by more than rounding (:data:`NUMERICAL_PCT`, for noise-free data); or, when the
+  current model is near the noise floor (its held-out NRMSE at least :data:`NEAR_FLOOR_RATIO`
+  times the floor, so there is an excess to explain, but a 15 % gain of the total may not even
+  be available), the candidate removes at least :data:`EXCESS_GAIN` (half) of the excess over
+  the floor and at least :data:`MIN_NEAR_GAIN` (5 %) of the total: a named effect that
+  explains most of what is left is named instead of being left to empirical terms;
 - it is better (by more than :data:`FOLD_TOL`, 2 %) in at least two folds and in at least twice
   as many folds as it is worse;
 - none of its physical parameters ends on a bound or on the wrong side of its null value.
@@ -22,12 +27,29 @@ import numpy as np
 from labrig.analysis.extended import FitOutcome
 from labrig.model.effects import Effect
 
-__all__ = ["FOLD_TOL", "MIN_GAIN", "NUMERICAL_PCT", "Acceptance", "Candidate", "accept"]
+__all__ = [
+    "EXCESS_GAIN",
+    "FOLD_TOL",
+    "MIN_GAIN",
+    "MIN_NEAR_GAIN",
+    "NEAR_FLOOR_RATIO",
+    "NUMERICAL_PCT",
+    "Acceptance",
+    "Candidate",
+    "accept",
+]
 
 #: minimum relative held-out gain for an effect to be added
 MIN_GAIN = 0.15
 #: a fold counts as better / worse when it changes by more than this (relative)
 FOLD_TOL = 0.02
+#: near the floor: the current model's held-out NRMSE over the noise floor must be at least this
+#: (an excess worth explaining; a model at the floor has none) ...
+NEAR_FLOOR_RATIO = 1.1
+#: ... the candidate must remove at least this fraction of that excess ...
+EXCESS_GAIN = 0.5
+#: ... and at least this fraction of the total held-out NRMSE
+MIN_NEAR_GAIN = 0.05
 #: a held-out gain smaller than this (NRMSE %) is rounding, not a gain (noise-free data)
 NUMERICAL_PCT = 1e-6
 
@@ -51,10 +73,13 @@ def accept(
     held_ref: dict[str, float],
     min_gain: float = MIN_GAIN,
     span_s: float = float("inf"),
+    floor_pct: float | None = None,
 ) -> Acceptance:
     """The acceptance rule (module docstring) for effect ``eff`` fitted as ``fo``, its held-out
     NRMSE per entry ``held`` against the current model's ``held_ref``. ``span_s``: the longest
-    simulated sequence (s), for the effect's own caveats (:meth:`Effect.caveats`)."""
+    simulated sequence (s), for the effect's own caveats (:meth:`Effect.caveats`);
+    ``floor_pct``: the noise floor (NRMSE %, the current model's residual evidence) for the
+    rule near the floor (none: that route is closed)."""
     names = list(held_ref)
     c = np.array([held[n] for n in names])
     b = np.array([held_ref[n] for n in names])
@@ -67,9 +92,10 @@ def accept(
             f"held-out gain below numerical precision ({NUMERICAL_PCT:g} % of NRMSE): the "
             "model already reproduces the data"
         )
-    elif gain < min_gain:
+    elif gain < min_gain and not _removes_the_excess(c.mean(), b.mean(), gain, floor_pct):
         reasons.append(
             f"held-out gain {100 * gain:.0f} % is below the {100 * min_gain:.0f} % minimum"
+            + _excess_clause(c.mean(), b.mean(), floor_pct)
         )
     if wins < max(2, 2 * losses):
         reasons.append(f"better in {wins} and worse in {losses} of {len(names)} folds")
@@ -93,6 +119,26 @@ def accept(
             suspicious.append(f"{q.name} is poorly determined ({v:.3g} +- {s:.2g})")
     suspicious += eff.caveats(p, span_s)
     return Acceptance(not reasons, gain, wins, losses, reasons, suspicious)
+
+
+def _removes_the_excess(cand: float, ref: float, gain: float, floor_pct: float | None) -> bool:
+    """The rule near the floor (module docstring): ``ref`` at least :data:`NEAR_FLOOR_RATIO`
+    times the floor, at least :data:`EXCESS_GAIN` of its excess removed, and a total gain of at
+    least :data:`MIN_NEAR_GAIN`."""
+    if floor_pct is None or not floor_pct > 0 or ref < NEAR_FLOOR_RATIO * floor_pct:
+        return False
+    return (ref - cand) >= EXCESS_GAIN * (ref - floor_pct) and gain >= MIN_NEAR_GAIN
+
+
+def _excess_clause(cand: float, ref: float, floor_pct: float | None) -> str:
+    if floor_pct is None or not floor_pct > 0 or ref < NEAR_FLOOR_RATIO * floor_pct:
+        return ""
+    share = (ref - cand) / (ref - floor_pct)
+    return (
+        f" and it removes {100 * share:.0f} % of the excess over the noise floor "
+        f"({floor_pct:.3g} %), under the {100 * EXCESS_GAIN:.0f} % that the rule near the floor "
+        "asks"
+    )
 
 
 @dataclass

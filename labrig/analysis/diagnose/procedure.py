@@ -28,30 +28,29 @@ The procedure (docs/diagnose.md has the method and its measurements):
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from labrig.analysis.diagnose.acceptance import MIN_GAIN, Candidate, accept
-from labrig.analysis.diagnose.evidence import (
-    Evidence,
-    collect_evidence,
-    modelled_creep_per_decade,
-)
+from labrig.analysis.diagnose.acceptance import MIN_GAIN, Candidate
+from labrig.analysis.diagnose.evidence import Evidence, modelled_creep_per_decade
 from labrig.analysis.diagnose.ranking import jacobian_basis, rank
+from labrig.analysis.diagnose.state import Model, Settings, Setup
+from labrig.analysis.diagnose.trial import MAX_NFEV, json_params, numeric, try_candidate
 from labrig.analysis.diagnose.verdict import (
     AT_FLOOR,
     creep_added_sentence,
     creep_sentence,
-    signature_clause,
     verdict,
 )
-from labrig.analysis.extended import LAM_GAP, ExtendedProblem, FitOutcome, effect_context
-from labrig.analysis.fit import PARAM_NAMES, FitResult, fit_model
+from labrig.analysis.engine import LAM_GAP, SharedSimulations
+from labrig.analysis.extended import DEFAULT_MAINS_HZ, ExtendedProblem, effect_context
+from labrig.analysis.fit import FitResult, fit_model
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic
+from labrig.analysis.parallel import map_tasks
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import build_sequences
 from labrig.analysis.spectra import detect_mains_hz
@@ -68,9 +67,6 @@ from labrig.model import ModelParams
 from labrig.model.effects import CREEP_EFFECTS, EFFECT_NAMES, Effect, library
 
 __all__ = ["MAX_NFEV", "Diagnosis", "diagnose", "slow_mode_identifiable", "split_entries"]
-
-#: evaluation limit of a candidate's full fit (its folds get half)
-MAX_NFEV = 60
 
 Progress = Callable[[str], Any]
 
@@ -107,15 +103,6 @@ class Diagnosis:
             "candidates": self.candidates,
             "verdict": self.verdict,
         }
-
-
-def _mean(d: dict[str, float] | None) -> float | None:
-    return None if not d else float(np.mean(list(d.values())))
-
-
-def _numeric(params: ModelParams) -> dict[str, float]:
-    """The fitted (numeric) parameters, without the operator family's shape and memory."""
-    return {n: float(getattr(params, n)) for n in PARAM_NAMES}
 
 
 def _default_chain(records: Sequence[Record]) -> bool:
@@ -161,6 +148,7 @@ def diagnose(
     mains_hz: float | None = None,
     always: Sequence[str] = (),
     progress: Progress | None = None,
+    workers: int = 1,
 ) -> Diagnosis:
     """Diagnose what the dynamic model misses in ``records`` (module docstring).
 
@@ -173,393 +161,335 @@ def diagnose(
       without one, ``mains_pickup`` is not tried).
     - ``always``: names tried even where the records cannot identify them (``--also``):
       ``viscoelastic_creep`` is otherwise left out without a long, slow entry.
+    - ``workers``: processes for the held-out folds and the candidates of a round
+      (:func:`~labrig.analysis.parallel.map_tasks`); the result does not depend on it.
     """
     t0 = time.perf_counter()
     if len(records) < 3:
         raise ValueError("diagnose needs at least 3 entries (leave-one-entry-out)")
-    proc = _Procedure(
-        records,
-        params,
-        _default_chain(records) if chain is None else chain,
-        offset,
-        warmup_s,
-        top_k,
-        min_gain,
-        progress or (lambda _msg: None),
+    settings = Settings(
+        chain=_default_chain(records) if chain is None else chain,
+        offset=offset,
+        warmup_s=warmup_s,
+        top_k=top_k,
+        min_gain=min_gain,
+        shape=params.shape if params is not None else "exponential",
+        memory=params.memory if params is not None else "return_point",
+        initial=params,
+        workers=max(1, int(workers)),
     )
-    proc.fit_base(effects, mains_hz, always)
+    say = progress or (lambda _msg: None)
+    messages: list[str] = []
+    setup, before = fit_base(records, settings, effects, mains_hz, always, say, messages)
+    current, rounds, added = before, [], []
     for rnd in range(max_effects):
-        if not proc.next_round(rnd):
+        cands, best, nxt = next_round(setup, settings, current, rnd, say)
+        if cands:
+            rounds.append(cands)
+        if best is None or nxt is None:
             break
-    proc.empirical_round(len(proc.rounds))
-    d = proc.result()
+        current = nxt
+        added.append(best)
+    cands, best, nxt = empirical_round(setup, settings, current, len(rounds), say, messages)
+    if cands:
+        rounds.append(cands)
+    if best is not None and nxt is not None:
+        current = nxt
+        added.append(best)
+    d = result(setup, settings, before, current, rounds, added, messages)
     d.elapsed_s = time.perf_counter() - t0
     return d
 
 
-class _Procedure:
-    """The state of one diagnosis: the current model, the rounds so far."""
-
-    def __init__(
-        self,
-        records: list[Record],
-        params: ModelParams | None,
-        chain: bool,
-        offset: bool,
-        warmup_s: float,
-        top_k: int,
-        min_gain: float,
-        say: Progress,
-    ):
-        self.records = records
-        self.params = params
-        self.chain = chain
-        self.warmup_s = warmup_s
-        self.top_k = top_k
-        self.min_gain = min_gain
-        self.say = say
-        self.shape = params.shape if params is not None else "exponential"
-        self.memory = params.memory if params is not None else "return_point"
-        self.messages: list[str] = []
-        self.fr_kwargs = {
-            "shape": self.shape,
-            "memory": self.memory,
-            "initial": params,
-            "heldout": False,
-            "warmup_s": warmup_s,
-            "chain": chain,
-            "offset": offset,
-        }
-        self.offset = offset
-        self.rounds: list[list[Candidate]] = []
-        self.added: list[dict[str, Any]] = []
-        self.added_cands: list[Candidate] = []
-
-    # -- 1. the base model --------------------------------------------------------------------
-    def fit_base(
-        self, effects: Sequence[str] | None, mains_hz: float | None, always: Sequence[str] = ()
-    ) -> None:
-        """Fit the base model, configure the library, cross-validate the base."""
-        self.say("fitting the base model")
-        fr = fit_model(self.records, **self.fr_kwargs)
-        self.messages += fr.messages
-        base0 = _numeric(fr.params)
-        sequences = build_sequences(self.records, self.chain)
-        self.span_s = max(s.n / s.rate_hz for s in sequences)
-        self.lib_context = effect_context(self.records, mains_hz)
-        self.lib = library(**self.lib_context)
-        self.names = [n for n in dict.fromkeys(effects or EFFECT_NAMES) if n in self.lib]
-        if "viscoelastic_creep" in self.names and not slow_mode_identifiable(self.records):
-            why = (
-                "no entry long and slow enough to identify a slow viscoelastic mode "
-                f"(at least {SLOW_MODE_RECORD_S:g} s at {SLOW_MODE_MAX_HZ:g} Hz or below, or a "
-                "step)"
-            )
-            if "viscoelastic_creep" in always:
-                self.messages.append(f"{why}: viscoelastic_creep tried as asked (--also)")
-            else:
-                self.names.remove("viscoelastic_creep")
-                self.messages.append(f"{why}: viscoelastic_creep not tried")
-        if mains_hz is None and "mains_pickup" in self.names and not detect_mains_hz(self.records):
-            self.names.remove("mains_pickup")
-            self.messages.append(
-                "no mains line at 50 or 60 Hz in the strain: mains_pickup not tried "
-                "(--mains-hz sets the frequency and tries it)"
-            )
-        self.common = {
-            "chain": self.chain,
-            "shape": self.shape,
-            "memory": self.memory,
-            "warmup_s": self.warmup_s,
-            "offset": self.offset,
-            "base_free": fr.free,
-            "sequences": sequences,
-        }
-        if "lam_d" in fr.free and abs(base0["lam_d"] - 1.0) < LAM_GAP:
-            self._restart_off_lam_gap(fr, base0)
-        self.current: list[Effect] = []
-        self.cur_prob = ExtendedProblem(self.records, self.current, **self.common)
-        self.cur = self.cur_prob.fit(base0)
-        self.say("cross-validating the base model")
-        self.cur_held = self.cur_prob.heldout(self.cur)
-        self.before_fit, self.before_held = self.cur, self.cur_held
-        self.before_prob = self.cur_prob
-        self.ev_before = self._evidence()
-
-    def _restart_off_lam_gap(self, fr: FitResult, base0: dict[str, float]) -> None:
-        """The relaxor's modal realisation is discontinuous at lam = 1; the engine skips a gap
-        around it (:data:`~labrig.analysis.extended.LAM_GAP`): start on the better side."""
-        trial = {}
-        for side in (1.0 - LAM_GAP, 1.0 + LAM_GAP):
-            pr = ExtendedProblem(self.records, [], **self.common)
-            b = dict(base0, lam_d=side)
-            r = pr.residual(pr.z_of(b, {}), b)
-            trial[side] = float(r @ r)
-        base0["lam_d"] = min(trial, key=trial.get)
-        self.messages.append(
-            f"the base fit ended at lam_d = {fr.params.lam_d:.4g}, at the relaxor realisation's "
-            f"discontinuity (lam = 1); diagnose restarts it at {base0['lam_d']:g}"
-        )
-
-    def _evidence(self) -> Evidence:
-        preds = self.cur_prob.predictions(self.cur.base, self.cur.effects)
-        return collect_evidence(self.records, preds, self.warmup_s)
-
-    # -- 2-6. one round -----------------------------------------------------------------------
-    def next_round(self, rnd: int) -> bool:
-        """Rank, refit and cross-validate the remaining candidates; add the best that passes.
-        Returns whether an effect was added."""
-        remaining = [self.lib[n] for n in self.names if n not in {e.name for e in self.current}]
-        if not remaining:
-            return False
-        self.say(f"round {rnd + 1}: ranking {len(remaining)} candidates")
-        ranked = rank(self.records, self.current, self.cur, self.cur_prob, remaining, self.common)
-        ev_cur = self._evidence()
-        cands: list[Candidate] = []
-        problems: dict[str, ExtendedProblem] = {}
-        for k, (eff, score, probe) in enumerate(ranked):
-            c = Candidate(eff.name, rnd, score)
-            cands.append(c)
-            if k >= self.top_k:
-                c.evidence = (
-                    f"ranked {k + 1} of {len(ranked)}: its direction explains "
-                    f"{100 * score:.1f} % of the residual; not refitted"
-                )
-                continue
-            problems[eff.name] = self._try(c, eff, probe, ev_cur, rnd)
-        self.rounds.append(cands)
-        passed = [c for c in cands if c.accepted]
-        if not passed:
-            return False
-        best = min(passed, key=lambda c: c.heldout_nrmse_pct)
-        self._add(best, self.lib[best.effect], problems[best.effect])
-        return True
-
-    def _add(self, best: Candidate, eff: Effect, prob: ExtendedProblem) -> None:
-        """Extend the current model with the accepted candidate ``best``."""
-        self.lib.setdefault(eff.name, eff)
-        self.current = [*self.current, eff]
-        self.cur_prob = prob
-        self.cur, self.cur_held = best.fit, best.heldout_per_entry
-        self.added_cands.append(best)
-        self.added.append(
-            {
-                "effect": best.effect,
-                "params": _json_params(eff, best.fit),
-                "evidence": best.evidence,
-            }
-        )
-
-    # -- when no named effect passes: terms found in the data --------------------------------
-    def empirical_round(self, rnd: int) -> None:
-        """Sparse regression of the residual over physically readable terms
-        (:mod:`labrig.analysis.terms`) when the model is not yet within the noise; the selected
-        terms, as one empirical effect, are refitted, cross-validated and judged by the same
-        acceptance rule as a named effect. Empirical, never a physical attribution."""
-        ev = self._evidence()
-        if ev.ratio <= AT_FLOOR:
-            return
-        self.say(f"round {rnd + 1}: sparse regression of the residual")
-        scales = TermScales.from_records(self.records)
-        terms = list(term_library(scales).values())
-        with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
-            data = regression_data(self.cur_prob, self.cur.base, self.cur.effects, terms)
-            r = self.cur_prob.residual(self.cur.z, self.cur.base)
-            B = jacobian_basis(self.cur_prob.jacobian(self.cur.z, self.cur.base, r))
-        sel = select_terms(data.residual, data.columns, terms, data.weights, B)
-        if not sel.terms:
-            self.messages.append(
-                "sparse regression of the residual selected no term "
-                f"(the best explains {100 * sel.share:.1f} % of it)"
-            )
-            return
-        eff = empirical_effect(sel.keys, scales)
-        c = Candidate(eff.name, rnd, sel.share)
-        found = ", ".join(f"{t.name} ({t.coefficient_ue:+.3g} ue at full scale)" for t in sel.terms)
-        prob = self._try(c, eff, sel.start(), ev, rnd)
-        c.evidence = (
-            f"sparse regression of the residual selects {found} "
-            f"({100 * sel.share:.0f} % of the residual); " + c.evidence
-        )
-        self.rounds.append([c])
-        if c.accepted:
-            self._add(c, eff, prob)
-
-    def _start(self, prob: ExtendedProblem, eff: Effect, probe: dict[str, float]):
-        """The base start of a refit: the current base or, for a voltage effect, the staged fit
-        of the records driven through the effect when that is better (the base compensated the
-        distorted drive)."""
-        start = self.cur.base
-        if eff.where != "voltage":
-            return start
-        alt = _voltage_start(self.records, eff, probe, self.common, self.fr_kwargs)
-        if alt is None:
-            return start
-        e0 = {**self.cur.effects, eff.name: probe}
-        costs = []
-        for b in (self.cur.base, alt):
-            rb = prob.residual(prob.z_of(b, e0), b)
-            costs.append(float(rb @ rb))
-        return alt if costs[1] < costs[0] else start
-
-    def _refit(self, prob: ExtendedProblem, eff: Effect, probe: dict[str, float]) -> FitOutcome:
-        """Base + candidate: first the effect with the operator's gains only (V* does not move),
-        then everything free; from each of the effect's starts (a filter's time constant traded
-        against G_d has local optima), the lowest cost wins."""
-        start = self._start(prob, eff, probe)
-        lin = [n for n in ("alpha0_ue_per_V", "gamma_ue_per_V") if n in self.common["base_free"]]
-        pre = ExtendedProblem(
-            self.records, [*self.current, eff], **{**self.common, "base_free": lin}
-        )
-        fo = None
-        for e0 in eff.refit_starts(probe):
-            f1 = pre.fit(start, {**self.cur.effects, eff.name: e0}, tight=False, max_nfev=30)
-            f2 = prob.fit(f1.base, f1.effects, max_nfev=MAX_NFEV)
-            fo = f2 if fo is None or f2.cost < fo.cost else fo
-        assert fo is not None
-        return fo
-
-    def _try(
-        self, c: Candidate, eff: Effect, probe: dict[str, float], ev_cur: Evidence, rnd: int
-    ) -> ExtendedProblem:
-        """Refit one candidate, cross-validate it if it gains enough in-sample, judge it."""
-        self.say(f"round {rnd + 1}: fitting base + {eff.name}")
-        prob = ExtendedProblem(self.records, [*self.current, eff], **self.common)
-        fo = self._refit(prob, eff, probe)
-        c.tried, c.fit = True, fo
-        c.insample_gain = 1.0 - fo.nrmse_pct / self.cur.nrmse_pct
-        clause = signature_clause(eff, ev_cur)
-        desc = eff.describe(fo.effects.get(eff.name, {}), fo.sd.get(eff.name, {}))
-        if c.insample_gain < 0.5 * self.min_gain:
-            c.reasons.append(
-                f"in-sample gain only {100 * c.insample_gain:.1f} %, not cross-validated"
-            )
-            c.evidence = (
-                f"{clause}; adding {eff.name} ({desc}) changes the in-sample NRMSE from "
-                f"{self.cur.nrmse_pct:.3g} % to {fo.nrmse_pct:.3g} % only: not cross-validated"
-            )
-            return prob
-        self.say(f"round {rnd + 1}: cross-validating base + {eff.name}")
-        c.heldout_per_entry = prob.heldout(fo)
-        c.heldout_nrmse_pct = _mean(c.heldout_per_entry)
-        a = accept(eff, fo, c.heldout_per_entry, self.cur_held, self.min_gain, self.span_s)
-        c.judged(a)
-        verb = "cuts" if a.gain > 0 else "raises"
-        c.evidence = (
-            f"{clause}; adding {eff.name} ({desc}) {verb} held-out NRMSE from "
-            f"{_mean(self.cur_held):.3g} % to {c.heldout_nrmse_pct:.3g} % "
-            f"(better in {a.wins}, worse in {a.losses} of {len(self.cur_held)} folds)"
-            + ("" if a.accepted else "; rejected: " + "; ".join(a.reasons))
-            + ("; suspicious: " + "; ".join(a.suspicious) if a.suspicious and a.accepted else "")
-        )
-        return prob
-
-    # -- 7. the result ------------------------------------------------------------------------
-    def _candidates_json(self) -> list[dict[str, Any]]:
-        """Every effect tried: its latest round's result."""
-        latest: dict[str, Candidate] = {}
-        for cands in self.rounds:
-            for c in cands:
-                if c.tried or c.effect not in latest:
-                    latest[c.effect] = c
-        return [
-            {
-                "effect": c.effect,
-                "heldout_nrmse_pct": c.heldout_nrmse_pct,
-                "evidence": c.evidence,
-            }
-            for c in sorted(latest.values(), key=lambda c: (c.round, -c.score))
-        ]
-
-    def _creep(self, text: str) -> tuple[str, float, float]:
-        """The verdict with its creep sentence; the base's and the final model's creep."""
-        step_V = self.lib_context["v_ref"]
-        creep = modelled_creep_per_decade(self.before_fit.params(self.shape, self.memory), step_V)
-        slow = [(self.lib[n], p) for n, p in self.cur.effects.items() if n in CREEP_EFFECTS]
-        creep_after = creep_gt = creep
-        if slow:
-            after_params = self.cur.params(self.shape, self.memory)
-            creep_after = modelled_creep_per_decade(after_params, step_V, creep_effects=slow)
-            creep_gt = modelled_creep_per_decade(after_params, step_V)
-        if slow and np.isfinite(creep_after) and np.isfinite(creep_gt):
-            names = [e.name for e, _ in slow]
-            text += creep_added_sentence(creep_after, creep_gt, step_V, self.records, names)
-        elif np.isfinite(creep):
-            text += creep_sentence(creep, step_V, self.records)
-        return text, creep, creep_after
-
-    def result(self) -> Diagnosis:
-        ev_after = self._evidence()
-        before = {
-            "nrmse_pct": self.before_fit.nrmse_pct,
-            "heldout_nrmse_pct": _mean(self.before_held),
-            "per_entry": dict(self.before_fit.per_entry),
-        }
-        after = {
-            "nrmse_pct": self.cur.nrmse_pct,
-            "heldout_nrmse_pct": _mean(self.cur_held),
-            "per_entry": dict(self.cur.per_entry),
-        }
-        cand_json = self._candidates_json()
-        cls, text = verdict(
-            self.ev_before, ev_after, before, after, self.added_cands, self.rounds, self.lib
-        )
-        text, creep, creep_after = self._creep(text)
-        bf = self.before_fit
-        return Diagnosis(
-            before=before,
-            after=after,
-            effects_added=self.added,
-            candidates=cand_json,
-            verdict=text,
-            classification=cls,
-            evidence_before=self.ev_before,
-            evidence_after=ev_after,
-            predictions_before=self.before_prob.predictions(bf.base, bf.effects),
-            predictions_after=self.cur_prob.predictions(self.cur.base, self.cur.effects),
-            rounds=self.rounds,
-            base_params=dict(bf.base),
-            after_params=dict(self.cur.base),
-            base_creep_pct_per_decade=100.0 * creep if np.isfinite(creep) else None,
-            after_creep_pct_per_decade=100.0 * creep_after if np.isfinite(creep_after) else None,
-            messages=self.messages,
-        )
+# -- 1. the base model -----------------------------------------------------------------------
 
 
-def _voltage_start(
+def candidate_names(
     records: Sequence[Record],
-    eff: Effect,
-    probe: dict[str, float],
-    common: dict[str, Any],
-    fr_kwargs: dict[str, Any],
-) -> dict[str, float] | None:
-    """Base parameters fitted (``fit_model``) to the records driven by the voltage effect at
-    ``probe``: a start for base + a voltage effect."""
-    new = []
-    for seq in common["sequences"]:
-        v = eff.apply(seq.voltage_V, seq.context, probe)
-        for r in seq.records:
-            sl = seq.entries[r.name]
-            new.append(
-                Record(r.name, r.rate_hz, r.time_s, v[sl], r.strain_ue, {}, r.hold, dict(r.meta))
-            )
-    try:
-        fr = fit_model(new, **fr_kwargs)
-    except (ValueError, RuntimeError):
-        return None
-    b = _numeric(fr.params)
-    if abs(b["lam_d"] - 1.0) < LAM_GAP:
-        b["lam_d"] = 1.0 + LAM_GAP
-    return b
+    lib: Mapping[str, Effect],
+    effects: Sequence[str] | None,
+    mains_given: bool,
+    mains_seen: bool,
+    always: Sequence[str],
+    messages: list[str],
+) -> tuple[str, ...]:
+    """The library names tried in the rounds, with a message for each one left out."""
+    names = [n for n in dict.fromkeys(effects or EFFECT_NAMES) if n in lib]
+    if "viscoelastic_creep" in names and not slow_mode_identifiable(records):
+        why = (
+            "no entry long and slow enough to identify a slow viscoelastic mode "
+            f"(at least {SLOW_MODE_RECORD_S:g} s at {SLOW_MODE_MAX_HZ:g} Hz or below, or a "
+            "step)"
+        )
+        if "viscoelastic_creep" in always:
+            messages.append(f"{why}: viscoelastic_creep tried as asked (--also)")
+        else:
+            names.remove("viscoelastic_creep")
+            messages.append(f"{why}: viscoelastic_creep not tried")
+    if not mains_given and "mains_pickup" in names and not mains_seen:
+        names.remove("mains_pickup")
+        messages.append(
+            "no mains line at 50 or 60 Hz in the strain: mains_pickup not tried "
+            "(--mains-hz sets the frequency and tries it)"
+        )
+    return tuple(names)
 
 
-def _json_params(eff: Effect, fo: FitOutcome) -> dict[str, Any]:
-    p = fo.effects.get(eff.name, {})
-    out: dict[str, Any] = {}
-    for k, v in eff.physical(p).items():
-        out[k] = v if isinstance(v, str) else (float(v) if np.isfinite(v) else None)
-    for k, s in fo.sd.get(eff.name, {}).items():
-        out[f"{k}_sd"] = s
-    if eff.where == "nuisance":
-        out["description"] = eff.describe({}, {})
+def fit_base(
+    records: Sequence[Record],
+    settings: Settings,
+    effects: Sequence[str] | None,
+    mains_hz: float | None,
+    always: Sequence[str],
+    say: Progress,
+    messages: list[str],
+) -> tuple[Setup, Model]:
+    """Fit the base model, configure the library, cross-validate the base."""
+    say("fitting the base model")
+    fr = fit_model(list(records), **settings.fit_kwargs())
+    messages += fr.messages
+    base0 = numeric(fr.params)
+    sequences = build_sequences(records, settings.chain)
+    seen = detect_mains_hz(records) if mains_hz is None else None
+    context = effect_context(records, mains_hz or seen or DEFAULT_MAINS_HZ)
+    lib = library(**context)
+    names = candidate_names(
+        records, lib, effects, mains_hz is not None, seen is not None, always, messages
+    )
+    setup = Setup(
+        records=tuple(records),
+        sequences=tuple(sequences),
+        base_free=tuple(fr.free),
+        library=lib,
+        candidates=names,
+        context=context,
+        span_s=max(s.n / s.rate_hz for s in sequences),
+        shared=SharedSimulations(),
+    )
+    if "lam_d" in fr.free and abs(base0["lam_d"] - 1.0) < LAM_GAP:
+        base0 = _off_lam_gap(setup, settings, fr, base0, messages)
+    prob = setup.problem(settings, [])
+    fo = prob.fit(base0)
+    say("cross-validating the base model")
+    held = prob.heldout(fo, workers=settings.workers)
+    return setup, Model.of([], prob, fo, held, records, settings.warmup_s)
+
+
+def _off_lam_gap(
+    setup: Setup, settings: Settings, fr: FitResult, base0: dict[str, float], messages: list[str]
+) -> dict[str, float]:
+    """The relaxor's modal realisation is discontinuous at lam = 1; the engine skips a gap
+    around it (:data:`~labrig.analysis.engine.LAM_GAP`): start on the better side."""
+    trial = {}
+    pr = setup.problem(settings, [])
+    for side in (1.0 - LAM_GAP, 1.0 + LAM_GAP):
+        b = dict(base0, lam_d=side)
+        r = pr.residual(pr.z_of(b, {}), b)
+        trial[side] = float(r @ r)
+    out = dict(base0, lam_d=min(trial, key=lambda s: trial[s]))
+    messages.append(
+        f"the base fit ended at lam_d = {fr.params.lam_d:.4g}, at the relaxor realisation's "
+        f"discontinuity (lam = 1); diagnose restarts it at {out['lam_d']:g}"
+    )
     return out
+
+
+# -- 2-6. one round --------------------------------------------------------------------------
+
+
+def _extended(current: Model, c: Candidate, eff: Effect, prob: ExtendedProblem) -> Model:
+    """The current model with the accepted candidate ``c`` added."""
+    assert c.fit is not None and c.heldout_per_entry is not None
+    return Model.of(
+        [*current.effects, eff],
+        prob,
+        c.fit,
+        c.heldout_per_entry,
+        current.problem.records,
+        current.problem.warmup_s,
+    )
+
+
+def next_round(
+    setup: Setup, settings: Settings, current: Model, rnd: int, say: Progress
+) -> tuple[list[Candidate], Candidate | None, Model | None]:
+    """Rank the remaining candidates, refit and cross-validate the best :attr:`Settings.top_k`,
+    and add the best that passes: ``(candidates, the added one, the extended model)``."""
+    have = {e.name for e in current.effects}
+    remaining = [setup.library[n] for n in setup.candidates if n not in have]
+    if not remaining:
+        return [], None, None
+    say(f"round {rnd + 1}: ranking {len(remaining)} candidates")
+    ranked = rank(current.effects, current.fit, current.problem, remaining, setup, settings)
+    chosen = ranked[: settings.top_k]
+    if settings.workers > 1 and len(chosen) > 1:
+        say(f"round {rnd + 1}: fitting and cross-validating {len(chosen)} candidates on "
+            f"{min(settings.workers, len(chosen))} processes")  # fmt: skip
+
+    def trial(k: int) -> Candidate:
+        eff, score, probe = chosen[k]
+        quiet = settings.workers > 1 and len(chosen) > 1
+        c, _ = try_candidate(
+            setup,
+            settings,
+            current,
+            eff,
+            probe,
+            rnd,
+            score,
+            (lambda _m: None) if quiet else say,
+            1 if quiet else settings.workers,
+        )
+        return c
+
+    workers = settings.workers if len(chosen) > 1 else 1
+    cands = map_tasks(trial, len(chosen), workers)
+    for k, (eff, score, _probe) in enumerate(ranked[settings.top_k :], start=settings.top_k):
+        c = Candidate(eff.name, rnd, score)
+        c.evidence = (
+            f"ranked {k + 1} of {len(ranked)}: its direction explains "
+            f"{100 * score:.1f} % of the residual; not refitted"
+        )
+        cands.append(c)
+    passed = [c for c in cands if c.accepted]
+    if not passed:
+        return cands, None, None
+    best = min(passed, key=lambda c: c.heldout_nrmse_pct or np.inf)
+    eff = setup.library[best.effect]
+    prob = setup.problem(settings, [*current.effects, eff])
+    return cands, best, _extended(current, best, eff, prob)
+
+
+# -- when no named effect passes: terms found in the data ------------------------------------
+
+
+def empirical_round(
+    setup: Setup,
+    settings: Settings,
+    current: Model,
+    rnd: int,
+    say: Progress,
+    messages: list[str],
+) -> tuple[list[Candidate], Candidate | None, Model | None]:
+    """Sparse regression of the residual over physically readable terms
+    (:mod:`labrig.analysis.terms`) when the model is not yet within the noise; the selected
+    terms, as one empirical effect, are refitted, cross-validated and judged by the same
+    acceptance rule as a named effect. Empirical, never a physical attribution."""
+    if current.evidence.ratio <= AT_FLOOR:
+        return [], None, None
+    say(f"round {rnd + 1}: sparse regression of the residual")
+    scales = TermScales.from_records(setup.records)
+    terms = list(term_library(scales).values())
+    prob, fo = current.problem, current.fit
+    with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
+        data = regression_data(prob, fo.base, fo.effects, terms)
+        B = jacobian_basis(prob.jacobian(fo.z, fo.base))
+    sel = select_terms(data.residual, data.columns, terms, data.weights, B)
+    if not sel.terms:
+        messages.append(
+            "sparse regression of the residual selected no term "
+            f"(the best explains {100 * sel.share:.1f} % of it)"
+        )
+        return [], None, None
+    eff = empirical_effect(sel.keys, scales)
+    found = ", ".join(f"{t.name} ({t.coefficient_ue:+.3g} ue at full scale)" for t in sel.terms)
+    c, eprob = try_candidate(
+        setup, settings, current, eff, sel.start(), rnd, sel.share, say, settings.workers
+    )
+    c.evidence = (
+        f"sparse regression of the residual selects {found} "
+        f"({100 * sel.share:.0f} % of the residual); " + c.evidence
+    )
+    if not c.accepted:
+        return [c], None, None
+    return [c], c, _extended(current, c, eff, eprob)
+
+
+# -- 7. the result -----------------------------------------------------------------------------
+
+
+def _candidates_json(rounds: list[list[Candidate]]) -> list[dict[str, Any]]:
+    """Every effect tried: its latest round's result."""
+    latest: dict[str, Candidate] = {}
+    for cands in rounds:
+        for c in cands:
+            if c.tried or c.effect not in latest:
+                latest[c.effect] = c
+    return [
+        {
+            "effect": c.effect,
+            "heldout_nrmse_pct": c.heldout_nrmse_pct,
+            "evidence": c.evidence,
+        }
+        for c in sorted(latest.values(), key=lambda c: (c.round, -c.score))
+    ]
+
+
+def _creep(
+    text: str,
+    setup: Setup,
+    settings: Settings,
+    before: Model,
+    after: Model,
+    library: Mapping[str, Effect],
+) -> tuple[str, float, float]:
+    """The verdict with its creep sentence; the base's and the final model's creep."""
+    step_V = setup.context["v_ref"]
+    shape, memory = settings.shape, settings.memory
+    creep = modelled_creep_per_decade(before.fit.params(shape, memory), step_V)
+    slow = [(library[n], p) for n, p in after.fit.effects.items() if n in CREEP_EFFECTS]
+    creep_after = creep_gt = creep
+    if slow:
+        after_params = after.fit.params(shape, memory)
+        creep_after = modelled_creep_per_decade(after_params, step_V, creep_effects=slow)
+        creep_gt = modelled_creep_per_decade(after_params, step_V)
+    if slow and np.isfinite(creep_after) and np.isfinite(creep_gt):
+        names = [e.name for e, _ in slow]
+        text += creep_added_sentence(creep_after, creep_gt, step_V, setup.records, names)
+    elif np.isfinite(creep):
+        text += creep_sentence(creep, step_V, setup.records)
+    return text, creep, creep_after
+
+
+def result(
+    setup: Setup,
+    settings: Settings,
+    before: Model,
+    after: Model,
+    rounds: list[list[Candidate]],
+    added: list[Candidate],
+    messages: list[str],
+) -> Diagnosis:
+    """The :class:`Diagnosis` of the procedure's models and rounds."""
+    lib = {**setup.library, **{e.name: e for e in after.effects}}
+    sb, sa = before.scores(), after.scores()
+    cls, text = verdict(before.evidence, after.evidence, sb, sa, added, rounds, lib)
+    text, creep, creep_after = _creep(text, setup, settings, before, after, lib)
+    effects_added = [
+        {
+            "effect": c.effect,
+            "params": json_params(lib[c.effect], c.fit),
+            "evidence": c.evidence,
+        }
+        for c in added
+        if c.fit is not None
+    ]
+    bf, af = before.fit, after.fit
+    return Diagnosis(
+        before=sb,
+        after=sa,
+        effects_added=effects_added,
+        candidates=_candidates_json(rounds),
+        verdict=text,
+        classification=cls,
+        evidence_before=before.evidence,
+        evidence_after=after.evidence,
+        predictions_before=before.problem.predictions(bf.base, bf.effects),
+        predictions_after=after.problem.predictions(af.base, af.effects),
+        rounds=rounds,
+        base_params=dict(bf.base),
+        after_params=dict(af.base),
+        base_creep_pct_per_decade=100.0 * creep if np.isfinite(creep) else None,
+        after_creep_pct_per_decade=100.0 * creep_after if np.isfinite(creep_after) else None,
+        messages=messages,
+    )

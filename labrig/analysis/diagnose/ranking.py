@@ -12,14 +12,13 @@ not a p-value: the decision is made on held-out data (:mod:`.acceptance`).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
+from labrig.analysis.diagnose.state import Settings, Setup
 from labrig.analysis.extended import ExtendedProblem, FitOutcome
-from labrig.analysis.records import Record
 from labrig.core.blas import single_thread_blas
 from labrig.model.effects import Effect
 
@@ -59,17 +58,17 @@ def nuisance_directions(prob: ExtendedProblem, eff: Effect) -> NDArray:
 
 
 def rank(
-    records: Sequence[Record],
-    current: list[Effect],
+    current: Sequence[Effect],
     cur: FitOutcome,
     cur_prob: ExtendedProblem,
-    candidates: list[Effect],
-    common: dict[str, Any],
+    candidates: Sequence[Effect],
+    setup: Setup,
+    settings: Settings,
 ) -> list[tuple[Effect, float, dict[str, float]]]:
     """(effect, explained share, best probe) for each candidate, best first."""
     with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
         r = cur_prob.residual(cur.z, cur.base)
-        B = jacobian_basis(cur_prob.jacobian(cur.z, cur.base, r))
+        B = jacobian_basis(cur_prob.jacobian(cur.z, cur.base))
         rr = float(r @ r)
         out = []
         for eff in candidates:
@@ -81,7 +80,7 @@ def rank(
                 expl = float(np.sum((D @ coef) ** 2)) / rr if rr > 0 else 0.0
                 out.append((eff, expl, probe_best))
                 continue
-            prob = ExtendedProblem(records, [*current, eff], **common)
+            prob = setup.problem(settings, [*current, eff])
             r0 = r  # the effect at its null value (or, without parameters, absent)
             cols, costs, probes = [], [], eff.probes([s.context for s in prob.sequences])
             for p in probes:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import fft as sp_fft
 from scipy import signal
 
 from labrig.model.bouc_wen import bouc_wen_exact
@@ -164,12 +165,39 @@ class Creep(Effect):
         """``log10(1 + t / t0)`` on the context's time base (cached per ``t0``)."""
         return ctx.cached(("creep_kernel", t0_s), lambda: np.log10(1.0 + ctx.t / t0_s))
 
+    def _spectra(self, ctx: Context, t0_s: float) -> tuple[int, NDArray, NDArray]:
+        """The FFT length and the spectra of the kernel and of its derivative with respect to
+        ``t0`` (``-t / (t0 (t0 + t) ln 10)``), cached per ``t0``: every convolution of a fit's
+        evaluation (the strain, each Jacobian column) reuses them."""
+
+        def make() -> tuple[int, NDArray, NDArray]:
+            nf = sp_fft.next_fast_len(2 * ctx.n - 1, real=True)
+            t = ctx.t
+            dk = -t / (t0_s * (t0_s + t) * np.log(10.0))
+            return nf, sp_fft.rfft(self.kernel(ctx, t0_s), nf), sp_fft.rfft(dk, nf)
+
+        return ctx.cached(("creep_spectra", t0_s), make)
+
+    def _convolve(self, ds: NDArray, spectrum: NDArray, nf: int) -> NDArray:
+        """``ds * kernel`` (causal, the first ``N`` samples), column-wise for a 2-D ``ds``."""
+        out = sp_fft.irfft(sp_fft.rfft(ds, nf, axis=0) * _col(spectrum, ds), nf, axis=0)
+        return out[: ds.shape[0]]
+
     def apply(self, x, ctx, p):
         c = p["c_per_decade"]
         if c == 0.0:
             return x
+        nf, K, _ = self._spectra(ctx, p["t0_s"])
+        return x + c * self._convolve(np.diff(x, axis=0, prepend=0.0), K, nf)
+
+    def tangent_columns(self, x, dX, ctx, p):
+        return self.apply(dX, ctx, p)
+
+    def parameter_derivatives(self, x, ctx, p):
+        nf, K, dK = self._spectra(ctx, p["t0_s"])
         ds = np.diff(x, prepend=0.0)
-        return x + c * signal.fftconvolve(ds, self.kernel(ctx, p["t0_s"]))[: x.size]
+        both = self._convolve(np.column_stack([ds, ds]), np.column_stack([K, dK]), nf)
+        return {"c_per_decade": both[:, 0], "t0_s": p["c_per_decade"] * both[:, 1]}
 
     def describe(self, p, sd):
         s, s0 = sd.get("c_per_decade"), sd.get("t0_s")
@@ -178,6 +206,12 @@ class Creep(Effect):
             + ", "
             + plus_minus("t0", 1e3 * p["t0_s"], None if s0 is None else 1e3 * s0, "ms")
         )
+
+
+def _col(spectrum: NDArray, like: NDArray) -> NDArray:
+    """``spectrum`` shaped to multiply the FFT of ``like`` (column-wise when ``like`` is 2-D and
+    the spectrum one vector)."""
+    return spectrum[:, None] if like.ndim == 2 and spectrum.ndim == 1 else spectrum
 
 
 def kelvin_voigt_filter(

@@ -106,6 +106,23 @@ class Effect:
         in the strain they receive."""
         return self.apply(dx, ctx, p)
 
+    def tangent_columns(
+        self, x: NDArray, dX: NDArray, ctx: Context, p: Mapping[str, float]
+    ) -> NDArray:
+        """:meth:`tangent` of every column of ``dX`` (N x k); effects whose tangent is cheaper
+        for all columns at once (one batched FFT) override it."""
+        out = np.empty_like(dX)
+        for j in range(dX.shape[1]):
+            out[:, j] = self.tangent(x, dX[:, j], ctx, p)
+        return out
+
+    def parameter_derivatives(
+        self, x: NDArray, ctx: Context, p: Mapping[str, float]
+    ) -> dict[str, NDArray] | None:
+        """``d apply(x) / d q`` for each parameter ``q`` in closed form (native units), or
+        ``None``: the engine then takes differences of :meth:`apply`."""
+        return None
+
     def columns(self, t: NDArray, rate_hz: float) -> NDArray:
         """Nuisance regressors of one entry (``len(t) x k``), ``t`` the entry's time (s)."""
         raise NotImplementedError

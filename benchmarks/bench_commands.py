@@ -1,0 +1,196 @@
+"""Whole-command CPU time of the analysis loop, beside the previous implementation.
+
+Run from the repository root (a few minutes on a loaded 2-core machine)::
+
+    .venv/bin/python benchmarks/bench_commands.py --previous /path/to/previous/.venv/bin/labrig
+
+Each command runs as its own process (imports included), ``--repeats`` times (default 3), for this
+checkout's ``labrig`` and, with ``--previous``, for another installation of labrig (the previous
+implementation: for instance a ``git worktree`` of the previous commit with its own virtual
+environment), the two interleaved so a drift of the machine's speed hits both alike. Reported:
+user + system CPU seconds of the process and its children (``resource.getrusage``), median and
+minimum, the ratio previous / this, and a yardstick timed in the same run (``numpy.sort`` of 1e6
+floats, CPU seconds in this process) so figures from different days compare. Wall time is not
+reported: the machine is shared.
+
+The datasets: ``experiments/paper.yaml`` run on the simulated rig with seed 1 (11 entries) and the
+real micromanipulator record ``tests/data/real/yan9a-micromanipulator/Model_Vi_Do.dat`` imported as
+the README says. Commands: ``labrig --help``, ``fit --json``, ``report --json`` (every peer),
+``diagnose --json`` and ``runs``. The JSON documents of both implementations are compared: the
+largest relative difference of every NRMSE, the effects added and the verdict's class.
+
+Prints markdown on stdout (copied into ``benchmarks/RESULTS.md``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+REAL = ROOT / "tests" / "data" / "real" / "yan9a-micromanipulator" / "Model_Vi_Do.dat"
+
+
+def yardstick_s(repeats: int = 5) -> float:
+    """CPU seconds of ``np.sort`` of 1e6 uniform floats (median of ``repeats``)."""
+    x = np.random.default_rng(0).random(1_000_000)
+    out = []
+    for _ in range(repeats):
+        t = time.process_time()
+        np.sort(x)
+        out.append(time.process_time() - t)
+    return statistics.median(out)
+
+
+def cpu_of(cmd: list[str], cwd: Path, timeout: float = 1800) -> tuple[float, str]:
+    """User + system CPU seconds of a child process (and its own children) and its stdout."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    res = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if res.returncode not in (0,):
+        raise RuntimeError(f"{' '.join(cmd)} exited {res.returncode}: {res.stderr[-2000:]}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return cpu, res.stdout
+
+
+def make_data(labrig: str, work: Path) -> dict[str, Path]:
+    work.mkdir(parents=True, exist_ok=True)
+    paper = work / "paper1.h5"
+    real = work / "real_model.h5"
+    if not paper.exists():
+        subprocess.run(
+            [labrig, "run", str(ROOT / "experiments" / "paper.yaml"), "--seed", "1", "--out",
+             str(paper)], check=True, capture_output=True,
+        )  # fmt: skip
+    if not real.exists():
+        subprocess.run(
+            [labrig, "import", str(REAL), "--out", str(real), "--voltage", "1", "--strain", "5",
+             "--rate-hz", "200"], check=True, capture_output=True,
+        )  # fmt: skip
+    return {"paper campaign (seed 1)": paper, "real record Model_Vi_Do": real}
+
+
+def nrmse_values(doc, prefix: str = "") -> dict[str, float]:
+    """Every number under a key that names an NRMSE, by its path in the document."""
+    out: dict[str, float] = {}
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            path = f"{prefix}.{k}" if prefix else str(k)
+            if isinstance(v, (int, float)) and not isinstance(v, bool) and "nrmse" in path:
+                out[path] = float(v)
+            else:
+                out.update(nrmse_values(v, path))
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc):
+            out.update(nrmse_values(v, f"{prefix}[{i}]"))
+    return out
+
+
+def compare(a: str, b: str) -> str:
+    """How two JSON documents of one command differ: NRMSE (largest relative difference),
+    effects added, verdict class."""
+    try:
+        da, db = json.loads(a), json.loads(b)
+    except json.JSONDecodeError:
+        return "-"
+    na, nb = nrmse_values(da), nrmse_values(db)
+    common = set(na) & set(nb)
+    rel = max(
+        (abs(na[k] - nb[k]) / max(abs(nb[k]), 1e-300) for k in common if np.isfinite(nb[k])),
+        default=0.0,
+    )
+    parts = [f"NRMSE max rel diff {rel:.1e} ({len(common)} values)"]
+    if isinstance(da, dict) and "effects_added" in da:
+        ea = [e["effect"] for e in da["effects_added"]]
+        eb = [e["effect"] for e in db["effects_added"]]
+        parts.append("same effects" if ea == eb else f"effects {ea} vs {eb}")
+        va, vb = da.get("verdict", ""), db.get("verdict", "")
+        parts.append("same verdict" if va == vb else "verdict text differs")
+    return "; ".join(parts)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--previous", help="the previous implementation's labrig executable")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--work", default="/tmp/labrig-bench-commands")
+    ap.add_argument("--only", default="", help="comma-separated commands (help,fit,report,...)")
+    args = ap.parse_args()
+    this = shutil.which("labrig", path=str(Path(sys.executable).parent)) or "labrig"
+    work = Path(args.work)
+    data = make_data(this, work)
+    load0 = os.getloadavg()
+    y0 = yardstick_s()
+    commands = {
+        "help": lambda f: ["--help"],
+        "fit": lambda f: ["fit", str(f), "--json"],
+        "report": lambda f: [
+            "report",
+            str(f),
+            "--json",
+            "--out",
+            str(work / "r.html"),
+            "--overwrite",
+        ],
+        "diagnose": lambda f: ["diagnose", str(f), "--json"],
+    }
+    only = [c for c in args.only.split(",") if c] or list(commands)
+    rows = []
+    for cname in only:
+        files = {"-": None} if cname == "help" else data
+        for dname, f in files.items():
+            times: dict[str, list[float]] = {"this": [], "previous": []}
+            outs: dict[str, str] = {}
+            for _ in range(args.repeats):
+                for who, exe in (("this", this), ("previous", args.previous)):
+                    if exe is None:
+                        continue
+                    cpu, out = cpu_of([exe, *commands[cname](f)], work)
+                    times[who].append(cpu)
+                    outs[who] = out
+            med = {k: statistics.median(v) for k, v in times.items() if v}
+            ratio = med["previous"] / med["this"] if "previous" in med else None
+            rows.append(
+                (
+                    cname,
+                    dname,
+                    med["this"],
+                    min(times["this"]),
+                    med.get("previous"),
+                    ratio,
+                    compare(outs["this"], outs["previous"]) if "previous" in outs else "",
+                )
+            )
+            print(f"  {cname} {dname}: {med}", file=sys.stderr)
+    y1 = yardstick_s()
+    load1 = os.getloadavg()
+    cpu = platform.processor() or platform.machine()
+    print(
+        f"Run {datetime.now(UTC):%Y-%m-%d %H:%M} UTC on {cpu}, {os.cpu_count()} cores; load "
+        f"average {load0[0]:.2f} at the start, {load1[0]:.2f} at the end; yardstick (np.sort of "
+        f"1e6 floats) {1e3 * y0:.1f} / {1e3 * y1:.1f} ms CPU.\n"
+    )
+    print("| command | data | CPU s (median / min) | previous CPU s | previous / this | "
+          "results against the previous |")  # fmt: skip
+    print("|---|---|---|---|---|---|")
+    for c, d, m, lo, p, r, cmp in rows:
+        prev = f"{p:.2f}" if p is not None else "-"
+        rat = f"{r:.1f}x" if r is not None else "-"
+        print(f"| `{c}` | {d} | {m:.2f} / {lo:.2f} | {prev} | {rat} | {cmp} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,55 @@
+"""Where the compiled kernels come from, and the numpy fallback when they cannot.
+
+The hot loops of the model (the hysteresis operator's sequential pass, the relaxor banks'
+recursion) are compiled with numba in :mod:`labrig.model.compiled`. numba is imported only
+when a kernel is first needed, never when ``labrig`` or ``labrig.model`` is imported, so the
+command line starts as fast as before (its import alone costs ~0.3 s of CPU).
+
+Compiled machine code is cached on disk (``@njit(cache=True)``): numba writes it to the
+``__pycache__`` folder beside ``compiled.py`` when that folder is writable, else to its
+user-wide cache folder (``$NUMBA_CACHE_DIR`` if set, else ``~/.cache/numba`` or the platform's
+equivalent). The first use on a machine compiles (seconds); later processes load the cache.
+
+If numba cannot be imported, or its kernels cannot be loaded (with no writable cache folder
+numba refuses ``cache=True`` functions), :func:`kernels` warns once and returns ``None``; every
+caller then runs its numpy code, which gives the same results.
+"""
+
+from __future__ import annotations
+
+import functools
+import warnings
+from types import ModuleType
+
+
+@functools.cache
+def kernels() -> ModuleType | None:
+    """The module of compiled kernels, or ``None`` (one warning per process) without numba."""
+    try:
+        import numba  # noqa: F401
+    except Exception as exc:  # ImportError, or numba's own errors on an unsupported platform
+        warnings.warn(
+            f"numba is not available ({type(exc).__name__}: {exc}); the model runs its "
+            "numpy code instead (same results, several times slower)",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return None
+    try:
+        from labrig.model import compiled
+    except Exception as exc:  # e.g. no writable folder for numba's cache
+        warnings.warn(
+            f"the model's compiled kernels could not be loaded ({type(exc).__name__}: {exc}); "
+            "if numba found no writable folder for its cache, set NUMBA_CACHE_DIR to one. "
+            "The model runs its numpy code instead (same results, several times slower)",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return None
+    return compiled
+
+
+def reset() -> None:
+    """Forget whether numba loaded (for tests that hide it)."""
+    kernels.cache_clear()
+

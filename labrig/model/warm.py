@@ -1,0 +1,26 @@
+"""Load the compiled kernels of a streaming simulation before it is needed."""
+
+from __future__ import annotations
+
+import functools
+
+from labrig.model.accel import kernels
+
+
+@functools.cache
+def warm() -> bool:
+    """Load the compiled kernels a streaming simulation uses (numba's import and each kernel's
+    cached machine code, about 0.5-1 s of CPU the first time in a process) now, not on the
+    first block: a simulator that answers its instruments' queries within a timeout must not
+    pause for it mid-dialogue. Returns whether the kernels are compiled."""
+    import numpy as np
+
+    from labrig.model.dynamic import DynamicHysteresisModel
+    from labrig.model.params import PAPER_TABLE1
+
+    if kernels() is None:
+        return False
+    model = DynamicHysteresisModel(PAPER_TABLE1)
+    model.stream(1000.0).process(np.zeros(8))
+    model.operator.apply(np.zeros(8))
+    return True
