@@ -63,7 +63,7 @@ def check_drive(
     fine_rate = rate_hz * OVERSAMPLE
     # no cap on the window here (the preflight caps it at MAX_WINDOW_POINTS)
     w = window_points(averaging_window_s(frequency_hz), fine_rate, cap=None)
-    # fine point 0 is the rest sample, one sample before the drive's first
+    # fine point j is at (j / OVERSAMPLE - 1) dt from the drive's first sample (0: the rest)
     load = measure_load(
         lambda lo, hi: fine[lo:hi],
         fine.size,
@@ -72,7 +72,7 @@ def check_drive(
         w,
         chunk=None,
         duration_s=v.size * dt,
-        start_s=-dt,
+        time_s=lambda j: (j / OVERSAMPLE - 1) * dt,
         name=what,
     )
     # the drive's own range (its samples, not the rest at 0 V before it), for the message's time

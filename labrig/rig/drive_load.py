@@ -122,18 +122,18 @@ def measure_load(
     chunk: int | None = CHUNK,
     *,
     duration_s: float,
-    start_s: float = 0.0,
+    time_s: Callable[[int], float] | None = None,
     name: str = "",
 ) -> DriveLoad:
     """Voltage range, peak and windowed-mean current of a drive on its fine grid.
 
     ``voltage(lo, hi)`` gives the drive (V) at fine-grid points ``lo .. hi - 1`` of
-    ``n_points``, spaced ``1 / fine_rate_hz``; point ``j`` is at ``start_s + j / fine_rate_hz``
-    s from the drive's start (``start_s < 0`` when the grid begins with a rest before the
-    drive). ``window`` is the mean current's window in points (:func:`window_points`);
-    ``chunk`` points are scanned at a time (``None``: all at once); ``duration_s`` and ``name``
-    are recorded as given. A current that is not finite counts as the peak (and a non-finite
-    mean as the largest mean), so a broken drive fails the check.
+    ``n_points``, spaced ``1 / fine_rate_hz``; ``time_s(j)`` is the time of point ``j`` in s from
+    the drive's start (default ``j / fine_rate_hz``: the grid starts with the drive).
+    ``window`` is the mean current's window in points (:func:`window_points`); ``chunk`` points
+    are scanned at a time (``None``: all at once); ``duration_s`` and ``name`` are recorded as
+    given. A current that is not finite counts as the peak (and a non-finite mean as the largest
+    mean), so a broken drive fails the check.
     """
     m = n_points
     step = m if chunk is None else chunk
@@ -168,9 +168,9 @@ def measure_load(
         v_min_V=vmin,
         v_max_V=vmax,
         peak_current_A=peak,
-        peak_time_s=start_s + peak_j / fine_rate_hz,
+        peak_time_s=peak_j / fine_rate_hz if time_s is None else time_s(peak_j),
         mean_current_A=mean,
-        mean_time_s=start_s + mean_j / fine_rate_hz,
+        mean_time_s=mean_j / fine_rate_hz if time_s is None else time_s(mean_j),
         window_s=w / fine_rate_hz,
         duration_s=duration_s,
         name=name,
