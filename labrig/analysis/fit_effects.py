@@ -29,15 +29,16 @@ from labrig.analysis.extended import ExtendedProblem, FitOutcome, effect_context
 from labrig.analysis.fit import PARAM_NAMES, FitResult
 from labrig.analysis.records import Record
 from labrig.model import ModelParams
-from labrig.model.effects import Effect, library
+from labrig.model.effects import FIT_EFFECT_NAMES, Effect, library
 
 __all__ = ["EffectsFit", "fit_effects", "known_effects", "resolve_effects"]
 
 
 def known_effects() -> list[str]:
     """Names of the library's effects that ``--effect`` accepts (fitted as global parameters:
-    voltage, operator and output effects; nuisance terms are per-entry and need no flag)."""
-    return [n for n, e in library().items() if e.where in ("voltage", "operator", "output")]
+    voltage, operator and output effects; nuisance terms are per-entry and need no flag), in
+    registry order (:data:`~labrig.model.effects.registry.FIT_EFFECT_NAMES`)."""
+    return list(FIT_EFFECT_NAMES)
 
 
 @dataclass

@@ -27,18 +27,13 @@ from labrig.analysis.records import Record
 from labrig.core.errors import InputFileError, InputIssue
 from labrig.core.jsonsafe import loads_bounded
 from labrig.model import ModelParams
-from labrig.model.effects import Effect
+from labrig.model.effects import Effect, RunContext
 
 #: the largest parameter file read (``labrig fit`` writes a few kB)
 MAX_PARAMS_BYTES = 10_000_000
 
 #: the types of ``effects_context`` (how the effects were configured when they were fitted)
-CONTEXT_TYPES: dict[str, type] = {
-    "temperature": bool,
-    "amplifier_voltage": bool,
-    "mains_hz": float,
-    "v_ref": float,
-}
+CONTEXT_TYPES: dict[str, type] = RunContext.types()
 
 
 def file_issue(path: Path, message: str, field: str = "") -> InputFileError:

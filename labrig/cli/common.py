@@ -4,9 +4,10 @@ commands, the choices of options with a fixed set of values, and the output conv
 stderr); ``--out FILE`` writes a command's one document, ``--out DIR`` a folder for several;
 nothing existing is replaced without ``--overwrite``.
 
-The choices are :class:`~enum.StrEnum` so ``--help`` lists them; they repeat names the library
-defines (tests/cli/test_cli_choices.py checks they match) so that ``labrig --help`` does not import
-the numerical stack.
+The choices are :class:`~enum.StrEnum` so ``--help`` lists them. The effects' are built from the
+effect registry (:mod:`labrig.model.effects.registry`, plain data); the others repeat names the
+library defines (tests/cli/test_cli_choices.py checks they match) so that ``labrig --help`` does
+not import the numerical stack.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import typer
 
 from labrig.core.errors import LabrigError
 from labrig.core.words import plural as plural  # re-exported for the commands
+from labrig.model.effects.registry import FIT_EFFECT_NAMES, STRUCTURAL_EFFECT_NAMES
 
 E = TypeVar("E", bound=StrEnum)
 
@@ -73,26 +75,24 @@ class Memory(StrEnum):
     RETURN_POINT_OPEN = "return_point_open"
 
 
-class FitEffect(StrEnum):
-    """Effects ``fit --effect`` adds to the model (labrig.analysis.fit_effects.known_effects)."""
-
-    THERMAL_DRIFT = "thermal_drift"
-    AMPLIFIER_CURRENT_LIMIT = "amplifier_current_limit"
-    SENSOR_LOWPASS = "sensor_lowpass"
-    CREEP = "creep"
-    VISCOELASTIC_CREEP = "viscoelastic_creep"
-    REMANENCE = "remanence"
-    TIME_DELAY = "time_delay"
-    QUADRATIC_TERM = "quadratic_term"
-    FIELD_SATURATION = "field_saturation"
+def names_enum(name: str, values: Sequence[str], doc: str) -> type[StrEnum]:
+    """A :class:`~enum.StrEnum` of ``values`` (members named by the upper-cased value), for
+    choices whose names the library lists."""
+    enum = StrEnum(name, [(v.upper(), v) for v in values])
+    enum.__doc__ = doc
+    return enum
 
 
-class StructuralEffect(StrEnum):
-    """Effects ``diagnose --also`` tries beside its default candidates
-    (labrig.model.effects.STRUCTURAL_EFFECT_NAMES)."""
-
-    REMANENCE = "remanence"
-    VISCOELASTIC_CREEP = "viscoelastic_creep"
+#: effects ``fit --effect`` adds to the model (the registry's, labrig.model.effects.registry)
+FitEffect = names_enum(
+    "FitEffect", FIT_EFFECT_NAMES, "Effects ``fit --effect`` adds to the model (the registry's)."
+)
+#: effects ``diagnose --also`` tries beside its default candidates (the registry's)
+StructuralEffect = names_enum(
+    "StructuralEffect",
+    STRUCTURAL_EFFECT_NAMES,
+    "Effects ``diagnose --also`` tries beside its default candidates (the registry's).",
+)
 
 
 class Preset(StrEnum):

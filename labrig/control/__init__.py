@@ -39,7 +39,7 @@ from labrig.control.control_model import (
     load_params,
 )
 from labrig.control.controllers import CompensationController, DirectController
-from labrig.control.drive_check import DriveCheck, InfeasibleCommandError, check_drive
+from labrig.control.drive_check import InfeasibleCommandError, check_drive
 from labrig.control.inverse_system import outside_zeros
 from labrig.control.inversion import (
     CONTROLS,
@@ -65,7 +65,6 @@ __all__ = [
     "CompensationController",
     "ControlModel",
     "DirectController",
-    "DriveCheck",
     "InfeasibleCommandError",
     "as_control_model",
     "check_drive",

@@ -1,7 +1,9 @@
 """What the controller inverts (:class:`ControlModel`), read from a ``labrig fit --out`` file.
 
 A control model is the dynamic model (:class:`~labrig.model.ModelParams`) and, optionally, the
-actuator effects fitted with it that the controller inverts (:data:`INVERTIBLE_EFFECTS`):
+actuator effects fitted with it that the controller inverts (:data:`INVERTIBLE_EFFECTS`, the
+effects the registry marks invertible, :mod:`labrig.model.effects.registry`; each has its field
+in :class:`ControlModel`):
 
     S = KV[alpha0 V* + H[V*] - h[V*]],      V* = G_d G_t V
 
@@ -25,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from labrig.model import DynamicHysteresisModel, ModelParams
 from labrig.model.bouc_wen import bouc_wen_exact, max_slope
-from labrig.model.effects import kelvin_voigt_filter, library
+from labrig.model.effects import INVERTIBLE_EFFECTS, kelvin_voigt_filter, library
 
 
 def _scipy_signal():
@@ -45,9 +47,6 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-
-#: actuator effects (labrig.model.effects) the controller inverts along with the model
-INVERTIBLE_EFFECTS = ("viscoelastic_creep", "remanence")
 
 
 @dataclass(frozen=True)

@@ -5,8 +5,8 @@ keys, validated), :mod:`~labrig.protocol.expand` (steps, sweeps and repeats expa
 steps, :mod:`~labrig.protocol.concrete`, with :mod:`~labrig.protocol.waveforms`,
 :mod:`~labrig.protocol.offset_sine` and :mod:`~labrig.protocol.csvsource` making their samples),
 :mod:`~labrig.protocol.plan` (the result: a :class:`Plan` of :class:`PlannedStep`),
-:mod:`~labrig.protocol.preflight` (every step against the rig's limits, one
-:class:`~labrig.protocol.step_check.StepCheck` each, measured by :mod:`labrig.rig.drive_load`) and
+:mod:`~labrig.protocol.preflight` (every step against the rig's limits, what each asks of the
+amplifier measured as one :class:`~labrig.rig.drive_load.DriveLoad`) and
 :mod:`~labrig.protocol.check` (the entry points the CLI calls); the numbers in their messages are
 printed by :mod:`~labrig.protocol.numbers`.
 
@@ -28,13 +28,11 @@ from labrig.protocol.expand import build_plan
 from labrig.protocol.plan import Plan, PlannedStep
 from labrig.protocol.preflight import max_sine_amplitude_V, max_sine_frequency_hz
 from labrig.protocol.schema import Protocol
-from labrig.protocol.step_check import StepCheck
 
 __all__ = [
     "Plan",
     "PlannedStep",
     "Protocol",
-    "StepCheck",
     "build_plan",
     "check_protocol",
     "format_plan",

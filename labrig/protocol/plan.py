@@ -15,7 +15,7 @@ import numpy as np
 
 from labrig.protocol import waveforms as wf
 from labrig.protocol.schema import Protocol
-from labrig.protocol.step_check import StepCheck
+from labrig.rig.drive_load import DriveLoad
 from labrig.rig.limits import RigLimits
 
 __all__ = ["Plan", "PlannedStep", "Where", "field_name", "line_of"]
@@ -144,7 +144,7 @@ class Plan:
     rig_path: Path | None = None
     #: what the preflight measured on each entry and the limits it checked them against; set
     #: by :meth:`take_checks` (``None`` before the preflight)
-    checks: list[StepCheck] | None = None
+    checks: list[DriveLoad] | None = None
     limits: RigLimits | None = None
 
     @property
@@ -177,7 +177,7 @@ class Plan:
                 return s
         raise KeyError(name)
 
-    def take_checks(self, checks: list[StepCheck], limits: RigLimits) -> None:
+    def take_checks(self, checks: list[DriveLoad], limits: RigLimits) -> None:
         """Keep the preflight's results (:func:`labrig.protocol.preflight.preflight_checks`)
         with the plan, for :meth:`to_dict` and :func:`labrig.protocol.check.format_plan`."""
         self.checks = checks

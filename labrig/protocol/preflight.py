@@ -11,15 +11,17 @@ For each entry of a plan:
 - mean ``|i|`` over a sliding window at most ``i_avg_A``; the window is one carrier cycle for
   sines and envelopes, :data:`AVG_WINDOW_S` otherwise (0 V assumed before the entry starts).
 
-The measurement is :func:`labrig.rig.drive_load.measure_load` (shared with the controller's
-:func:`labrig.control.check_drive`): the current ``i = C_eff dV/dt`` on a grid
-:data:`OVERSAMPLE` times finer than the output rate (waveforms are functions of continuous time,
-so the preflight evaluates them there). For a unipolar sine of amplitude A and frequency f this
-gives ``i_peak = pi C_eff A f`` and a cycle-mean ``2 C_eff A f``, so the highest frequency at
-amplitude A is ``min(i_peak_A / (pi C_eff A), i_avg_A / (2 C_eff A))`` (56.2 Hz at 100 V on the
-default rig). A sine of amplitude A around a bias (``offset_sine``) gives ``i_peak = 2 pi C_eff A
-f`` and a cycle-mean ``4 C_eff A f`` (:func:`max_offset_sine_frequency_hz`); its raised-cosine
-ramps are measured with the rest, and their current scales as ``1 / ramp_s``.
+The measurement is :func:`labrig.rig.drive_load.measure_load`, one
+:class:`~labrig.rig.drive_load.DriveLoad` per entry (the record the controller's
+:func:`labrig.control.check_drive` gives too, compared with the limits by its methods): the
+current ``i = C_eff dV/dt`` on a grid :data:`OVERSAMPLE` times finer than the output rate
+(waveforms are functions of continuous time, so the preflight evaluates them there). For a
+unipolar sine of amplitude A and frequency f this gives ``i_peak = pi C_eff A f`` and a
+cycle-mean ``2 C_eff A f``, so the highest frequency at amplitude A is ``min(i_peak_A / (pi C_eff
+A), i_avg_A / (2 C_eff A))`` (56.2 Hz at 100 V on the default rig). A sine of amplitude A
+around a bias (``offset_sine``) gives ``i_peak = 2 pi C_eff A f`` and a cycle-mean ``4 C_eff A
+f`` (:func:`max_offset_sine_frequency_hz`); its raised-cosine ramps are measured with the rest,
+and their current scales as ``1 / ramp_s``.
 
 Numbers in the messages are printed by :mod:`labrig.protocol.numbers`: a value over a limit
 never prints as the limit, and a huge one never prints with hundreds of digits.
@@ -38,11 +40,11 @@ from labrig.core.errors import InputFileError, InputIssue
 from labrig.protocol.numbers import amps, at_least, at_most, beyond, exact, fixed
 from labrig.protocol.plan import Plan, PlannedStep, Where
 from labrig.protocol.schema import STRAIN_KINDS
-from labrig.protocol.step_check import StepCheck
 from labrig.rig.drive_load import (
     AVG_WINDOW_S,
     CHUNK,
     OVERSAMPLE,
+    DriveLoad,
     averaging_window_s,
     measure_load,
     window_points,
@@ -53,7 +55,6 @@ __all__ = [
     "AVG_WINDOW_S",
     "MIN_SAMPLES_PER_CYCLE",
     "OVERSAMPLE",
-    "StepCheck",
     "max_offset_sine_frequency_hz",
     "max_sine_amplitude_V",
     "max_sine_frequency_hz",
@@ -104,9 +105,10 @@ def sine_currents_A(amplitude_V: float, frequency_hz: float, limits: RigLimits) 
 
 def measure(
     step: PlannedStep, limits: RigLimits, oversample: int = OVERSAMPLE, chunk: int = CHUNK
-) -> StepCheck:
-    """Voltage range and currents of one entry (:func:`labrig.rig.drive_load.measure_load` on its
-    waveform, ``chunk`` fine-grid points at a time: never the whole fine grid at once)."""
+) -> DriveLoad:
+    """What one entry asks of the amplifier (:func:`labrig.rig.drive_load.measure_load` on its
+    waveform, ``chunk`` fine-grid points at a time: never the whole fine grid at once; times from
+    the entry's start)."""
     wave = step.waveform
     fine_rate = step.rate_hz * oversample
     w = window_points(averaging_window_s(step.frequency_hz), fine_rate)
@@ -114,17 +116,9 @@ def measure(
     def voltage(lo: int, hi: int) -> np.ndarray:
         return wave.at_index(np.arange(lo, hi, dtype=float) / oversample)
 
-    load = measure_load(voltage, (wave.n_samples - 1) * oversample + 1, fine_rate, limits, w, chunk)
-    return StepCheck(
-        name=step.name,
-        v_min_V=load.v_min_V,
-        v_max_V=load.v_max_V,
-        peak_current_A=load.peak_current_A,
-        peak_time_s=load.peak_index / fine_rate,
-        mean_current_A=load.mean_current_A,
-        mean_time_s=load.mean_index / fine_rate,
-        window_s=load.window_points / fine_rate,
-        duration_s=step.duration_s,
+    n_points = (wave.n_samples - 1) * oversample + 1
+    return measure_load(
+        voltage, n_points, fine_rate, limits, w, chunk, duration_s=step.duration_s, name=step.name
     )
 
 
@@ -157,23 +151,7 @@ def _beyond_range(bad: float, too_high: bool, lim: RigLimits) -> str:
     return beyond(bad, lim.v_max_V if too_high else lim.v_min_V)
 
 
-def _outside_range(chk: StepCheck, lim: RigLimits) -> tuple[bool, float] | None:
-    """``(too high, the voltage out of range)``, or None when the entry stays in range."""
-    if chk.v_max_V > lim.v_max_V + _TOL or chk.v_min_V < lim.v_min_V - _TOL:
-        hi = chk.v_max_V > lim.v_max_V + _TOL
-        return hi, chk.v_max_V if hi else chk.v_min_V
-    return None
-
-
-def _peak_too_high(chk: StepCheck, lim: RigLimits) -> bool:
-    return not chk.peak_current_A <= lim.i_peak_A * (1 + 1e-6)
-
-
-def _mean_too_high(chk: StepCheck, lim: RigLimits) -> bool:
-    return not chk.mean_current_A <= lim.i_avg_A * (1 + 1e-6)
-
-
-def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tuple[Where, str]]:
+def _strain_issues(step: PlannedStep, chk: DriveLoad, lim: RigLimits) -> list[tuple[Where, str]]:
     """Limits of a strain-command entry: its computed drive is checked like any waveform;
     the messages say which command and control need it and what to change."""
     out: list[tuple[Where, str]] = []
@@ -185,7 +163,7 @@ def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tu
     else:
         what = f"the {d['control']} drive for {d['amplitude_ue']:g} ue at {d['frequency_hz']:g} Hz"
     lower = "lower amplitude_ue or frequency_hz" if key == "amplitude_ue" else "check the file"
-    outside = _outside_range(chk, lim)
+    outside = chk.beyond_range(lim)
     if outside is not None:
         hi, bad = outside
         why = (
@@ -205,7 +183,7 @@ def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tu
     cycles = _samples_per_cycle_issue(step, f)
     if cycles is not None:
         out.append(cycles)
-    if _peak_too_high(chk, lim):
+    if chk.over_peak(lim):
         where, seg = _blame_segment(step, chk.peak_time_s)
         need = amps(chk.peak_current_A, lim.i_peak_A)
         if seg == "edge":
@@ -219,7 +197,7 @@ def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tu
                 f"gives {amps(lim.i_peak_A)}; {lower}"
             )
         out.append((where, msg))
-    if _mean_too_high(chk, lim):
+    if chk.over_mean(lim):
         where = step.blame(key)
         window = "a cycle" if f else f"{chk.window_s:g} s"
         out.append(
@@ -234,11 +212,11 @@ def _strain_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tu
 
 
 def _voltage_range_issue(
-    step: PlannedStep, chk: StepCheck, lim: RigLimits, what: str | None
+    step: PlannedStep, chk: DriveLoad, lim: RigLimits, what: str | None
 ) -> tuple[Where, str] | None:
     """A voltage step outside the rig's range, blamed on the key that sets the voltage
     (``what``: the periodic step's description, ``None`` for the others)."""
-    outside = _outside_range(chk, lim)
+    outside = chk.beyond_range(lim)
     if outside is None:
         return None
     _, bad = outside
@@ -262,7 +240,7 @@ def _voltage_range_issue(
 
 
 def _peak_current_issue(
-    step: PlannedStep, chk: StepCheck, lim: RigLimits, periodic: bool, what: str
+    step: PlannedStep, chk: DriveLoad, lim: RigLimits, periodic: bool, what: str
 ) -> tuple[Where, str]:
     """The message for a voltage step over the peak current: what to change, by step kind."""
     c = lim.effective_capacitance_F
@@ -303,7 +281,7 @@ def _peak_current_issue(
 
 
 def _mean_current_issue(
-    step: PlannedStep, chk: StepCheck, lim: RigLimits, periodic: bool, what: str
+    step: PlannedStep, chk: DriveLoad, lim: RigLimits, periodic: bool, what: str
 ) -> tuple[Where, str]:
     """The message for a voltage step over the mean current."""
     where, _seg = _blame_segment(step, chk.mean_time_s)
@@ -326,11 +304,11 @@ def _mean_current_issue(
 
 
 def _offset_sine_range_issue(
-    step: PlannedStep, chk: StepCheck, lim: RigLimits, what: str
+    step: PlannedStep, chk: DriveLoad, lim: RigLimits, what: str
 ) -> tuple[Where, str] | None:
     """An offset sine outside the rig's range: blamed on ``offset_V`` when the bias itself is
     outside, else on ``amplitude_V`` with the largest amplitude around that bias."""
-    outside = _outside_range(chk, lim)
+    outside = chk.beyond_range(lim)
     if outside is None:
         return None
     hi, bad = outside
@@ -346,7 +324,7 @@ def _offset_sine_range_issue(
 
 
 def _offset_sine_current_issues(
-    step: PlannedStep, chk: StepCheck, lim: RigLimits, what: str
+    step: PlannedStep, chk: DriveLoad, lim: RigLimits, what: str
 ) -> list[tuple[Where, str]]:
     """An offset sine over the peak or mean current: its ramps (ramp_s), its edge ramps or the
     sine itself (frequency_hz, with the highest frequency at its amplitude)."""
@@ -354,7 +332,7 @@ def _offset_sine_current_issues(
     a, ramp_s = step.amplitude_V, step.definition["ramp_s"]
     f_max = fixed(max_offset_sine_frequency_hz(a, lim), 1)
     gives = f"the amplifier gives {amps(lim.i_peak_A)}"
-    if _peak_too_high(chk, lim):
+    if chk.over_peak(lim):
         where, seg = _blame_segment(step, chk.peak_time_s)
         need = amps(chk.peak_current_A, lim.i_peak_A)
         if seg == "edge":
@@ -367,7 +345,7 @@ def _offset_sine_current_issues(
         else:
             msg = f"{what} needs {need} peak; {gives}; max frequency at {a:g} V is {f_max} Hz"
         out.append((where, msg))
-    if _mean_too_high(chk, lim):
+    if chk.over_mean(lim):
         where, seg = _blame_segment(step, chk.mean_time_s)
         draws = f"draws {amps(chk.mean_current_A, lim.i_avg_A)} on average over a cycle"
         limit = f"the amplifier's average limit is {amps(lim.i_avg_A)}"
@@ -381,7 +359,7 @@ def _offset_sine_current_issues(
 
 
 def _offset_sine_issues(
-    step: PlannedStep, chk: StepCheck, lim: RigLimits
+    step: PlannedStep, chk: DriveLoad, lim: RigLimits
 ) -> list[tuple[Where, str]]:
     """Every limit an offset sine breaks (range, samples per cycle, currents)."""
     d = step.definition
@@ -393,7 +371,7 @@ def _offset_sine_issues(
     return [x for x in found if x is not None] + _offset_sine_current_issues(step, chk, lim, what)
 
 
-def _step_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tuple[Where, str]]:
+def _step_issues(step: PlannedStep, chk: DriveLoad, lim: RigLimits) -> list[tuple[Where, str]]:
     """Every limit ``step`` breaks, in the order: voltage range, samples per cycle, peak
     current, mean current."""
     if step.kind in STRAIN_KINDS:
@@ -406,16 +384,16 @@ def _step_issues(step: PlannedStep, chk: StepCheck, lim: RigLimits) -> list[tupl
     found = [
         _voltage_range_issue(step, chk, lim, what if periodic else None),
         _samples_per_cycle_issue(step, f if periodic else None),
-        _peak_current_issue(step, chk, lim, periodic, what) if _peak_too_high(chk, lim) else None,
-        _mean_current_issue(step, chk, lim, periodic, what) if _mean_too_high(chk, lim) else None,
+        _peak_current_issue(step, chk, lim, periodic, what) if chk.over_peak(lim) else None,
+        _mean_current_issue(step, chk, lim, periodic, what) if chk.over_mean(lim) else None,
     ]
     return [x for x in found if x is not None]
 
 
-def preflight_checks(plan: Plan, limits: RigLimits) -> list[StepCheck]:
+def preflight_checks(plan: Plan, limits: RigLimits) -> list[DriveLoad]:
     """Check every entry of ``plan`` against ``limits``; the plan is left as it is.
 
-    Returns one :class:`StepCheck` per entry; raises :class:`InputFileError` listing every
+    Returns one :class:`DriveLoad` per entry; raises :class:`InputFileError` listing every
     problem found (a rate outside the DAQ's range alone: the samples at it would tell nothing).
     """
     found: list[tuple[Where, str]] = []
@@ -443,7 +421,7 @@ def preflight_checks(plan: Plan, limits: RigLimits) -> list[StepCheck]:
     return checks
 
 
-def preflight(plan: Plan, limits: RigLimits | None = None) -> list[StepCheck]:
+def preflight(plan: Plan, limits: RigLimits | None = None) -> list[DriveLoad]:
     """:func:`preflight_checks` against ``limits`` (default: the built-in rig's), handing the
     results to the plan (:meth:`Plan.take_checks`) for callers that read them from it
     (``labrig.runner.execute.preflight``). Returns the checks; raises :class:`InputFileError`."""

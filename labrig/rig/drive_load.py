@@ -1,9 +1,11 @@
 """What a voltage drive asks of the amplifier: its voltage range, peak current and mean current.
 
-The one measurement behind both limit checks: the protocol preflight
-(:func:`labrig.protocol.preflight.measure`, on a planned step's waveform) and the controller's
-:func:`labrig.control.check_drive` (on a computed drive). Both then compare it with the rig's
-:class:`~labrig.rig.limits.RigLimits` and word their own messages.
+One measurement, one record (:class:`DriveLoad`), behind both limit checks: the protocol
+preflight (:func:`labrig.protocol.preflight.measure`, one record per planned entry, on its
+waveform) and the controller's :func:`labrig.control.check_drive` (on a computed drive). Both
+compare the record with the rig's :class:`~labrig.rig.limits.RigLimits` through its methods
+(:meth:`DriveLoad.beyond_range`, :meth:`DriveLoad.over_peak`, :meth:`DriveLoad.over_mean`) and
+word their own messages.
 
 The current into the stack is ``i = C_eff dV/dt`` (:meth:`RigLimits.current_A`: ``C_eff =
 capacitance_F * large_signal_factor``, ``dV/dt`` by central differences). It is taken on a grid
@@ -33,8 +35,10 @@ from labrig.rig.limits import RigLimits
 __all__ = [
     "AVG_WINDOW_S",
     "CHUNK",
+    "CURRENT_RTOL",
     "MAX_WINDOW_POINTS",
     "OVERSAMPLE",
+    "RANGE_TOL_V",
     "DriveLoad",
     "averaging_window_s",
     "measure_load",
@@ -49,27 +53,51 @@ AVG_WINDOW_S = 1.0
 CHUNK = 1 << 20
 #: the protocol preflight caps its averaging window at this many fine-grid points
 MAX_WINDOW_POINTS = 50_000_000
+#: a voltage this far (V) beyond the rig's range is beyond it (rounding of the waveforms)
+RANGE_TOL_V = 1e-9
+#: a current this much (relative) above a limit is above it
+CURRENT_RTOL = 1e-6
 
 Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
 class DriveLoad:
-    """The load of a drive on the amplifier, on the fine grid (index ``j`` is at ``j /
-    fine_rate_hz`` s from the grid's first point).
+    """What a drive asks of the amplifier (times in s from the drive's start).
 
-    ``v_min_V`` / ``v_max_V``: the voltage range over the grid; ``peak_current_A`` at
-    ``peak_index``: the largest ``|i|`` (A); ``mean_current_A``: the largest mean ``|i|`` over
-    ``window_points`` consecutive points, for the window that ends at ``mean_index``.
+    ``v_min_V`` / ``v_max_V``: its voltage range (V); ``peak_current_A``: the largest ``|i|``
+    (A), at ``peak_time_s``; ``mean_current_A``: the largest mean ``|i|`` (A) over ``window_s``
+    (s), for the window that ends at ``mean_time_s``; ``duration_s``: the drive's duration (s);
+    ``name``: what was measured (a planned entry's name; for a computed drive, its description).
     """
 
     v_min_V: float
     v_max_V: float
     peak_current_A: float
-    peak_index: int
+    peak_time_s: float
     mean_current_A: float
-    mean_index: int
-    window_points: int
+    mean_time_s: float
+    window_s: float
+    duration_s: float
+    name: str = ""
+
+    def beyond_range(self, limits: RigLimits) -> tuple[bool, float] | None:
+        """``(too high, the voltage out of range)`` when the drive leaves ``limits``'
+        ``v_min_V .. v_max_V`` by more than :data:`RANGE_TOL_V` (the top first), else None."""
+        if self.v_max_V > limits.v_max_V + RANGE_TOL_V:
+            return True, self.v_max_V
+        if self.v_min_V < limits.v_min_V - RANGE_TOL_V:
+            return False, self.v_min_V
+        return None
+
+    def over_peak(self, limits: RigLimits) -> bool:
+        """The peak current is above ``limits.i_peak_A`` (relative tolerance
+        :data:`CURRENT_RTOL`; a current that is not a number is above)."""
+        return not self.peak_current_A <= limits.i_peak_A * (1 + CURRENT_RTOL)
+
+    def over_mean(self, limits: RigLimits) -> bool:
+        """The mean current is above ``limits.i_avg_A`` (as :meth:`over_peak`)."""
+        return not self.mean_current_A <= limits.i_avg_A * (1 + CURRENT_RTOL)
 
 
 def averaging_window_s(frequency_hz: float | None) -> float:
@@ -92,14 +120,20 @@ def measure_load(
     limits: RigLimits,
     window: int,
     chunk: int | None = CHUNK,
+    *,
+    duration_s: float,
+    time_s: Callable[[int], float] | None = None,
+    name: str = "",
 ) -> DriveLoad:
     """Voltage range, peak and windowed-mean current of a drive on its fine grid.
 
     ``voltage(lo, hi)`` gives the drive (V) at fine-grid points ``lo .. hi - 1`` of
-    ``n_points``, spaced ``1 / fine_rate_hz``; ``window`` is the mean current's window in points
-    (:func:`window_points`); ``chunk`` points are scanned at a time (``None``: all at once). A
-    current that is not finite counts as the peak (and a non-finite mean as the largest mean), so
-    a broken drive fails the check.
+    ``n_points``, spaced ``1 / fine_rate_hz``; ``time_s(j)`` is the time of point ``j`` in s from
+    the drive's start (default ``j / fine_rate_hz``: the grid starts with the drive).
+    ``window`` is the mean current's window in points (:func:`window_points`); ``chunk`` points
+    are scanned at a time (``None``: all at once); ``duration_s`` and ``name`` are recorded as
+    given. A current that is not finite counts as the peak (and a non-finite mean as the largest
+    mean), so a broken drive fails the check.
     """
     m = n_points
     step = m if chunk is None else chunk
@@ -130,4 +164,14 @@ def measure_load(
                 mean, mean_j = float(means[k]), a + k
             total = float(cs[-1])
             hist = arr[-w:]
-    return DriveLoad(vmin, vmax, peak, peak_j, mean, mean_j, w)
+    return DriveLoad(
+        v_min_V=vmin,
+        v_max_V=vmax,
+        peak_current_A=peak,
+        peak_time_s=peak_j / fine_rate_hz if time_s is None else time_s(peak_j),
+        mean_current_A=mean,
+        mean_time_s=mean_j / fine_rate_hz if time_s is None else time_s(mean_j),
+        window_s=w / fine_rate_hz,
+        duration_s=duration_s,
+        name=name,
+    )

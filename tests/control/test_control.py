@@ -295,3 +295,25 @@ def test_load_control_model(tmp_path):
     f.write_text(json.dumps({**doc, "effects": [bad]}))
     with pytest.raises(ValueError, match="-1 < c < 1"):
         load_control_model(f)
+
+
+def test_every_effect_the_registry_calls_invertible_reaches_its_own_control_field(tmp_path):
+    """The registry marks which effects the controller inverts; each must land in a field of
+    ``ControlModel`` of its own (an effect marked invertible that the controller ignored would
+    be dropped from the drive without a word)."""
+    import dataclasses
+
+    from labrig.control import INVERTIBLE_EFFECTS, ControlModel, load_control_model
+
+    doc = json.loads((ROOT / "experiments" / "hybrid-params.json").read_text())
+    fitted = {e["effect"]: e for e in doc["effects"]}
+    effect_fields = [f.name for f in dataclasses.fields(ControlModel) if f.name != "params"]
+    reached = []
+    for name in INVERTIBLE_EFFECTS:
+        assert name in fitted, f"{name}: no fitted example in hybrid-params.json"
+        f = tmp_path / f"{name}.json"
+        f.write_text(json.dumps({**doc, "effects": [fitted[name]]}))
+        cm = load_control_model(f)
+        (field,) = [k for k in effect_fields if getattr(cm, k) is not None]
+        reached.append(field)
+    assert sorted(reached) == sorted(effect_fields)

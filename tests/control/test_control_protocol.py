@@ -179,6 +179,10 @@ def test_preflight_and_check_drive_measure_a_drive_alike(tmp_path):
     assert chk.mean_current_A == pytest.approx(pf.mean_current_A, rel=1e-9)
     assert chk.window_s == pf.window_s == pytest.approx(1 / 20)
     assert chk.peak_time_s + 1e-3 == pytest.approx(pf.peak_time_s, abs=1e-12)
+    # one record: the entry's, and the drive's (its own samples' range and duration)
+    assert type(chk) is type(pf) and pf.name == step.name and chk.name == "the drive"
+    assert chk.duration_s == pytest.approx(drive.size / 1000.0)
+    assert (chk.v_min_V, chk.v_max_V) == (float(drive.min()), float(drive.max()))
     # 50 samples per cycle played linearly between samples: the peak slope is a chord's, 0.3 %
     # below the sine's
     c_eff, amp = lim.effective_capacitance_F, float(np.max(drive))

@@ -106,7 +106,7 @@ def test_slew_limit():
     assert np.max(np.abs(np.diff(y, prepend=0.0))) <= top / FS + 1e-12
     assert np.ptp(y) < np.ptp(v)
     assert slew_limit(v, 1e9, FS) is v
-    e = AmplifierCurrentLimit(measured=False)
+    e = AmplifierCurrentLimit(amplifier_voltage=False)
     assert e.physical({"inv_slew_ms_per_V": 0.5})["slew_V_per_ms"] == pytest.approx(2.0)
 
 

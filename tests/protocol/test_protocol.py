@@ -15,6 +15,7 @@ from labrig.core.errors import InputFileError
 from labrig.protocol import preflight as pf
 from labrig.protocol.check import check_protocol, format_plan, load_plan
 from labrig.protocol.waveforms import envelope, unipolar_sine
+from labrig.rig.drive_load import DriveLoad
 from labrig.rig.limits import RigLimits
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -317,6 +318,34 @@ def test_other_rig_limits_refuse_the_sweep():
         check_protocol(EXP / "sweep.yaml", lim)
     assert {i.field for i in e.value.issues} == {"steps[0].amplitudes_V[1]"}
     assert all(i.line == 18 for i in e.value.issues)  # the amplitudes_V line of sweep.yaml
+
+
+def test_a_drive_load_is_compared_with_the_limits_at_their_tolerances():
+    """The one comparison of a measured drive with the rig (preflight and controller): the
+    voltage range with 1 nV to spare, the currents with 1 ppm; a current that is not a number
+    is over the limit."""
+    lim = RigLimits()  # -20..100 V, 0.18 A peak, 0.12 A average
+
+    def load(v_min=0.0, v_max=50.0, peak=0.1, mean=0.05):
+        return DriveLoad(v_min, v_max, peak, 0.0, mean, 0.0, 1.0, 1.0)
+
+    assert load().beyond_range(lim) is None
+    assert load(v_max=100.0 + 5e-10).beyond_range(lim) is None
+    assert load(v_max=100.0 + 2e-9).beyond_range(lim) == (True, 100.0 + 2e-9)
+    assert load(v_min=-20.1).beyond_range(lim) == (False, -20.1)
+    assert load(v_min=-30.0, v_max=120.0).beyond_range(lim) == (True, 120.0)  # the top first
+    assert not load(peak=0.18 * (1 + 5e-7)).over_peak(lim)
+    assert load(peak=0.18 * (1 + 2e-6)).over_peak(lim) and load(peak=math.nan).over_peak(lim)
+    assert not load(mean=0.12).over_mean(lim)
+    assert load(mean=0.121).over_mean(lim) and load(mean=math.inf).over_mean(lim)
+
+
+def test_preflight_records_each_entry_with_its_name_and_duration():
+    plan = check_protocol(EXP / "paper.yaml")
+    assert plan.checks is not None
+    assert [c.name for c in plan.checks] == [s.name for s in plan.steps]
+    assert [c.duration_s for c in plan.checks] == [s.duration_s for s in plan.steps]
+    assert all(isinstance(c, DriveLoad) for c in plan.checks)
 
 
 def test_chunked_scan_equals_single_pass():

@@ -28,111 +28,76 @@ the driving voltage, the entries' sample ranges and, when the run recorded them,
 measured output voltage and a temperature channel (over the whole sequence; rests between
 entries filled in by :class:`Context`'s builder).
 
-The effects live in :mod:`.actuator` (the actuator's own physics) and :mod:`.electronics` (the
-amplifier and the measuring chain); :mod:`.base` has their common interface and
-:mod:`.empirical` the sparse terms found in a residual when no named effect passes. Forms
-deliberately differ from the simulated bench's (``drivers/sim/effects.py``) where the physics
-allows: a fitted first-order low-pass here against the bench's Butterworth, a pure slew
-limit against the bench's peak/average fold-back, an exact logarithmic kernel with a fitted
-onset time ``t0`` against the bench's mode bank from 0.01 s, a heating state driven by each entry's
-mean loss power against the bench's instantaneous power.
+Each effect is one module named after it (``creep.py``: :class:`Creep`), registered once in
+:mod:`.registry`, from which the names (:data:`EFFECT_NAMES`, :data:`STRUCTURAL_EFFECT_NAMES`,
+:data:`CREEP_EFFECTS`, :data:`INVERTIBLE_EFFECTS`), :func:`library`, the command line's choices
+and the table of effects in docs/diagnose.md are derived; :mod:`.base` has their common
+interface, :mod:`.empirical` the sparse terms found in a residual when no named effect passes and
+:mod:`.table` the table of effects. Forms deliberately differ from the simulated bench's
+(``drivers/sim/effects.py``) where the physics allows: a fitted first-order low-pass here against
+the bench's Butterworth, a pure slew limit against the bench's peak/average fold-back, an exact
+logarithmic kernel with a fitted onset time ``t0`` against the bench's mode bank from 0.01 s, a
+heating state driven by each entry's mean loss power against the bench's instantaneous power.
+
+Importing the package imports no numerical package: the registry's names are plain data, and
+the classes and helpers below are imported from their modules when first used
+(``from labrig.model.effects import Creep`` works as usual).
 """
 
 from __future__ import annotations
 
-from labrig.model.effects.actuator import (
-    Creep,
-    FieldSaturation,
-    QuadraticTerm,
-    Remanence,
-    ThermalDrift,
-    ViscoelasticCreep,
-    kelvin_voigt_filter,
+import importlib
+from typing import Any
+
+from labrig.model.effects.registry import (
+    CREEP_EFFECTS,
+    EFFECT_NAMES,
+    FIT_EFFECT_NAMES,
+    INVERTIBLE_EFFECTS,
+    REGISTRY,
+    STRUCTURAL_EFFECT_NAMES,
+    Registration,
+    RunContext,
+    library,
 )
-from labrig.model.effects.base import Context, Effect, Param
-from labrig.model.effects.electronics import (
-    AmplifierCurrentLimit,
-    MainsPickup,
-    OffsetDrift,
-    SensorLowpass,
-    TimeDelay,
-    measured_voltage,
-    slew_limit,
-)
-from labrig.model.effects.empirical import EMPIRICAL_NOTE, EmpiricalTerms
+
+#: names imported from their modules when first used: the common interface, the empirical
+#: effect, the helpers of some effects, and every registered effect's class (from its module)
+LAZY: dict[str, str] = {
+    "Context": "base",
+    "Effect": "base",
+    "Param": "base",
+    "EMPIRICAL_NOTE": "empirical",
+    "EmpiricalTerms": "empirical",
+    "kelvin_voigt_filter": "viscoelastic_creep",
+    "measured_voltage": "amplifier_current_limit",
+    "slew_limit": "amplifier_current_limit",
+    **{r.cls: r.name for r in REGISTRY},
+}
 
 __all__ = [
     "CREEP_EFFECTS",
     "EFFECT_NAMES",
-    "EMPIRICAL_NOTE",
+    "FIT_EFFECT_NAMES",
+    "INVERTIBLE_EFFECTS",
+    "REGISTRY",
     "STRUCTURAL_EFFECT_NAMES",
-    "AmplifierCurrentLimit",
-    "Context",
-    "Creep",
-    "Effect",
-    "EmpiricalTerms",
-    "FieldSaturation",
-    "MainsPickup",
-    "OffsetDrift",
-    "Param",
-    "QuadraticTerm",
-    "Remanence",
-    "SensorLowpass",
-    "ThermalDrift",
-    "TimeDelay",
-    "ViscoelasticCreep",
-    "kelvin_voigt_filter",
+    "Registration",
+    "RunContext",
     "library",
-    "measured_voltage",
-    "slew_limit",
+    *LAZY,
 ]
 
 
-#: the default ``diagnose`` candidates (the order is the order of the report);
-#: ``viscoelastic_creep`` only where a slow mode is identifiable
-#: (:func:`labrig.analysis.diagnose.procedure.slow_mode_identifiable`)
-EFFECT_NAMES: tuple[str, ...] = (
-    "thermal_drift",
-    "amplifier_current_limit",
-    "sensor_lowpass",
-    "mains_pickup",
-    "offset_drift",
-    "creep",
-    "viscoelastic_creep",
-    "time_delay",
-    "quadratic_term",
-    "field_saturation",
-)
-
-#: structural effects of the actuator that ``labrig diagnose --also NAME`` adds to the
-#: candidates and ``labrig fit --effect NAME`` fits (path-dependent: ``remanence`` is not a
-#: default candidate; ``viscoelastic_creep`` is one where identifiable, and ``--also`` keeps
-#: accepting it). On the hybrid bench with the paper's campaign they are what the model lacks
-#: (docs/diagnose.md).
-STRUCTURAL_EFFECT_NAMES: tuple[str, ...] = ("remanence", "viscoelastic_creep")
-#: the effects that make the strain creep on after a step (part of the model's creep figure)
-CREEP_EFFECTS: tuple[str, ...] = ("creep", "viscoelastic_creep")
+def __getattr__(name: str) -> Any:
+    """A name of :data:`LAZY`, imported from its module on first use (PEP 562)."""
+    module = LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
 
 
-def library(
-    temperature: bool = False,
-    amplifier_voltage: bool = False,
-    mains_hz: float = 50.0,
-    v_ref: float = 100.0,
-) -> dict[str, Effect]:
-    """The effects, configured for what a run recorded (temperature channel, amplifier monitor),
-    its mains frequency and its full-scale voltage."""
-    effects: list[Effect] = [
-        ThermalDrift(temperature),
-        AmplifierCurrentLimit(amplifier_voltage),
-        SensorLowpass(),
-        MainsPickup(mains_hz),
-        OffsetDrift(),
-        Creep(),
-        ViscoelasticCreep(),
-        Remanence(),
-        TimeDelay(),
-        QuadraticTerm(v_ref),
-        FieldSaturation(v_ref),
-    ]
-    return {e.name: e for e in effects}
+def __dir__() -> list[str]:
+    return sorted({*globals(), *LAZY})

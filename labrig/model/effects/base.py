@@ -89,6 +89,12 @@ class Effect:
 
     name: str = ""
     where: str = ""  # "voltage" | "operator" | "output" | "nuisance"
+    #: the cells of the table of effects in docs/diagnose.md (:mod:`labrig.model.effects.table`;
+    #: Markdown): where it acts, in words; its parameters with their null values; its form as
+    #: an equation. The table's signature is :attr:`signature`.
+    acts_on: str = ""
+    params_doc: str = ""
+    form: str = ""
     physics: str = ""
     signature: str = ""
     confusable: tuple[str, ...] = ()

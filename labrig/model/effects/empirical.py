@@ -56,6 +56,9 @@ class EmpiricalTerms(Effect):
 
     name = "empirical_terms"
     where = "output"
+    acts_on = "measured strain"
+    params_doc = "one coefficient per selected term (0)"
+    form = "`S + sum_k c_k theta_k`, terms selected from the residual by sparse regression"
     physics = EMPIRICAL_NOTE
     signature = "whatever the selected terms describe (found by sparse regression)"
     confusable = ()

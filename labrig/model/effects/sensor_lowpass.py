@@ -1,0 +1,70 @@
+"""The ``sensor_lowpass`` effect: a low-pass on the measured strain (:class:`SensorLowpass`)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal
+
+from labrig.model.effects.base import Effect, Param, plus_minus
+
+__all__ = ["SensorLowpass"]
+
+
+class SensorLowpass(Effect):
+    """A low-pass on the measured strain (conditioner or anti-alias filter): a second-order
+    section ``1 / (1 + 2 zeta tau s + (tau s)^2)`` with a fitted cutoff ``fc = 1 / (2 pi tau)``
+    and a fitted damping ``zeta`` (0.71: Butterworth, 0.87: Bessel-like, large: first order with
+    ``tau_1 = 2 zeta tau``).
+
+    Acts on the measured output. Signature: a quadrature residual (lagging the strain) growing
+    with frequency, the same percentage at 50 and 100 V. Null: ``tau = 0``. Confusable with a
+    delay (below the cutoff a Butterworth section *is* a delay of ``sqrt 2 tau`` to first order),
+    a load resonance and the model's own ``G_d``.
+    """
+
+    name = "sensor_lowpass"
+    where = "output"
+    acts_on = "measured strain"
+    params_doc = "`tau_s` (0), `zeta`"
+    form = "second-order section, fitted cutoff `fc = 1/(2 pi tau)` and damping"
+    physics = "conditioner / anti-alias low-pass on the measured strain"
+    signature = "quadrature residual growing with frequency, same % at 50 and 100 V"
+    confusable = ("time_delay", "amplifier_current_limit")
+    tell_apart = "calibrate the gauge chain with a known step or a multisine"
+    params = (
+        # cutoffs 16 Hz to 1.6 kHz: the cutoff trades against G_d's order (local optima)
+        Param("tau_s", "s", 0.0, 0.0, 0.02, 5e-4, sign=+1, starts=(1e-4, 3e-4, 1e-3, 3e-3, 1e-2)),
+        Param("zeta", "", 0.7, 0.2, 5.0, 0.7, check_bounds=False),
+    )
+
+    def apply(self, x, ctx, p):
+        tau, zeta = p["tau_s"], p["zeta"]
+        if tau <= 0:
+            return x
+
+        def design():
+            bd, ad, _ = signal.cont2discrete(
+                ([1.0], [tau * tau, 2 * zeta * tau, 1.0]), 1.0 / ctx.rate_hz, method="foh"
+            )
+            return np.atleast_1d(np.squeeze(bd)) / ad[0], np.asarray(ad, float) / ad[0]
+
+        b, a = ctx.cached(("lp2", tau, zeta, ctx.rate_hz), design)
+        zi = signal.lfilter_zi(b, a) * x[0]
+        return signal.lfilter(b, a, x, zi=zi)[0]
+
+    def physical(self, p):
+        tau = p["tau_s"]
+        return {
+            "fc_hz": 1.0 / (2 * np.pi * tau) if tau > 0 else float("inf"),
+            "zeta": p["zeta"],
+            "tau_s": tau,
+        }
+
+    def describe(self, p, sd):
+        tau, s = p["tau_s"], sd.get("tau_s")
+        if tau <= 0:
+            return "no low-pass"
+        fc = 1.0 / (2 * np.pi * tau)
+        return plus_minus("fc", fc, None if s is None else fc * s / tau, "Hz") + plus_minus(
+            ", damping", p["zeta"], sd.get("zeta"), ""
+        )
