@@ -264,7 +264,7 @@ class Run:
         target = Path(out) if out is not None else None
         params_path = Path(params) if params is not None else None
         if target is not None:
-            _check_targets([target], [self.path, params_path], overwrite, "report.html")
+            _check_targets([target], [self.path, params_path], overwrite)
         built = build_run_report(
             self.path,
             params_path,
@@ -277,8 +277,9 @@ class Run:
         )
         if target is not None:
             from labrig.core.outputs import write_text_output
+            from labrig.store.reader import being_written
 
-            write_text_output(target, built.page, overwrite=overwrite)
+            write_text_output(target, built.page, overwrite=overwrite, being_written=being_written)
         return built
 
     def diagnose(
@@ -303,7 +304,7 @@ class Run:
         params_path = Path(params) if params else None
         if folder is not None:
             targets = [folder / n for n in OUTPUT_NAMES]
-            _check_targets(targets, [self.path, params_path], overwrite, "diagnosis.json")
+            _check_targets(targets, [self.path, params_path], overwrite)
         say = _stderr if progress else _silent
         result = diagnose_run_file(
             self.path,
@@ -398,21 +399,22 @@ def _ui(progress: bool):
     return QuietUI()
 
 
-def _check_targets(
-    targets: list[Path], inputs: list[Path | None], overwrite: bool, example: str
-) -> None:
-    """Before the work, as Python expects: a folder where a file goes is an
-    ``IsADirectoryError``, an existing file without ``overwrite`` a ``FileExistsError``; then
-    the checks of :func:`labrig.core.outputs.check_writable` (an input as output, a place that
-    cannot be written: :class:`~labrig.core.errors.InputFileError`)."""
+def _check_targets(targets: list[Path], inputs: list[Path | None], overwrite: bool) -> None:
+    """Before the work, the one output check (:func:`labrig.core.outputs.check_writable`):
+    an existing file without ``overwrite`` is a :class:`FileExistsError`, a folder where a file
+    goes an :class:`IsADirectoryError` (both also
+    :class:`~labrig.core.errors.InputFileError`), an input as output or a run file being
+    written an :class:`~labrig.core.errors.InputFileError`."""
     from labrig.core.outputs import check_writable
+    from labrig.store.reader import being_written
 
-    for t in targets:
-        if t.is_dir():
-            raise IsADirectoryError(f"{t} is a folder; give a file name such as {example}")
-        if t.exists() and not overwrite:
-            raise FileExistsError(f"{t} exists; pass overwrite=True to replace it")
-    check_writable(targets, inputs=inputs, overwrite=overwrite)
+    check_writable(
+        targets,
+        inputs=inputs,
+        overwrite=overwrite,
+        option="out",
+        being_written=being_written,
+    )
 
 
 def as_json(result: Any) -> dict[str, Any]:
@@ -486,16 +488,12 @@ def run(
     that ended on a device fault or a full disk is returned (``status`` says ``failed``, with
     a warning). Bad input raises :class:`~labrig.core.errors.InputFileError` before anything is
     energised."""
-    from labrig.runner.execute import execute, preflight
+    from labrig.runner.execute import check_run_output, default_out_path, execute, preflight
 
     rig_path = Path(rig) if rig is not None else None
-    plan, rig_path = preflight(Path(protocol), rig_path)
-    target = Path(out) if out is not None else None
-    if target is not None:
-        if target.is_dir():
-            raise IsADirectoryError(f"{target} is a folder; give a file name such as run.h5")
-        if target.exists() and not overwrite:
-            raise FileExistsError(f"{target} exists; choose another out or pass overwrite=True")
+    plan, rig_path = preflight(protocol, rig_path)
+    target = Path(out) if out is not None else default_out_path(plan)
+    check_run_output(plan, rig_path, target, overwrite)  # before anything is energised
     with _bar(plan.total_duration_s, progress) as callback:
         outcome = execute(plan, rig_path, target, seed, realtime, callback, overwrite)
     if outcome.exit_code == 130:

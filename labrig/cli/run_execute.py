@@ -22,7 +22,13 @@ from labrig.cli.common import plural
 from labrig.core.interrupts import Interrupted, interrupt_once
 from labrig.core.metadata import RunMetadata
 from labrig.protocol.plan import Plan
-from labrig.runner.execute import RunOutcome, execute, preflight
+from labrig.runner.execute import (
+    RunOutcome,
+    check_run_output,
+    default_out_path,
+    execute,
+    preflight,
+)
 
 
 @dataclass
@@ -57,15 +63,9 @@ def run_with_progress(
         if not extras.resume.is_file():
             typer.echo(f"error: --resume {extras.resume}: run file not found", err=True)
             return 2
-    if out is not None and out.is_dir():
-        example = out / "run.h5"
-        typer.echo(
-            f"error: --out {out} is a directory; give a file name such as {example}", err=True
-        )
-        return 2
-    if out is not None and out.exists() and not overwrite:
-        typer.echo(f"error: {out} exists; choose another --out or pass --overwrite", err=True)
-        return 2
+    if extras.resume is None:
+        out = out or default_out_path(plan)
+        check_run_output(plan, rig_path, out, overwrite, [extras.params])
     where = escape(f"rig {rig_path}") if rig_path else "the simulated rig"
     console.print(
         f"[bold]{escape(plan.name)}[/]: {plural(len(plan.steps), 'entry')}, "
@@ -177,7 +177,7 @@ def _execute_with_bar(
                 execute(
                     plan, rig_path, out, seed, realtime, progress, overwrite,
                     metadata=extras.metadata, resume=extras.resume,
-                    on_file=live.follow if live is not None else None,
+                    on_file=live.follow if live is not None else None, inputs=[extras.params],
                 )
             )  # fmt: skip
     except OSError:

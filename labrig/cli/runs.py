@@ -82,7 +82,11 @@ def list_runs_command(
         raise InputFileError(
             [InputIssue(str(DEFAULT_FOLDER), None, "", "no runs/ folder here: give a folder")]
         )
-    check_out(out, [], overwrite)
+    from labrig.catalogue.listing import RUN_SUFFIXES
+    from labrig.core.outputs import ReadFolder
+
+    folders = [ReadFolder(p, RUN_SUFFIXES) for p in targets if p.is_dir()]
+    check_out(out, targets, overwrite, folders)
     detail = as_json or out is not None
     with _progress_bar() as progress:
         listing = list_runs(targets, conditions, detail=detail, reindex=reindex, progress=progress)
