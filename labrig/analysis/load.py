@@ -6,7 +6,7 @@ from pathlib import Path
 
 from labrig.analysis.records import Record
 from labrig.core.errors import InputFileError, InputIssue
-from labrig.store import read_run
+from labrig.store import RunFile, read_run
 
 _CORE = {"time", "command_voltage", "strain"}
 
@@ -20,7 +20,12 @@ def records_from_run(path: Path | str, entries: list[str] | None = None) -> list
     step definition (``frequency_hz``, ``amplitude_V``, ``kind``...) goes to ``meta``.
     Entries that did not complete are skipped unless named explicitly.
     """
-    run = read_run(path)
+    return records_of(read_run(path), path, entries)
+
+
+def records_of(run: RunFile, path: Path | str, entries: list[str] | None = None) -> list[Record]:
+    """:func:`records_from_run` of a run file already read (``run``, read from ``path``): a
+    command that reads a file once passes the same snapshot to every step."""
     names = [e.name for e in run]
     if entries:
         missing = [n for n in entries if n not in names]

@@ -21,10 +21,17 @@ from typing import Any
 import numpy as np
 
 from labrig.analysis.baselines import KINDS
-from labrig.analysis.fit import predict_record
+from labrig.analysis.fit import FitResult, predict_record
 from labrig.analysis.params_file import fitted_effects, read_fit_output
 from labrig.analysis.records import Record
-from labrig.commands.fit import CommandUI, Progress, QuietUI, fit_base, fit_dynamic
+from labrig.commands.fit import (
+    CommandUI,
+    FitOutcome,
+    Progress,
+    QuietUI,
+    fit_base,
+    fit_dynamic,
+)
 from labrig.commands.prepare import AnalysisError, Setup, prepare
 from labrig.core.jsonsafe import json_safe
 from labrig.core.version import __version__
@@ -106,9 +113,16 @@ def predict_entries(
     return out
 
 
-def _fitted_now(setup: Setup, method: str, heldout: bool, progress: Progress) -> FittedModels:
-    """Our model fitted to the setup's records."""
-    res = fit_dynamic(setup, method, heldout, progress)
+def _fitted_now(
+    setup: Setup,
+    method: str,
+    heldout: bool,
+    progress: Progress,
+    fitted: FitResult | None = None,
+) -> FittedModels:
+    """Our model fitted to the setup's records (``fitted``: that fit, already made on this
+    setup, is used instead of fitting again)."""
+    res = fitted if fitted is not None else fit_dynamic(setup, method, heldout, progress)
     j = res.to_json()
     model = Fitted(
         "dynamic",
@@ -164,13 +178,14 @@ def fit_report_models(
     method: str,
     heldout: bool,
     progress: Progress,
+    fit: FitResult | None = None,
 ) -> FittedModels:
     """Our model (fitted now, or from the ``labrig fit`` output ``doc`` read from
-    ``params_file``) and the baselines, fitted on the same records; a baseline that cannot be
-    fitted is reported as such (its ``note``)."""
+    ``params_file``, or ``fit`` made on this setup already) and the baselines, fitted on the
+    same records; a baseline that cannot be fitted is reported as such (its ``note``)."""
     t0 = time.perf_counter()
     if doc is None or params_file is None:
-        fitted = _fitted_now(setup, method, heldout, progress)
+        fitted = _fitted_now(setup, method, heldout, progress, fit)
     else:
         fitted = _from_file(setup, doc, params_file)
     for kind in KINDS:
@@ -308,16 +323,22 @@ def build_run_report(
     heldout: bool = True,
     ui: CommandUI | None = None,
     page: bool = True,
+    fit: FitOutcome | None = None,
 ) -> BuiltReport:
     """``labrig report``: the report of the run file ``path`` (module docstring); our model's
     parameters from ``params_file`` (``labrig fit`` output) when given, else fitted now.
-    ``page=False``: the metrics only (no figures drawn; ``BuiltReport.page`` is ``""``)."""
+    ``page=False``: the metrics only (no figures drawn; ``BuiltReport.page`` is ``""``).
+    ``fit``: ``labrig fit`` of the same file with the same settings, already made (``batch
+    report``): its records and fit are used, so the file is read and our model fitted once."""
     ui = ui or QuietUI()
     doc = read_fit_output(params_file) if params_file is not None else None
-    setup = prepare(path, entries, warmup_s, offset)
+    if fit is not None and not isinstance(fit.result, FitResult):
+        raise ValueError("report takes a fit of our model (not a baseline or effects fit)")
+    setup = fit.setup if fit is not None else prepare(path, entries, warmup_s, offset)
     ui.announce(setup)
     with ui.fitting() as progress:
-        fitted = fit_report_models(setup, doc, params_file, method, heldout, progress)
+        ours = fit.result if fit is not None else None
+        fitted = fit_report_models(setup, doc, params_file, method, heldout, progress, ours)
     data = report_data(setup, fitted, heldout, doc is not None)
     html = ""
     if page:
