@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from labrig.analysis.diagnose import Diagnosis
     from labrig.analysis.fit import FitResult
     from labrig.analysis.fit_effects import EffectsFit
+    from labrig.analysis.records import Record
     from labrig.commands.report import BuiltReport
     from labrig.runner.execute import ProgressFn
     from labrig.store import RunEntry, RunFile
@@ -178,6 +179,27 @@ class Run:
     def __len__(self) -> int:
         return len(self.entries)
 
+    def __enter__(self) -> Run:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Let go of the samples read (the file itself is never held open: every read is made
+        and closed in a child process). ``with labrig.open(path) as run:`` calls it at the
+        end; the run's metadata stays usable, the samples are read again if asked for."""
+        self._full = None
+
+    def records(self, entries: Sequence[str] | str | None = None) -> list[Record]:
+        """The entries as the analysis sees them (:class:`~labrig.analysis.records.Record`:
+        voltage, strain, auxiliary channels, step definition): the complete ones with voltage
+        and strain, or ``entries`` by name. What ``fit(...).predict(run)`` simulates."""
+        from labrig.analysis.load import records_of
+
+        names = [entries] if isinstance(entries, str) else (list(entries) if entries else None)
+        return records_of(self.file, self.path, names)
+
     def __contains__(self, name: object) -> bool:
         return name in self.entries
 
@@ -195,9 +217,11 @@ class Run:
 
     def to_pandas(self, entries: Sequence[str] | str | None = None) -> pd.DataFrame:
         """The samples of ``entries`` (default: all, in run order) as one DataFrame: an
-        ``entry`` column, then one column per channel named with its unit (``time_s``,
-        ``command_voltage_V``, ``strain_ue``); ``df.attrs["units"]`` and
-        ``df.attrs["long_names"]`` by column. One entry: ``df[df.entry == name]``."""
+        ``entry`` column, one column per channel named with its unit (``time_s``,
+        ``command_voltage_V``, ``strain_ue``), then the entry's step definition (``kind``,
+        ``amplitude_V``, ``frequency_hz``...; :func:`labrig.api.frames.step_values`);
+        ``df.attrs["units"]`` and ``df.attrs["long_names"]`` by column. One entry:
+        ``df[df.entry == name]``."""
         from labrig.api.frames import entries_frame
 
         return entries_frame(self._chosen(entries), self._attrs())
