@@ -320,7 +320,7 @@ def execute(
     resume: Path | None = None,
     on_file: Callable[[Path], None] | None = None,
     inputs: Sequence[Path | None] = (),
-    opener: Callable[[Path | None, int | None], Rig] = open_rig,
+    opener: Callable[[Path | None, int | None], Rig] | None = None,
 ) -> RunOutcome:
     """Run a preflighted plan on the rig and log it; returns the outcome (never raises for
     device faults, a full disk or stop signals once the run file exists: those are recorded
@@ -332,7 +332,8 @@ def execute(
     then ignored). ``on_file(path)`` is called once the run file exists, with the path being
     written (a copy beside the target with ``overwrite`` or ``resume``). ``inputs``: other
     files the command reads, never the run file (:func:`check_run_output`). ``opener``:
-    opens the rig (:func:`~labrig.runner.rigfile.open_rig`; tests pass one that records).
+    opens the rig (default :func:`~labrig.runner.rigfile.open_rig`; tests pass one that
+    records).
 
     Called from the main thread, SIGINT, SIGTERM, SIGHUP and SIGQUIT stop the run once:
     repeats are ignored until the output is at 0 V and the file is closed (see
@@ -351,7 +352,8 @@ def execute(
         out = out or default_out_path(plan)
         check_run_output(plan, rig_path, out, overwrite, inputs)
     with interrupt_once() as guard:
-        rig = opener(rig_path, seed)  # a stop signal here: open_rig closes what it opened
+        # a stop signal here: open_rig closes what it opened (looked up now: a test seam)
+        rig = (opener or open_rig)(rig_path, seed)
         try:
             with guard.defer():
                 return _run_on(rig, job, out, guard)
