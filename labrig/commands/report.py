@@ -141,15 +141,41 @@ def _fitted_now(
     )
 
 
-def _from_file(setup: Setup, doc: dict[str, Any], params_file: Path) -> FittedModels:
-    """Our model with the parameters (and effects) of a ``labrig fit`` file."""
+def _from_file(
+    setup: Setup,
+    doc: dict[str, Any],
+    params_file: Path,
+    heldout: bool = False,
+    progress: Progress | None = None,
+) -> FittedModels:
+    """Our model with the parameters (and effects) of a ``labrig fit`` file. The file gives
+    its held-out NRMSE as a mean only; with ``heldout`` (and two scored entries or more, no
+    effects) the held-out NRMSE of each entry is measured now, leave-one-entry-out as
+    ``labrig fit`` does (each fold fits the other entries), so the report keeps its column."""
     params = ModelParams(**doc["params"])
     effects = fitted_effects(doc, params_file, setup.records)
+    held_per, held_mean = None, doc.get("heldout_nrmse_pct")
+    notes = []
+    if heldout and len(setup.scored) >= 2 and not effects[0]:
+        method = str(doc.get("method", "global"))
+        method = method if method in ("global", "staged") else "global"
+        res = fit_dynamic(setup, method, True, progress, params.memory)
+        held_per, held_mean = res.heldout_per_entry, res.heldout_nrmse_pct
+        notes.append(
+            "held-out NRMSE per entry: leave-one-entry-out fits made now "
+            f"({method}; the parameters file gives its mean only)"
+        )
+    else:
+        notes.append(
+            "held-out NRMSE per entry not available with --params here (the file gives its "
+            "mean only; it is measured now with --heldout, two scored entries or more and no "
+            "effects)"
+        )
     model = Fitted(
         "dynamic",
         predict_entries(params, setup, effects),
-        None,
-        doc.get("heldout_nrmse_pct"),
+        held_per,
+        held_mean,
         doc["params"],
         doc.get("uncertainty") or {},
         doc.get("correlation") or {},
@@ -158,16 +184,13 @@ def _from_file(setup: Setup, doc: dict[str, Any], params_file: Path) -> FittedMo
     source = f"from {params_file}"
     if effects[0]:
         source += " with the effects fitted with it: " + ", ".join(e.name for e in effects[0])
-    notes = []
     fitted_on = doc.get("entries")
     if isinstance(fitted_on, list) and fitted_on != setup.scored:
-        notes.append(
+        notes.insert(
+            0,
             f"the parameters were fitted on {', '.join(map(str, fitted_on))}; this "
-            f"report scores {', '.join(setup.scored)}"
+            f"report scores {', '.join(setup.scored)}",
         )
-    notes.append(
-        "held-out NRMSE per entry not available with --params (the file gives its mean only)"
-    )
     return FittedModels({"dynamic": model}, source, notes)
 
 
@@ -187,7 +210,7 @@ def fit_report_models(
     if doc is None or params_file is None:
         fitted = _fitted_now(setup, method, heldout, progress, fit)
     else:
-        fitted = _from_file(setup, doc, params_file)
+        fitted = _from_file(setup, doc, params_file, heldout, progress)
     for kind in KINDS:
         try:
             b = fit_base(setup, kind, heldout, progress)

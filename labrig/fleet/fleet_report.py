@@ -181,7 +181,7 @@ def run_table(rows: list[dict[str, Any]], shown: list[str], out_dir: Path) -> li
                 "actuator": str(r.get("actuator") or ""),
                 "status": str(r["status"]),
                 "verdict": str(r.get("verdict_class") or ""),
-                "values": values,
+                "cells": values,
                 "page": page,
                 "page_name": Path(page).name if page else "",
             }
