@@ -67,7 +67,9 @@ def export(
 
     folder = one_option("--out", {"--out": out, "--csv": csv})
     if folder is None:
-        raise typer.BadParameter("give the folder for the CSV files", param_hint="--out")
+        raise typer.BadParameter(
+            "Missing option '--out': give the folder for the CSV files", param_hint="--out"
+        )
     written = export_csv(run_file, folder, overwrite, option="--csv" if csv else "--out")
     if as_json:
         typer.echo(json_text({"files": [str(p) for p in written]}))

@@ -163,6 +163,8 @@ def check_outputs(
     if folders_given:
         raise OutputIsFolderError(folders_given)
     if existing:
+        # an option of the command line, or a keyword of the Python API (option "out")
+        flag = "--overwrite" if option.startswith("--") else "overwrite=True"
         named = ", ".join(str(t) for t in existing[:MAX_NAMED])
         more = f" and {len(existing) - MAX_NAMED} more" if len(existing) > MAX_NAMED else ""
         what = "exists" if len(existing) == 1 else "exist"
@@ -172,7 +174,7 @@ def check_outputs(
                     named + more,
                     None,
                     option,
-                    f"{what} already; pass --overwrite to replace "
+                    f"{what} already; pass {flag} to replace "
                     f"{'it' if len(existing) == 1 else 'them'}, or choose another {option}",
                 )
             ]

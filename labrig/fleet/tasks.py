@@ -138,12 +138,18 @@ class NotAnalysedError(Exception):
 
 @dataclass
 class Snapshot:
-    """A run file as the task read it: the file, its SHA-256, and the fit once made."""
+    """A run file as the task read it: the file, its SHA-256, and the fit once made
+    (``run`` ``None``: not read yet; each part then reads it itself)."""
 
     path: Path
-    run: RunFile
-    sha256: str
+    run: RunFile | None
+    sha256: str = ""
     fit: FitOutcome | None = None
+
+
+def _snapshot(source: Snapshot | Path) -> Snapshot:
+    """A part's input: the task's snapshot, or a path (a part called on its own)."""
+    return source if isinstance(source, Snapshot) else Snapshot(Path(source), None)
 
 
 def _stamp(path: Path) -> tuple[int, int, int, int]:
@@ -172,7 +178,7 @@ def read_snapshot(path: Path) -> Snapshot:
 # -- the three commands ---------------------------------------------------------------------
 
 
-def fit_part(snap: Snapshot, opt: TaskOptions, out: TaskResult) -> None:
+def fit_part(source: Snapshot | Path, opt: TaskOptions, out: TaskResult) -> None:
     """``labrig fit RUN --json``: ``fit.json``, the parameters with uncertainties, NRMSE, and the
     creep the fitted model describes (:func:`~labrig.analysis.diagnose.modelled_creep_per_decade`
     after a step to the run's largest voltage)."""
@@ -182,6 +188,7 @@ def fit_part(snap: Snapshot, opt: TaskOptions, out: TaskResult) -> None:
     from labrig.core.jsonsafe import json_safe
     from labrig.model import ModelParams
 
+    snap = _snapshot(source)
     outcome = fit_run_file(
         snap.path, method=opt.method, memory=opt.memory, heldout=opt.heldout, run=snap.run
     )
@@ -208,11 +215,12 @@ def fit_part(snap: Snapshot, opt: TaskOptions, out: TaskResult) -> None:
         )
 
 
-def diagnose_part(snap: Snapshot, opt: TaskOptions, out: TaskResult) -> None:
+def diagnose_part(source: Snapshot | Path, opt: TaskOptions, out: TaskResult) -> None:
     """``labrig diagnose RUN --json --out D``: ``diagnosis.json`` and ``diagnosis.html``, the
     effects added, the verdict and its class."""
     from labrig.commands.diagnose import diagnose_run_file
 
+    snap = _snapshot(source)
     notes: list[str] = []
     result = diagnose_run_file(
         snap.path,
@@ -248,11 +256,12 @@ def diagnose_part(snap: Snapshot, opt: TaskOptions, out: TaskResult) -> None:
         r["notes"] = "; ".join(notes)
 
 
-def report_part(snap: Snapshot, opt: TaskOptions, out: TaskResult) -> None:
+def report_part(source: Snapshot | Path, opt: TaskOptions, out: TaskResult) -> None:
     """``labrig report RUN --out report.html --json``: the page, its metrics table, and each
     model's mean NRMSE; our model is the fit :func:`fit_part` made."""
     from labrig.commands.report import build_run_report
 
+    snap = _snapshot(source)
     built = build_run_report(snap.path, None, method=opt.method, heldout=opt.heldout, fit=snap.fit)
     out.documents["report.html"] = built.page
     out.documents["report.json"] = dumps(built.metrics)

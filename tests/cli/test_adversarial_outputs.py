@@ -15,10 +15,13 @@ file being written), tests/fleet/test_batch_snapshot.py and tests/runner/test_re
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 from pathlib import Path
 
 import pytest
+
+from labrig.model import PAPER_TABLE1
 
 from helpers import TINY, invoke
 
@@ -67,7 +70,7 @@ def folder(tiny_run: Path, tmp_path: Path, monkeypatch) -> Path:
 
     (tmp_path / "P.yaml").write_text(TINY)
     (tmp_path / "R.yaml").write_text(DEFAULT_RIG_YAML)
-    (tmp_path / "F.json").write_text('{"params": {}}\n')
+    (tmp_path / "F.json").write_text(json.dumps({"params": PAPER_TABLE1.model_dump()}))
     (tmp_path / "wave.csv").write_text("".join(f"{10 * (k % 5)}\n" for k in range(200)))
     (tmp_path / "C.yaml").write_text(
         "name: c\nrate_hz: 500\nsteps:\n  - kind: csv\n    file: wave.csv\n    column: 1\n"

@@ -10,6 +10,7 @@ silently wrote to B).
 from __future__ import annotations
 
 import hashlib
+import json
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,7 @@ import pytest
 import labrig
 from labrig.core.errors import InputFileError
 from labrig.core.outputs import OutputExistsError, ReadFolder, check_outputs
+from labrig.model import PAPER_TABLE1
 
 from helpers import TINY, invoke, start_writer, stop_writer
 
@@ -65,7 +67,7 @@ def test_run_never_writes_over_its_rig_file(tmp_path: Path):
 def test_run_never_writes_over_the_live_views_parameters(tmp_path: Path):
     proto, params = tmp_path / "P.yaml", tmp_path / "P.json"
     proto.write_text(TINY)
-    params.write_text('{"params": {}}\n')
+    params.write_text(json.dumps({"params": PAPER_TABLE1.model_dump()}))  # a valid one
     before = digest(params)
     res = invoke("run", proto, "--live", "--params", params, "--out", params, "--overwrite")
     refused(res, str(params), "is an input")
