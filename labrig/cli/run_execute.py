@@ -24,11 +24,13 @@ from labrig.core.metadata import RunMetadata
 from labrig.protocol.plan import Plan
 from labrig.runner.execute import (
     RunOutcome,
+    check_resume_of,
     check_run_output,
     default_out_path,
     execute,
     preflight,
 )
+from labrig.store.resume import ResumePlan
 
 
 @dataclass
@@ -63,9 +65,12 @@ def run_with_progress(
         if not extras.resume.is_file():
             typer.echo(f"error: --resume {extras.resume}: run file not found", err=True)
             return 2
+    resume = None
     if extras.resume is None:
         out = out or default_out_path(plan)
         check_run_output(plan, rig_path, out, overwrite, [extras.params])
+    else:  # before anything is shown or energised: damage, another protocol, being written
+        resume = check_resume_of(plan, extras.resume)
     where = escape(f"rig {rig_path}") if rig_path else "the simulated rig"
     console.print(
         f"[bold]{escape(plan.name)}[/]: {plural(len(plan.steps), 'entry')}, "
@@ -78,7 +83,7 @@ def run_with_progress(
         outcome = None
         try:
             outcome = _execute_with_bar(
-                console, plan, rig_path, out, seed, realtime, overwrite, extras, live
+                console, plan, rig_path, out, seed, realtime, overwrite, extras, live, resume
             )
         except Interrupted as e:  # before the run file existed: nothing energised or written
             _say(console, f"[red]stopped before the run began[/]: {escape(e.reason)}")
@@ -146,6 +151,7 @@ def _execute_with_bar(
     overwrite: bool,
     extras: RunExtras,
     live,
+    resume: ResumePlan | None = None,
 ) -> RunOutcome:
     """``execute`` under a progress bar; a terminal that disappears during the run (the bar's
     last redraw fails), or a stop signal while the bar closes, does not lose the outcome."""
@@ -176,7 +182,7 @@ def _execute_with_bar(
             done.append(
                 execute(
                     plan, rig_path, out, seed, realtime, progress, overwrite,
-                    metadata=extras.metadata, resume=extras.resume,
+                    metadata=extras.metadata, resume=resume,
                     on_file=live.follow if live is not None else None, inputs=[extras.params],
                 )
             )  # fmt: skip

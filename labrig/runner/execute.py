@@ -64,6 +64,7 @@ __all__ = [
     "STATUS_CHECK_S",
     "DeviceError",
     "RunOutcome",
+    "check_resume_of",
     "check_run_output",
     "default_out_path",
     "execute",
@@ -148,6 +149,13 @@ def run_inputs(plan: Plan, rig_path: Path | None) -> list[Path]:
         if isinstance(name, str) and name:
             files.append(Path(name) if Path(name).is_absolute() else base / name)
     return files
+
+
+def check_resume_of(plan: Plan, path: Path) -> ResumePlan:
+    """Whether the run file ``path`` can be resumed with ``plan`` and what remains
+    (:func:`labrig.store.resume.check_resume`: the same protocol, not complete, not being
+    written, every sample and seal sound); :class:`InputFileError` (exit 2) otherwise."""
+    return check_resume(path, plan.text, [s.name for s in plan.steps], plan.file)
 
 
 def check_run_output(
@@ -317,7 +325,7 @@ def execute(
     overwrite: bool = False,
     *,
     metadata: RunMetadata | None = None,
-    resume: Path | None = None,
+    resume: Path | ResumePlan | None = None,
     on_file: Callable[[Path], None] | None = None,
     inputs: Sequence[Path | None] = (),
     opener: Callable[[Path | None, int | None], Rig] | None = None,
@@ -343,7 +351,7 @@ def execute(
     """
     job = _Job(plan, rig_path, realtime, progress, overwrite, on_file)
     if resume is not None:
-        job.resume = check_resume(resume, plan.text, [s.name for s in plan.steps], plan.file)
+        job.resume = resume if isinstance(resume, ResumePlan) else check_resume_of(plan, resume)
         job.metadata = (metadata or RunMetadata()).over(RunMetadata(job.resume.metadata))
         job.options = metadata or RunMetadata()
         out = resume
