@@ -109,7 +109,7 @@ def control_chart(rows: list[dict[str, Any]], q: str) -> bytes:
             name = rows[i].get("actuator") or Path(str(rows[i]["run_file"])).stem
             ax.annotate(str(name), (when[i], x[i]), fontsize=7, color="tab:red",
                         xytext=(3, 3), textcoords="offset points")  # fmt: skip
-    if log:
+    if log and len({float(x[i]) for i in idx}) > 1:  # one value (a small fleet): linear axis
         ax.set_yscale("log")
     ax.set_ylabel(q, fontsize=8)
     ax.legend(fontsize=7, loc="upper right", title="rig", title_fontsize=7)
