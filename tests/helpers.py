@@ -3,6 +3,8 @@ protocols. (Fixtures built on them are in ``conftest.py``.)"""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import yaml
@@ -114,3 +116,40 @@ def rig_path(tmp_path: Path, **over) -> Path:
     p = tmp_path / "rig.yaml"
     p.write_text(yaml.safe_dump(data, sort_keys=False))
     return p
+
+
+#: a run file's writer in another process: a block every 0.1 s until a line arrives on stdin
+WRITER = """
+import select, sys, numpy as np
+from labrig.store import RunWriter
+with RunWriter(sys.argv[1], "name: w\\n", "", {}, seed=1, protocol_name="being written") as w:
+    e = w.begin_entry("first", {"kind": "sine"}, 1000.0, ["command_voltage", "strain"])
+    for k in range(600):
+        v = np.full(100, float(k))
+        e.append({"command_voltage": v, "strain": 9 * v})
+        if k == 0:
+            print("writing", flush=True)
+        if select.select([sys.stdin], [], [], 0.1)[0]:
+            break
+    e.finish("complete")
+"""
+
+
+def start_writer(path: Path) -> subprocess.Popen:
+    """A process writing the run file ``path`` (until :func:`stop_writer`)."""
+    p = subprocess.Popen(
+        [sys.executable, "-c", WRITER, str(path)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert p.stdout is not None and p.stdout.readline() == "writing\n"
+    return p
+
+
+def stop_writer(p: subprocess.Popen) -> None:
+    if p.poll() is None:
+        assert p.stdin is not None
+        p.stdin.write("stop\n")
+        p.stdin.flush()
+    assert p.wait(timeout=30) == 0

@@ -475,13 +475,21 @@ class BaselineResult:
     def params(self) -> dict[str, Any]:
         return self.model.params()
 
-    def predict(self, record: Record) -> NDArray[np.float64]:
-        """Strain (ue) for the record's voltage, from rest (see ``predictions`` for a chain),
-        plus its fitted offset if any."""
-        s = self.model.predict(record.voltage_V, rest_V=record.rest_V)
-        if self.offsets_ue and record.name in self.offsets_ue:
-            s = s + self.offsets_ue[record.name]
-        return s
+    def predict(self, target: Any) -> Any:
+        """Strain (ue) for a :class:`Record` or a run file's entry, from rest, plus its fitted
+        offset if any; for a run (``labrig.Run``) ``{entry: strain}``, chained as the fit did
+        (as :meth:`labrig.analysis.fit.FitResult.predict`)."""
+        from labrig.analysis.load import as_records
+        from labrig.analysis.simulate import predict_sequences
+
+        records, single = as_records(target)
+        out = predict_sequences(
+            records,
+            self.chain and not single,
+            lambda seq: self.model.predict(seq.voltage_V, rest_V=seq.rest_V),
+            self.offsets_ue,
+        )
+        return out[records[0].name] if single else out
 
     def to_json(self) -> dict[str, Any]:
         return {

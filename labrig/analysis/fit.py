@@ -111,13 +111,29 @@ class FitResult:
             ),
         }
 
-    def predict(self, record: Record) -> NDArray[np.float64]:
-        """The fitted model's strain for ``record`` simulated on its own from rest (plus its
-        fitted offset, if any). For the fitted entries of a chained fit use ``predictions``."""
-        s = predict_record(self.params, record)
-        if self.offsets_ue and record.name in self.offsets_ue:
-            s = s + self.offsets_ue[record.name]
-        return s
+    def predict(self, target: Any) -> Any:
+        """The fitted model's strain (ue). ``target`` a :class:`Record` or a run file's entry
+        (``run[name]``): its strain simulated on its own from rest (plus its fitted offset, if
+        any). A run (``labrig.Run``): ``{entry: strain}`` for its complete entries, simulated
+        back to back as the fit did when it chained them."""
+        from labrig.analysis.load import as_records
+        from labrig.analysis.simulate import predict_sequences
+
+        records, single = as_records(target)
+        if single:
+            s = predict_record(self.params, records[0])
+            if self.offsets_ue and records[0].name in self.offsets_ue:
+                s = s + self.offsets_ue[records[0].name]
+            return s
+
+        def simulate(seq) -> NDArray[np.float64]:
+            with single_thread_blas(), np.errstate(over="ignore"):
+                model = DynamicHysteresisModel(self.params)
+                return model.predict(
+                    seq.voltage_V, seq.rate_hz, method="fast", hold=seq.hold, rest_V=seq.rest_V
+                )
+
+        return predict_sequences(records, self.chain, simulate, self.offsets_ue)
 
 
 def predict_record(params: ModelParams, record: Record) -> NDArray[np.float64]:

@@ -263,6 +263,24 @@ def build_sequences(records: Sequence[Record], chain: bool) -> list[SimSequence]
     return [SimSequence(tuple(records), rate, holds.pop(), np.concatenate(parts), entries, t_ref)]
 
 
+def predict_sequences(
+    records: Sequence[Record],
+    chain: bool,
+    simulate: Callable[[SimSequence], NDArray[np.float64]],
+    offsets_ue: dict[str, float] | None = None,
+) -> dict[str, NDArray[np.float64]]:
+    """A fitted model's strain (ue) for each record, by name: ``simulate(sequence)`` over the
+    sequences of :func:`build_sequences` (chained as the fit was when ``chain`` and the records
+    share one rate and hold), plus each record's fitted offset."""
+    chain = chain and len({r.rate_hz for r in records}) == 1 and len({r.hold for r in records}) == 1
+    out = {}
+    for seq in build_sequences(records, chain):
+        y = simulate(seq)
+        for name, sl in seq.entries.items():
+            out[name] = y[sl] + (offsets_ue or {}).get(name, 0.0)
+    return out
+
+
 def score_segments(seq: SimSequence, scored: Collection[str], warmup_s: float) -> list[Segment]:
     """The :class:`Segment` of each record of ``seq`` named in ``scored``, after ``warmup_s``
     seconds simulated but not scored.

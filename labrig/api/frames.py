@@ -32,10 +32,23 @@ def column_name(channel: str, units: str) -> str:
     return f"{channel}_{u}" if u else channel
 
 
+def step_values(e: RunEntry) -> dict[str, Any]:
+    """The scalar keys of an entry's step definition (``kind``, ``amplitude_V``,
+    ``frequency_hz``, ``cycles``, ``rest_after_s``...; their units are in their names)."""
+    return {
+        k: v
+        for k, v in e.step.items()
+        if isinstance(v, str | int | float | bool) and not isinstance(v, np.ndarray)
+    }
+
+
 def entries_frame(entries: Sequence[RunEntry], attrs: Mapping[str, Any]) -> pd.DataFrame:
     """One row per sample of every entry, in run order: an ``entry`` column (categorical, in
-    run order), then one column per channel named with its unit (channels an entry lacks are
-    NaN). ``attrs``: ``units`` and ``long_names`` by column, plus ``attrs`` given."""
+    run order), one column per channel named with its unit (channels an entry lacks are NaN),
+    then the entry's step definition, one column per scalar key (:func:`step_values`: ``kind``,
+    ``amplitude_V``, ``frequency_hz``..., missing where an entry's step lacks the key; a key
+    that is also a channel's column keeps the channel). ``attrs``: ``units`` and
+    ``long_names`` by column, plus ``attrs`` given."""
     import pandas as pd
 
     frames, units, long_names = [], {"entry": ""}, {"entry": "entry name"}
@@ -46,10 +59,18 @@ def entries_frame(entries: Sequence[RunEntry], attrs: Mapping[str, Any]) -> pd.D
             columns[name] = np.asarray(e.data[c][: e.n_samples], dtype=float)
             units[name] = e.units.get(c, "")
             long_names[name] = e.long_names.get(c, "")
+        for key, value in step_values(e).items():
+            if key not in columns:
+                columns[key] = np.full(e.n_samples, value, dtype=object)
+                long_names.setdefault(key, "step definition")
         frames.append(pd.DataFrame(columns))
     names = [e.name for e in entries]
     df = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame({"entry": []})
     df["entry"] = pd.Categorical(df["entry"], categories=names, ordered=True)
+    channels = {n for n in units if n != "entry"}
+    for col in df.columns:
+        if col != "entry" and col not in channels:  # a step key: numbers as numbers
+            df[col] = df[col].infer_objects()
     df.attrs.update(dict(attrs))
     df.attrs["units"] = units
     df.attrs["long_names"] = long_names

@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from labrig.analysis.diagnose import Diagnosis
     from labrig.analysis.fit import FitResult
     from labrig.analysis.fit_effects import EffectsFit
+    from labrig.analysis.records import Record
     from labrig.commands.report import BuiltReport
     from labrig.runner.execute import ProgressFn
     from labrig.store import RunEntry, RunFile
@@ -178,6 +179,27 @@ class Run:
     def __len__(self) -> int:
         return len(self.entries)
 
+    def __enter__(self) -> Run:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Let go of the samples read (the file itself is never held open: every read is made
+        and closed in a child process). ``with labrig.open(path) as run:`` calls it at the
+        end; the run's metadata stays usable, the samples are read again if asked for."""
+        self._full = None
+
+    def records(self, entries: Sequence[str] | str | None = None) -> list[Record]:
+        """The entries as the analysis sees them (:class:`~labrig.analysis.records.Record`:
+        voltage, strain, auxiliary channels, step definition): the complete ones with voltage
+        and strain, or ``entries`` by name. What ``fit(...).predict(run)`` simulates."""
+        from labrig.analysis.load import records_of
+
+        names = [entries] if isinstance(entries, str) else (list(entries) if entries else None)
+        return records_of(self.file, self.path, names)
+
     def __contains__(self, name: object) -> bool:
         return name in self.entries
 
@@ -195,9 +217,11 @@ class Run:
 
     def to_pandas(self, entries: Sequence[str] | str | None = None) -> pd.DataFrame:
         """The samples of ``entries`` (default: all, in run order) as one DataFrame: an
-        ``entry`` column, then one column per channel named with its unit (``time_s``,
-        ``command_voltage_V``, ``strain_ue``); ``df.attrs["units"]`` and
-        ``df.attrs["long_names"]`` by column. One entry: ``df[df.entry == name]``."""
+        ``entry`` column, one column per channel named with its unit (``time_s``,
+        ``command_voltage_V``, ``strain_ue``), then the entry's step definition (``kind``,
+        ``amplitude_V``, ``frequency_hz``...; :func:`labrig.api.frames.step_values`);
+        ``df.attrs["units"]`` and ``df.attrs["long_names"]`` by column. One entry:
+        ``df[df.entry == name]``."""
         from labrig.api.frames import entries_frame
 
         return entries_frame(self._chosen(entries), self._attrs())
@@ -264,7 +288,7 @@ class Run:
         target = Path(out) if out is not None else None
         params_path = Path(params) if params is not None else None
         if target is not None:
-            _check_targets([target], [self.path, params_path], overwrite, "report.html")
+            _check_targets([target], [self.path, params_path], overwrite)
         built = build_run_report(
             self.path,
             params_path,
@@ -277,8 +301,9 @@ class Run:
         )
         if target is not None:
             from labrig.core.outputs import write_text_output
+            from labrig.store.reader import being_written
 
-            write_text_output(target, built.page, overwrite=overwrite)
+            write_text_output(target, built.page, overwrite=overwrite, being_written=being_written)
         return built
 
     def diagnose(
@@ -303,7 +328,7 @@ class Run:
         params_path = Path(params) if params else None
         if folder is not None:
             targets = [folder / n for n in OUTPUT_NAMES]
-            _check_targets(targets, [self.path, params_path], overwrite, "diagnosis.json")
+            _check_targets(targets, [self.path, params_path], overwrite)
         say = _stderr if progress else _silent
         result = diagnose_run_file(
             self.path,
@@ -398,21 +423,22 @@ def _ui(progress: bool):
     return QuietUI()
 
 
-def _check_targets(
-    targets: list[Path], inputs: list[Path | None], overwrite: bool, example: str
-) -> None:
-    """Before the work, as Python expects: a folder where a file goes is an
-    ``IsADirectoryError``, an existing file without ``overwrite`` a ``FileExistsError``; then
-    the checks of :func:`labrig.core.outputs.check_writable` (an input as output, a place that
-    cannot be written: :class:`~labrig.core.errors.InputFileError`)."""
+def _check_targets(targets: list[Path], inputs: list[Path | None], overwrite: bool) -> None:
+    """Before the work, the one output check (:func:`labrig.core.outputs.check_writable`):
+    an existing file without ``overwrite`` is a :class:`FileExistsError`, a folder where a file
+    goes an :class:`IsADirectoryError` (both also
+    :class:`~labrig.core.errors.InputFileError`), an input as output or a run file being
+    written an :class:`~labrig.core.errors.InputFileError`."""
     from labrig.core.outputs import check_writable
+    from labrig.store.reader import being_written
 
-    for t in targets:
-        if t.is_dir():
-            raise IsADirectoryError(f"{t} is a folder; give a file name such as {example}")
-        if t.exists() and not overwrite:
-            raise FileExistsError(f"{t} exists; pass overwrite=True to replace it")
-    check_writable(targets, inputs=inputs, overwrite=overwrite)
+    check_writable(
+        targets,
+        inputs=inputs,
+        overwrite=overwrite,
+        option="out",
+        being_written=being_written,
+    )
 
 
 def as_json(result: Any) -> dict[str, Any]:
@@ -486,16 +512,12 @@ def run(
     that ended on a device fault or a full disk is returned (``status`` says ``failed``, with
     a warning). Bad input raises :class:`~labrig.core.errors.InputFileError` before anything is
     energised."""
-    from labrig.runner.execute import execute, preflight
+    from labrig.runner.execute import check_run_output, default_out_path, execute, preflight
 
     rig_path = Path(rig) if rig is not None else None
-    plan, rig_path = preflight(Path(protocol), rig_path)
-    target = Path(out) if out is not None else None
-    if target is not None:
-        if target.is_dir():
-            raise IsADirectoryError(f"{target} is a folder; give a file name such as run.h5")
-        if target.exists() and not overwrite:
-            raise FileExistsError(f"{target} exists; choose another out or pass overwrite=True")
+    plan, rig_path = preflight(protocol, rig_path)
+    target = Path(out) if out is not None else default_out_path(plan)
+    check_run_output(plan, rig_path, target, overwrite)  # before anything is energised
     with _bar(plan.total_duration_s, progress) as callback:
         outcome = execute(plan, rig_path, target, seed, realtime, callback, overwrite)
     if outcome.exit_code == 130:

@@ -33,7 +33,9 @@ __all__ = ["check", "driver_line"]
 
 @friendly
 def check(
-    protocol: Path = typer.Argument(..., help="Protocol file (YAML)."),
+    protocol: Path = typer.Argument(
+        ..., help="Protocol file (YAML), or a shipped example's name (paper, sweep...)."
+    ),
     rig: Path | None = typer.Option(None, "--rig", metavar="FILE", help=RIG_OPTION_HELP),
     as_json: bool = json_option("the plan, the rig and its drivers"),
     out: Path | None = out_file_option("the plan, the rig and its drivers as JSON"),
@@ -45,8 +47,8 @@ def check(
     from labrig.rig.rigspec import DEFAULT_RIG_NAME, load_rig
     from labrig.runner.execute import preflight
 
-    check_out(out, [protocol, rig], overwrite)
     plan, rig_path = preflight(protocol, rig)
+    check_out(out, [protocol, rig, plan.path, rig_path], overwrite)
     spec = load_rig(rig_path)
     drivers = load_rig_drivers(spec)
     doc: dict[str, Any] = {

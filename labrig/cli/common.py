@@ -17,13 +17,16 @@ import json
 from collections.abc import Callable, Sequence
 from enum import StrEnum
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import typer
 
 from labrig.core.errors import LabrigError
 from labrig.core.words import plural as plural  # re-exported for the commands
 from labrig.model.effects.registry import FIT_EFFECT_NAMES, STRUCTURAL_EFFECT_NAMES
+
+if TYPE_CHECKING:
+    from labrig.core.outputs import ReadFolder
 
 E = TypeVar("E", bound=StrEnum)
 
@@ -162,13 +165,48 @@ def out_dir_option(what: str, required: bool = False) -> Any:
 OVERWRITE_OPTION = flag(False, "--overwrite", help="Replace existing --out files.")
 
 
-def check_out(out: Path | None, inputs: Sequence[Path | None], overwrite: bool) -> None:
-    """Before the work: ``--out`` must not be an input, a folder or (without ``--overwrite``)
-    an existing file, and its place must be writable (:mod:`labrig.core.outputs`, exit 2)."""
+def check_out(
+    out: Path | None,
+    inputs: Sequence[Path | None],
+    overwrite: bool,
+    folders: Sequence[ReadFolder] = (),
+) -> None:
+    """Before the work, the one output check (:func:`labrig.core.outputs.check_outputs`, exit
+    2): ``--out`` is not an input (nor read from an input folder of ``folders``), not a run
+    file being written, not a folder, not (without ``--overwrite``) an existing file, and its
+    place is writable."""
     if out is not None:
         from labrig.core.outputs import check_writable
+        from labrig.store.reader import being_written
 
-        check_writable([out], inputs=list(inputs), overwrite=overwrite)
+        check_writable(
+            [out],
+            inputs=list(inputs),
+            folders=folders,
+            overwrite=overwrite,
+            being_written=being_written,
+        )
+
+
+def one_option(option: str, values: dict[str, Any]) -> Any:
+    """The value of an option that has several names (``{"--out": a, "--csv": b}``): the one
+    given; two names given are refused (exit 2 naming both), whatever their values."""
+    from labrig.core.errors import InputFileError, InputIssue
+
+    given = {k: v for k, v in values.items() if v is not None}
+    if len(given) > 1:
+        names = " and ".join(given)
+        raise InputFileError(
+            [
+                InputIssue(
+                    ", ".join(str(v) for v in given.values()),
+                    None,
+                    option,
+                    f"{names} are names of one option: give {option} once",
+                )
+            ]
+        )
+    return next(iter(given.values()), None)
 
 
 def deliver_json(doc: Any, *, as_json: bool, out: Path | None, overwrite: bool) -> bool:
@@ -178,8 +216,9 @@ def deliver_json(doc: Any, *, as_json: bool, out: Path | None, overwrite: bool) 
     text = json_text(doc)
     if out is not None:
         from labrig.core.outputs import write_text_output
+        from labrig.store.reader import being_written
 
-        write_text_output(out, text + "\n", overwrite=overwrite)
+        write_text_output(out, text + "\n", overwrite=overwrite, being_written=being_written)
         typer.echo(f"wrote {out}", err=True)
     if as_json:
         typer.echo(text)
@@ -199,4 +238,7 @@ OFFSET_OPTION = flag(
     help="Fit one strain offset per entry (default: on for imported data).",
 )
 ENTRIES_HELP = "{}, comma-separated (default: every complete one)."
-RIG_OPTION_HELP = "Rig file (default: the protocol's `rig`, else the built-in simulated rig)."
+RIG_OPTION_HELP = (
+    "Rig file, or a shipped rig's name such as hybrid (default: the protocol's `rig`, else the "
+    "built-in simulated rig)."
+)

@@ -16,6 +16,7 @@ from labrig.cli.common import (
     friendly,
     json_option,
     json_text,
+    one_option,
     out_file_option,
 )
 from labrig.cli.run import META_OPTION, OPERATOR_OPTION, SAMPLE_OPTION, metadata_of
@@ -52,12 +53,11 @@ def info(
 @friendly
 def export(
     run_file: Path = typer.Argument(..., help="Run file (HDF5)."),
-    out: Path = typer.Option(
-        ...,
-        "--out",
-        "--csv",
-        metavar="DIR",
-        help="Folder for one CSV file per entry (--csv: the same option's older name).",
+    out: Path | None = typer.Option(
+        None, "--out", metavar="DIR", help="Folder for one CSV file per entry (required)."
+    ),
+    csv: Path | None = typer.Option(
+        None, "--csv", metavar="DIR", help="The older name of --out (give one of them)."
     ),
     as_json: bool = json_option("the files written"),
     overwrite: bool = flag(False, "--overwrite", help="Replace CSV files of the same names."),
@@ -65,7 +65,12 @@ def export(
     """Export every entry of a run file to CSV (header: column names with units)."""
     from labrig.store import export_csv
 
-    written = export_csv(run_file, out, overwrite)
+    folder = one_option("--out", {"--out": out, "--csv": csv})
+    if folder is None:
+        raise typer.BadParameter(
+            "Missing option '--out': give the folder for the CSV files", param_hint="--out"
+        )
+    written = export_csv(run_file, folder, overwrite, option="--csv" if csv else "--out")
     if as_json:
         typer.echo(json_text({"files": [str(p) for p in written]}))
         return

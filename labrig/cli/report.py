@@ -62,6 +62,7 @@ def report(
     from labrig.commands.progress import RichUI
     from labrig.commands.report import build_run_report
     from labrig.core.outputs import write_text_output
+    from labrig.store.reader import being_written
 
     check_out(out, [run_file, params], overwrite)  # before the work
     ui = RichUI()
@@ -77,7 +78,7 @@ def report(
         page=out is not None,
     )
     if out is not None:
-        write_text_output(out, built.page, overwrite=overwrite)
+        write_text_output(out, built.page, overwrite=overwrite, being_written=being_written)
         ui.err.print(f"wrote {escape(str(out))} ({len(built.page) / 1e6:.1f} MB)")
     if as_json:
         typer.echo(json_text(built.metrics))

@@ -55,7 +55,9 @@ def metadata_of(meta: list[str], operator: str | None, sample: str | None):
 
 @friendly
 def run(
-    protocol: Path = typer.Argument(..., help="Protocol file (YAML)."),
+    protocol: Path = typer.Argument(
+        ..., help="Protocol file (YAML), or a shipped example's name (paper, sweep...)."
+    ),
     rig: Path | None = typer.Option(None, "--rig", help=RIG_OPTION_HELP),
     out: Path | None = typer.Option(
         None, "--out", help="Run file to write (default: runs/NAME-DATE-TIME.h5).", metavar="FILE"

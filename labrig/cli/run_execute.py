@@ -23,7 +23,15 @@ from labrig.cli.common import plural
 from labrig.core.interrupts import STOP_SIGNALS, Interrupted, exit_code_for, interrupt_once
 from labrig.core.metadata import RunMetadata
 from labrig.protocol.plan import Plan
-from labrig.runner.execute import RunOutcome, execute, preflight
+from labrig.runner.execute import (
+    RunOutcome,
+    check_resume_of,
+    check_run_output,
+    default_out_path,
+    execute,
+    preflight,
+)
+from labrig.store.resume import ResumePlan
 
 
 @dataclass
@@ -62,15 +70,12 @@ def run_with_progress(
         if not extras.resume.is_file():
             typer.echo(f"error: --resume {extras.resume}: run file not found", err=True)
             return 2
-    if out is not None and out.is_dir():
-        example = out / "run.h5"
-        typer.echo(
-            f"error: --out {out} is a directory; give a file name such as {example}", err=True
-        )
-        return 2
-    if out is not None and out.exists() and not overwrite:
-        typer.echo(f"error: {out} exists; choose another --out or pass --overwrite", err=True)
-        return 2
+    resume = None
+    if extras.resume is None:
+        out = out or default_out_path(plan)
+        check_run_output(plan, rig_path, out, overwrite, [extras.params])
+    else:  # before anything is shown or energised: damage, another protocol, being written
+        resume = check_resume_of(plan, extras.resume)
     where = escape(f"rig {rig_path}") if rig_path else "the simulated rig"
     console.print(
         f"[bold]{escape(plan.name)}[/]: {plural(len(plan.steps), 'entry')}, "
@@ -83,7 +88,7 @@ def run_with_progress(
         outcome = None
         try:
             outcome = _execute_with_bar(
-                console, plan, rig_path, out, seed, realtime, overwrite, extras, live
+                console, plan, rig_path, out, seed, realtime, overwrite, extras, live, resume
             )
         except Interrupted as e:  # before the run file existed: nothing energised or written
             _say(console, f"[red]stopped before the run began[/]: {escape(e.reason)}")
@@ -180,6 +185,7 @@ def _execute_with_bar(
     overwrite: bool,
     extras: RunExtras,
     live,
+    resume: ResumePlan | None = None,
 ) -> RunOutcome:
     """``execute`` under a progress bar; a terminal that disappears during the run (the bar's
     last redraw fails), or a stop signal while the bar closes, does not lose the outcome."""
@@ -210,8 +216,8 @@ def _execute_with_bar(
             done.append(
                 execute(
                     plan, rig_path, out, seed, realtime, progress, overwrite,
-                    metadata=extras.metadata, resume=extras.resume,
-                    on_file=live.follow if live is not None else None,
+                    metadata=extras.metadata, resume=resume,
+                    on_file=live.follow if live is not None else None, inputs=[extras.params],
                 )
             )  # fmt: skip
     except OSError:

@@ -33,8 +33,15 @@ if TYPE_CHECKING:
 
 #: the folder listed when no path is given (where ``labrig run`` writes by default)
 DEFAULT_FOLDER = Path("runs")
-#: the text table's column widths (characters)
-WIDTHS = {"file": 44, "status": 10, "started": 16, "protocol": 24, "entries": 34}
+#: the text table's column widths (characters; ``None``: as wide as the widest cell, never cut:
+#: a file name is shown whole so that it can be copied)
+WIDTHS: dict[str, int | None] = {
+    "file": None,
+    "status": 10,
+    "started": 16,
+    "protocol": 24,
+    "entries": 34,
+}
 
 WHERE_HELP = (
     "Keep runs where KEY OP VALUE holds (repeatable; all must hold). OP: = != ~ (contains) "
@@ -82,7 +89,11 @@ def list_runs_command(
         raise InputFileError(
             [InputIssue(str(DEFAULT_FOLDER), None, "", "no runs/ folder here: give a folder")]
         )
-    check_out(out, [], overwrite)
+    from labrig.catalogue.listing import RUN_SUFFIXES
+    from labrig.core.outputs import ReadFolder
+
+    folders = [ReadFolder(p, RUN_SUFFIXES) for p in targets if p.is_dir()]
+    check_out(out, targets, overwrite, folders)
     detail = as_json or out is not None
     with _progress_bar() as progress:
         listing = list_runs(targets, conditions, detail=detail, reindex=reindex, progress=progress)
@@ -154,11 +165,9 @@ def _notes(listing: Listing, filtered: bool) -> None:
             print(f"  ... and {len(listing.unreadable) - 20} more (--json lists all)", file=err)
 
 
-def _cut(text: str, width: int, left: bool = False) -> str:
+def _cut(text: str, width: int) -> str:
     """``text`` in at most ``width`` characters (``...`` where it was cut)."""
-    if len(text) <= width:
-        return text
-    return "..." + text[-(width - 3) :] if left else text[: width - 3] + "..."
+    return text if len(text) <= width else text[: width - 3] + "..."
 
 
 def _values(xs: list[float], unit: str) -> str:
@@ -215,14 +224,12 @@ def _row(run: ListedRun) -> list[str]:
 def table_lines(runs: list[ListedRun]) -> list[str]:
     """The listing as aligned text: a header and one line per run."""
     rows = [_row(r) for r in runs]
-    widths = [
-        min(WIDTHS[n], max([len(n)] + [len(row[i]) for row in rows])) for i, n in enumerate(WIDTHS)
-    ]
+    widths = []
+    for i, (name, limit) in enumerate(WIDTHS.items()):
+        widest = max([len(name)] + [len(row[i]) for row in rows])
+        widths.append(widest if limit is None else min(limit, widest))
     lines = ["  ".join(n.ljust(w) for n, w in zip(WIDTHS, widths, strict=True)) + "  metadata"]
     for row in rows:
-        cells = [
-            _cut(c, w, left=i == 0).ljust(w)
-            for i, (c, w) in enumerate(zip(row, widths, strict=False))
-        ]
+        cells = [_cut(c, w).ljust(w) for c, w in zip(row, widths, strict=False)]
         lines.append(("  ".join(cells) + "  " + _cut(row[-1], 80)).rstrip())
     return lines

@@ -44,10 +44,10 @@ def fleet(
         0.05, "--defects", min=0.0, max=1.0, help="Fraction of defective actuators (0-1)."
     ),
     protocol: Path = typer.Option(
-        Path("experiments/paper.yaml"),
+        Path("paper"),
         "--protocol",
         metavar="FILE",
-        help="Protocol each actuator runs.",
+        help="Protocol each actuator runs: a file or a shipped example's name.",
     ),
     as_json: bool = json_option("the files written"),
     overwrite: bool = OVERWRITE_OPTION,
@@ -59,10 +59,11 @@ def fleet(
     from labrig.fleet.simfleet import write_fleet
 
     err = Console(stderr=True)
-    with Progress(
+    bar = Progress(
         "simulating", BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=err
-    ) as bar:
-        task = bar.add_task("fleet", total=n)
+    )
+    task = bar.add_task("fleet", total=n)
+    try:  # the bar shows once the options are checked (a refusal is one line, no bar)
         paths = write_fleet(
             n,
             out,
@@ -71,7 +72,11 @@ def fleet(
             defect_fraction=defects,
             overwrite=overwrite,
             progress=lambda _a: bar.advance(task),
+            checked=bar.start,
         )
+    finally:
+        if bar.live.is_started:
+            bar.stop()
     if as_json:
         typer.echo(json_text({"files": [str(p) for p in paths], "truth": str(out / "truth.json")}))
     else:

@@ -24,6 +24,7 @@ from labrig.commands.prepare import prepare_diagnosis
 from labrig.core.jsonsafe import json_safe
 from labrig.core.outputs import staged_outputs
 from labrig.model.effects import EFFECT_NAMES, STRUCTURAL_EFFECT_NAMES
+from labrig.store import RunFile
 
 __all__ = ["OUTPUT_NAMES", "RunDiagnosis", "diagnose_run_file"]
 
@@ -100,6 +101,7 @@ def diagnose_run_file(
     say: Say = _quiet,
     progress: Say | None = None,
     workers: int = 1,
+    snapshot: RunFile | None = None,
 ) -> RunDiagnosis:
     """Diagnose the run file ``path`` (module docstring).
 
@@ -109,12 +111,14 @@ def diagnose_run_file(
     default: the line the strain shows at 50 or 60 Hz); ``out``: a folder for
     :data:`OUTPUT_NAMES` (replaced only with ``overwrite``); ``say``: notes (a file of one
     entry cut into parts, parameters not used); ``progress``: the diagnosis' steps;
-    ``workers``: processes for its folds and candidates (the result does not depend on it)."""
+    ``workers``: processes for its folds and candidates (the result does not depend on it);
+    ``snapshot``: the file as already read (one snapshot for the fit and the diagnosis of
+    ``batch``)."""
     path = Path(path)
     also = tuple(dict.fromkeys(also))
 
     def run() -> RunDiagnosis:
-        setup = prepare_diagnosis(path, params_file, say)
+        setup = prepare_diagnosis(path, params_file, say, snapshot)
         d = diagnosis.diagnose(  # looked up at each call (tests replace it)
             setup.records,
             setup.start,

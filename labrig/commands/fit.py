@@ -20,6 +20,7 @@ from labrig.analysis.baselines import KINDS, BaselineResult, fit_baseline
 from labrig.analysis.fit import FitResult, fit_model
 from labrig.analysis.fit_effects import EffectsFit
 from labrig.commands.prepare import AnalysisError, Setup, prepare
+from labrig.store import RunFile
 
 #: ``progress(stage, done, total)``; stages: ``model:fit``, ``model:<heldout stage>``, a
 #: baseline's kind, ``effects:<stage>`` of :func:`labrig.analysis.fit_effects.fit_effects`
@@ -163,10 +164,11 @@ def fit_run_file(
     heldout: bool = True,
     offset: bool | None = None,
     ui: CommandUI | None = None,
+    run: RunFile | None = None,
 ) -> FitOutcome:
-    """``labrig fit``: read the run file (:func:`~labrig.commands.prepare.prepare`) and fit
-    ``model`` (one of :data:`MODELS`) to it; with ``effects`` our model is fitted first, then
-    refitted with them (held-out scores only for the refit)."""
+    """``labrig fit``: read the run file (:func:`~labrig.commands.prepare.prepare`; ``run``:
+    as already read) and fit ``model`` (one of :data:`MODELS`) to it; with ``effects`` our
+    model is fitted first, then refitted with them (held-out scores only for the refit)."""
     from labrig.analysis.fit_effects import resolve_effects
 
     ui = ui or QuietUI()
@@ -178,7 +180,7 @@ def fit_run_file(
         resolve_effects(effects)  # before any fitting
     except ValueError as e:
         raise AnalysisError(f"--effect {e}") from None
-    setup = prepare(path, entries, warmup_s, offset)
+    setup = prepare(path, entries, warmup_s, offset, run=run)
     ui.announce(setup)
     with ui.fitting() as progress:
         if model == "dynamic":

@@ -128,15 +128,17 @@ def prepare(
     entries: list[str] | None = None,
     warmup_s: float | None = None,
     offset: bool | None = None,
+    run: RunFile | None = None,
 ) -> Setup:
-    """Read the run file and decide chain, warm-up and offset (module docstring)."""
-    run = read_run(path)  # read once: records_from_run reads it again from the cache
+    """Read the run file and decide chain, warm-up and offset (module docstring). ``run``:
+    the file as already read (one snapshot for several steps of a command), else read now."""
+    run = read_run(path) if run is None else run
     names = list(run.entries)
     if not names:
         raise _issue(path, "the run file has no entries")
     _check_entries(path, names, entries)
     complete = [n for n in names if run[n].complete]
-    all_recs = load.records_from_run(path, names)  # incomplete ones too (history of a chain)
+    all_recs = load.records_of(run, path, names)  # incomplete ones too (history of a chain)
     by_name = {r.name: r for r in all_recs}
     if entries:
         unusable = [n for n in entries if n not in by_name]
@@ -320,7 +322,10 @@ class DiagnoseSetup:
 
 
 def prepare_diagnosis(
-    path: Path, params_file: Path | None = None, say: Callable[[str], None] = print
+    path: Path,
+    params_file: Path | None = None,
+    say: Callable[[str], None] = print,
+    run: RunFile | None = None,
 ) -> DiagnoseSetup:
     """Read the run file (and the start parameters,
     :func:`labrig.analysis.params_file.start_params`) for ``diagnose``.
@@ -328,10 +333,11 @@ def prepare_diagnosis(
     A file of one entry is cut into :data:`DIAGNOSE_SPLIT` consecutive parts
     (:func:`split_entries`, said through ``say``) for leave-one-entry-out; imported data get an
     offset per entry (the sensor's zero is arbitrary). Fewer than :data:`MIN_DIAGNOSE_ENTRIES`
-    entries: an :class:`~labrig.core.errors.InputFileError`."""
+    entries: an :class:`~labrig.core.errors.InputFileError`. ``run``: the file as already
+    read (the snapshot the fit of the same command used), else read now."""
     from labrig.analysis.params_file import start_params
 
-    records = load.records_from_run(path)
+    records = load.records_of(run, path) if run is not None else load.records_from_run(path)
     start = start_params(params_file, say) if params_file is not None else None
     if len(records) == 1 and records[0].duration_s > 0:
         records = split_entries(records, DIAGNOSE_SPLIT)

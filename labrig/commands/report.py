@@ -21,10 +21,17 @@ from typing import Any
 import numpy as np
 
 from labrig.analysis.baselines import KINDS
-from labrig.analysis.fit import predict_record
+from labrig.analysis.fit import FitResult, predict_record
 from labrig.analysis.params_file import fitted_effects, read_fit_output
 from labrig.analysis.records import Record
-from labrig.commands.fit import CommandUI, Progress, QuietUI, fit_base, fit_dynamic
+from labrig.commands.fit import (
+    CommandUI,
+    FitOutcome,
+    Progress,
+    QuietUI,
+    fit_base,
+    fit_dynamic,
+)
 from labrig.commands.prepare import AnalysisError, Setup, prepare
 from labrig.core.jsonsafe import json_safe
 from labrig.core.version import __version__
@@ -106,9 +113,16 @@ def predict_entries(
     return out
 
 
-def _fitted_now(setup: Setup, method: str, heldout: bool, progress: Progress) -> FittedModels:
-    """Our model fitted to the setup's records."""
-    res = fit_dynamic(setup, method, heldout, progress)
+def _fitted_now(
+    setup: Setup,
+    method: str,
+    heldout: bool,
+    progress: Progress,
+    fitted: FitResult | None = None,
+) -> FittedModels:
+    """Our model fitted to the setup's records (``fitted``: that fit, already made on this
+    setup, is used instead of fitting again)."""
+    res = fitted if fitted is not None else fit_dynamic(setup, method, heldout, progress)
     j = res.to_json()
     model = Fitted(
         "dynamic",
@@ -127,15 +141,41 @@ def _fitted_now(setup: Setup, method: str, heldout: bool, progress: Progress) ->
     )
 
 
-def _from_file(setup: Setup, doc: dict[str, Any], params_file: Path) -> FittedModels:
-    """Our model with the parameters (and effects) of a ``labrig fit`` file."""
+def _from_file(
+    setup: Setup,
+    doc: dict[str, Any],
+    params_file: Path,
+    heldout: bool = False,
+    progress: Progress | None = None,
+) -> FittedModels:
+    """Our model with the parameters (and effects) of a ``labrig fit`` file. The file gives
+    its held-out NRMSE as a mean only; with ``heldout`` (and two scored entries or more, no
+    effects) the held-out NRMSE of each entry is measured now, leave-one-entry-out as
+    ``labrig fit`` does (each fold fits the other entries), so the report keeps its column."""
     params = ModelParams(**doc["params"])
     effects = fitted_effects(doc, params_file, setup.records)
+    held_per, held_mean = None, doc.get("heldout_nrmse_pct")
+    notes = []
+    if heldout and len(setup.scored) >= 2 and not effects[0]:
+        method = str(doc.get("method", "global"))
+        method = method if method in ("global", "staged") else "global"
+        res = fit_dynamic(setup, method, True, progress, params.memory)
+        held_per, held_mean = res.heldout_per_entry, res.heldout_nrmse_pct
+        notes.append(
+            "held-out NRMSE per entry: leave-one-entry-out fits made now "
+            f"({method}; the parameters file gives its mean only)"
+        )
+    else:
+        notes.append(
+            "held-out NRMSE per entry not available with --params here (the file gives its "
+            "mean only; it is measured now with --heldout, two scored entries or more and no "
+            "effects)"
+        )
     model = Fitted(
         "dynamic",
         predict_entries(params, setup, effects),
-        None,
-        doc.get("heldout_nrmse_pct"),
+        held_per,
+        held_mean,
         doc["params"],
         doc.get("uncertainty") or {},
         doc.get("correlation") or {},
@@ -144,16 +184,13 @@ def _from_file(setup: Setup, doc: dict[str, Any], params_file: Path) -> FittedMo
     source = f"from {params_file}"
     if effects[0]:
         source += " with the effects fitted with it: " + ", ".join(e.name for e in effects[0])
-    notes = []
     fitted_on = doc.get("entries")
     if isinstance(fitted_on, list) and fitted_on != setup.scored:
-        notes.append(
+        notes.insert(
+            0,
             f"the parameters were fitted on {', '.join(map(str, fitted_on))}; this "
-            f"report scores {', '.join(setup.scored)}"
+            f"report scores {', '.join(setup.scored)}",
         )
-    notes.append(
-        "held-out NRMSE per entry not available with --params (the file gives its mean only)"
-    )
     return FittedModels({"dynamic": model}, source, notes)
 
 
@@ -164,15 +201,16 @@ def fit_report_models(
     method: str,
     heldout: bool,
     progress: Progress,
+    fit: FitResult | None = None,
 ) -> FittedModels:
     """Our model (fitted now, or from the ``labrig fit`` output ``doc`` read from
-    ``params_file``) and the baselines, fitted on the same records; a baseline that cannot be
-    fitted is reported as such (its ``note``)."""
+    ``params_file``, or ``fit`` made on this setup already) and the baselines, fitted on the
+    same records; a baseline that cannot be fitted is reported as such (its ``note``)."""
     t0 = time.perf_counter()
     if doc is None or params_file is None:
-        fitted = _fitted_now(setup, method, heldout, progress)
+        fitted = _fitted_now(setup, method, heldout, progress, fit)
     else:
-        fitted = _from_file(setup, doc, params_file)
+        fitted = _from_file(setup, doc, params_file, heldout, progress)
     for kind in KINDS:
         try:
             b = fit_base(setup, kind, heldout, progress)
@@ -308,16 +346,22 @@ def build_run_report(
     heldout: bool = True,
     ui: CommandUI | None = None,
     page: bool = True,
+    fit: FitOutcome | None = None,
 ) -> BuiltReport:
     """``labrig report``: the report of the run file ``path`` (module docstring); our model's
     parameters from ``params_file`` (``labrig fit`` output) when given, else fitted now.
-    ``page=False``: the metrics only (no figures drawn; ``BuiltReport.page`` is ``""``)."""
+    ``page=False``: the metrics only (no figures drawn; ``BuiltReport.page`` is ``""``).
+    ``fit``: ``labrig fit`` of the same file with the same settings, already made (``batch
+    report``): its records and fit are used, so the file is read and our model fitted once."""
     ui = ui or QuietUI()
     doc = read_fit_output(params_file) if params_file is not None else None
-    setup = prepare(path, entries, warmup_s, offset)
+    if fit is not None and not isinstance(fit.result, FitResult):
+        raise ValueError("report takes a fit of our model (not a baseline or effects fit)")
+    setup = fit.setup if fit is not None else prepare(path, entries, warmup_s, offset)
     ui.announce(setup)
     with ui.fitting() as progress:
-        fitted = fit_report_models(setup, doc, params_file, method, heldout, progress)
+        ours = fit.result if fit is not None else None
+        fitted = fit_report_models(setup, doc, params_file, method, heldout, progress, ours)
     data = report_data(setup, fitted, heldout, doc is not None)
     html = ""
     if page:

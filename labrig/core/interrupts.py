@@ -19,12 +19,17 @@ import signal
 import threading
 from collections.abc import Iterator
 
-#: the signals a run stops on, with the words its run file records
+#: the signals a run stops on, with the words its run file records (SIGHUP and SIGQUIT do not
+#: exist on Windows)
 STOP_SIGNALS: dict[int, str] = {
-    signal.SIGINT: "interrupted (Ctrl-C, SIGINT)",
-    signal.SIGTERM: "terminated (SIGTERM)",
-    signal.SIGHUP: "hangup (SIGHUP: the terminal or the SSH session closed)",
-    signal.SIGQUIT: "quit (SIGQUIT, Ctrl-\\)",
+    getattr(signal, name): words
+    for name, words in (
+        ("SIGINT", "interrupted (Ctrl-C, SIGINT)"),
+        ("SIGTERM", "terminated (SIGTERM)"),
+        ("SIGHUP", "hangup (SIGHUP: the terminal or the SSH session closed)"),
+        ("SIGQUIT", "quit (SIGQUIT, Ctrl-\\)"),
+    )
+    if hasattr(signal, name)
 }
 
 

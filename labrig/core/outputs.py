@@ -1,23 +1,32 @@
-"""Output files of the commands, written beside their target and renamed into place.
+"""Output files of the commands: the one check of an output path, then written beside the
+target and renamed into place.
 
-Every file a command writes (``fit --out``, ``report --out``, ``diagnose --out DIR``,
-``export --csv DIR``, the run file of ``run --overwrite``) goes through here:
+Every file a command or the Python API writes (``fit --out``, ``report --out``, ``diagnose --out
+DIR``, ``export --out DIR``, ``info``/``runs``/``check``/``drivers``/``model demo --out``, the
+run file of ``run``, ``sim fleet --out DIR``, ``batch --out DIR``) is checked by
+:func:`check_outputs` before any work:
 
-- :func:`check_outputs`, before any computation: an output that is one of the command's input
-  files is refused whatever the flags; an existing output is refused unless ``--overwrite``;
-  an output that names a folder is refused;
-- :func:`stage` then creates a hidden folder ``.<name>.<random>.partial`` beside the targets
-  (creating their folder if needed), which proves the place writable before the work starts;
-  the command writes each output there under its own name;
-- :meth:`Staged.commit` renames each written file onto its target (same folder, so the rename
-  is atomic: a reader sees the old file or the new one, never a part); without ``--overwrite``
-  a target that appeared meanwhile is not replaced (a hard link that fails if it exists);
-- :meth:`Staged.discard` removes the staging folder and the folders :func:`stage` created, if
-  they are still empty. After a crash the old file is untouched and the partial folder stays
-  beside it.
+- an output is never an input of the same command, whatever the flags: the same resolved path or
+  the same file (:func:`os.path.samefile`, so a hard link or a symbolic link is caught too);
+- an output inside an input folder whose files of that kind the command reads
+  (:class:`ReadFolder`: ``runs DIR --out DIR/a.h5``) is an input too;
+- an existing output that another process is writing now (a run file being recorded: the probe
+  ``being_written`` the caller passes, :func:`labrig.store.writing.being_written`) is never
+  replaced, even with ``--overwrite``;
+- an existing output is replaced only with ``--overwrite``;
+- a folder where a file goes, or a file where a folder goes, is refused.
 
-Problems are :class:`~labrig.core.errors.InputFileError` (exit code 2) naming the file and the
-option.
+Then :func:`stage` creates a hidden folder ``.<name>.<random>.partial`` beside the targets
+(creating their folder if needed), which proves the place writable before the work starts; the
+command writes each output there under its own name; :meth:`Staged.commit` renames each written
+file onto its target (same folder, so the rename is atomic: a reader sees the old file or the
+new one, never a part); without ``--overwrite`` a target that appeared meanwhile is not replaced
+(a hard link that fails if it exists); :meth:`Staged.discard` removes the staging folder and the
+folders :func:`stage` created, if they are still empty. After a crash the old file is untouched
+and the partial folder stays beside it.
+
+Problems are :class:`~labrig.core.errors.InputFileError` (exit code 2) naming the file, the
+option and what would be valid.
 """
 
 from __future__ import annotations
@@ -27,7 +36,7 @@ import errno
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,61 +46,139 @@ from labrig.core.errors import InputFileError, InputIssue
 MAX_NAMED = 5
 
 
+class OutputExistsError(InputFileError, FileExistsError):
+    """Outputs that exist already, without ``--overwrite`` (exit code 2; a
+    :class:`FileExistsError` for Python callers)."""
+
+
+class OutputIsFolderError(InputFileError, IsADirectoryError):
+    """An output that names a folder where a file goes (exit code 2; an
+    :class:`IsADirectoryError` for Python callers)."""
+
+
+#: ``being_written(path)``: a description of the process writing the existing file ``path``
+#: now (``"process 123, last written 0.1 s ago"``), or ``None`` when nobody writes it
+WriterProbe = Callable[[Path], str | None]
+
+
+@dataclass(frozen=True)
+class ReadFolder:
+    """An input folder from which the command reads every file (searched recursively) whose
+    name ends with one of ``suffixes`` (lower case, e.g. ``(".h5", ".hdf5")``)."""
+
+    path: Path
+    suffixes: tuple[str, ...]
+
+    def reads(self, target: Path) -> bool:
+        """True when ``target`` lies in this folder (at any depth) and is of a kind read."""
+        if not target.name.lower().endswith(self.suffixes):
+            return False
+        try:
+            return _resolved(target).is_relative_to(_resolved(self.path))
+        except OSError:
+            return False
+
+
+def _resolved(p: Path) -> Path:
+    return Path(os.path.abspath(p)).resolve()
+
+
 def same_file(a: Path, b: Path) -> bool:
     """True when ``a`` and ``b`` are the same file (the same inode when both exist, else the
     same resolved path)."""
     try:
         if a.exists() and b.exists():
             return os.path.samefile(a, b)
-        return a.resolve() == b.resolve()
+        return _resolved(a) == _resolved(b)
     except OSError:
         return False
+
+
+def _refusal(target: Path, option: str, message: str) -> InputIssue:
+    return InputIssue(str(target), None, option, message)
 
 
 def check_outputs(
     targets: Sequence[Path],
     *,
     inputs: Sequence[Path | None] = (),
+    folders: Sequence[ReadFolder] = (),
     overwrite: bool = False,
     option: str = "--out",
+    being_written: WriterProbe | None = None,
+    folder: bool = False,
 ) -> None:
-    """Refuse outputs that are inputs, folders, or (without ``overwrite``) existing files."""
-    issues = []
+    """The one check of a command's outputs (module docstring), before the work: refuse an
+    output that is an input (``inputs``; or read from one of ``folders``), one that another
+    process is writing (``being_written``), a folder where a file goes (a file where a folder
+    goes with ``folder``: then ``targets`` are folders), or (without ``overwrite``) an existing
+    file. Every problem at once, in one :class:`InputFileError`."""
+    issues: list[InputIssue] = []
+    folders_given: list[InputIssue] = []
     existing = []
-    for t in targets:
-        for i in inputs:
-            if i is not None and same_file(t, Path(i)):
+    given = [Path(i) for i in inputs if i is not None]
+    for t in (Path(t) for t in targets):
+        source = next((i for i in given if same_file(t, i)), None)
+        reader = next((f for f in folders if f.reads(t)), None)
+        if source is not None:
+            issues.append(
+                _refusal(
+                    t, option, f"is an input of this command ({source}); choose another {option}"
+                )
+            )
+        elif reader is not None:
+            issues.append(
+                _refusal(
+                    t,
+                    option,
+                    f"is inside {reader.path}, an input of this command whose "
+                    f"{'/'.join(reader.suffixes)} files it reads; choose another {option} "
+                    "outside that folder",
+                )
+            )
+        elif folder:
+            if t.exists() and not t.is_dir():
                 issues.append(
-                    InputIssue(
-                        str(t),
-                        None,
+                    _refusal(t, option, "is a file; give a folder (new, or one to add to)")
+                )
+        elif t.is_dir():
+            folders_given.append(
+                _refusal(t, option, f"is a directory; give a file name such as {t / 'out'}")
+            )
+        elif t.exists() or t.is_symlink():
+            writer = being_written(t) if being_written is not None and t.is_file() else None
+            if writer is not None:
+                issues.append(
+                    _refusal(
+                        t,
                         option,
-                        f"is an input of this command; choose another {option}",
+                        f"is a run file being written now ({writer}); it is never replaced, "
+                        f"even with --overwrite: choose another {option}",
                     )
                 )
-                break
-        else:
-            if t.is_dir():
-                issues.append(
-                    InputIssue(str(t), None, option, "is a directory; give a file name to write")
-                )
-            elif (t.exists() or t.is_symlink()) and not overwrite:
+            elif not overwrite:
                 existing.append(t)
+    if issues:
+        raise InputFileError(issues + folders_given)
+    if folders_given:
+        raise OutputIsFolderError(folders_given)
     if existing:
+        # an option of the command line, or a keyword of the Python API (option "out")
+        flag = "--overwrite" if option.startswith("--") else "overwrite=True"
         named = ", ".join(str(t) for t in existing[:MAX_NAMED])
         more = f" and {len(existing) - MAX_NAMED} more" if len(existing) > MAX_NAMED else ""
         what = "exists" if len(existing) == 1 else "exist"
-        issues.append(
-            InputIssue(
-                named + more,
-                None,
-                option,
-                f"{what} already; pass --overwrite to replace "
-                f"{'it' if len(existing) == 1 else 'them'}, or choose another {option}",
-            )
+        raise OutputExistsError(
+            [
+                InputIssue(
+                    named + more,
+                    None,
+                    option,
+                    f"{what} already; pass {flag} to replace "
+                    f"{'it' if len(existing) == 1 else 'them'}, or choose another {option}",
+                )
+            ]
         )
-    if issues:
-        raise InputFileError(issues)
 
 
 @dataclass
@@ -101,6 +188,7 @@ class Staged:
     targets: list[Path]
     overwrite: bool
     option: str
+    being_written: WriterProbe | None = None
     folders: dict[Path, Path] = field(default_factory=dict)  # target's folder -> staging
     created: list[Path] = field(default_factory=list)  # folders made for the targets
 
@@ -124,10 +212,16 @@ class Staged:
         return InputFileError([InputIssue(str(target), None, self.option, message)])
 
     def commit(self) -> None:
-        """Rename every written output onto its target; targets not written are left alone."""
+        """Rename every written output onto its target; targets not written are left alone. A
+        target that another process began to write meanwhile is not replaced (an error)."""
         for t in self.targets:
             staged = self.path(t)
             if staged.exists():
+                writer = self.being_written(t) if self.being_written and t.is_file() else None
+                if writer is not None:
+                    raise self.error(
+                        t, f"began to be written while the command ran ({writer}); kept"
+                    )
                 try:
                     _rename(staged, t, self.overwrite, self.option)
                 except OSError as e:
@@ -176,10 +270,17 @@ def _make_folder(folder: Path, created: list[Path]) -> None:
     created.extend(reversed(missing))
 
 
-def stage(targets: Sequence[Path], *, overwrite: bool = False, option: str = "--out") -> Staged:
+def stage(
+    targets: Sequence[Path],
+    *,
+    overwrite: bool = False,
+    option: str = "--out",
+    being_written: WriterProbe | None = None,
+) -> Staged:
     """A staging folder beside each distinct folder of ``targets`` (created as needed); an
-    unwritable place is an :class:`InputFileError` naming it."""
-    staged = Staged([Path(t) for t in targets], overwrite, option)
+    unwritable place is an :class:`InputFileError` naming it. ``being_written``: checked
+    again for each target when it is put in place (:meth:`Staged.commit`)."""
+    staged = Staged([Path(t) for t in targets], overwrite, option, being_written)
     try:
         for t in staged.targets:
             if t.parent in staged.folders:
@@ -201,21 +302,35 @@ def check_writable(
     targets: Sequence[Path],
     *,
     inputs: Sequence[Path | None] = (),
+    folders: Sequence[ReadFolder] = (),
     overwrite: bool = False,
     option: str = "--out",
+    being_written: WriterProbe | None = None,
 ) -> None:
     """:func:`check_outputs`, then prove each target's folder writable (stage, discard): for a
     command that writes its outputs at the end with :func:`write_text_output`."""
     paths = [Path(t) for t in targets]
-    check_outputs(paths, inputs=inputs, overwrite=overwrite, option=option)
+    check_outputs(
+        paths,
+        inputs=inputs,
+        folders=folders,
+        overwrite=overwrite,
+        option=option,
+        being_written=being_written,
+    )
     stage(paths, overwrite=overwrite, option=option).discard()
 
 
 def write_text_output(
-    target: Path, text: str, *, overwrite: bool = False, option: str = "--out"
+    target: Path,
+    text: str,
+    *,
+    overwrite: bool = False,
+    option: str = "--out",
+    being_written: WriterProbe | None = None,
 ) -> None:
     """Write ``text`` to ``target`` beside it, then rename it into place."""
-    staged = stage([Path(target)], overwrite=overwrite, option=option)
+    staged = stage([Path(target)], overwrite=overwrite, option=option, being_written=being_written)
     try:
         staged.write_text(Path(target), text)
         staged.commit()
@@ -230,12 +345,15 @@ def staged_outputs(
     inputs: Sequence[Path | None] = (),
     overwrite: bool = False,
     option: str = "--out",
+    being_written: WriterProbe | None = None,
 ) -> Iterator[Staged]:
     """:func:`check_outputs`, :func:`stage`, then (when the block ends without an exception)
     :meth:`Staged.commit`; the staging folders go whatever happens."""
     paths = [Path(t) for t in targets]
-    check_outputs(paths, inputs=inputs, overwrite=overwrite, option=option)
-    staged = stage(paths, overwrite=overwrite, option=option)
+    check_outputs(
+        paths, inputs=inputs, overwrite=overwrite, option=option, being_written=being_written
+    )
+    staged = stage(paths, overwrite=overwrite, option=option, being_written=being_written)
     try:
         yield staged
         staged.commit()

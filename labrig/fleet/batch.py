@@ -134,7 +134,7 @@ def row_of(res: TaskResult, skipped: bool) -> dict[str, Any]:
         "run_file": res.path,
         "key": res.key,
         "command": res.command,
-        "status": "ok" if res.ok else "failed",
+        "status": "ok" if res.ok else (res.status or "failed"),
         "error": res.error,
         "skipped": skipped,
         "input_sha256": res.input_sha256,

@@ -22,13 +22,15 @@ from matplotlib.figure import Figure
 
 from labrig.core.version import __version__
 from labrig.fleet.cache import write_atomic
-from labrig.fleet.outliers import QUANTITIES, Z_LIMIT
+from labrig.fleet.outliers import QUANTITIES, Z_LIMIT, present_quantities
 from labrig.fleet.schedule import ScheduleInfo
 from labrig.report.plots import png, style_axes
 from labrig.report.templating import render
 
 RIG_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:cyan")
 PAGES = ("diagnosis.html", "report.html", "fit.json")
+#: the page lists every run in a table up to this many runs (beyond: fleet.parquet has them)
+MAX_TABLE_ROWS = 500
 SCALE = dict(QUANTITIES)
 
 
@@ -107,7 +109,7 @@ def control_chart(rows: list[dict[str, Any]], q: str) -> bytes:
             name = rows[i].get("actuator") or Path(str(rows[i]["run_file"])).stem
             ax.annotate(str(name), (when[i], x[i]), fontsize=7, color="tab:red",
                         xytext=(3, 3), textcoords="offset points")  # fmt: skip
-    if log:
+    if log and len({float(x[i]) for i in idx}) > 1:  # one value (a small fleet): linear axis
         ax.set_yscale("log")
     ax.set_ylabel(q, fontsize=8)
     ax.legend(fontsize=7, loc="upper right", title="rig", title_fontsize=7)
@@ -163,11 +165,36 @@ def flagged_rows(rows: list[dict[str, Any]], out_dir: Path) -> list[dict[str, An
     return out
 
 
+def run_table(rows: list[dict[str, Any]], shown: list[str], out_dir: Path) -> list[dict[str, Any]]:
+    """One line per run for the page's table: file, actuator, status, verdict, the shown
+    quantities (4 significant digits), its own page."""
+    out = []
+    for r in rows:
+        page = page_of(r, out_dir) if r["status"] == "ok" else None
+        values = []
+        for q in shown:
+            v = r.get(q)
+            values.append(f"{v:.4g}" if isinstance(v, int | float) and v == v else "—")
+        out.append(
+            {
+                "file": Path(str(r["run_file"])).name,
+                "actuator": str(r.get("actuator") or ""),
+                "status": str(r["status"]),
+                "verdict": str(r.get("verdict_class") or ""),
+                "cells": values,
+                "page": page,
+                "page_name": Path(page).name if page else "",
+            }
+        )
+    return out
+
+
 def fleet_context(
     rows: list[dict[str, Any]], quantities: list[str], info: ScheduleInfo, out_dir: Path
 ) -> dict[str, Any]:
     """Everything ``fleet.html.j2`` shows (module docstring)."""
     ok_rows = [r for r in rows if r["status"] == "ok"]
+    shown = present_quantities(rows)  # a small fleet too: its values, untested for outliers
     return {
         "version": __version__,
         "n": len(rows),
@@ -180,11 +207,13 @@ def fleet_context(
         "z_limit": Z_LIMIT,
         "quantities": quantities,
         "flagged": flagged_rows(rows, out_dir),
-        "distributions_png": distributions_figure(ok_rows, quantities),
+        "distributions_png": distributions_figure(ok_rows, shown),
         "charts": [
-            {"png": control_chart(ok_rows, q), "alt": f"{q} against the test date"}
-            for q in quantities
+            {"png": control_chart(ok_rows, q), "alt": f"{q} against the test date"} for q in shown
         ],
+        "shown": shown,
+        "runs": run_table(rows, shown, out_dir) if len(rows) <= MAX_TABLE_ROWS else [],
+        "max_table_rows": MAX_TABLE_ROWS,
         "failed": [
             {"file": str(r["run_file"]), "error": str(r["error"])}
             for r in rows

@@ -91,9 +91,10 @@ def rig_name(run: RunFile) -> str:
     return "sim" if not run.rig_file else Path(run.rig_file).stem
 
 
-def run_identity(path: Path | str) -> dict[str, Any]:
-    """The run file's metadata columns of the fleet table (``docs/fleet.md``)."""
-    run = read_run(path, load_data=False)
+def run_identity(path: Path | str, run: RunFile | None = None) -> dict[str, Any]:
+    """The run file's metadata columns of the fleet table (``docs/fleet.md``); ``run``: the
+    file as the task read it (else read now)."""
+    run = read_run(path, load_data=False) if run is None else run
     actuator = sample_from_hdf5(path) or sample_from_protocol(run.protocol_text)
     return {
         "actuator": actuator,

@@ -72,6 +72,18 @@ def _values(rows: Sequence[dict[str, Any]], col: str, scale: str) -> NDArray:
     return np.array(out)
 
 
+def present_quantities(rows: list[dict[str, Any]]) -> list[str]:
+    """The quantities of :data:`QUANTITIES` that some successful run has a number for (shown
+    on the fleet page whatever the fleet's size; tested for outliers only from
+    :data:`MIN_RUNS` runs)."""
+    ok = [r for r in rows if r.get("status") == "ok"]
+    return [
+        q
+        for q, _ in QUANTITIES
+        if any(isinstance(r.get(q), int | float) and not isinstance(r.get(q), bool) for r in ok)
+    ]
+
+
 def flag_runs(rows: list[dict[str, Any]]) -> list[str]:
     """Add ``z_<quantity>``, ``flagged``, ``flags`` and ``named_effect`` to each row (in place)
     by the rule of the module docstring; returns the quantities tested."""

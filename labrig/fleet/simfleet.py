@@ -145,23 +145,20 @@ def truth_doc(fleet: list[Actuator], seed: int, defect_fraction: float, protocol
     }
 
 
-def check_free(out: Path, fleet: list[Actuator], overwrite: bool) -> None:
-    """Refuse (exit 2) to replace files of an earlier fleet without ``overwrite``."""
-    taken = [out / a.run_file for a in fleet if (out / a.run_file).exists()]
-    if (out / "truth.json").exists():
-        taken.insert(0, out / "truth.json")
-    if taken and not overwrite:
-        raise InputFileError(
-            [
-                InputIssue(
-                    str(taken[0]),
-                    None,
-                    "--out",
-                    f"exists ({len(taken)} files of the fleet do); choose another --out or "
-                    "pass --overwrite",
-                )
-            ]
-        )
+def check_free(out: Path, fleet: list[Actuator], protocol: Path, overwrite: bool) -> None:
+    """The one output check (:func:`labrig.core.outputs.check_outputs`) for the fleet's folder
+    and files: ``out`` is a folder (or new), no file of the fleet is the protocol or a run file
+    being written, and files of an earlier fleet are replaced only with ``overwrite``."""
+    from labrig.core.outputs import check_outputs
+    from labrig.store.reader import being_written
+
+    check_outputs([out], inputs=[protocol], folder=True)
+    check_outputs(
+        [out / "truth.json", *(out / a.run_file for a in fleet)],
+        inputs=[protocol],
+        overwrite=overwrite,
+        being_written=being_written,
+    )
 
 
 def write_fleet(
@@ -173,17 +170,26 @@ def write_fleet(
     defect_fraction: float = 0.05,
     overwrite: bool = False,
     progress: Callable[[Actuator], None] | None = None,
+    checked: Callable[[], None] | None = None,
 ) -> list[Path]:
     """Draw the fleet, run each actuator on its simulated rig, write ``truth.json``; returns
-    the run files. A run that does not complete is a :class:`LabrigError` naming it."""
+    the run files. ``protocol``: a file or a shipped example's name. ``checked()`` is called
+    once the inputs and outputs are checked (:func:`check_free`), before the first run;
+    ``progress(actuator)`` after each run. A run that does not complete is a
+    :class:`LabrigError` naming it."""
+    from labrig.runner.examples import resolve_protocol
     from labrig.runner.execute import execute, preflight
 
+    protocol = resolve_protocol(protocol)
     try:
         base = protocol.read_text(encoding="utf-8")
     except OSError as e:
-        raise InputFileError([InputIssue(str(protocol), None, "--protocol", str(e))]) from None
+        why = e.strerror or str(e)
+        raise InputFileError([InputIssue(str(protocol), None, "--protocol", why)]) from None
     fleet = draw_fleet(n, seed, defect_fraction)
-    check_free(out, fleet, overwrite)
+    check_free(out, fleet, protocol, overwrite)
+    if checked is not None:
+        checked()
     setup = out / "setup"
     setup.mkdir(parents=True, exist_ok=True)
     paths = []

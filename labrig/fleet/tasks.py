@@ -6,6 +6,14 @@
 - ``report``: the fit, then :func:`labrig.commands.report.build_run_report` (``labrig report RUN
   --out report.html --json``).
 
+**One snapshot per result.** A task reads its run file once (:func:`read_snapshot`) and gives
+the same records to every part (the fit and the diagnosis, the fit and the report), and the
+SHA-256 it records is of the bytes it read: a file that changed while it was read is a failed
+task ("changed while it was read"), never a row mixing two versions. A run file still being
+written (:mod:`labrig.store.writing`) is not analysed: its row has the status
+``being written`` and counts as failed (exit 4); a later batch analyses it once the run ended.
+``report`` takes the fit the task made (our model is fitted once per run, not twice).
+
 A task never raises: any failure (a file that is not a run file, a truncated one, a fit that
 fails) becomes a :class:`TaskResult` with ``ok=False`` and the error's text, so one bad run
 never stops the others. The documents the commands would write (``fit.json``,
@@ -22,12 +30,16 @@ import time
 import traceback
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from labrig.core.errors import LabrigError
 from labrig.core.version import __version__
+
+if TYPE_CHECKING:
+    from labrig.commands.fit import FitOutcome
+    from labrig.store import RunFile
 
 #: the three batch commands
 COMMANDS = ("fit", "diagnose", "report")
@@ -69,6 +81,8 @@ class TaskResult:
     key: str
     ok: bool
     error: str = ""
+    #: why a task that did not run is not ``failed`` (``being written``); ``""`` otherwise
+    status: str = ""
     input_sha256: str = ""
     row: dict[str, Any] = field(default_factory=dict)
     entries: list[dict[str, Any]] = field(default_factory=list)
@@ -110,10 +124,61 @@ def dumps(doc: Any) -> str:
     return json.dumps(doc, indent=2, allow_nan=False) + "\n"
 
 
+#: the row status of a run file still being written (not analysed; counts as failed)
+BEING_WRITTEN = "being written"
+
+
+class NotAnalysedError(Exception):
+    """The run file is not analysed now (``status``: the row's status; message: why)."""
+
+    def __init__(self, status: str, message: str):
+        self.status = status
+        super().__init__(message)
+
+
+@dataclass
+class Snapshot:
+    """A run file as the task read it: the file, its SHA-256, and the fit once made
+    (``run`` ``None``: not read yet; each part then reads it itself)."""
+
+    path: Path
+    run: RunFile | None
+    sha256: str = ""
+    fit: FitOutcome | None = None
+
+
+def _snapshot(source: Snapshot | Path) -> Snapshot:
+    """A part's input: the task's snapshot, or a path (a part called on its own)."""
+    return source if isinstance(source, Snapshot) else Snapshot(Path(source), None)
+
+
+def _stamp(path: Path) -> tuple[int, int, int, int]:
+    st = path.stat()
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+
+
+def read_snapshot(path: Path) -> Snapshot:
+    """Read ``path`` once (every sample), with the SHA-256 of the same bytes: a file changed
+    between the read and the hash is :class:`NotAnalysedError`, as is a file being written."""
+    from labrig.store import read_run
+
+    before = _stamp(path)
+    run = read_run(path)
+    if run.being_written:
+        raise NotAnalysedError(
+            BEING_WRITTEN,
+            f"is being written now ({run.writer}); analyse it once the run has ended",
+        )
+    sha = file_sha256(path)
+    if _stamp(path) != before:
+        raise NotAnalysedError("failed", "changed while it was read; run the batch again")
+    return Snapshot(path, run, sha)
+
+
 # -- the three commands ---------------------------------------------------------------------
 
 
-def fit_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
+def fit_part(source: Snapshot | Path, opt: TaskOptions, out: TaskResult) -> None:
     """``labrig fit RUN --json``: ``fit.json``, the parameters with uncertainties, NRMSE, and the
     creep the fitted model describes (:func:`~labrig.analysis.diagnose.modelled_creep_per_decade`
     after a step to the run's largest voltage)."""
@@ -123,7 +188,11 @@ def fit_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
     from labrig.core.jsonsafe import json_safe
     from labrig.model import ModelParams
 
-    outcome = fit_run_file(path, method=opt.method, memory=opt.memory, heldout=opt.heldout)
+    snap = _snapshot(source)
+    outcome = fit_run_file(
+        snap.path, method=opt.method, memory=opt.memory, heldout=opt.heldout, run=snap.run
+    )
+    snap.fit = outcome
     doc = json_safe(outcome.result.to_json())
     out.documents["fit.json"] = dumps(doc)
     for name in PARAM_NAMES:
@@ -146,18 +215,20 @@ def fit_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
         )
 
 
-def diagnose_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
+def diagnose_part(source: Snapshot | Path, opt: TaskOptions, out: TaskResult) -> None:
     """``labrig diagnose RUN --json --out D``: ``diagnosis.json`` and ``diagnosis.html``, the
     effects added, the verdict and its class."""
     from labrig.commands.diagnose import diagnose_run_file
 
+    snap = _snapshot(source)
     notes: list[str] = []
     result = diagnose_run_file(
-        path,
+        snap.path,
         also=opt.also,
         max_effects=opt.max_effects,
         mains_hz=opt.mains_hz,
         say=notes.append,
+        snapshot=snap.run,
     )
     d, doc = result.diagnosis, result.document
     out.documents.update(result.documents())
@@ -185,12 +256,13 @@ def diagnose_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
         r["notes"] = "; ".join(notes)
 
 
-def report_part(path: Path, opt: TaskOptions, out: TaskResult) -> None:
+def report_part(source: Snapshot | Path, opt: TaskOptions, out: TaskResult) -> None:
     """``labrig report RUN --out report.html --json``: the page, its metrics table, and each
-    model's mean NRMSE."""
+    model's mean NRMSE; our model is the fit :func:`fit_part` made."""
     from labrig.commands.report import build_run_report
 
-    built = build_run_report(path, None, method=opt.method, heldout=opt.heldout)
+    snap = _snapshot(source)
+    built = build_run_report(snap.path, None, method=opt.method, heldout=opt.heldout, fit=snap.fit)
     out.documents["report.html"] = built.page
     out.documents["report.json"] = dumps(built.metrics)
     by_entry = {e["entry"]: e for e in out.entries}
@@ -224,11 +296,14 @@ def run_task(spec: TaskSpec) -> TaskResult:
     out.worker = f"{socket.gethostname()}:{os.getpid()}"
     path = Path(spec.path)
     try:
-        out.input_sha256 = file_sha256(path)
-        out.row.update(run_identity(path))
+        snap = read_snapshot(path)
+        out.input_sha256 = snap.sha256
+        out.row.update(run_identity(path, snap.run))
         for part in PARTS[spec.command]:
-            part(path, spec.options, out)
+            part(snap, spec.options, out)
         out.ok = True
+    except NotAnalysedError as e:
+        out.status, out.error = e.status, f"{path}: {e}"
     except Exception as e:
         out.error = error_text(e)
         out.documents.clear()

@@ -23,7 +23,7 @@ from labrig.importers.limits import MAX_FILE_BYTES
 from labrig.importers.mat_read import V5_MAGIC, V73_MAGIC, mat_version, read_tree
 from labrig.importers.mat_tables import plain_table
 from labrig.importers.options import Checked, ImportOptions, check_options
-from labrig.importers.table import Table, bad, option_error
+from labrig.importers.table import Table, bad
 from labrig.importers.text import read_text
 from labrig.importers.writer import import_description, write_run
 
@@ -80,12 +80,13 @@ def read_tables(path: Path, checked: Checked) -> list[Table]:
 
 
 def _check_out(files: list[Path], out: Path, overwrite: bool) -> None:
-    if out.is_dir():
-        raise option_error("--out", f"{out} is a folder; give a file name, e.g. {out}/run.h5")
-    if out.exists() and not overwrite:
-        raise option_error("--out", f"{out} exists; pass --overwrite to replace it")
-    if out.exists() and any(f.exists() and f.resolve() == out.resolve() for f in files):
-        raise option_error("--out", f"{out} is also an input; write to another file")
+    """The one output check (:func:`labrig.core.outputs.check_outputs`): ``--out`` is not an
+    input (any spelling, a link), not a run file being written, not a folder, not an existing
+    file without ``--overwrite``."""
+    from labrig.core.outputs import check_outputs
+    from labrig.store.reader import being_written
+
+    check_outputs([out], inputs=files, overwrite=overwrite, being_written=being_written)
 
 
 def _digest(path: Path) -> bytes:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -44,9 +44,11 @@ from labrig.protocol.preflight import preflight as check_plan
 from labrig.rig.instruments import Rig
 from labrig.rig.limits import RigLimits
 from labrig.rig.ramp import RAMP_CURRENT_FRACTION, RampRecord
+from labrig.runner.examples import example_names, resolve_protocol, resolve_rig
 from labrig.runner.record import record_end
 from labrig.runner.rigfile import load_rig, open_rig
 from labrig.store import Channel, RunWriter, estimate_run_bytes, free_bytes
+from labrig.store.reader import being_written
 from labrig.store.resume import ResumePlan, check_resume, check_same_rig, record_resume
 from labrig.store.space import RESERVE_BYTES
 
@@ -62,12 +64,15 @@ __all__ = [
     "STATUS_CHECK_S",
     "DeviceError",
     "RunOutcome",
+    "check_resume_of",
+    "check_run_output",
     "default_out_path",
     "execute",
     "interrupt_once",
     "open_rig",
     "preflight",
     "ramp_to_zero",
+    "run_inputs",
 ]
 
 # DAQ channel -> (run-file dataset, units, long name)
@@ -105,17 +110,71 @@ def default_out_path(plan: Plan, runs_dir: Path = Path("runs")) -> Path:
     return path
 
 
-def preflight(protocol: Path, rig_path: Path | None) -> tuple[Plan, Path | None]:
+def preflight(protocol: Path | str, rig_path: Path | str | None) -> tuple[Plan, Path | None]:
     """Validate the protocol against the rig's limits without opening any device.
 
-    The rig is ``rig_path``, else the protocol's ``rig`` key, else the built-in simulated rig.
-    Raises :class:`~labrig.core.errors.InputFileError` (exit 2) on any problem.
+    ``protocol`` is a file or the name of a shipped example (``paper``;
+    :mod:`labrig.runner.examples`), as is ``rig_path`` (``hybrid``). The rig is ``rig_path``,
+    else the protocol's ``rig`` key, else the built-in simulated rig. Raises
+    :class:`~labrig.core.errors.InputFileError` (exit 2) on any problem.
     """
-    plan = load_plan(protocol)
-    rig = rig_path if rig_path is not None else plan.rig_path
+    path = resolve_protocol(protocol)
+    if not path.exists() and path.parent == Path(".") and path.suffix in ("", ".yaml"):
+        names = ", ".join(example_names()) or "none installed"
+        raise InputFileError(
+            [
+                InputIssue(
+                    str(path),
+                    None,
+                    "",
+                    f"no such protocol file, nor a shipped example of that name "
+                    f"(examples: {names})",
+                )
+            ]
+        )
+    plan = load_plan(path)
+    given_rig = resolve_rig(rig_path)
+    rig = given_rig if given_rig is not None else plan.rig_path
     limits: RigLimits = load_rig(rig).limits
     check_plan(plan, limits)
     return plan, rig
+
+
+def run_inputs(plan: Plan, rig_path: Path | None) -> list[Path]:
+    """The files a run reads: the protocol, the rig file and the CSV files of its steps."""
+    files = [Path(plan.path)] + ([Path(rig_path)] if rig_path is not None else [])
+    base = Path(plan.path).parent
+    for step in plan.steps:
+        name = step.definition.get("file")
+        if isinstance(name, str) and name:
+            files.append(Path(name) if Path(name).is_absolute() else base / name)
+    return files
+
+
+def check_resume_of(plan: Plan, path: Path) -> ResumePlan:
+    """Whether the run file ``path`` can be resumed with ``plan`` and what remains
+    (:func:`labrig.store.resume.check_resume`: the same protocol, not complete, not being
+    written, every sample and seal sound); :class:`InputFileError` (exit 2) otherwise."""
+    return check_resume(path, plan.text, [s.name for s in plan.steps], plan.file)
+
+
+def check_run_output(
+    plan: Plan,
+    rig_path: Path | None,
+    out: Path,
+    overwrite: bool,
+    inputs: Sequence[Path | None] = (),
+) -> None:
+    """The one output check (:func:`labrig.core.outputs.check_outputs`) for the run file
+    ``out``: not the protocol, the rig file, a CSV file the protocol reads or another of
+    ``inputs`` (the live view's parameters); not a run file being written; not a folder; not
+    an existing file without ``overwrite``. :class:`InputFileError` (exit 2)."""
+    check_outputs(
+        [out],
+        inputs=[*run_inputs(plan, rig_path), *inputs],
+        overwrite=overwrite,
+        being_written=being_written,
+    )
 
 
 def ramp_to_zero(rig: Rig) -> RampRecord:
@@ -266,8 +325,10 @@ def execute(
     overwrite: bool = False,
     *,
     metadata: RunMetadata | None = None,
-    resume: Path | None = None,
+    resume: Path | ResumePlan | None = None,
     on_file: Callable[[Path], None] | None = None,
+    inputs: Sequence[Path | None] = (),
+    opener: Callable[[Path | None, int | None], Rig] | None = None,
 ) -> RunOutcome:
     """Run a preflighted plan on the rig and log it; returns the outcome (never raises for
     device faults, a full disk or stop signals once the run file exists: those are recorded
@@ -277,7 +338,10 @@ def execute(
     the protocol's ``metadata:`` (:mod:`labrig.core.metadata`). ``resume``: continue that run file
     with the planned entries it does not hold complete (:mod:`labrig.store.resume`; ``out`` is
     then ignored). ``on_file(path)`` is called once the run file exists, with the path being
-    written (a copy beside the target with ``overwrite`` or ``resume``).
+    written (a copy beside the target with ``overwrite`` or ``resume``). ``inputs``: other
+    files the command reads, never the run file (:func:`check_run_output`). ``opener``:
+    opens the rig (default :func:`~labrig.runner.rigfile.open_rig`; tests pass one that
+    records).
 
     Called from the main thread, SIGINT, SIGTERM, SIGHUP and SIGQUIT stop the run once:
     repeats are ignored until the output is at 0 V and the file is closed (see
@@ -287,15 +351,17 @@ def execute(
     """
     job = _Job(plan, rig_path, realtime, progress, overwrite, on_file)
     if resume is not None:
-        job.resume = check_resume(resume, plan.text, [s.name for s in plan.steps], plan.file)
+        job.resume = resume if isinstance(resume, ResumePlan) else check_resume_of(plan, resume)
         job.metadata = (metadata or RunMetadata()).over(RunMetadata(job.resume.metadata))
         job.options = metadata or RunMetadata()
         out = resume
     else:
         job.metadata = combine(getattr(plan.protocol, "metadata", None), metadata)
-    with interrupt_once() as guard:
         out = out or default_out_path(plan)
-        rig = open_rig(rig_path, seed)  # a stop signal here: open_rig closes what it opened
+        check_run_output(plan, rig_path, out, overwrite, inputs)
+    with interrupt_once() as guard:
+        # a stop signal here: open_rig closes what it opened (looked up now: a test seam)
+        rig = (opener or open_rig)(rig_path, seed)
         try:
             with guard.defer():
                 return _run_on(rig, job, out, guard)
@@ -459,9 +525,11 @@ def _run_on(rig: Rig, job: _Job, out: Path, guard: SignalGuard) -> RunOutcome:
         check_same_rig(job.resume, rig.rig_text, str(job.rig_path or ""))
         staged: Staged | None = stage([out], overwrite=True, option="--resume")
     else:
-        check_outputs([out], overwrite=job.overwrite)  # a directory; an existing file
+        # a file that appeared since check_run_output: refused unless --overwrite
+        check_run_output(job.plan, job.rig_path, out, job.overwrite)
         # --overwrite: the new file is written beside the old one and replaces it once closed
-        staged = stage([out], overwrite=True) if job.overwrite and out.exists() else None
+        replace = job.overwrite and out.exists()
+        staged = stage([out], overwrite=True, being_written=being_written) if replace else None
     try:
         if job.resume is not None and staged is not None:
             writer = _reopen_writer(job, rig, out, setup.chans, staged)

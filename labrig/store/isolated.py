@@ -15,7 +15,8 @@ forked child:
 - a child that crashes (a segmentation fault in libhdf5) takes only itself down.
 
 The result comes back pickled through a pipe; the parent keeps answering Ctrl-C while it waits
-(and kills the child). Where ``os.fork`` does not exist the function is called in-process.
+(and kills the child). Where ``os.fork`` or the POSIX module ``resource`` does not exist
+(Windows) the function is called in-process, without limits.
 """
 
 from __future__ import annotations
@@ -25,13 +26,17 @@ import faulthandler
 import math
 import os
 import pickle
-import resource
 import select
 import signal
 import time
 import traceback
 from collections.abc import Callable
 from typing import Any
+
+try:  # POSIX only: without it (Windows) reads are made in-process, without CPU limits
+    import resource
+except ImportError:
+    resource = None  # type: ignore[assignment]
 
 #: CPU seconds one step of a read may take (opening the file, one object), plus
 #: :data:`CPU_BYTES_PER_S` per byte it reads (a sound run file reads, checksums included,
@@ -60,7 +65,7 @@ def allow_cpu(seconds: float = STEP_CPU_S, size_bytes: int = 0) -> None:
     """In a child of :func:`call_isolated`: allow the next step ``seconds`` plus
     ``size_bytes / CPU_BYTES_PER_S`` of CPU time from now (the kernel stops the child beyond
     that: ``RLIMIT_CPU``, whole seconds, rounded up). Does nothing in any other process."""
-    if not _in_child:
+    if not _in_child or resource is None:
         return
     use = resource.getrusage(resource.RUSAGE_SELF)
     limit = math.ceil(use.ru_utime + use.ru_stime + seconds + size_bytes / CPU_BYTES_PER_S)
@@ -83,7 +88,7 @@ def call_isolated(
     skip a read than wait: the live view). Returns what ``fn`` returns, re-raises what it
     raises (when it can be pickled; otherwise :class:`IsolatedCallError`), and raises
     :class:`IsolatedReadError` when the child is stopped by a limit or dies."""
-    if not hasattr(os, "fork"):
+    if not hasattr(os, "fork") or resource is None:
         return fn(*args)
     wall = wall_limit_s(size_bytes) if wall_s is None else wall_s
     read_fd, write_fd = os.pipe()

@@ -23,7 +23,15 @@ from labrig.store.isolated import IsolatedReadError, call_isolated
 from labrig.store.parse import RunEntry, RunFile, read_run_here
 from labrig.store.writing import writer_of
 
-__all__ = ["RunEntry", "RunFile", "export_csv", "read_run", "run_info", "run_summary"]
+__all__ = [
+    "RunEntry",
+    "RunFile",
+    "being_written",
+    "export_csv",
+    "read_run",
+    "run_info",
+    "run_summary",
+]
 
 
 #: a file being written may be caught between two of its writer's writes: it is read again
@@ -71,6 +79,25 @@ def read_run(path: Path | str, load_data: bool = True) -> RunFile:
         for e in run:
             e.data = {c: np.empty(shapes[e.name][c]) for c in e.data}
     return run
+
+
+#: the first bytes of an HDF5 file (without a user block, as labrig writes them)
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def being_written(path: Path | str) -> str | None:
+    """Who writes the run file ``path`` now (:mod:`labrig.store.writing`: its writer's process,
+    host and last write), or ``None`` when it is not a run file being written (another kind of
+    file, a finished or abandoned run, a file that cannot be read). The output check's probe
+    (:func:`labrig.core.outputs.check_outputs`)."""
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(len(HDF5_SIGNATURE)) != HDF5_SIGNATURE:
+                return None
+        run = read_run(path, load_data=False)
+    except (OSError, InputFileError):
+        return None
+    return run.writer if run.being_written else None
 
 
 def _read_isolated(p: Path, load_data: bool, size: int) -> tuple[RunFile, dict]:
@@ -243,7 +270,9 @@ def _col_header(name: str, units: str) -> str:
     return f"{name}_{u}" if u else name
 
 
-def export_csv(path: Path | str, out_dir: Path | str, overwrite: bool = False) -> list[Path]:
+def export_csv(
+    path: Path | str, out_dir: Path | str, overwrite: bool = False, option: str = "--csv"
+) -> list[Path]:
     """Write one CSV per entry (``<out_dir>/<entry>.csv``); returns the paths written.
 
     The header line names the columns with their units, e.g. ``time_s,command_voltage_V,
@@ -257,9 +286,9 @@ def export_csv(path: Path | str, out_dir: Path | str, overwrite: bool = False) -
     run = read_run(path)
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
-        raise InputFileError([InputIssue(str(out), None, "--csv", "is a file, not a directory")])
+        raise InputFileError([InputIssue(str(out), None, option, "is a file, not a directory")])
     targets = [out / f"{e.name}.csv" for e in run]
-    with staged_outputs(targets, inputs=[Path(path)], overwrite=overwrite, option="--csv") as st:
+    with staged_outputs(targets, inputs=[Path(path)], overwrite=overwrite, option=option) as st:
         for e, target in zip(run, targets, strict=True):
             cols = e.channels
             header = [_col_header(c, e.units.get(c, "")) for c in cols]

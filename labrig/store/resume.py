@@ -2,7 +2,9 @@
 
 :func:`check_resume` decides, before anything is opened or energised, whether a file can be
 resumed with a protocol and which entries remain: the file must not be complete nor being
-written now, and the protocol must be the one it recorded (the same text). The runner then
+written now, the protocol must be the one it recorded (the same text), and every stored sample
+must pass its checksum and every object its seal (:func:`verify_samples`): a resume appends to
+the file, so a damaged one would take the new entries down with it. The runner then
 works on a copy written beside the file (:mod:`labrig.core.outputs`), opened by
 :meth:`labrig.store.writer.RunWriter.reopen`, and renames the copy over the file only once the
 copy is closed: a resume that fails, or is killed, leaves the file as it was.
@@ -36,7 +38,9 @@ import h5py
 from labrig.core.errors import InputFileError, InputIssue
 from labrig.core.metadata import RunMetadata
 from labrig.store.format import now_iso
+from labrig.store.isolated import IsolatedReadError, call_isolated
 from labrig.store.nexus import set_str, write_metadata_collection
+from labrig.store.parse import read_run_here
 from labrig.store.reader import read_run
 
 #: records of earlier endings moved into the resume record: /run name -> name in the record
@@ -82,6 +86,22 @@ def _first_difference(recorded: str, given: str) -> str:
     return "the same lines, other line endings or spacing"
 
 
+def _verify_here(path: Path) -> None:
+    read_run_here(path, load_data=True)  # every chunk's checksum, every seal; nothing sent back
+
+
+def verify_samples(path: Path, option: str = "--resume") -> None:
+    """Read every sample of ``path`` (Fletcher-32 checksums) and every object's seal, in a
+    child process with the reader's limits (:mod:`labrig.store.isolated`); damage is an
+    :class:`InputFileError` (exit 2) naming the file, the object and the option."""
+    try:
+        call_isolated(_verify_here, path, size_bytes=path.stat().st_size)
+    except InputFileError as e:
+        raise _refuse(path, f"cannot be resumed, the file is damaged: {e}", option) from None
+    except (IsolatedReadError, OSError) as e:
+        raise _refuse(path, f"cannot be resumed, the file is damaged: {e}", option) from None
+
+
 def check_resume(
     path: Path, protocol_text: str, planned: list[str], protocol_file: str
 ) -> ResumePlan:
@@ -106,6 +126,7 @@ def check_resume(
         raise _refuse(
             path, f"every planned entry is complete (status {run.status}): nothing to resume"
         )
+    verify_samples(path)
     names = {e.name for e in run}
     superseded = {}
     for n in to_run:

@@ -76,7 +76,12 @@ def test_to_pandas_has_units_in_names_and_the_file_values(seeded: Path):
         # as labrig names units in memory (microstrain stored as um/m reads as ue)
         units = {c: memory_units(f[ENTRIES[0]]["data"][c].attrs["units"]) for c in channels}
         expected = ["entry", *(f"{c}_{units[c]}" for c in channels)]
-        assert list(df.columns) == expected
+        # the channels, then the step definition's scalar keys (tests/api/test_day_one.py)
+        assert list(df.columns)[: len(expected)] == expected
+        step = json.loads(f[ENTRIES[0]]["step_definition"][()])
+        assert set(df.columns[len(expected) :]) <= {k for k in step} | {
+            k for e in ENTRIES for k in json.loads(f[e]["step_definition"][()])
+        }
         assert list(df["entry"].cat.categories) == ENTRIES
         for name in ENTRIES:
             rows = df[df["entry"] == name]

@@ -97,7 +97,7 @@ def test_overwrite_replaces_whole_file_and_input_named_run(tmp_path: Path, preci
     assert run.status == "complete"
     assert h5py.File(precious).attrs["file_name"] == "precious.h5"
     res = invoke("import", precious, "--out", precious, "--overwrite")
-    assert res.exit_code == 2 and "also an input" in res.output
+    assert res.exit_code == 2 and "is an input" in res.output
 
 
 def test_aux_never_replaces_core_channels(tmp_path: Path) -> None:

@@ -1,0 +1,56 @@
+"""The example protocols and rig files shipped with labrig (``experiments/`` in the repository,
+installed as the package data ``labrig.experiments``), addressable by name from any folder:
+``labrig run paper`` runs ``paper.yaml``, ``--rig hybrid`` is ``rigs/hybrid.yaml``.
+
+A name is looked up only when no file of that name exists (a file in the working folder always
+wins) and it has no folder part; ``paper`` and ``paper.yaml`` are the same name.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+#: the package that holds the examples (``experiments/`` installed)
+PACKAGE = "labrig.experiments"
+
+
+def examples_folder() -> Path | None:
+    """The folder of the shipped examples (``None`` if labrig was installed without them)."""
+    try:
+        folder = Path(str(resources.files(PACKAGE)))
+    except (ModuleNotFoundError, TypeError):
+        return None
+    return folder if folder.is_dir() else None
+
+
+def example_names(kind: str = "protocol") -> list[str]:
+    """The names of the shipped protocols (``kind="protocol"``) or rig files (``"rig"``)."""
+    folder = examples_folder()
+    if folder is None:
+        return []
+    where = folder / "rigs" if kind == "rig" else folder
+    return sorted(p.stem for p in where.glob("*.yaml"))
+
+
+def resolve(given: Path | str, kind: str = "protocol") -> Path:
+    """``given`` when it exists or names a folder; else the shipped example of that name when
+    there is one; else ``given`` unchanged (its reader then says it is not found)."""
+    path = Path(given)
+    if path.exists() or path.parent != Path(".") or path.suffix not in ("", ".yaml"):
+        return path
+    folder = examples_folder()
+    if folder is None:
+        return path
+    candidate = (folder / "rigs" if kind == "rig" else folder) / f"{path.stem}.yaml"
+    return candidate if candidate.is_file() else path
+
+
+def resolve_protocol(given: Path | str) -> Path:
+    """A protocol file or the name of a shipped one (:func:`resolve`)."""
+    return resolve(given, "protocol")
+
+
+def resolve_rig(given: Path | str | None) -> Path | None:
+    """A rig file or the name of a shipped one (:func:`resolve`); ``None`` stays ``None``."""
+    return None if given is None else resolve(given, "rig")

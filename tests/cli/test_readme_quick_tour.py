@@ -1,0 +1,147 @@
+"""The README's "Quick tour", run as written: every command of its code blocks, parsed from
+README.md (so the test and the README cannot drift), through the installed ``labrig`` entry
+point, in a fresh folder holding a copy of ``experiments/`` (as the repository root does), on the
+simulated rig; then its Python block.
+
+``runs/<file>.h5`` is the run file the tour's first ``labrig run`` wrote (the path it printed);
+``their.csv``, another lab's file, is made from a run: time, voltage and a displacement in um
+over an 18 mm stack, with a units row.
+
+- slow tier: the tour as written (the paper's 11-entry campaign, a fleet of 50; an hour or
+  more), and the same commands on a 3-entry protocol in place of ``experiments/paper.yaml`` and
+  ``experiments/sweep.yaml`` with a fleet of 3 of it (the only changes, listed in :data:`FAST`;
+  about 5 minutes on the loaded 2-core machine);
+- default tier: on that 3-entry protocol, the tour's commands that write and read files
+  (``check``, ``run``, ``info``, ``runs``, ``export``, ``import``, ``sim fleet``), without the
+  analysis ones (:data:`ANALYSIS`: ``fit``, ``report``, ``diagnose``, ``batch`` and the Python
+  block, each tested on its own elsewhere).
+"""
+
+from __future__ import annotations
+
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from helpers import ROOT, TINY
+
+README = ROOT / "README.md"
+EXE = Path(sys.executable).parent / "labrig"
+#: the fast tier's changes to the tour's commands (text -> replacement)
+FAST = {"sim fleet 50": "sim fleet 3 --protocol experiments/paper.yaml"}
+#: the tour's analysis commands, left out of the default tier (minutes each on a loaded machine)
+ANALYSIS = ("labrig fit", "labrig report", "labrig diagnose", "labrig batch")
+
+
+def tour() -> tuple[list[str], str]:
+    """The Quick tour's shell commands (comments dropped) and its Python block, from README.md."""
+    text = README.read_text(encoding="utf-8")
+    section = text.split("## Quick tour", 1)[1].split("\n## ", 1)[0]
+    commands = [
+        line.strip()
+        for line in section.splitlines()
+        if line.startswith("    labrig ")  # an indented code block's line
+    ]
+    python = re.search(r"```python\n(.*?)```", section, re.S)
+    assert commands and python, "the README's Quick tour has no commands or no Python block"
+    return commands, python.group(1)
+
+
+def their_csv(run_file: Path, out: Path) -> None:
+    """Another lab's file: the run's entries back to back, strain as a displacement (um, 18 mm
+    stack), a header and a units row."""
+    import labrig
+
+    run = labrig.open(run_file)
+    t, v, d = [], [], []
+    t0 = 0.0
+    for name in run.entries:
+        e = run[name]
+        t.append(e.time + t0)
+        t0 = float(t[-1][-1]) + 1.0 / e.rate_hz
+        v.append(e["command_voltage"])
+        d.append(e["strain"] * 1e-6 * 18e-3 * 1e6)  # ue over 18 mm, in um
+    rows = np.column_stack([np.concatenate(t), np.concatenate(v), np.concatenate(d)])
+    with out.open("w") as f:
+        f.write("time,voltage,disp\ns,V,um\n")
+        np.savetxt(f, rows, fmt="%.9g", delimiter=",")
+
+
+def run_tour(tmp_path: Path, fast: bool, analysis: bool = True) -> None:
+    commands, python = tour()
+    if not analysis:
+        commands = [c for c in commands if not c.startswith(ANALYSIS)]
+    shutil.copytree(ROOT / "experiments", tmp_path / "experiments")
+    if fast:
+        for name in ("paper.yaml", "sweep.yaml"):
+            (tmp_path / "experiments" / name).write_text(TINY)
+    first_run: Path | None = None
+    for command in commands:
+        if fast:
+            for old, new in FAST.items():
+                command = command.replace(old, new)
+        if "<file>" in command:
+            assert first_run is not None, "the tour names a run file before it runs one"
+            command = command.replace("runs/<file>.h5", str(first_run.relative_to(tmp_path)))
+        if command.startswith("labrig import their.csv") and not (tmp_path / "their.csv").exists():
+            assert first_run is not None
+            their_csv(first_run, tmp_path / "their.csv")
+        args = shlex.split(command, comments=True)
+        res = subprocess.run(
+            [str(EXE), *args[1:]], cwd=tmp_path, capture_output=True, text=True, timeout=7200
+        )
+        assert res.returncode == 0, f"{command}\n{res.stdout}\n{res.stderr}"
+        assert "Traceback" not in res.stderr, command
+        if args[1] == "run" and first_run is None:
+            first_run = tmp_path / res.stdout.strip().splitlines()[-1]
+            assert first_run.is_file(), res.stdout
+        if args[1] == "runs":
+            assert str(first_run.relative_to(tmp_path)) in res.stdout, res.stdout
+    if not analysis:
+        assert len(list((tmp_path / "csv").glob("*.csv"))) == 3
+        assert (tmp_path / "theirs.h5").is_file() and (tmp_path / "fleet/truth.json").is_file()
+        return
+    (tmp_path / "tour.py").write_text(python)
+    res = subprocess.run(
+        [sys.executable, "tour.py"], cwd=tmp_path, capture_output=True, text=True, timeout=7200
+    )
+    assert res.returncode == 0, res.stderr
+    assert "'params'" in res.stdout and "'nrmse_pct'" in res.stdout  # the dict as_json gives
+    for made in ("params.json", "report.html", "diagnosis/diagnosis.json", "theirs.h5",
+                 "theirs-diagnosis/diagnosis.html", "fleet/truth.json", "fleet/batch/fleet.html",
+                 "runs/sweep.h5"):  # fmt: skip
+        assert (tmp_path / made).is_file(), made
+    assert len(list((tmp_path / "csv").glob("*.csv"))) == (3 if fast else 11)
+
+
+def test_the_tour_parses():
+    commands, python = tour()
+    assert commands[0].startswith("labrig check experiments/paper.yaml")
+    assert any("<file>" in c for c in commands) and "import labrig" in python
+    assert all(old in " ".join(commands) for old in FAST), "FAST no longer matches the README"
+
+
+@pytest.mark.skipif(not EXE.exists(), reason="needs the labrig entry point")
+@pytest.mark.timeout(600)
+def test_the_quick_tours_files_on_a_three_entry_protocol(tmp_path: Path):
+    run_tour(tmp_path, fast=True, analysis=False)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not EXE.exists(), reason="needs the labrig entry point")
+@pytest.mark.timeout(1800)
+def test_the_quick_tour_on_a_three_entry_protocol(tmp_path: Path):
+    run_tour(tmp_path, fast=True)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not EXE.exists(), reason="needs the labrig entry point")
+@pytest.mark.timeout(4 * 3600)
+def test_the_quick_tour_as_written(tmp_path: Path):
+    run_tour(tmp_path, fast=False)
