@@ -501,6 +501,7 @@ def test_also_accepts_only_structural_effects(tmp_path):
 
 
 # two diagnoses of a hybrid campaign: 93 s on an idle machine, over 300 s with both cores busy
+@pytest.mark.slow  # the default tier's twin: test_also_accepts_only_structural_effects
 @pytest.mark.timeout(900)
 def test_also_adds_the_structural_effect_to_the_candidates(tmp_path, monkeypatch, capsys):
     import labrig.analysis.load as load
