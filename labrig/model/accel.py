@@ -52,4 +52,3 @@ def kernels() -> ModuleType | None:
 def reset() -> None:
     """Forget whether numba loaded (for tests that hide it)."""
     kernels.cache_clear()
-
