@@ -52,3 +52,4 @@ def kernels() -> ModuleType | None:
 def reset() -> None:
     """Forget whether numba loaded (for tests that hide it)."""
     kernels.cache_clear()
+
