@@ -8,7 +8,8 @@ places:
   ``amplifier_current_limit``, ``quadratic_term``);
 - ``"output"``: on the modelled strain of a whole simulated sequence (operator gain and creep:
   ``thermal_drift``, ``creep``; the measuring chain: ``sensor_lowpass``, ``time_delay``); every
-  output effect is *linear* in the strain it receives;
+  output effect is *linear* in the strain it receives, or affine: ``sensor_drift`` adds a term
+  that does not depend on the strain, and says so with its tangent (the identity);
 - ``"operator"``: an additive strain term computed from the operator's input ``V*`` (hysteresis
   the paper's operator cannot hold: ``remanence``); fitted like the output effects, and the
   compensation controller inverts it with the operator;
@@ -69,8 +70,12 @@ LAZY: dict[str, str] = {
     "Param": "base",
     "EMPIRICAL_NOTE": "empirical",
     "EmpiricalTerms": "empirical",
+    "drift_basis": "sensor_drift",
+    "first_order_lowpass": "amplifier_bandwidth",
     "kelvin_voigt_filter": "viscoelastic_creep",
     "measured_voltage": "amplifier_current_limit",
+    "rate_hysteresis_state": "rate_hysteresis",
+    "resonance_filter": "mechanical_resonance",
     "slew_limit": "amplifier_current_limit",
     **{r.cls: r.name for r in REGISTRY},
 }
