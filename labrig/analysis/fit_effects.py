@@ -110,7 +110,7 @@ def _mean(d: dict[str, float] | None) -> float | None:
 def fit_effects(
     records: Sequence[Record],
     base: FitResult,
-    names: Sequence[str],
+    names: Sequence[str | Effect],
     *,
     chain: bool,
     scored: Sequence[str] | None = None,
@@ -119,12 +119,15 @@ def fit_effects(
     heldout: bool = True,
     progress: Callable[[str, int, int], None] | None = None,
 ) -> EffectsFit:
-    """Refit ``base`` jointly with the library effects ``names`` (module docstring).
+    """Refit ``base`` jointly with the library effects ``names`` (module docstring); an
+    :class:`~labrig.model.effects.Effect` given instead of a name is used as it is (the empirical
+    terms of a diagnosis, a nuisance effect: ``labrig validate`` carries what diagnose accepted).
 
     ``progress(stage, done, total)``: stage ``"effects"`` (the starts) then ``"heldout"``.
     Raises ``ValueError`` for an unknown effect name."""
     context = effect_context(records)
-    effects = resolve_effects(names, context)
+    named = resolve_effects([n for n in names if isinstance(n, str)], context)
+    effects = [n if not isinstance(n, str) else named.pop(0) for n in names]
     common = dict(
         chain=chain,
         shape=base.params.shape,
@@ -161,7 +164,7 @@ def fit_effects(
             progress("heldout", n, n)
     listed = []
     for e in effects:
-        p, sd = best.effects[e.name], best.sd.get(e.name, {})
+        p, sd = best.effects.get(e.name, {}), best.sd.get(e.name, {})
         listed.append(
             {
                 "effect": e.name,

@@ -70,11 +70,15 @@ def predict_entries(
     params: ModelParams,
     setup: Setup,
     effects: tuple[list[Effect], dict[str, dict[str, float]]] | None = None,
+    *,
+    raw: bool = False,
 ) -> dict[str, np.ndarray]:
     """The model's strain for each scored entry (chained as the run when ``setup.chain``),
     with one offset per entry fitted over the scored samples when ``setup.offset``; with the
     fitted ``effects`` (:func:`labrig.analysis.params_file.fitted_effects`) when given, simulated as
-    ``labrig fit --effect`` fitted them."""
+    ``labrig fit --effect`` fitted them (their nuisance terms fitted over the scored samples).
+    ``raw``: the model's strain alone, no offset and no nuisance terms (``labrig validate``
+    fits those by its own rule)."""
     if effects and effects[0]:
         from labrig.analysis.extended import ExtendedProblem
 
@@ -86,9 +90,9 @@ def predict_entries(
             memory=params.memory,
             scored=setup.scored,
             warmup_s=setup.warmup_s,
-            offset=setup.offset,
+            offset=setup.offset and not raw,
         )
-        return prob.predictions(params.model_dump(), effects[1])
+        return prob.predictions(params.model_dump(), effects[1], nuisance=not raw)
     keep = set(setup.scored)
     out: dict[str, np.ndarray] = {}
     if setup.chain:
@@ -105,7 +109,7 @@ def predict_entries(
         for r in setup.records:
             if r.name in keep:
                 out[r.name] = predict_record(params, r)
-    if setup.offset:
+    if setup.offset and not raw:
         for r in setup.records:
             if r.name in out:
                 i0 = round(setup.warmup_s * r.rate_hz)
