@@ -17,7 +17,6 @@ from labrig.cli.common import (
     OVERWRITE_OPTION,
     WARMUP_OPTION,
     Method,
-    check_out,
     choice,
     flag,
     friendly,
@@ -65,10 +64,7 @@ def validate(
     """Identify every model on TRAIN, predict TEST: one scoring rule for all."""
     from labrig.commands.progress import RichUI
     from labrig.commands.validate import validate_runs
-    from labrig.core.outputs import write_text_output
-    from labrig.store.reader import being_written
 
-    check_out(out, [*train, *on, effects_from], overwrite)  # before the work
     ui = RichUI()
     v = validate_runs(
         train,
@@ -79,12 +75,12 @@ def validate(
         warmup_s=warmup_s,
         offset=offset,
         ui=ui,
-        page=out is not None,
+        out=out,
+        overwrite=overwrite,
     )
-    for n in v.notes:
+    for n in (n for n in v.notes if not n.startswith("training: ")):  # announced already
         ui.err.print(f"[yellow]note:[/] {escape(n)}")
     if out is not None:
-        write_text_output(out, v.page, overwrite=overwrite, being_written=being_written)
         ui.err.print(f"wrote {escape(str(out))} ({len(v.page) / 1e6:.1f} MB)")
     if as_json:
         typer.echo(json_text(v.to_json()))

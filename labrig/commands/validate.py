@@ -201,7 +201,8 @@ def training_setup(
 ) -> Setup:
     """The training records of ``paths`` as one :class:`~labrig.commands.prepare.Setup`: one
     file as ``labrig fit`` prepares it; several files (each entry simulated on its own) put
-    together, an entry renamed ``FILE:ENTRY`` where names repeat, with one warm-up
+    together, an entry renamed ``STEM:ENTRY`` where names repeat (``PATH:ENTRY`` where stems
+do too), with one warm-up
     (:func:`~labrig.commands.prepare.auto_warmup` over them all, unless given) and an offset per
     entry when any file gets one."""
     setups = [prepare(Path(p), None, warmup_s, offset) for p in paths]
@@ -219,11 +220,13 @@ def training_setup(
     for s in setups:
         for r in s.scored_records:
             counts[r.name] = counts.get(r.name, 0) + 1
+    stems = [s.path.stem for s in setups]
     records: list[Record] = []
     notes: list[str] = []
     for s in setups:
+        prefix = s.path.stem if stems.count(s.path.stem) == 1 else str(s.path)
         for r in s.scored_records:
-            name = r.name if counts[r.name] == 1 else f"{s.path.stem}:{r.name}"
+            name = r.name if counts[r.name] == 1 else f"{prefix}:{r.name}"
             records.append(dataclasses.replace(r, name=name))
         notes += [f"{s.path.name}: {n}" for n in s.notes if "warm-up" not in n]
     if warmup_s is None:
@@ -437,14 +440,26 @@ def validate_runs(
     offset: bool | None = None,
     ui: CommandUI | None = None,
     page: bool = False,
+    out: Path | str | None = None,
+    overwrite: bool = False,
 ) -> Validation:
     """``labrig validate`` (module docstring): identify every model on the files ``train``,
     score each on the files ``on``. ``effects_from``: a ``diagnosis.json`` whose accepted
     effects are added to our model; ``run_diagnosis``: diagnose the training records now
-    instead; ``page``: also draw the HTML page (:attr:`Validation.page`)."""
+    instead; ``page``: also draw the HTML page (:attr:`Validation.page`); ``out``: write it
+    there (checked before any work by :func:`labrig.core.outputs.check_outputs`: never an
+    input, an existing file only with ``overwrite``; written beside, then renamed)."""
+    from labrig.core.outputs import check_writable, write_text_output
+    from labrig.store.reader import being_written
+
     ui = ui or QuietUI()
     train_p, test_p = [Path(p) for p in train], [Path(p) for p in on]
     check_files(train_p, test_p)
+    target = Path(out) if out is not None else None
+    if target is not None:
+        inputs = [*train_p, *test_p, Path(effects_from) if effects_from is not None else None]
+        check_writable([target], inputs=inputs, overwrite=overwrite, being_written=being_written)
+        page = True
     if effects_from is not None and run_diagnosis:
         raise _issue(effects_from, "give --effects-from or --diagnose, not both", "--diagnose")
     doc = _read_diagnosis(Path(effects_from)) if effects_from is not None else None
@@ -492,6 +507,8 @@ def validate_runs(
 
         with ui.busy("drawing the figures"):
             v.page = render("validate.html.j2", **page_context(v))
+    if target is not None:
+        write_text_output(target, v.page, overwrite=overwrite, being_written=being_written)
     return v
 
 
