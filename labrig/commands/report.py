@@ -47,6 +47,21 @@ from labrig.report.data import (
 )
 
 
+def peers_caveat(params_file: Path | str, fitted_on: Any, run_file: Path | str) -> str:
+    """What ``labrig report RUN --params P`` compares, said plainly: our model was identified
+    wherever ``P`` was fitted (``fitted_on``: its entries), the peers are fitted now on the
+    report's own records, so they are scored in-sample; ``labrig validate`` compares like with
+    like."""
+    on = ", ".join(map(str, fitted_on)) if isinstance(fitted_on, list) and fitted_on else "?"
+    return (
+        f"Not a like-for-like comparison: our model's parameters come from {params_file} "
+        f"(identified on {on}), while the peers (Prandtl-Ishlinskii, Bouc-Wen, SINDy) are "
+        f"fitted now on the records of this report, so they are scored in-sample. To identify "
+        f"every model on the same training records and score them all on records none of them "
+        f"saw: labrig validate TRAIN.h5 --on {Path(run_file).name}"
+    )
+
+
 @dataclass
 class FittedModels:
     """The report's models fitted to a :class:`~labrig.commands.prepare.Setup`."""
@@ -55,15 +70,19 @@ class FittedModels:
     source: str  # where our model's parameters come from
     notes: list[str] = field(default_factory=list)
     elapsed_s: float = 0.0
+    #: set when our model and the peers were not identified on the same records
+    caveat: str | None = None
 
 
 @dataclass
 class BuiltReport:
-    """The report: the HTML page and the metrics table ``labrig report --json`` prints."""
+    """The report: the HTML page and the metrics table ``labrig report --json`` prints;
+    ``caveat``: what the comparison is not (:func:`peers_caveat`), when it applies."""
 
     setup: Setup
     page: str
     metrics: dict[str, Any]
+    caveat: str | None = None
 
 
 def predict_entries(
@@ -195,7 +214,8 @@ def _from_file(
             f"the parameters were fitted on {', '.join(map(str, fitted_on))}; this "
             f"report scores {', '.join(setup.scored)}",
         )
-    return FittedModels({"dynamic": model}, source, notes)
+    caveat = peers_caveat(params_file, fitted_on, setup.path)
+    return FittedModels({"dynamic": model}, source, notes, caveat=caveat)
 
 
 def fit_report_models(
@@ -283,6 +303,7 @@ def report_data(setup: Setup, fitted: FittedModels, heldout: bool, from_file: bo
         "chain": setup.chain,
         "offset": setup.offset,
         "params_source": fitted.source,
+        "comparison": fitted.caveat or "",
         "fit_time": (
             f"{fitted.elapsed_s:.1f} s ("
             + ("baselines" if from_file else "model and baselines")
@@ -371,4 +392,4 @@ def build_run_report(
     if page:
         with ui.busy("drawing the figures"):
             html = render_page(setup, data)
-    return BuiltReport(setup, html, metrics_table(setup, data))
+    return BuiltReport(setup, html, metrics_table(setup, data), fitted.caveat)

@@ -301,6 +301,7 @@ def report_context(
             ("provenance", "Provenance"),
         ],
         "summary": summary_context(data),
+        "comparison": str(data.settings.get("comparison") or ""),
         "noise_floor": noise_floor,
         "notes": list(data.notes),
         "metrics": metrics_context(data),

@@ -21,7 +21,11 @@ import pytest
 import labrig
 from labrig.analysis.baselines import fit_baseline
 from labrig.analysis.load import records_from_run
+from labrig.cli.validate import print_scores
+from labrig.commands.prepare import prepare
+from labrig.commands.report import fit_report_models, report_data
 from labrig.commands.validate import score_entry
+from labrig.report.html import render
 
 from helpers import invoke
 
@@ -98,7 +102,7 @@ def test_models_are_identified_on_the_training_file_only(files, result) -> None:
     )
 
 
-def test_cli_json_table_and_page(files, result, tmp_path: Path) -> None:
+def test_cli_json_table_and_page(files, result, tmp_path: Path, capsys) -> None:
     train, test = files
     page = tmp_path / "v.html"
     res = invoke("validate", train, "--on", test, "--json", "--out", page)
@@ -112,12 +116,13 @@ def test_cli_json_table_and_page(files, result, tmp_path: Path) -> None:
     for label in ("ours", "Prandtl-Ishlinskii", "Bouc-Wen", "SINDy", "noise floor"):
         assert label in html
     assert "http" not in html
-    # the table: every model and the floor with their numbers as printed
-    res = invoke("validate", train, "--on", test)
-    assert res.exit_code == 0, res.output
-    for m in api["models"].values():
-        assert f"{m['whole_nrmse_pct']:.3g}" in res.stdout
-    assert f"{api['noise_floor_pct']:.3g}" in res.stdout
+    # the table: every model and the floor, with the numbers of the JSON
+    print_scores(doc)
+    shown = capsys.readouterr().out
+    for m in doc["models"].values():
+        assert f"{m['whole_nrmse_pct']:.3g}" in shown
+        assert f"{m['second_half_nrmse_pct']:.3g}" in shown
+    assert f"{doc['noise_floor_pct']:.3g}" in shown
 
 
 def test_effects_from_a_diagnosis(files, tmp_path: Path) -> None:
@@ -204,3 +209,50 @@ def test_score_entry_rule() -> None:
     assert h == pytest.approx(100 * np.sqrt(np.mean(r_half**2)) / np.ptp(m), rel=1e-12)
     w0, h0 = score_entry(m, m + 3.0, np.zeros((m.size, 0)))  # no nuisance: the offset counts
     assert w0 == pytest.approx(300 / np.ptp(m)) and h0 == pytest.approx(300 / np.ptp(m))
+
+
+def test_report_with_params_from_elsewhere_says_what_it_compares(
+    files, result, tmp_path: Path
+) -> None:
+    """``labrig report TEST --params TRAIN.json``: our model identified on TRAIN, the peers
+    fitted on TEST itself; the table, the page and the notes say so and point to validate."""
+    _, test = files
+    params = tmp_path / "train.json"
+    doc = {"params": result.models["dynamic"].params, "method": "global", "entries": ["ident"]}
+    params.write_text(json.dumps(doc))
+    res = invoke("report", test, "--params", params, "--no-heldout", columns=400)
+    assert res.exit_code == 0, res.output
+    table = " ".join(res.stdout.split())
+    assert "Not a like-for-like comparison" in table
+    assert "identified on ident" in table and "scored in-sample" in table
+    assert f"labrig validate TRAIN.h5 --on {test.name}" in table
+    # the page (its text; the figures are the report's own): the same, in the summary
+    setup = prepare(test)
+    fitted = fit_report_models(setup, doc, params, "global", False, lambda *a: None)
+    page = render(report_data(setup, fitted, False, True), None, {})
+    summary = page[page.index('id="summary"') : page.index('id="metrics"')]
+    assert "What this page compares" in summary and "scored in-sample" in summary
+
+
+@pytest.mark.slow
+def test_report_page_with_params_from_elsewhere(files, tmp_path: Path) -> None:
+    """The same end to end: fit, report --out (figures drawn), the note on stderr."""
+    train, test = files
+    params = tmp_path / "train.json"
+    assert invoke("fit", train, "--no-heldout", "--out", params).exit_code == 0
+    page = tmp_path / "r.html"
+    res = invoke("report", test, "--params", params, "--no-heldout", "--out", page)
+    assert res.exit_code == 0, res.output
+    assert "What this page compares" in page.read_text(encoding="utf-8")
+    assert "labrig validate" in " ".join(res.stderr.split())
+
+
+def test_report_without_params_says_nothing_of_the_kind(files) -> None:
+    """Every model fitted on the same records: no caveat (the fitted-now path sets none)."""
+    _, test = files
+    setup = prepare(test)
+    fitted = fit_report_models(setup, None, None, "global", False, lambda *a: None)
+    assert fitted.caveat is None
+    assert "What this page compares" not in render(
+        report_data(setup, fitted, False, False), None, {}
+    )
