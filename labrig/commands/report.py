@@ -156,12 +156,24 @@ def _fitted_now(
         j["uncertainty"],
         j["correlation"],
         res.method,
+        loop_span_V=res.loop_span_V,
     )
     return FittedModels(
         {"dynamic": model},
         f"fitted now ({res.method}, {res.elapsed_s:.1f} s)",
         [f"fit: {m}" for m in res.messages],
     )
+
+
+def _loop_span(doc: dict[str, Any], setup: Setup) -> float | None:
+    """The stroke (V) of the loop coordinates: the parameter file's, else the records' largest
+    peak-to-peak voltage."""
+    loop = (doc.get("identifiability") or {}).get("loop") if isinstance(doc, dict) else None
+    span = loop.get("span_V") if isinstance(loop, dict) else None
+    if isinstance(span, int | float) and span > 0:
+        return float(span)
+    spans = [float(np.ptp(r.voltage_V)) for r in setup.scored_records if r.n]
+    return max(spans) if spans else None
 
 
 def _from_file(
@@ -203,6 +215,7 @@ def _from_file(
         doc.get("uncertainty") or {},
         doc.get("correlation") or {},
         str(doc.get("method", "")),
+        loop_span_V=_loop_span(doc, setup),
     )
     source = f"from {params_file}"
     if effects[0]:

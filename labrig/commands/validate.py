@@ -200,11 +200,11 @@ def training_setup(
     offset: bool | None = None,
 ) -> Setup:
     """The training records of ``paths`` as one :class:`~labrig.commands.prepare.Setup`: one
-    file as ``labrig fit`` prepares it; several files (each entry simulated on its own) put
-    together, an entry renamed ``STEM:ENTRY`` where names repeat (``PATH:ENTRY`` where stems
-do too), with one warm-up
-    (:func:`~labrig.commands.prepare.auto_warmup` over them all, unless given) and an offset per
-    entry when any file gets one."""
+        file as ``labrig fit`` prepares it; several files (each entry simulated on its own) put
+        together, an entry renamed ``STEM:ENTRY`` where names repeat (``PATH:ENTRY`` where stems
+    do too), with one warm-up
+        (:func:`~labrig.commands.prepare.auto_warmup` over them all, unless given) and an offset per
+        entry when any file gets one."""
     setups = [prepare(Path(p), None, warmup_s, offset) for p in paths]
     if len(setups) == 1:
         return setups[0]
