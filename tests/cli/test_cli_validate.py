@@ -256,3 +256,20 @@ def test_report_without_params_says_nothing_of_the_kind(files) -> None:
     assert "What this page compares" not in render(
         report_data(setup, fitted, False, False), None, {}
     )
+
+
+@pytest.mark.slow
+def test_diagnose_now_equals_effects_from_the_diagnosis_file(files, tmp_path: Path) -> None:
+    """``--diagnose`` carries what ``labrig diagnose`` of the training file accepts: the same
+    effects and the same scores as ``--effects-from`` its diagnosis.json (about 45 s of CPU)."""
+    train, test = files
+    res = invoke("diagnose", train, "--out", tmp_path / "diag")
+    assert res.exit_code == 0, res.output
+    doc = json.loads((tmp_path / "diag" / "diagnosis.json").read_text())
+    names = [e["effect"] for e in doc["effects_added"]]
+    now = labrig.validate(train, on=test, diagnose=True)
+    given = labrig.validate(train, on=test, effects_from=tmp_path / "diag" / "diagnosis.json")
+    assert now.effects == given.effects == names
+    for key in now.models:
+        a, b = now.models[key], given.models[key]
+        assert a.mean("whole_nrmse_pct") == pytest.approx(b.mean("whole_nrmse_pct"), rel=1e-9)
