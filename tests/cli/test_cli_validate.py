@@ -27,7 +27,7 @@ from labrig.commands.report import fit_report_models, report_data
 from labrig.commands.validate import score_entry
 from labrig.report.html import render
 
-from helpers import invoke
+from helpers import TINY, invoke, run_protocol
 
 REAL = Path(__file__).resolve().parents[1] / "data" / "real" / "yan9a-micromanipulator"
 FILES = ("Model_Vi_Do.dat", "Test_Vi_Do_Di.dat")
@@ -273,3 +273,41 @@ def test_diagnose_now_equals_effects_from_the_diagnosis_file(files, tmp_path: Pa
     for key in now.models:
         a, b = now.models[key], given.models[key]
         assert a.mean("whole_nrmse_pct") == pytest.approx(b.mean("whole_nrmse_pct"), rel=1e-9)
+
+
+@pytest.fixture(scope="module")
+def rig_runs(tmp_path_factory) -> tuple[Path, Path]:
+    d = tmp_path_factory.mktemp("rig")
+    return run_protocol(TINY, d, seed=1), run_protocol(TINY, d, seed=2)
+
+
+def test_recorded_runs_are_chained_and_scored_without_offset(rig_runs, files) -> None:
+    """Two recorded runs of the simulated rig: each simulated as a chain of its entries with
+    their rests, no offset (the conditioner is zeroed at rest), so the whole-record NRMSE is
+    the plain NRMSE of the exported prediction; a recorded run with another training file is
+    refused (exit 2 naming it)."""
+    a, b = rig_runs
+    v = labrig.validate(a, on=b)
+    assert v.tests[0].chain and not v.tests[0].offset
+    recs = records_from_run(b)
+    assert [r.name for r in recs] == v.tests[0].scored
+    for key, m in v.models.items():
+        for r in recs:
+            p = m.predictions[(str(b), r.name)]
+            e = r.strain_ue - p
+            ref = 100 * np.sqrt(np.mean(e**2)) / np.ptp(r.strain_ue)
+            sc = next(s for s in m.scores if s.entry == r.name)
+            assert sc.whole_nrmse_pct == pytest.approx(ref, rel=1e-9), (key, r.name)
+            h = r.n // 2
+            ref_h = 100 * np.sqrt(np.mean(e[h:] ** 2)) / np.ptp(r.strain_ue)
+            assert sc.second_half_nrmse_pct == pytest.approx(ref_h, rel=1e-9), (key, r.name)
+    # the truth is our model: it predicts the other run near the noise floor, the peers do not
+    ours = v.models["dynamic"].mean("whole_nrmse_pct")
+    assert ours < 2 * v.noise_floor_pct
+    assert ours < min(
+        v.models[k].mean("whole_nrmse_pct") for k in ("prandtl_ishlinskii", "bouc_wen")
+    )
+    res = invoke("validate", a, b, "--on", b)  # b on both sides: refused first
+    assert res.exit_code == 2 and "both as training and as test" in res.output
+    res = invoke("validate", a, files[0], "--on", b)
+    assert res.exit_code == 2 and "only training file" in res.output and str(a) in res.output
