@@ -27,9 +27,9 @@ BASELINE_JSON_KEYS = (
     "method",
     "entries",
 )
-#: the keys of ``labrig fit --json`` (the contract of the fit output): the baselines' and the
-#: parameters' identifiability
-FIT_JSON_KEYS = (*BASELINE_JSON_KEYS, "identifiability")
+#: the keys of ``labrig fit --json`` (the contract of the fit output): the baselines', the run
+#: files fitted and the parameters' identifiability
+FIT_JSON_KEYS = (*BASELINE_JSON_KEYS, "train_files", "identifiability")
 
 #: three short sines at 500 Hz (a run file of a few hundred kB, written in about a second)
 TINY = """\

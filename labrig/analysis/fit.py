@@ -103,6 +103,9 @@ class FitResult:
     #: the stroke (V) of the operator's loop coordinates (the records' largest peak-to-peak
     #: voltage; :class:`~labrig.analysis.engine.LoopScale`), ``None`` without them
     loop_span_V: float | None = None
+    #: the run files the records came from (absolute paths; set by ``labrig fit``), so that a
+    #: report on other records can fit its peers on the same ones
+    train_files: list[str] | None = None
 
     def to_json(self) -> dict[str, Any]:
         from labrig.analysis.identifiability import identifiability
@@ -115,6 +118,7 @@ class FitResult:
             **scores_json(
                 self.nrmse_pct, self.per_entry, self.heldout_nrmse_pct, self.method, self.entries
             ),
+            "train_files": None if self.train_files is None else list(self.train_files),
             "identifiability": identifiability(
                 params, self.uncertainty, self.correlation, self.loop_span_V
             ),

@@ -56,6 +56,7 @@ class EffectsFit:
     base_heldout_nrmse_pct: float | None
     entries: list[str]
     context: dict  # how the effects were configured (effect_context): saved for predictions
+    train_files: list[str] | None = None  # as FitResult.train_files
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -72,6 +73,7 @@ class EffectsFit:
             },
             "method": "global+effects",
             "entries": list(self.entries),
+            "train_files": None if self.train_files is None else list(self.train_files),
             "effects_context": dict(self.context),
         }
 

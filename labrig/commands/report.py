@@ -34,6 +34,7 @@ from labrig.commands.fit import (
 )
 from labrig.commands.prepare import AnalysisError, Setup, prepare
 from labrig.core.jsonsafe import json_safe
+from labrig.core.outputs import same_file
 from labrig.core.version import __version__
 from labrig.model import DynamicHysteresisModel, ModelParams
 from labrig.model.effects import Effect
@@ -72,6 +73,9 @@ class FittedModels:
     elapsed_s: float = 0.0
     #: set when our model and the peers were not identified on the same records
     caveat: str | None = None
+    #: the run files the peers are identified on (our model's training files), else ``None``
+    #: (the report's own records)
+    peers_on: list[Path] | None = None
 
 
 @dataclass
@@ -128,11 +132,19 @@ def predict_entries(
         for r in setup.records:
             if r.name in keep:
                 out[r.name] = predict_record(params, r)
-    if setup.offset and not raw:
-        for r in setup.records:
-            if r.name in out:
-                i0 = round(setup.warmup_s * r.rate_hz)
-                out[r.name] = out[r.name] + float(np.mean(r.strain_ue[i0:] - out[r.name][i0:]))
+    return out if raw else with_offsets(out, setup)
+
+
+def with_offsets(predictions: dict[str, np.ndarray], setup: Setup) -> dict[str, np.ndarray]:
+    """``predictions`` (entry -> strain) plus, when ``setup.offset``, each entry's constant
+    offset fitted over its scored samples (the mean of measured minus predicted)."""
+    if not setup.offset:
+        return predictions
+    out = dict(predictions)
+    for r in setup.records:
+        if r.name in out:
+            i0 = round(setup.warmup_s * r.rate_hz)
+            out[r.name] = out[r.name] + float(np.mean(r.strain_ue[i0:] - out[r.name][i0:]))
     return out
 
 
@@ -162,6 +174,29 @@ def _fitted_now(
         {"dynamic": model},
         f"fitted now ({res.method}, {res.elapsed_s:.1f} s)",
         [f"fit: {m}" for m in res.messages],
+    )
+
+
+def training_files(doc: dict[str, Any], params_file: Path) -> list[Path] | None:
+    """The run files a ``labrig fit`` output was fitted on (its ``train_files``; relative paths
+    from the parameter file's folder), or ``None`` when it does not say."""
+    listed = doc.get("train_files") if isinstance(doc, dict) else None
+    if not isinstance(listed, list) or not listed or not all(isinstance(p, str) for p in listed):
+        return None
+    return [p if p.is_absolute() else params_file.parent / p for p in map(Path, listed)]
+
+
+def _peers_elsewhere(setup: Setup, train: list[Path], kind: str, progress: Progress) -> Fitted:
+    """The peer ``kind`` identified on the run files ``train`` (as ``labrig validate`` does)
+    and predicting the report's records (each entry's offset fitted as for our model)."""
+    from labrig.commands.prepare import training_setup
+
+    tr = training_setup(train)
+    b = fit_base(tr, kind, False, progress)
+    sim = b.simulate(setup.records, setup.chain)
+    preds = with_offsets({n: sim[n] for n in setup.scored}, setup)
+    return Fitted(
+        kind, preds, None, None, b.params, method=f"{kind} (identified on the training files)"
     )
 
 
@@ -227,8 +262,22 @@ def _from_file(
             f"the parameters were fitted on {', '.join(map(str, fitted_on))}; this "
             f"report scores {', '.join(setup.scored)}",
         )
-    caveat = peers_caveat(params_file, fitted_on, setup.path)
-    return FittedModels({"dynamic": model}, source, notes, caveat=caveat)
+    out = FittedModels({"dynamic": model}, source, notes)
+    train = training_files(doc, params_file)
+    if train is None or any(not p.is_file() for p in train):
+        if train is not None:
+            missing = [str(p) for p in train if not p.is_file()]
+            notes.append(f"the training files of {params_file} are not found: {', '.join(missing)}")
+        out.caveat = peers_caveat(params_file, fitted_on, setup.path)
+    elif not (len(train) == 1 and same_file(train[0], setup.path)):
+        out.peers_on = train
+        names = ", ".join(p.name for p in train)
+        notes.insert(
+            0,
+            f"our model and the peers are identified on {names} (the training files of "
+            f"{params_file.name}) and predict the records of this report",
+        )
+    return out
 
 
 def fit_report_models(
@@ -250,6 +299,9 @@ def fit_report_models(
         fitted = _from_file(setup, doc, params_file, heldout, progress)
     for kind in KINDS:
         try:
+            if fitted.peers_on is not None:
+                fitted.models[kind] = _peers_elsewhere(setup, fitted.peers_on, kind, progress)
+                continue
             b = fit_base(setup, kind, heldout, progress)
         except AnalysisError as e:
             fitted.models[kind] = Fitted(kind, None, note=str(e))

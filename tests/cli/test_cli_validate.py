@@ -234,17 +234,64 @@ def test_report_with_params_from_elsewhere_says_what_it_compares(
     assert "What this page compares" in summary and "scored in-sample" in summary
 
 
+def test_report_fits_the_peers_on_the_training_files_the_params_name(
+    files, result, tmp_path: Path
+) -> None:
+    """A parameter file that names its training files (``train_files``, as ``labrig fit``
+    writes it): the report identifies the peers on those files too, predicts its own records
+    with them (one offset per entry over the scored samples) and has nothing to warn about."""
+    train, test = files
+    params = tmp_path / "train.json"
+    doc = {
+        "params": result.models["dynamic"].params,
+        "method": "global",
+        "entries": ["ident"],
+        "train_files": [str(train)],
+    }
+    params.write_text(json.dumps(doc))
+    setup = prepare(test)
+    fitted = fit_report_models(setup, doc, params, "global", False, lambda *a: None)
+    assert fitted.caveat is None and fitted.peers_on == [train]
+    (rec,) = records_from_run(train)
+    pi = fit_baseline([rec], "prandtl_ishlinskii", heldout=False, warmup_s=WARMUP_S, offset=True)
+    fm = fitted.models["prandtl_ishlinskii"]
+    assert fm.params["weights_ue_per_V"] == pytest.approx(pi.params["weights_ue_per_V"], rel=1e-9)
+    # its prediction of the test record: the training fit's model run on the test voltage
+    (trec,) = records_from_run(test)
+    raw = pi.model.predict(trec.voltage_V, rest_V=trec.rest_V)
+    i0 = round(WARMUP_S * trec.rate_hz)
+    expected = raw + np.mean(trec.strain_ue[i0:] - raw[i0:])
+    assert fm.predictions[trec.name] == pytest.approx(expected, rel=1e-9, abs=1e-9)
+    # the same scores as validate's whole-record rule
+    m = trec.strain_ue[i0:]
+    got = 100 * np.sqrt(np.mean((m - fm.predictions[trec.name][i0:]) ** 2)) / np.ptp(m)
+    assert got == pytest.approx(result.models["prandtl_ishlinskii"].mean("whole_nrmse_pct"))
+    assert "What this page compares" not in render(
+        report_data(setup, fitted, False, True), None, {}
+    )
+    # training files that are gone: back to the in-sample peers, said plainly
+    doc["train_files"] = [str(tmp_path / "gone.h5")]
+    fitted = fit_report_models(setup, doc, params, "global", False, lambda *a: None)
+    assert fitted.peers_on is None and "Not a like-for-like" in (fitted.caveat or "")
+    assert any("not found" in n and "gone.h5" in n for n in fitted.notes)
+
+
 @pytest.mark.slow
-def test_report_page_with_params_from_elsewhere(files, tmp_path: Path) -> None:
-    """The same end to end: fit, report --out (figures drawn), the note on stderr."""
+def test_report_page_with_params_from_a_fit_of_another_file(files, tmp_path: Path) -> None:
+    """End to end: ``labrig fit TRAIN`` writes its training file; ``labrig report TEST
+    --params`` fits the peers on it (no caveat); the same report on the training file itself
+    keeps its peers in-sample, like our model (no caveat either)."""
     train, test = files
     params = tmp_path / "train.json"
     assert invoke("fit", train, "--no-heldout", "--out", params).exit_code == 0
+    assert json.loads(params.read_text())["train_files"] == [str(train.resolve())]
     page = tmp_path / "r.html"
     res = invoke("report", test, "--params", params, "--no-heldout", "--out", page)
     assert res.exit_code == 0, res.output
-    assert "What this page compares" in page.read_text(encoding="utf-8")
-    assert "labrig validate" in " ".join(res.stderr.split())
+    html = page.read_text(encoding="utf-8")
+    assert "What this page compares" not in html and "training files of" in html
+    res = invoke("report", train, "--params", params, "--no-heldout", "--json")
+    assert res.exit_code == 0 and "like-for-like" not in res.stderr
 
 
 def test_report_without_params_says_nothing_of_the_kind(files) -> None:
