@@ -15,6 +15,7 @@ library call), ``studies``, ``fleet``, ``api`` and ``cli``; instrument drivers a
 """
 
 from labrig.api.runs import EntryInfo, Run, as_json, open, run, runs
+from labrig.api.validate import validate
 from labrig.core.version import __version__
 
-__all__ = ["EntryInfo", "Run", "__version__", "as_json", "open", "run", "runs"]
+__all__ = ["EntryInfo", "Run", "__version__", "as_json", "open", "run", "runs", "validate"]

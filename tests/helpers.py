@@ -16,8 +16,8 @@ from labrig.cli import app
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"
 
-#: the keys of ``labrig fit --json`` (the contract of the fit output)
-FIT_JSON_KEYS = (
+#: the keys of ``labrig fit --model BASELINE --json``
+BASELINE_JSON_KEYS = (
     "params",
     "uncertainty",
     "correlation",
@@ -27,6 +27,9 @@ FIT_JSON_KEYS = (
     "method",
     "entries",
 )
+#: the keys of ``labrig fit --json`` (the contract of the fit output): the baselines', the run
+#: files fitted and the parameters' identifiability
+FIT_JSON_KEYS = (*BASELINE_JSON_KEYS, "train_files", "identifiability")
 
 #: three short sines at 500 Hz (a run file of a few hundred kB, written in about a second)
 TINY = """\

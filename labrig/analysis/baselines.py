@@ -491,6 +491,19 @@ class BaselineResult:
         )
         return out[records[0].name] if single else out
 
+    def simulate(self, records: Sequence[Record], chain: bool) -> dict[str, NDArray[np.float64]]:
+        """The fitted baseline's strain (ue) for each of ``records`` (records it was not fitted
+        on: ``labrig validate``), chained as a run when ``chain``, without any offset; SINDy
+        is integrated at the records' own sample rate."""
+        from labrig.analysis.simulate import predict_sequences
+
+        def run(seq: SimSequence) -> NDArray[np.float64]:
+            if isinstance(self.model, SindyBaseline):
+                return self.model.predict(seq.voltage_V, rest_V=seq.rest_V, rate_hz=seq.rate_hz)
+            return self.model.predict(seq.voltage_V, rest_V=seq.rest_V)
+
+        return predict_sequences(records, chain, run)
+
     def to_json(self) -> dict[str, Any]:
         return {
             "params": self.params,

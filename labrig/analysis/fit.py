@@ -100,14 +100,27 @@ class FitResult:
     predictions: dict[str, NDArray[np.float64]] = field(default_factory=dict, repr=False)
     jacobian: NDArray[np.float64] | None = field(default=None, repr=False)
     free: tuple[str, ...] = ()
+    #: the stroke (V) of the operator's loop coordinates (the records' largest peak-to-peak
+    #: voltage; :class:`~labrig.analysis.engine.LoopScale`), ``None`` without them
+    loop_span_V: float | None = None
+    #: the run files the records came from (absolute paths; set by ``labrig fit``), so that a
+    #: report on other records can fit its peers on the same ones
+    train_files: list[str] | None = None
 
     def to_json(self) -> dict[str, Any]:
+        from labrig.analysis.identifiability import identifiability
+
+        params = self.params.model_dump()
         return {
-            "params": self.params.model_dump(),
+            "params": params,
             "uncertainty": dict(self.uncertainty),
             "correlation": {k: dict(v) for k, v in self.correlation.items()},
             **scores_json(
                 self.nrmse_pct, self.per_entry, self.heldout_nrmse_pct, self.method, self.entries
+            ),
+            "train_files": None if self.train_files is None else list(self.train_files),
+            "identifiability": identifiability(
+                params, self.uncertainty, self.correlation, self.loop_span_V
             ),
         }
 
@@ -360,6 +373,7 @@ def fit_model(
         predictions=preds,
         jacobian=J,
         free=free,
+        loop_span_V=camp.loop.span_V if camp.loop is not None else None,
     )
 
 

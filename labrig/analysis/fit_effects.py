@@ -56,6 +56,7 @@ class EffectsFit:
     base_heldout_nrmse_pct: float | None
     entries: list[str]
     context: dict  # how the effects were configured (effect_context): saved for predictions
+    train_files: list[str] | None = None  # as FitResult.train_files
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -72,6 +73,7 @@ class EffectsFit:
             },
             "method": "global+effects",
             "entries": list(self.entries),
+            "train_files": None if self.train_files is None else list(self.train_files),
             "effects_context": dict(self.context),
         }
 
@@ -110,7 +112,7 @@ def _mean(d: dict[str, float] | None) -> float | None:
 def fit_effects(
     records: Sequence[Record],
     base: FitResult,
-    names: Sequence[str],
+    names: Sequence[str | Effect],
     *,
     chain: bool,
     scored: Sequence[str] | None = None,
@@ -119,12 +121,15 @@ def fit_effects(
     heldout: bool = True,
     progress: Callable[[str, int, int], None] | None = None,
 ) -> EffectsFit:
-    """Refit ``base`` jointly with the library effects ``names`` (module docstring).
+    """Refit ``base`` jointly with the library effects ``names`` (module docstring); an
+    :class:`~labrig.model.effects.Effect` given instead of a name is used as it is (the empirical
+    terms of a diagnosis, a nuisance effect: ``labrig validate`` carries what diagnose accepted).
 
     ``progress(stage, done, total)``: stage ``"effects"`` (the starts) then ``"heldout"``.
     Raises ``ValueError`` for an unknown effect name."""
     context = effect_context(records)
-    effects = resolve_effects(names, context)
+    named = resolve_effects([n for n in names if isinstance(n, str)], context)
+    effects = [n if not isinstance(n, str) else named.pop(0) for n in names]
     common = dict(
         chain=chain,
         shape=base.params.shape,
@@ -161,7 +166,7 @@ def fit_effects(
             progress("heldout", n, n)
     listed = []
     for e in effects:
-        p, sd = best.effects[e.name], best.sd.get(e.name, {})
+        p, sd = best.effects.get(e.name, {}), best.sd.get(e.name, {})
         listed.append(
             {
                 "effect": e.name,

@@ -263,7 +263,7 @@ class Run:
             warmup_s=warmup_s,
             heldout=heldout,
             offset=offset,
-            ui=_ui(progress),
+            ui=command_ui(progress),
         )
         return outcome.result
 
@@ -297,7 +297,7 @@ class Run:
             offset=offset,
             method=method,
             heldout=heldout,
-            ui=_ui(progress),
+            ui=command_ui(progress),
         )
         if target is not None:
             from labrig.core.outputs import write_text_output
@@ -412,7 +412,7 @@ def _silent(message: str) -> None:
     pass
 
 
-def _ui(progress: bool):
+def command_ui(progress: bool):
     """The analysis' :class:`~labrig.commands.fit.CommandUI`: bars on stderr or nothing."""
     if progress:
         from labrig.commands.progress import RichUI

@@ -4,7 +4,8 @@ library function and prints; this module lists the commands, in the order ``--he
 - :mod:`labrig.cli.check`: ``check`` (a protocol against the rig, its drivers loaded);
   :mod:`labrig.cli.run`: ``run`` (protocols on the rig)
 - :mod:`labrig.cli.files`: ``info``, ``export``, ``import`` (run files in and out)
-- :mod:`labrig.cli.fit`, :mod:`labrig.cli.report`, :mod:`labrig.cli.diagnose`: the analysis
+- :mod:`labrig.cli.fit`, :mod:`labrig.cli.report`, :mod:`labrig.cli.diagnose`,
+  :mod:`labrig.cli.validate`: the analysis
 - :mod:`labrig.cli.model`: ``model demo``, ``model figures``; :mod:`labrig.cli.sim`: ``sim serve``
 - :mod:`labrig.cli.drivers`: ``drivers`` (the installed drivers); :mod:`labrig.cli.runs`:
   ``runs`` (the catalogue); :mod:`labrig.cli.watch`: ``watch`` (the live view of a run file)
@@ -18,7 +19,7 @@ from __future__ import annotations
 
 import typer
 
-from labrig.cli import check, diagnose, drivers, files, fit, report, run
+from labrig.cli import check, diagnose, drivers, files, fit, report, run, validate
 from labrig.cli.batch import batch_app
 from labrig.cli.model import model_app
 from labrig.cli.runs import runs as runs_command
@@ -68,6 +69,7 @@ app.command("import")(files.import_)
 app.command("fit")(fit.fit)
 app.command("report")(report.report)
 app.command("diagnose")(diagnose.diagnose)
+app.command("validate")(validate.validate)
 app.add_typer(model_app, name="model")
 app.add_typer(sim_app, name="sim")
 app.add_typer(batch_app, name="batch")

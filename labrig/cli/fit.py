@@ -169,13 +169,29 @@ def summary_tables(res: FitResult | BaselineResult | EffectsFit, model: str) -> 
         t.add_column("± 1σ", justify="right")
         t.add_column("rel.", justify="right")
         t.add_column("unit")
+        ident = j.get("identifiability") or {}
+        flagged = ident.get("unidentifiable") or {}
         for name in PARAM_NAMES:
             v = j["params"][name]
             u = j["uncertainty"].get(name)
             rel = "fixed" if u is None else (f"{100 * u / abs(v):.2g} %" if v else "—")
-            t.add_row(name, number(v, 5), number(u, 2), rel, UNITS.get(name, ""))
+            shown = number(v, 5)
+            if name in flagged:
+                shown = f"unidentifiable (fitted {shown}; {flagged[name]})"
+            t.add_row(name, escape(shown), number(u, 2), rel, UNITS.get(name, ""))
         t.add_row("shape", str(j["params"]["shape"]), "", "", "")
         t.add_row("memory", str(j["params"]["memory"]), "", "", "")
+        loop = ident.get("loop")
+        if loop:
+            for key, unit in (("loop_width_ue", "ue"), ("loop_curvature", "")):
+                v, u = loop[key], loop[f"{key}_sd"]
+                rel = "—" if u is None or not v else f"{100 * u / abs(v):.2g} %"
+                t.add_row(key, number(v, 5), number(u, 2), rel, unit)
+            t.caption = (
+                f"loop_width_ue: the operator's loop opening at mid-stroke of a "
+                f"{number(loop['span_V'], 4)} V loop; loop_curvature: span / vc_V. "
+                + str(ident.get("rule", ""))
+            )
     else:
         for name, v in j["params"].items():
             if isinstance(v, list):

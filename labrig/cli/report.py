@@ -85,12 +85,15 @@ def report(
     elif out is not None:
         typer.echo(str(out))
     else:
-        print_metrics(built.metrics)
+        print_metrics(built.metrics, built.caveat)
         ui.err.print("no page drawn: --out FILE writes the report")
+    if built.caveat and (as_json or out is not None):
+        ui.err.print(f"[yellow]note:[/] {escape(built.caveat)}")
 
 
-def print_metrics(metrics: dict[str, dict[str, Any]]) -> None:
-    """NRMSE (%) per entry and model, held-out in brackets, as a table on stdout."""
+def print_metrics(metrics: dict[str, dict[str, Any]], caveat: str | None = None) -> None:
+    """NRMSE (%) per entry and model, held-out in brackets, as a table on stdout; ``caveat``
+    (what the comparison is not) as its caption."""
     from rich.console import Console
     from rich.table import Table
 
@@ -113,4 +116,6 @@ def print_metrics(metrics: dict[str, dict[str, Any]]) -> None:
             cell = "—" if v is None else f"{v:.3g}"
             cells.append(cell + ("" if h is None else f" ({h:.3g})"))
         t.add_row(escape(entry), *cells)
+    if caveat:
+        t.caption = escape(caveat)
     Console().print(t)

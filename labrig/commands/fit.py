@@ -20,6 +20,7 @@ from labrig.analysis.baselines import KINDS, BaselineResult, fit_baseline
 from labrig.analysis.fit import FitResult, fit_model
 from labrig.analysis.fit_effects import EffectsFit
 from labrig.commands.prepare import AnalysisError, Setup, prepare
+from labrig.model.effects import Effect
 from labrig.store import RunFile
 
 #: ``progress(stage, done, total)``; stages: ``model:fit``, ``model:<heldout stage>``, a
@@ -116,12 +117,12 @@ def fit_base(setup: Setup, kind: str, heldout: bool, progress: Progress | None) 
 def fit_with_effects(
     setup: Setup,
     base: FitResult,
-    effects: Sequence[str],
+    effects: Sequence[str | Effect],
     heldout: bool,
     progress: Progress | None,
 ) -> EffectsFit:
-    """``--effect``: the base fit refitted with the named effects
-    (:func:`labrig.analysis.fit_effects.fit_effects`)."""
+    """``--effect``: the base fit refitted with the named effects (or effects given as
+    objects: :func:`labrig.analysis.fit_effects.fit_effects`)."""
     from labrig.analysis.fit_effects import fit_effects
 
     def cb(stage: str, done: int, total: int) -> None:
@@ -191,4 +192,6 @@ def fit_run_file(
                 res = fit_with_effects(setup, res, effects, heldout, progress)
         else:
             res = fit_base(setup, model, heldout, progress)
+    if isinstance(res, FitResult | EffectsFit):
+        res.train_files = [str(Path(path).resolve())]
     return FitOutcome(setup, res)

@@ -1,5 +1,6 @@
 """A run file's records as an analysis command fits and scores them: :func:`prepare` for ``fit``
-and ``report``, :func:`prepare_diagnosis` for ``diagnose``.
+and ``report``, :func:`training_setup` for several files fitted together (``validate``),
+:func:`prepare_diagnosis` for ``diagnose``.
 
 How a run file's entries are treated (:func:`prepare`):
 
@@ -28,6 +29,7 @@ change; a step definition whose ``rest_after_s`` is not a number from 0 to :data
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -182,6 +184,61 @@ def prepare(
     if short:
         raise _issue(path, f"the warm-up of {warmup:g} s leaves nothing of {short[0]!r} to score")
     return Setup(path, run, records, scored, chain, warmup, offset, imported, notes)
+
+
+def training_setup(
+    paths: Sequence[Path],
+    warmup_s: float | None = None,
+    offset: bool | None = None,
+) -> Setup:
+    """The training records of ``paths`` as one :class:`~labrig.commands.prepare.Setup`: one
+        file as ``labrig fit`` prepares it; several files (each entry simulated on its own) put
+        together, an entry renamed ``STEM:ENTRY`` where names repeat (``PATH:ENTRY`` where stems
+    do too), with one warm-up
+        (:func:`~labrig.commands.prepare.auto_warmup` over them all, unless given) and an offset per
+        entry when any file gets one."""
+    setups = [prepare(Path(p), None, warmup_s, offset) for p in paths]
+    if len(setups) == 1:
+        return setups[0]
+    chained = next((s for s in setups if s.chain), None)
+    if chained is not None:
+        raise _issue(
+            chained.path,
+            "a recorded run is simulated as one chain of its entries and cannot be fitted "
+            "together with other files: give it as the only training file",
+            "TRAIN",
+        )
+    counts: dict[str, int] = {}
+    for s in setups:
+        for r in s.scored_records:
+            counts[r.name] = counts.get(r.name, 0) + 1
+    stems = [s.path.stem for s in setups]
+    records: list[Record] = []
+    notes: list[str] = []
+    for s in setups:
+        prefix = s.path.stem if stems.count(s.path.stem) == 1 else str(s.path)
+        for r in s.scored_records:
+            name = r.name if counts[r.name] == 1 else f"{prefix}:{r.name}"
+            records.append(dataclasses.replace(r, name=name))
+        notes += [f"{s.path.name}: {n}" for n in s.notes if "warm-up" not in n]
+    if warmup_s is None:
+        warm, why = auto_warmup(records)
+        if why:
+            notes.append(why)
+    else:
+        warm = float(warmup_s)
+    first = setups[0]
+    return Setup(
+        first.path,
+        first.run,
+        records,
+        [r.name for r in records],
+        False,
+        warm,
+        any(s.offset for s in setups),
+        all(s.imported for s in setups),
+        notes,
+    )
 
 
 def check_records(

@@ -34,6 +34,7 @@ from labrig.commands.fit import (
 )
 from labrig.commands.prepare import AnalysisError, Setup, prepare
 from labrig.core.jsonsafe import json_safe
+from labrig.core.outputs import same_file
 from labrig.core.version import __version__
 from labrig.model import DynamicHysteresisModel, ModelParams
 from labrig.model.effects import Effect
@@ -47,6 +48,21 @@ from labrig.report.data import (
 )
 
 
+def peers_caveat(params_file: Path | str, fitted_on: Any, run_file: Path | str) -> str:
+    """What ``labrig report RUN --params P`` compares, said plainly: our model was identified
+    wherever ``P`` was fitted (``fitted_on``: its entries), the peers are fitted now on the
+    report's own records, so they are scored in-sample; ``labrig validate`` compares like with
+    like."""
+    on = ", ".join(map(str, fitted_on)) if isinstance(fitted_on, list) and fitted_on else "?"
+    return (
+        f"Not a like-for-like comparison: our model's parameters come from {params_file} "
+        f"(identified on {on}), while the peers (Prandtl-Ishlinskii, Bouc-Wen, SINDy) are "
+        f"fitted now on the records of this report, so they are scored in-sample. To identify "
+        f"every model on the same training records and score them all on records none of them "
+        f"saw: labrig validate TRAIN.h5 --on {Path(run_file).name}"
+    )
+
+
 @dataclass
 class FittedModels:
     """The report's models fitted to a :class:`~labrig.commands.prepare.Setup`."""
@@ -55,26 +71,37 @@ class FittedModels:
     source: str  # where our model's parameters come from
     notes: list[str] = field(default_factory=list)
     elapsed_s: float = 0.0
+    #: set when our model and the peers were not identified on the same records
+    caveat: str | None = None
+    #: the run files the peers are identified on (our model's training files), else ``None``
+    #: (the report's own records)
+    peers_on: list[Path] | None = None
 
 
 @dataclass
 class BuiltReport:
-    """The report: the HTML page and the metrics table ``labrig report --json`` prints."""
+    """The report: the HTML page and the metrics table ``labrig report --json`` prints;
+    ``caveat``: what the comparison is not (:func:`peers_caveat`), when it applies."""
 
     setup: Setup
     page: str
     metrics: dict[str, Any]
+    caveat: str | None = None
 
 
 def predict_entries(
     params: ModelParams,
     setup: Setup,
     effects: tuple[list[Effect], dict[str, dict[str, float]]] | None = None,
+    *,
+    raw: bool = False,
 ) -> dict[str, np.ndarray]:
     """The model's strain for each scored entry (chained as the run when ``setup.chain``),
     with one offset per entry fitted over the scored samples when ``setup.offset``; with the
     fitted ``effects`` (:func:`labrig.analysis.params_file.fitted_effects`) when given, simulated as
-    ``labrig fit --effect`` fitted them."""
+    ``labrig fit --effect`` fitted them (their nuisance terms fitted over the scored samples).
+    ``raw``: the model's strain alone, no offset and no nuisance terms (``labrig validate``
+    fits those by its own rule)."""
     if effects and effects[0]:
         from labrig.analysis.extended import ExtendedProblem
 
@@ -86,9 +113,9 @@ def predict_entries(
             memory=params.memory,
             scored=setup.scored,
             warmup_s=setup.warmup_s,
-            offset=setup.offset,
+            offset=setup.offset and not raw,
         )
-        return prob.predictions(params.model_dump(), effects[1])
+        return prob.predictions(params.model_dump(), effects[1], nuisance=not raw)
     keep = set(setup.scored)
     out: dict[str, np.ndarray] = {}
     if setup.chain:
@@ -105,11 +132,19 @@ def predict_entries(
         for r in setup.records:
             if r.name in keep:
                 out[r.name] = predict_record(params, r)
-    if setup.offset:
-        for r in setup.records:
-            if r.name in out:
-                i0 = round(setup.warmup_s * r.rate_hz)
-                out[r.name] = out[r.name] + float(np.mean(r.strain_ue[i0:] - out[r.name][i0:]))
+    return out if raw else with_offsets(out, setup)
+
+
+def with_offsets(predictions: dict[str, np.ndarray], setup: Setup) -> dict[str, np.ndarray]:
+    """``predictions`` (entry -> strain) plus, when ``setup.offset``, each entry's constant
+    offset fitted over its scored samples (the mean of measured minus predicted)."""
+    if not setup.offset:
+        return predictions
+    out = dict(predictions)
+    for r in setup.records:
+        if r.name in out:
+            i0 = round(setup.warmup_s * r.rate_hz)
+            out[r.name] = out[r.name] + float(np.mean(r.strain_ue[i0:] - out[r.name][i0:]))
     return out
 
 
@@ -133,12 +168,47 @@ def _fitted_now(
         j["uncertainty"],
         j["correlation"],
         res.method,
+        loop_span_V=res.loop_span_V,
     )
     return FittedModels(
         {"dynamic": model},
         f"fitted now ({res.method}, {res.elapsed_s:.1f} s)",
         [f"fit: {m}" for m in res.messages],
     )
+
+
+def training_files(doc: dict[str, Any], params_file: Path) -> list[Path] | None:
+    """The run files a ``labrig fit`` output was fitted on (its ``train_files``; relative paths
+    from the parameter file's folder), or ``None`` when it does not say."""
+    listed = doc.get("train_files") if isinstance(doc, dict) else None
+    if not isinstance(listed, list) or not listed or not all(isinstance(p, str) for p in listed):
+        return None
+    return [p if p.is_absolute() else params_file.parent / p for p in map(Path, listed)]
+
+
+def _peers_elsewhere(setup: Setup, train: list[Path], kind: str, progress: Progress) -> Fitted:
+    """The peer ``kind`` identified on the run files ``train`` (as ``labrig validate`` does)
+    and predicting the report's records (each entry's offset fitted as for our model)."""
+    from labrig.commands.prepare import training_setup
+
+    tr = training_setup(train)
+    b = fit_base(tr, kind, False, progress)
+    sim = b.simulate(setup.records, setup.chain)
+    preds = with_offsets({n: sim[n] for n in setup.scored}, setup)
+    return Fitted(
+        kind, preds, None, None, b.params, method=f"{kind} (identified on the training files)"
+    )
+
+
+def _loop_span(doc: dict[str, Any], setup: Setup) -> float | None:
+    """The stroke (V) of the loop coordinates: the parameter file's, else the records' largest
+    peak-to-peak voltage."""
+    loop = (doc.get("identifiability") or {}).get("loop") if isinstance(doc, dict) else None
+    span = loop.get("span_V") if isinstance(loop, dict) else None
+    if isinstance(span, int | float) and span > 0:
+        return float(span)
+    spans = [float(np.ptp(r.voltage_V)) for r in setup.scored_records if r.n]
+    return max(spans) if spans else None
 
 
 def _from_file(
@@ -180,6 +250,7 @@ def _from_file(
         doc.get("uncertainty") or {},
         doc.get("correlation") or {},
         str(doc.get("method", "")),
+        loop_span_V=_loop_span(doc, setup),
     )
     source = f"from {params_file}"
     if effects[0]:
@@ -191,7 +262,22 @@ def _from_file(
             f"the parameters were fitted on {', '.join(map(str, fitted_on))}; this "
             f"report scores {', '.join(setup.scored)}",
         )
-    return FittedModels({"dynamic": model}, source, notes)
+    out = FittedModels({"dynamic": model}, source, notes)
+    train = training_files(doc, params_file)
+    if train is None or any(not p.is_file() for p in train):
+        if train is not None:
+            missing = [str(p) for p in train if not p.is_file()]
+            notes.append(f"the training files of {params_file} are not found: {', '.join(missing)}")
+        out.caveat = peers_caveat(params_file, fitted_on, setup.path)
+    elif not (len(train) == 1 and same_file(train[0], setup.path)):
+        out.peers_on = train
+        names = ", ".join(p.name for p in train)
+        notes.insert(
+            0,
+            f"our model and the peers are identified on {names} (the training files of "
+            f"{params_file.name}) and predict the records of this report",
+        )
+    return out
 
 
 def fit_report_models(
@@ -213,6 +299,9 @@ def fit_report_models(
         fitted = _from_file(setup, doc, params_file, heldout, progress)
     for kind in KINDS:
         try:
+            if fitted.peers_on is not None:
+                fitted.models[kind] = _peers_elsewhere(setup, fitted.peers_on, kind, progress)
+                continue
             b = fit_base(setup, kind, heldout, progress)
         except AnalysisError as e:
             fitted.models[kind] = Fitted(kind, None, note=str(e))
@@ -279,6 +368,7 @@ def report_data(setup: Setup, fitted: FittedModels, heldout: bool, from_file: bo
         "chain": setup.chain,
         "offset": setup.offset,
         "params_source": fitted.source,
+        "comparison": fitted.caveat or "",
         "fit_time": (
             f"{fitted.elapsed_s:.1f} s ("
             + ("baselines" if from_file else "model and baselines")
@@ -367,4 +457,4 @@ def build_run_report(
     if page:
         with ui.busy("drawing the figures"):
             html = render_page(setup, data)
-    return BuiltReport(setup, html, metrics_table(setup, data))
+    return BuiltReport(setup, html, metrics_table(setup, data), fitted.caveat)

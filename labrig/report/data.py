@@ -90,6 +90,8 @@ class Fitted:
     correlation: dict[str, dict[str, float]] = field(default_factory=dict)
     method: str = ""
     note: str | None = None
+    #: the stroke (V) of our model's loop coordinates (labrig.analysis.identifiability)
+    loop_span_V: float | None = None
 
     @property
     def label(self) -> str:

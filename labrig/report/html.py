@@ -132,25 +132,51 @@ def _any_value(v: Any) -> str:
 def params_context(data: ReportData) -> dict[str, Any] | None:
     """Our model's parameters with uncertainties, their correlation, the baselines' parameters
     (``None`` when our model was not fitted)."""
+    from labrig.analysis.identifiability import RULE, loop_coordinates, unidentifiable
+
     fm = data.models.get("dynamic")
     if fm is None or not fm.params:
         return None
+    flagged = unidentifiable(fm.params, fm.uncertainty, fm.correlation)
     rows = []
     for name, symbol, unit in PARAM_ROWS:
         v, u = fm.params.get(name), fm.uncertainty.get(name)
         rel = (
             f"{100 * u / abs(v):.2g} %" if (u is not None and v) else "fixed" if u is None else "—"
         )
+        value = sig(v, 5)
+        if name in flagged:
+            value = f"unidentifiable (fitted {value}; {flagged[name]})"
         rows.append(
             {
                 "symbol": symbol,
                 "field": name,
-                "value": sig(v, 5),
+                "value": value,
                 "sd": sig(u, 2) if u is not None else "—",
                 "relative": rel,
                 "unit": unit,
+                "flagged": name in flagged,
             }
         )
+    loop = loop_coordinates(fm.params, fm.uncertainty, fm.correlation, fm.loop_span_V)
+    loop_rows = []
+    if loop is not None:
+        for key, symbol, unit in (
+            ("loop_width_ue", "W", "ue"),
+            ("loop_curvature", "q = span / Vc", ""),
+        ):
+            v, u = loop[key], loop[f"{key}_sd"]
+            loop_rows.append(
+                {
+                    "symbol": symbol,
+                    "field": key,
+                    "value": sig(v, 5),
+                    "sd": sig(u, 2) if u is not None else "—",
+                    "relative": f"{100 * u / abs(v):.2g} %" if (u is not None and v) else "—",
+                    "unit": unit,
+                    "flagged": False,
+                }
+            )
     correlation = None
     if fm.correlation:
         names = list(fm.correlation)
@@ -175,6 +201,10 @@ def params_context(data: ReportData) -> dict[str, Any] | None:
     ]
     return {
         "rows": rows,
+        "loop_rows": loop_rows,
+        "loop_span": sig(loop["span_V"], 4) if loop is not None else "",
+        "rule": RULE,
+        "flagged": bool(flagged),
         "shape": str(fm.params.get("shape", "")),
         "memory": str(fm.params.get("memory", "")),
         "method": fm.method or "—",
@@ -301,6 +331,7 @@ def report_context(
             ("provenance", "Provenance"),
         ],
         "summary": summary_context(data),
+        "comparison": str(data.settings.get("comparison") or ""),
         "noise_floor": noise_floor,
         "notes": list(data.notes),
         "metrics": metrics_context(data),

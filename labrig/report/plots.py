@@ -237,3 +237,43 @@ def _hold_inset(ax, t, s, p, others, k, unit) -> None:
     ins.tick_params(labelsize=6.5)
     ins.grid(True, alpha=0.3)
     ins.legend(fontsize=6, loc="upper right", ncol=2, frameon=False)
+
+
+def validation_figure(
+    entry: EntryView,
+    predictions: dict[str, NDArray[np.float64]],
+    warmup_s: float = 0.0,
+    strain_unit: str = "ue",
+) -> bytes:
+    """``labrig validate``: one test entry predicted by each model (label -> strain over the
+    record), one row per model: its voltage-strain loop over the measured one (left) and its
+    residual, measured minus predicted, in time (right); the warm-up is not drawn."""
+    r = entry.record
+    i0 = min(round(warmup_s * r.rate_hz), r.n - 1)
+    t, v, s = r.time_s[i0:] - r.time_s[0], r.voltage_V[i0:], r.strain_ue[i0:]
+    rows = max(len(predictions), 1)
+    fig = Figure(figsize=(11.0, 1.9 * rows + 0.5))
+    gs = fig.add_gridspec(
+        rows, 2, width_ratios=(1.0, 2.3), left=0.065, right=0.985,
+        bottom=0.5 / (1.9 * rows + 0.5) + 0.03, top=0.97, wspace=0.17, hspace=0.35,
+    )  # fmt: skip
+    first = None
+    for k, (label, pred) in enumerate(predictions.items()):
+        p = np.asarray(pred, dtype=float)[i0:]
+        ax_l = fig.add_subplot(gs[k, 0])
+        ax_r = fig.add_subplot(gs[k, 1], sharex=first)
+        first = first or ax_r
+        ax_l.plot(v, s, color=MEASURED, lw=2.4, alpha=0.45, label="measured")
+        ax_l.plot(v, p, color=OURS, lw=0.8, label=label)
+        ax_l.legend(fontsize=7, loc="upper left", frameon=False)
+        ax_l.set_ylabel(f"strain ({strain_unit})", fontsize=8)
+        ax_r.plot(t, s - p, color=OURS, lw=0.5)
+        ax_r.axhline(0.0, color="0.4", lw=0.6)
+        ax_r.set_ylabel(f"residual ({strain_unit})", fontsize=8)
+        ax_r.set_title(label, fontsize=8, loc="left")
+        for ax in (ax_l, ax_r):
+            style_axes(ax)
+        if k == rows - 1:
+            ax_l.set_xlabel("voltage (V)", fontsize=9)
+            ax_r.set_xlabel("time (s)", fontsize=9)
+    return png(fig)

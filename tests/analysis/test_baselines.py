@@ -23,10 +23,10 @@ from labrig.analysis.metrics import nrmse_pct
 from labrig.analysis.records import Record
 from labrig.model import PAPER_TABLE1, DynamicHysteresisModel
 
-from helpers import FIT_JSON_KEYS
+from helpers import BASELINE_JSON_KEYS
 
 RATE = 1000.0
-JSON_KEYS = set(FIT_JSON_KEYS)
+JSON_KEYS = set(BASELINE_JSON_KEYS)
 
 
 def unipolar(amp: float, f: float, duration_s: float) -> np.ndarray:

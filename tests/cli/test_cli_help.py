@@ -43,7 +43,7 @@ ALL = [path for path, _ in commands()]
 def test_the_tree_has_every_command() -> None:
     names = {" ".join(p) for p in ALL}
     for expected in ("check", "run", "drivers", "info", "runs", "fit", "report", "diagnose",
-                     "model figures", "batch diagnose", "sim fleet"):  # fmt: skip
+                     "validate", "model figures", "batch diagnose", "sim fleet"):  # fmt: skip
         assert expected in names, names
 
 
@@ -79,7 +79,7 @@ def test_every_option_names_its_value(path: tuple[str, ...]) -> None:
 
 def test_outputs_say_file_or_folder() -> None:
     for cmd, kind in (("fit", "FILE"), ("report", "FILE"), ("info", "FILE"), ("check", "FILE"),
-                      ("run", "FILE"), ("import", "FILE"),
+                      ("run", "FILE"), ("import", "FILE"), ("validate", "FILE"),
                       ("diagnose", "DIR"), ("export", "DIR")):  # fmt: skip
         text = " ".join(invoke(cmd, "--help").stdout.split())
         assert f"--out {kind}" in text or f"--out, --csv {kind}" in text, (cmd, text)

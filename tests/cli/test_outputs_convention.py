@@ -81,7 +81,8 @@ def test_the_table_covers_every_command() -> None:
     assert len(documented) >= 14, documented
     for path in (("check",), ("fit",), ("report",), ("diagnose",), ("export",), ("info",),
                  ("runs",), ("drivers",), ("model", "demo"), ("model", "figures"),
-                 ("sim", "fleet"), ("sim", "serve"), ("run",), ("import",)):  # fmt: skip
+                 ("sim", "fleet"), ("sim", "serve"), ("run",), ("import",),
+                 ("validate",)):  # fmt: skip
         assert path in documented, path
     assert ("batch", "fit|diagnose|report") in documented
 

@@ -1,0 +1,60 @@
+"""``labrig.validate(train, on=test)``: ``labrig validate`` from Python
+(:func:`labrig.commands.validate.validate_runs`, the call the command makes)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from labrig.commands.validate import Validation
+
+PathLike = str | os.PathLike[str]
+
+__all__ = ["validate"]
+
+
+def _paths(files: Any) -> list[Path]:
+    """One file or several: paths, or runs opened by :func:`labrig.open` (their ``path``)."""
+    if isinstance(files, str | os.PathLike) or hasattr(files, "path"):
+        files = [files]
+    return [Path(getattr(f, "path", f)) for f in files]
+
+
+def validate(
+    train: PathLike | Sequence[PathLike] | Any,
+    on: PathLike | Sequence[PathLike] | Any,
+    *,
+    effects_from: PathLike | None = None,
+    diagnose: bool = False,
+    method: str = "global",
+    warmup_s: float | None = None,
+    offset: bool | None = None,
+    out: PathLike | None = None,
+    overwrite: bool = False,
+    page: bool = False,
+    progress: bool = False,
+) -> Validation:
+    """``labrig validate TRAIN... --on TEST...``: every model identified on ``train`` (run
+    files, or runs from :func:`labrig.open`), scored on ``on`` by one rule. ``as_json(result)``
+    is what ``labrig validate --json`` prints; ``result.models[key].predictions`` each model's
+    strain for each ``(test file, entry)``; ``out``: the HTML page (``page``: draw it into
+    ``result.page`` without writing it). The options are the command's (docs/validate.md)."""
+    from labrig.api.runs import command_ui
+    from labrig.commands.validate import validate_runs
+
+    return validate_runs(
+        _paths(train),
+        _paths(on),
+        effects_from=effects_from,
+        run_diagnosis=diagnose,
+        method=method,
+        warmup_s=warmup_s,
+        offset=offset,
+        ui=command_ui(progress),
+        page=page,
+        out=out,
+        overwrite=overwrite,
+    )

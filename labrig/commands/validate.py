@@ -1,0 +1,596 @@
+"""``labrig validate TRAIN... --on TEST...`` as one library call (:func:`validate_runs`), for the
+command line and the Python API (``labrig.validate``).
+
+Every model is identified on the **training** records and predicts the **test** records, which
+no fit has seen:
+
+- ``dynamic``: our model (:func:`~labrig.commands.fit.fit_dynamic`);
+- ``dynamic+effects``: our model refitted on the training records with the effects
+  ``labrig diagnose`` accepted on them (a ``diagnosis.json`` given with ``effects_from``, or
+  a diagnosis run now with ``run_diagnosis``; :func:`~labrig.commands.fit.fit_with_effects`);
+- the peers Prandtl-Ishlinskii, Bouc-Wen and SINDy (:func:`~labrig.commands.fit.fit_base`),
+  on the same training records with the same chain, warm-up and offsets.
+
+**One scoring rule for every model** (:func:`score_entry`), on each scored test entry after its
+warm-up: the model's own strain ``p`` (:func:`~labrig.commands.report.predict_entries` with
+``raw``, :meth:`~labrig.analysis.baselines.BaselineResult.simulate`) plus its per-entry nuisance
+terms ``C c`` (a constant offset when the test data get one, as ``labrig fit`` decides, and the
+columns of any nuisance effect diagnose accepted) fitted by least squares:
+
+- **whole record**: ``c`` fitted on every scored sample, ``NRMSE = 100 RMS(m - p - C c) /
+  (max m - min m)``;
+- **second half**: ``c`` fitted on the first half only, the error taken on the second half,
+  in percent of the whole entry's span (:func:`~labrig.analysis.metrics.second_half_nrmse_pct`;
+  the held-out score of ``labrig diagnose``).
+
+The noise floor (the NRMSE of a perfect model) is the report's when it is known
+(:func:`~labrig.report.data.noise_floor`), else the residual's period-to-period scatter of our
+model on the test records, as ``labrig diagnose`` measures it.
+
+Several training files are fitted together when each entry is simulated on its own (imported
+data); a recorded run is one chain and is the only training (or test) file of its side. A file
+given both as training and as test data, or twice, is refused (exit code 2).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from labrig.analysis.baselines import KINDS, BaselineResult
+from labrig.analysis.metrics import nrmse_pct, second_half_nrmse_pct
+from labrig.analysis.records import Record
+from labrig.commands.fit import (
+    BASELINE_LABELS,
+    CommandUI,
+    QuietUI,
+    fit_base,
+    fit_dynamic,
+    fit_with_effects,
+)
+from labrig.commands.prepare import AnalysisError, Setup, prepare, training_setup
+from labrig.core.errors import InputFileError, InputIssue
+from labrig.core.jsonsafe import json_safe
+from labrig.core.outputs import same_file
+from labrig.model import ModelParams
+from labrig.model.effects import Effect
+
+__all__ = [
+    "MODEL_LABELS",
+    "SCORING",
+    "ValidatedModel",
+    "Validation",
+    "accepted_effects",
+    "score_entry",
+    "validate_runs",
+]
+
+#: the models ``validate`` scores, in the order it shows them, with their labels
+MODEL_LABELS: dict[str, str] = {
+    "dynamic": "ours",
+    "dynamic+effects": "ours + diagnose's effects",
+    **BASELINE_LABELS,
+}
+#: the scoring rule, in words (the JSON's ``scoring``, the page's)
+SCORING = (
+    "identified on the training records only; each test entry predicted from rest (a recorded "
+    "run: its entries chained with their rests), its warm-up not scored; per-entry nuisance "
+    "terms (a constant offset where the data get one, and any nuisance effect diagnose "
+    "accepted) fitted by least squares on the whole scored record (whole) or on its first half "
+    "(second half: error on the second half); NRMSE in % of the entry's measured span"
+)
+#: a diagnosis' parameter names of empirical terms start with this
+_TERM_PREFIX = "c_"
+
+
+@dataclass
+class EntryScore:
+    """One test entry scored for one model: NRMSE (%) on the whole record and on its second
+    half (nuisance terms from the first half)."""
+
+    file: str
+    entry: str
+    whole_nrmse_pct: float
+    second_half_nrmse_pct: float
+
+
+@dataclass
+class ValidatedModel:
+    """A model identified on the training records and scored on the test records.
+
+    ``predictions``: ``(test file, entry) -> strain`` (ue) over the whole record, the model's
+    own strain without any offset or nuisance term (what :func:`score_entry` scores);
+    ``note``: why it could not be fitted (then no scores)."""
+
+    key: str
+    label: str
+    params: dict[str, Any] = field(default_factory=dict)
+    scores: list[EntryScore] = field(default_factory=list)
+    predictions: dict[tuple[str, str], NDArray[np.float64]] = field(
+        default_factory=dict, repr=False
+    )
+    nuisance: list[Effect] = field(default_factory=list, repr=False)
+    note: str | None = None
+
+    def mean(self, which: str) -> float | None:
+        """The mean over the test entries of ``whole_nrmse_pct`` or ``second_half_nrmse_pct``."""
+        vals = [getattr(s, which) for s in self.scores]
+        return float(np.mean(vals)) if vals else None
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "label": self.label,
+            "whole_nrmse_pct": self.mean("whole_nrmse_pct"),
+            "second_half_nrmse_pct": self.mean("second_half_nrmse_pct"),
+            "per_entry": [dataclasses.asdict(s) for s in self.scores],
+            "params": self.params,
+            "note": self.note,
+        }
+
+
+@dataclass
+class Validation:
+    """What ``labrig validate`` found (module docstring); :meth:`to_json` is ``--json``."""
+
+    train: list[Path]
+    test: list[Path]
+    train_setup: Setup
+    tests: list[Setup]
+    models: dict[str, ValidatedModel]
+    noise_floor_pct: float | None
+    noise_source: str
+    effects: list[str] | None  # what diagnose accepted (None: not asked for)
+    effects_source: str
+    notes: list[str] = field(default_factory=list)
+    page: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        return json_safe(
+            {
+                "train": [str(p) for p in self.train],
+                "test": [str(p) for p in self.test],
+                "train_entries": list(self.train_setup.scored),
+                "scoring": SCORING,
+                "noise_floor_pct": self.noise_floor_pct,
+                "noise_floor_source": self.noise_source,
+                "effects": self.effects,
+                "effects_source": self.effects_source or None,
+                "models": {k: m.to_json() for k, m in self.models.items()},
+                "notes": list(self.notes),
+            }
+        )
+
+
+def _issue(path: Path | str, message: str, fld: str = "") -> InputFileError:
+    return InputFileError([InputIssue(str(path), None, fld, message)])
+
+
+def check_files(train: Sequence[Path], test: Sequence[Path]) -> None:
+    """At least one file on each side, and no file twice (the same file on both sides, or twice
+    on one side, whatever its spelling: :func:`~labrig.core.outputs.same_file`)."""
+    if not train:
+        raise _issue("TRAIN", "no training file given", "TRAIN")
+    if not test:
+        raise _issue("--on", "no test file given (--on TEST)", "--on")
+    seen: list[tuple[Path, str]] = []
+    for p, side in [*((p, "TRAIN") for p in train), *((p, "--on") for p in test)]:
+        for q, other in seen:
+            if same_file(Path(p), Path(q)):
+                if side != other:
+                    msg = "given both as training and as test data; a model is validated on "
+                    msg += "records it was not identified on: give another file to --on"
+                else:
+                    msg = f"given twice as {'training' if side == 'TRAIN' else 'test'} data"
+                raise _issue(p, msg, side)
+        seen.append((Path(p), side))
+
+
+def with_nuisance(
+    measured: NDArray[np.float64],
+    predicted: NDArray[np.float64],
+    C: NDArray[np.float64],
+    upto: int | None = None,
+) -> NDArray[np.float64]:
+    """``predicted`` plus the nuisance columns ``C`` (samples x k) fitted by least squares to
+    ``measured - predicted`` over the first ``upto`` samples (all when ``None``)."""
+    p = np.asarray(predicted, dtype=float)
+    if not C.shape[1]:
+        return p
+    n = p.size if upto is None else upto
+    coef, *_ = np.linalg.lstsq(C[:n], np.asarray(measured, dtype=float)[:n] - p[:n], rcond=None)
+    return p + C @ coef
+
+
+def score_entry(
+    measured: NDArray[np.float64], predicted: NDArray[np.float64], C: NDArray[np.float64]
+) -> tuple[float, float]:
+    """The scoring rule (module docstring) of one entry's scored samples: ``measured`` and
+    ``predicted`` (ue), the nuisance columns ``C`` (samples x k, k may be 0). Returns the
+    whole-record and the second-half NRMSE (%)."""
+    m = np.asarray(measured, dtype=float)
+    whole = with_nuisance(m, predicted, C)
+    second = with_nuisance(m, predicted, C, m.size // 2)
+    return nrmse_pct(m, whole), second_half_nrmse_pct(m, second)
+
+
+def nuisance_columns(record: Record, i0: int, offset: bool, effects: Sequence[Effect]) -> NDArray:
+    """The per-entry nuisance regressors of ``record`` from sample ``i0``: a constant (offset)
+    and the columns of the nuisance ``effects``."""
+    t = record.time_s[i0:]
+    cols = [np.ones((t.size, 1))] if offset else []
+    cols += [e.columns(t, record.rate_hz) for e in effects]
+    return np.hstack(cols) if cols else np.zeros((t.size, 0))
+
+
+def fitted_prediction(model: ValidatedModel, s: Setup, r: Record) -> NDArray[np.float64]:
+    """``model``'s prediction of the test entry ``r`` of ``s`` with its nuisance terms fitted on
+    the whole scored record (what the whole-record NRMSE scores; the warm-up as simulated)."""
+    p = model.predictions[(str(s.path), r.name)]
+    i0 = round(max(s.warmup_s, 0.0) * r.rate_hz)
+    C = nuisance_columns(r, i0, s.offset, model.nuisance)
+    out = np.array(p, dtype=float)
+    out[i0:] = with_nuisance(r.strain_ue[i0:], p[i0:], C)
+    if i0 and C.shape[1]:
+        out[:i0] += out[i0] - p[i0]  # the offset carried into the warm-up, for the figure
+    return out
+
+
+def _score(
+    model: ValidatedModel, tests: Sequence[Setup], raw: dict[Path, dict[str, NDArray]]
+) -> None:
+    """Score ``model``'s raw predictions ``raw`` (test file -> entry -> strain) of every test
+    entry by :func:`score_entry`."""
+    for s in tests:
+        for r in s.scored_records:
+            p = raw[s.path][r.name]
+            model.predictions[(str(s.path), r.name)] = p
+            i0 = round(max(s.warmup_s, 0.0) * r.rate_hz)
+            C = nuisance_columns(r, i0, s.offset, model.nuisance)
+            w, h = score_entry(r.strain_ue[i0:], p[i0:], C)
+            model.scores.append(EntryScore(str(s.path), r.name, w, h))
+
+
+# -- what diagnose accepted ---------------------------------------------------------------------
+
+
+def accepted_effects(doc: Any, path: Path | str, records: Sequence[Record]) -> list[Effect]:
+    """The effects of a diagnosis (``diagnosis.json``'s ``effects_added``, or
+    :meth:`labrig.analysis.diagnose.Diagnosis.to_json`) configured for the training
+    ``records``: library effects by name, empirical terms rebuilt from their parameter names
+    (``c_<term>``) with the training records' scales. Anything else is an
+    :class:`~labrig.core.errors.InputFileError` naming the file and the field."""
+    from labrig.analysis.extended import effect_context
+    from labrig.analysis.terms import TermScales, empirical_effect
+    from labrig.model.effects import library
+
+    if not isinstance(doc, dict) or not isinstance(doc.get("effects_added"), list):
+        raise _issue(
+            path,
+            "no 'effects_added' list (expected diagnosis.json, as labrig diagnose --out writes it)",
+            "effects_added",
+        )
+    lib = library(**effect_context(records))
+    out: list[Effect] = []
+    for k, item in enumerate(doc["effects_added"]):
+        fld = f"effects_added[{k}]"
+        name = item.get("effect") if isinstance(item, dict) else None
+        params = item.get("params") if isinstance(item, dict) else None
+        if not isinstance(name, str) or not isinstance(params, dict):
+            raise _issue(path, "each effect needs an 'effect' name and a 'params' object", fld)
+        if name == "empirical_terms":
+            keys = [
+                p.removeprefix(_TERM_PREFIX)
+                for p in params
+                if p.startswith(_TERM_PREFIX) and not p.endswith("_sd")
+            ]
+            try:
+                out.append(empirical_effect(keys, TermScales.from_records(records)))
+            except ValueError as e:
+                raise _issue(path, f"empirical terms: {e}", fld) from None
+        elif name in lib:
+            out.append(lib[name])
+        else:
+            raise _issue(
+                path,
+                f"{name!r} is not an effect of the library; known: {', '.join(lib)}, "
+                "empirical_terms",
+                fld,
+            )
+    return out
+
+
+def _read_diagnosis(path: Path) -> Any:
+    from labrig.core.jsonsafe import loads_bounded
+
+    try:
+        return loads_bounded(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise _issue(path, "diagnosis file not found", "--effects-from") from None
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise _issue(path, f"not a JSON diagnosis ({e})", "--effects-from") from None
+
+
+def _diagnose_now(setup: Setup, ui: CommandUI) -> dict[str, Any]:
+    """``labrig diagnose`` of the training records (one entry cut into parts, as the command
+    does): its JSON."""
+    from labrig.analysis import diagnose as diagnosis
+    from labrig.analysis.split import split_entries
+    from labrig.commands.prepare import DIAGNOSE_SPLIT, MIN_DIAGNOSE_ENTRIES
+    from labrig.model.effects import EFFECT_NAMES
+
+    records = setup.scored_records if not setup.chain else list(setup.records)
+    if len(records) == 1:
+        records = split_entries(records, DIAGNOSE_SPLIT)
+    if len(records) < MIN_DIAGNOSE_ENTRIES:
+        raise _issue(
+            setup.path,
+            f"--diagnose needs at least {MIN_DIAGNOSE_ENTRIES} training entries "
+            f"(leave-one-entry-out), found {len(records)}",
+            "--diagnose",
+        )
+    with ui.busy("diagnosing the training records"):
+        d = diagnosis.diagnose(records, None, offset=setup.offset, effects=EFFECT_NAMES)
+    return d.to_json()
+
+
+# -- the command --------------------------------------------------------------------------------
+
+
+def _floor(tests: Sequence[Setup], ours: ValidatedModel) -> tuple[float | None, str]:
+    """The noise floor of the test records (module docstring) and where it comes from."""
+    from labrig.report.data import noise_floor
+
+    vals, sources = [], set()
+    for s in tests:
+        nf = noise_floor(s.scored_records, s.run.instrument, s.warmup_s)
+        if nf is not None:
+            vals += [nf.nrmse_pct] * len(s.scored)
+            sources.add(nf.source)
+            continue
+        if not ours.scores:
+            continue
+        from labrig.analysis.diagnose.evidence import collect_evidence
+
+        preds = {}
+        for r in s.scored_records:
+            p = ours.predictions[(str(s.path), r.name)]
+            i0 = round(max(s.warmup_s, 0.0) * r.rate_hz)
+            offset = float(np.mean(r.strain_ue[i0:] - p[i0:])) if s.offset else 0.0
+            preds[r.name] = p + offset
+        ev = collect_evidence(s.scored_records, preds, s.warmup_s)
+        vals += [e.floor_pct for e in ev.entries.values()]
+        sources.add("the period-to-period scatter of our model's residual (as diagnose)")
+    if not vals:
+        return None, "unknown"
+    return float(np.mean(vals)), "; ".join(sorted(sources))
+
+
+def validate_runs(
+    train: Sequence[Path | str],
+    on: Sequence[Path | str],
+    *,
+    effects_from: Path | str | None = None,
+    run_diagnosis: bool = False,
+    method: str = "global",
+    warmup_s: float | None = None,
+    offset: bool | None = None,
+    ui: CommandUI | None = None,
+    page: bool = False,
+    out: Path | str | None = None,
+    overwrite: bool = False,
+) -> Validation:
+    """``labrig validate`` (module docstring): identify every model on the files ``train``,
+    score each on the files ``on``. ``effects_from``: a ``diagnosis.json`` whose accepted
+    effects are added to our model; ``run_diagnosis``: diagnose the training records now
+    instead; ``page``: also draw the HTML page (:attr:`Validation.page`); ``out``: write it
+    there (checked before any work by :func:`labrig.core.outputs.check_outputs`: never an
+    input, an existing file only with ``overwrite``; written beside, then renamed)."""
+    from labrig.core.outputs import check_writable, write_text_output
+    from labrig.store.reader import being_written
+
+    ui = ui or QuietUI()
+    train_p, test_p = [Path(p) for p in train], [Path(p) for p in on]
+    check_files(train_p, test_p)
+    target = Path(out) if out is not None else None
+    if target is not None:
+        inputs = [*train_p, *test_p, Path(effects_from) if effects_from is not None else None]
+        check_writable([target], inputs=inputs, overwrite=overwrite, being_written=being_written)
+        page = True
+    if effects_from is not None and run_diagnosis:
+        raise _issue(effects_from, "give --effects-from or --diagnose, not both", "--diagnose")
+    doc = _read_diagnosis(Path(effects_from)) if effects_from is not None else None
+    tr = training_setup(train_p, warmup_s, offset)
+    tests = [prepare(p, None, warmup_s, offset) for p in test_p]
+    ui.announce(tr)
+    notes = [f"training: {n}" for n in tr.notes]
+    for s in tests:
+        notes += [f"test {s.path.name}: {n}" for n in s.notes]
+    effects: list[Effect] | None = None
+    source = ""
+    if doc is not None:
+        effects = accepted_effects(doc, effects_from or "", tr.scored_records)
+        source = f"from {effects_from}"
+    elif run_diagnosis:
+        found = _diagnose_now(tr, ui)
+        effects = accepted_effects(found, tr.path, tr.scored_records)
+        source = "diagnosed now on the training records"
+    models: dict[str, ValidatedModel] = {}
+    with ui.fitting() as progress:
+        base = fit_dynamic(tr, method, False, progress)
+        ours = ValidatedModel("dynamic", MODEL_LABELS["dynamic"], base.to_json()["params"])
+        notes += [f"fit: {m}" for m in base.messages]
+        _score(ours, tests, {s.path: _predict_ours(base.params, s, None) for s in tests})
+        models["dynamic"] = ours
+        if effects is not None:
+            models["dynamic+effects"] = _with_effects(tr, tests, base, effects, progress)
+        for kind in KINDS:
+            models[kind] = _peer(tr, tests, kind, progress)
+    floor, floor_source = _floor(tests, ours)
+    v = Validation(
+        train_p,
+        test_p,
+        tr,
+        tests,
+        models,
+        floor,
+        floor_source,
+        None if effects is None else [e.name for e in effects],
+        source,
+        notes,
+    )
+    if page:
+        from labrig.report.templating import render
+
+        with ui.busy("drawing the figures"):
+            v.page = render("validate.html.j2", **page_context(v))
+    if target is not None:
+        write_text_output(target, v.page, overwrite=overwrite, being_written=being_written)
+    return v
+
+
+def page_context(v: Validation) -> dict[str, Any]:
+    """Everything ``validate.html.j2`` shows: the scores, one figure per test entry (each
+    model's prediction over the measurement, :func:`labrig.report.plots.validation_figure`),
+    the parameters."""
+    from datetime import datetime
+
+    from labrig.commands.report import strain_unit
+    from labrig.core.version import __version__
+    from labrig.report.data import EntryView, amplitude_of
+    from labrig.report.plots import validation_figure
+
+    scored = {k: m for k, m in v.models.items() if m.scores}
+    best = {
+        w: min((m.mean(w) for m in scored.values()), default=None)
+        for w in ("whole_nrmse_pct", "second_half_nrmse_pct")
+    }
+    rows = [
+        {
+            "label": m.label,
+            "ours": k.startswith("dynamic"),
+            "note": m.note,
+            "whole": fmt_pct(m.mean("whole_nrmse_pct")),
+            "half": fmt_pct(m.mean("second_half_nrmse_pct")),
+            "best_whole": m.scores and m.mean("whole_nrmse_pct") == best["whole_nrmse_pct"],
+            "best_half": m.scores
+            and m.mean("second_half_nrmse_pct") == best["second_half_nrmse_pct"],
+        }
+        for k, m in v.models.items()
+    ]
+    entries = []
+    for s in v.tests:
+        unit = strain_unit(s.scored_records)
+        for r in s.scored_records:
+            cells, preds = [], {}
+            for m in scored.values():
+                sc = next(x for x in m.scores if x.file == str(s.path) and x.entry == r.name)
+                cells.append(f"{fmt_pct(sc.whole_nrmse_pct)} / {fmt_pct(sc.second_half_nrmse_pct)}")
+                preds[m.label] = fitted_prediction(m, s, r)
+            f = r.frequency_hz
+            view = EntryView(r, f, amplitude_of(r), False, str(r.meta.get("kind", "")))
+            drive = f"{r.duration_s:.3g} s at {r.rate_hz:g} Hz, {view.amplitude_V:g} V"
+            entries.append(
+                {
+                    "file": s.path.name,
+                    "entry": r.name,
+                    "cells": cells,
+                    "drive": drive + (f", warm-up {s.warmup_s:g} s" if s.warmup_s else ""),
+                    "png": validation_figure(view, preds, s.warmup_s, unit),
+                }
+            )
+    params = [
+        {"label": m.label, "text": as_text(json_safe(m.params))}
+        for m in v.models.values()
+        if m.params
+    ]
+    return {
+        "version": __version__,
+        "title": "Validation: identified on one set of records, predicting another",
+        "train": [p.name for p in v.train],
+        "test": [p.name for p in v.test],
+        "rows": rows,
+        "floor": fmt_pct(v.noise_floor_pct),
+        "floor_source": v.noise_source,
+        "scoring": SCORING,
+        "effects": v.effects,
+        "effects_source": v.effects_source,
+        "notes": v.notes,
+        "heads": [m.label for m in scored.values()],
+        "entries": entries,
+        "params": params,
+        "generated": datetime.now().astimezone().isoformat(timespec="seconds"),
+    }
+
+
+def _predict_ours(
+    params: ModelParams, s: Setup, effects: tuple[list[Effect], dict] | None
+) -> dict[str, NDArray]:
+    from labrig.commands.report import predict_entries
+
+    try:
+        return predict_entries(params, s, effects, raw=True)
+    except (ValueError, RuntimeError) as e:
+        raise AnalysisError(f"{s.path}: cannot simulate the model: {e}") from None
+
+
+def _with_effects(
+    tr: Setup, tests: Sequence[Setup], base: Any, effects: list[Effect], progress: Any
+) -> ValidatedModel:
+    """Our model refitted on the training records with ``effects`` (nothing accepted: the
+    base model again, said in its note)."""
+    key = "dynamic+effects"
+    if not effects:
+        m = ValidatedModel(key, MODEL_LABELS[key], base.to_json()["params"])
+        m.note = "diagnose accepted no effect on the training data: the same as ours"
+        _score(m, tests, {s.path: _predict_ours(base.params, s, None) for s in tests})
+        return m
+    res = fit_with_effects(tr, base, effects, False, progress)
+    values = {e["effect"]: e["params"] for e in res.effects}
+    m = ValidatedModel(
+        key,
+        f"ours + {', '.join(e.name for e in effects)}",
+        {"params": res.params.model_dump(), "effects": res.effects},
+    )
+    m.nuisance = [e for e in effects if e.where == "nuisance"]
+    glob = [e for e in effects if e.where != "nuisance"]
+    vals = {k: v for k, v in values.items() if k in {e.name for e in glob}}
+    _score(m, tests, {s.path: _predict_ours(res.params, s, (glob, vals)) for s in tests})
+    return m
+
+
+def _peer(tr: Setup, tests: Sequence[Setup], kind: str, progress: Any) -> ValidatedModel:
+    """The baseline ``kind`` fitted on the training records, scored on the test records."""
+    m = ValidatedModel(kind, MODEL_LABELS[kind])
+    try:
+        res: BaselineResult = fit_base(tr, kind, False, progress)
+    except AnalysisError as e:
+        m.note = str(e)
+        return m
+    m.params = res.params
+    raw = {}
+    for s in tests:
+        sim = res.simulate(s.records, s.chain)
+        raw[s.path] = {n: sim[n] for n in s.scored}
+    if not all(np.all(np.isfinite(p)) for d in raw.values() for p in d.values()):
+        m.note = "its prediction of the test records diverges (non-finite)"
+        return m
+    _score(m, tests, raw)
+    return m
+
+
+def as_text(doc: dict[str, Any]) -> str:
+    """The JSON of ``--json`` as the indented text it prints."""
+    return json.dumps(doc, indent=2, allow_nan=False)
+
+
+def fmt_pct(v: float | None) -> str:
+    """A percentage for a table cell (``—`` when undefined)."""
+    return "—" if v is None or not math.isfinite(v) else f"{v:.3g}"
