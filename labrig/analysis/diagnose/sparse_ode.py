@@ -91,12 +91,21 @@ class SparseOdeEffect(Effect):
 
 
 def equation_text(model: SindyBaseline) -> str:
-    """``dS/dt = ...`` with each coefficient's unit: ``+2.1e+02 ue/(V s) * V``."""
+    """``dS/dt = -0.2562 S + 0.08243 V + ...`` (four significant digits; t in s, V in V, S in
+    the records' strain unit, ue or the raw numbers of an import)."""
     parts = []
     for x, t in zip(model.coefficients, LIBRARY, strict=True):
         if x != 0:
-            parts.append(f"{x:+.4g} {t.unit}" + ("" if t.name == "1" else f" * {t.name}"))
-    return "dS/dt = " + (" ".join(parts) if parts else "0") + " (S in ue, V in V, t in s)"
+            parts.append(f"{x:+.4g}" + ("" if t.name == "1" else f" {t.name}"))
+    body = " ".join(parts).lstrip("+") if parts else "0"
+    return f"dS/dt = {body} (t in s, V in V, V' = dV/dt)"
+
+
+def readings(model: SindyBaseline) -> str:
+    """What each selected term reads as (:data:`~labrig.analysis.sindy.LIBRARY`)."""
+    return "; ".join(
+        f"{t.name}: {t.physics}" for x, t in zip(model.coefficients, LIBRARY, strict=True) if x != 0
+    )
 
 
 @dataclass
@@ -111,6 +120,8 @@ class SparseOdeTrial:
     predictions: dict[str, NDArray]
     acceptance: Acceptance
     candidate: Candidate
+    #: the model it is judged against, in words ("the model with sensor_lowpass")
+    replaced: str = "the model"
 
     @property
     def heldout_pct(self) -> float:
@@ -220,7 +231,7 @@ def sparse_ode_trial(
         f"for {what} (better in {a.wins}, worse in {a.losses} of {len(names)} folds)"
         + ("; refused: " + "; ".join(c.reasons) if c.reasons else "")
     )
-    return SparseOdeTrial(model, per_entry, held, preds, a, c)
+    return SparseOdeTrial(model, per_entry, held, preds, a, c, what)
 
 
 def _what(current: Model) -> str:
@@ -235,10 +246,11 @@ UNEXPLAINED = "Unexplained: "
 
 
 def refused_sentence(trial: SparseOdeTrial) -> str:
-    """The verdict's sentence for a sparse ODE that the acceptance rule refused."""
+    """The verdict's sentence for a sparse ODE that the acceptance rule refused, with why."""
+    c = trial.candidate
+    why = "" if "refused:" in c.evidence else "; refused: " + "; ".join(c.reasons)
     return (
-        f" Empirical step: {trial.candidate.evidence}; so the model stays the description of "
-        "these records."
+        f" Empirical step: {c.evidence}{why}; so the model stays the description of these records."
     )
 
 
@@ -248,9 +260,9 @@ def adopted_sentence(trial: SparseOdeTrial, before_pct: float | None) -> str:
     base = f" (the base model's: {before_pct:.3g} %)" if before_pct is not None else ""
     return (
         f" EMPIRICAL alternative base: {c.evidence}{base}. It replaces the model as the "
-        f"description of these records; {EMPIRICAL_NOTE}: the model's operator and relaxors "
-        "miss a dynamics that these terms describe (|V'| S and |V'| V: Bouc-Wen-like memory; "
-        "S: a lag), to be tested by a drive the ODE was not identified on."
+        f"description of these records ({EMPIRICAL_NOTE}): the model's operator and relaxors "
+        f"miss a dynamics that its terms describe ({readings(trial.model)}); a drive it was "
+        "not identified on (other amplitudes and rates, a step) tells whether it holds."
     )
 
 
@@ -295,7 +307,7 @@ def adopt(
             "the model's candidates: " + d.verdict[len(UNEXPLAINED) :]
         )
     d.verdict += adopted_sentence(trial, d.before.get("heldout_nrmse_pct"))
-    added = [e["effect"] for e in d.effects_added[:-1]] + [f"{NAME} (EMPIRICAL, alternative base)"]
+    added = [f"{NAME} (EMPIRICAL alternative base, in place of {trial.replaced})"]
     d.headline = headline(d.classification, before, ev, d.before, d.after, added)
     d.evidence_after = ev
     d.predictions_after = dict(trial.predictions)
