@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,8 +47,23 @@ from labrig.core.blas import single_thread_blas
 from labrig.model.effects import Effect
 from labrig.model.effects.empirical import EMPIRICAL_NOTE
 
-if TYPE_CHECKING:
-    from labrig.analysis.diagnose.procedure import Diagnosis
+
+class DiagnosisLike(Protocol):
+    """What :func:`adopt` reads and sets of a :class:`~.procedure.Diagnosis` (no import: the
+    procedure imports this module)."""
+
+    before: dict[str, Any]
+    after: dict[str, Any]
+    effects_added: list[dict[str, Any]]
+    candidates: list[dict[str, Any]]
+    verdict: str
+    classification: str
+    headline: str
+    evidence_after: Evidence
+    predictions_after: dict[str, NDArray]
+    rounds: list[list[Candidate]]
+    messages: list[str]
+
 
 __all__ = ["NAME", "SparseOdeEffect", "SparseOdeTrial", "adopt", "sparse_ode_trial"]
 
@@ -266,13 +281,16 @@ def adopted_sentence(trial: SparseOdeTrial, before_pct: float | None) -> str:
     )
 
 
+D = TypeVar("D", bound=DiagnosisLike)
+
+
 def adopt(
-    d: Diagnosis,
+    d: D,
     trial: SparseOdeTrial,
     setup: Setup,
     settings: Settings,
     before: Evidence,
-) -> Diagnosis:
+) -> D:
     """``d`` with the sparse ODE recorded: a candidate row in a round of its own, and when
     accepted, as the alternative base (``after``, ``effects_added``, class, headline, verdict,
     predictions and the residual's evidence)."""
@@ -315,14 +333,14 @@ def adopt(
 
 
 def sparse_ode_step(
-    d: Diagnosis,
+    d: D,
     setup: Setup,
     settings: Settings,
     before: Model,
     current: Model,
     rnd: int,
     say: Progress,
-) -> Diagnosis:
+) -> D:
     """The sparse-ODE candidate of the empirical step (module docstring), tried when the
     final model is still above :data:`~.verdict.AT_FLOOR` times the noise floor."""
     if current.evidence.ratio <= AT_FLOOR:
