@@ -58,6 +58,21 @@ def real_records(name: str) -> list[Record]:
     return split_entries([rec], 4)
 
 
+SMART = ROOT / "tests" / "data" / "real" / "chandratue-SmartHysteresis"
+
+
+def smart_records() -> list[Record]:
+    """The SmartHysteresis record (2 periods of +-150 V at 1 Hz, 1 kHz; displacement in um kept
+    raw) as ``labrig import FILE --time 2 --voltage 4 --strain 3 --strain-units raw`` reads it,
+    cut into 4 chained parts (what diagnose does with one entry)."""
+    rows = np.loadtxt(
+        SMART / "hysteresis_v_150_1hz_2cycles_1khz.csv", delimiter=",", usecols=(1, 2, 3)
+    )
+    rec = Record.from_arrays("smart", 1000.0, rows[:, 2], rows[:, 1], hold="linear")
+    rec.meta["kind"] = "import"
+    return split_entries([rec], 4)
+
+
 def peers(records: list[Record], offset: bool) -> dict[str, float | None]:
     out = {}
     for kind in ("prandtl_ishlinskii", "bouc_wen", "sindy"):
@@ -96,6 +111,7 @@ def table() -> None:
     print("|---|---|---|---|---|---|---|---|---|")
     for name in ("Model_Vi_Do.dat", "Test_Vi_Do_Di.dat"):
         print(row(f"real: {name} (4 parts)", real_records(name), offset=True), flush=True)
+    print(row("real: SmartHysteresis +-150 V 1 Hz (4 parts)", smart_records(), True), flush=True)
     for label, case, drive in SIMULATED:
         print(row(label + " (seed 1)", study_campaign(case, 1, drive=drive), False), flush=True)
 

@@ -116,3 +116,26 @@ def test_real_micromanipulator_data(tmp_path: Path) -> None:
     assert [r.name for r in recs] == ["Model_Vi_Do", "Test_Vi_Do_Di"]
     assert recs[0].voltage_V.size == 8027 and recs[1].voltage_V.size == 14155
     assert recs[0].voltage_V.min() >= 0 and recs[0].voltage_V.max() <= 3.7
+
+
+SMART = Path(__file__).resolve().parents[1] / "data" / "real" / "chandratue-SmartHysteresis"
+
+
+def test_real_smart_hysteresis_record_reads_as_written(tmp_path: Path) -> None:
+    """The headerless SmartHysteresis rows (an empty first field, then time s, displacement um,
+    voltage V) import with column numbers; the numbers are the file's, independently parsed."""
+    src = SMART / "hysteresis_v_150_1hz_2cycles_1khz.csv"
+    out = tmp_path / "smart.h5"
+    args = ["import", str(src), "--out", str(out), "--time", "2", "--voltage", "4"]
+    args += ["--strain", "3", "--strain-units", "raw"]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 0, res.output
+    (rec,) = records_from_run(out)
+    rows = [line.split(",") for line in src.read_text().splitlines()]
+    assert len(rows) == 2000 and all(r[0] == "" and len(r) == 4 for r in rows)
+    np.testing.assert_array_equal(rec.voltage_V, [float(r[3]) for r in rows])
+    np.testing.assert_array_equal(rec.strain_ue, [float(r[2]) for r in rows])
+    assert rec.rate_hz == pytest.approx(1000.0, rel=1e-4)
+    # a displacement in um is not a strain: refused without a stack length or raw
+    bad = runner.invoke(app, [*args[:-2], "--strain-units", "um", "--overwrite"])
+    assert bad.exit_code == 2 and "stack-length-mm" in bad.output

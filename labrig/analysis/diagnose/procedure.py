@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 from labrig.analysis.diagnose.acceptance import MIN_GAIN, Candidate
 from labrig.analysis.diagnose.evidence import Evidence, modelled_creep_per_decade
 from labrig.analysis.diagnose.ranking import jacobian_basis, rank
+from labrig.analysis.diagnose.sparse_ode import sparse_ode_step
 from labrig.analysis.diagnose.state import Model, Settings, Setup
 from labrig.analysis.diagnose.trial import MAX_NFEV, json_params, numeric, try_candidate
 from labrig.analysis.diagnose.verdict import (
@@ -201,6 +202,7 @@ def diagnose(
         current = nxt
         added.append(best)
     d = result(setup, settings, before, current, rounds, added, messages)
+    d = sparse_ode_step(d, setup, settings, before, current, len(rounds), say)
     d.elapsed_s = time.perf_counter() - t0
     return d
 

@@ -1,0 +1,354 @@
+"""The empirical step's sparse-ODE candidate: an alternative base found in the data.
+
+When no named effect brings the model to the noise floor, the strain may still follow a small
+differential equation of the voltage that the model's structure (an operator and relaxors) does
+not contain. The empirical step then also identifies a **sparse ODE of Duhem form**,
+
+    dS/dt = sum_k xi_k theta_k(S, V, V'),      V' = dV/dt,
+
+over the library of :mod:`labrig.analysis.sindy` (``1``, ``S``, ``V``, ``V'``, ``|V'|``,
+``V' S``, ``V' V``, ``|V'| S``, ``|V'| V``, ``S|S|``: the six terms of a Duhem / Bouc-Wen model,
+``1, S, V, V', |V'|, |V'| S``, are among them), identified with pysindy's STLSQ by
+:func:`~labrig.analysis.sindy.fit_sindy` (sparsest support within 5 % of the best training free
+run), and simulated forward from rest (free run, never fed the measured strain).
+
+It is scored **exactly as the model's candidates are** (:meth:`labrig.analysis.extended.
+ExtendedProblem.score_second_half`): leave-one-entry-out, the ODE identified without the held-out
+entry (which stays in a chained run as history), the current model's per-entry nuisance terms
+(offset, and hum or drift when added) fitted on the first half of the held-out entry, NRMSE on
+the second half. It is judged by the same acceptance rule (:func:`~.acceptance.accept`) against
+the current model (the base and whatever was added): at least 15 % held-out gain and the fold
+rule. When it passes it **replaces** the model as the description of the records (an
+alternative base, not a correction on top of it): ``after`` holds its scores, ``effects_added``
+ends with ``sparse_ode`` and its terms and coefficients, the verdict says EMPIRICAL, and the
+class is at best "partially explained" (it is not a physical attribution). When it is refused,
+the verdict says why.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from labrig.analysis.diagnose.acceptance import Acceptance, Candidate, accept
+from labrig.analysis.diagnose.evidence import Evidence, collect_evidence
+from labrig.analysis.diagnose.state import Model, Settings, Setup
+from labrig.analysis.diagnose.verdict import AT_FLOOR, headline
+from labrig.analysis.extended import FitOutcome
+from labrig.analysis.metrics import nrmse_pct, second_half_nrmse_pct
+from labrig.analysis.simulate import Scored, scored_sequences
+from labrig.analysis.sindy import LIBRARY, SindyBaseline, SindyCache, fit_sindy
+from labrig.core.blas import single_thread_blas
+from labrig.model.effects import Effect
+from labrig.model.effects.empirical import EMPIRICAL_NOTE
+
+
+class DiagnosisLike(Protocol):
+    """What :func:`adopt` reads and sets of a :class:`~.procedure.Diagnosis` (no import: the
+    procedure imports this module)."""
+
+    before: dict[str, Any]
+    after: dict[str, Any]
+    effects_added: list[dict[str, Any]]
+    candidates: list[dict[str, Any]]
+    verdict: str
+    classification: str
+    headline: str
+    evidence_after: Evidence
+    predictions_after: dict[str, NDArray]
+    rounds: list[list[Candidate]]
+    messages: list[str]
+
+
+__all__ = ["NAME", "SparseOdeEffect", "SparseOdeTrial", "adopt", "sparse_ode_trial"]
+
+#: the candidate's name in ``candidates`` and ``effects_added``
+NAME = "sparse_ode"
+
+Progress = Callable[[str], Any]
+
+
+class SparseOdeEffect(Effect):
+    """The sparse ODE as the acceptance rule sees a candidate: no parameter of the model's
+    (its coefficients are identified by sparse regression, not refitted), the empirical
+    caveat. It is an alternative base, never applied on top of the model."""
+
+    name = NAME
+    where = "output"
+    acts_on = "the whole strain (an alternative base)"
+    params_doc = "one coefficient per selected library term (sparse regression)"
+    form = "`dS/dt = sum_k xi_k theta_k(S, V, dV/dt)`, free run from rest"
+    physics = EMPIRICAL_NOTE
+    signature = "a strain that a small Duhem-type ODE of the voltage follows better"
+    confusable = ()
+    tell_apart = "a drive the ODE was not identified on (other amplitudes, rates, a step)"
+    params = ()
+
+    def __init__(self, model: SindyBaseline):
+        self.model = model
+
+    def apply(self, x: NDArray, ctx: Any, p: Mapping[str, float]) -> NDArray:
+        raise NotImplementedError("the sparse ODE is an alternative base, not a correction")
+
+    def caveats(self, p: Mapping[str, float], span_s: float) -> list[str]:
+        return [f"{EMPIRICAL_NOTE}: an ODE identified from these records, not a mechanism"]
+
+    def physical(self, p: Mapping[str, float]) -> dict[str, Any]:
+        return dict(self.model.params())
+
+    def describe(self, p: Mapping[str, float], sd: Mapping[str, float | None]) -> str:
+        return f"{EMPIRICAL_NOTE}: {equation_text(self.model)}"
+
+
+def equation_text(model: SindyBaseline) -> str:
+    """``dS/dt = -0.2562 S + 0.08243 V + ...`` (four significant digits; t in s, V in V, S in
+    the records' strain unit, ue or the raw numbers of an import)."""
+    parts = []
+    for x, t in zip(model.coefficients, LIBRARY, strict=True):
+        if x != 0:
+            parts.append(f"{x:+.4g}" + ("" if t.name == "1" else f" {t.name}"))
+    body = " ".join(parts).lstrip("+") if parts else "0"
+    return f"dS/dt = {body} (t in s, V in V, V' = dV/dt)"
+
+
+def readings(model: SindyBaseline) -> str:
+    """What each selected term reads as (:data:`~labrig.analysis.sindy.LIBRARY`)."""
+    return "; ".join(
+        f"{t.name}: {t.physics}" for x, t in zip(model.coefficients, LIBRARY, strict=True) if x != 0
+    )
+
+
+@dataclass
+class SparseOdeTrial:
+    """What the sparse-ODE candidate did: the ODE identified on every entry, its in-sample and
+    held-out NRMSE per entry (%), its predictions (entry -> strain over the record, nuisance
+    fitted), the acceptance rule's verdict against the current model and the candidate row."""
+
+    model: SindyBaseline
+    per_entry: dict[str, float]
+    heldout_per_entry: dict[str, float]
+    predictions: dict[str, NDArray]
+    acceptance: Acceptance
+    candidate: Candidate
+    #: the model it is judged against, in words ("the model with sensor_lowpass")
+    replaced: str = "the model"
+
+    @property
+    def heldout_pct(self) -> float:
+        return float(np.mean(list(self.heldout_per_entry.values())))
+
+    @property
+    def nrmse_pct(self) -> float:
+        return float(np.mean(list(self.per_entry.values())))
+
+
+def _items(scored: Sequence[Scored], leave_out: str | None = None) -> list[tuple[Any, list]]:
+    return [(s.seq, [g for g in s.segments if g.name != leave_out]) for s in scored]
+
+
+def _entry(
+    scored: Sequence[Scored], model: SindyBaseline, name: str
+) -> tuple[Any, Any, NDArray, NDArray]:
+    """``(record, segment, prediction over the record, measured)``: the free run of the
+    sequence holding ``name`` up to its end, cut to the entry."""
+    for s in scored:
+        for g in s.segments:
+            if g.name != name:
+                continue
+            seq = s.seq
+            rec = next(r for r in seq.records if r.name == name)
+            a = seq.entries[name].start
+            y = model.predict(seq.voltage_V[: a + rec.n], seq.rest_V, seq.rate_hz)
+            return rec, g, y[a : a + rec.n], rec.strain_ue
+    raise KeyError(name)
+
+
+def _scores(
+    scored: Sequence[Scored],
+    model: SindyBaseline,
+    name: str,
+    columns: Callable[[NDArray, float], NDArray],
+    held: bool,
+) -> tuple[float, NDArray]:
+    """NRMSE (%) of entry ``name`` by ``model``'s free run with the nuisance ``columns``: held
+    out (fitted on the first half of the scored samples, scored on the second) or in-sample
+    (fitted and scored on all of them); and the prediction over the record."""
+    rec, g, p, m = _entry(scored, model, name)
+    i0 = g.i0
+    pm, mm, t = p[i0:], m[i0:], rec.time_s[i0:]
+    C = columns(t, rec.rate_hz)
+    fit_to = mm.size // 2 if held else mm.size
+    if C.shape[1] and np.all(np.isfinite(pm)):
+        coef, *_ = np.linalg.lstsq(C[:fit_to], mm[:fit_to] - pm[:fit_to], rcond=None)
+        pm = pm + C @ coef
+    out = p.copy()
+    out[i0:] = pm
+    if not np.all(np.isfinite(pm)):
+        return math.inf, out
+    return (second_half_nrmse_pct(mm, pm) if held else nrmse_pct(mm, pm)), out
+
+
+def sparse_ode_trial(
+    setup: Setup, settings: Settings, current: Model, rnd: int, say: Progress
+) -> SparseOdeTrial:
+    """Identify the sparse ODE, cross-validate it and judge it against ``current`` (module
+    docstring). Raises ``ValueError`` when the records cannot be differentiated (too short)
+    or differ in sample rate."""
+    say(f"round {rnd + 1}: sparse ODE of the strain (Duhem library, STLSQ)")
+    names = list(current.heldout)
+    scored = scored_sequences(list(setup.records), names, settings.warmup_s, settings.chain)
+    cache = SindyCache()
+    columns = current.problem.nuisance_columns
+    with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
+        model = fit_sindy(_items(scored), settings.offset, cache=cache)
+        per_entry, preds = {}, {}
+        for n in names:
+            per_entry[n], preds[n] = _scores(scored, model, n, columns, held=False)
+        say(f"round {rnd + 1}: cross-validating the sparse ODE")
+        held = {}
+        for n in names:
+            fold = fit_sindy(_items(scored, leave_out=n), settings.offset, cache=cache)
+            held[n] = _scores(scored, fold, n, columns, held=True)[0]
+    eff = SparseOdeEffect(model)
+    fo = FitOutcome({}, {NAME: {}}, {}, {}, per_entry, math.nan)
+    a = accept(
+        eff,
+        fo,
+        held,
+        current.heldout,
+        settings.min_gain,
+        setup.span_s,
+        current.evidence.floor_pct,
+    )
+    c = Candidate(NAME, rnd, 0.0, tried=True)
+    c.heldout_per_entry = held
+    c.heldout_nrmse_pct = float(np.mean(list(held.values())))
+    c.insample_gain = 1.0 - float(np.mean(list(per_entry.values()))) / current.fit.nrmse_pct
+    c.judged(a)
+    if not c.heldout_nrmse_pct < (current.heldout_pct or math.inf):
+        # the rule's wording for "no gain" is about rounding; say what happened
+        c.reasons = [
+            f"it predicts held-out data worse than {_what(current)}"
+            if math.isfinite(c.heldout_nrmse_pct)
+            else "its free run diverges on held-out data",
+            *[r for r in a.reasons if "numerical precision" not in r],
+        ]
+    what = _what(current)
+    verb = "predicts" if math.isfinite(c.heldout_nrmse_pct) else "diverges on"
+    c.evidence = (
+        f"a sparse ODE of Duhem form identified by STLSQ, {equation_text(model)}, {verb} "
+        f"held-out entries at {c.heldout_nrmse_pct:.3g} % against {current.heldout_pct:.3g} % "
+        f"for {what} (better in {a.wins}, worse in {a.losses} of {len(names)} folds)"
+        + ("; refused: " + "; ".join(c.reasons) if c.reasons else "")
+    )
+    return SparseOdeTrial(model, per_entry, held, preds, a, c, what)
+
+
+def _what(current: Model) -> str:
+    """The current model in words: "the model" or "the model with X and Y"."""
+    if not current.effects:
+        return "the model"
+    return "the model with " + " and ".join(e.name for e in current.effects)
+
+
+#: how the verdict of a model left unexplained by its candidates begins
+UNEXPLAINED = "Unexplained: "
+
+
+def refused_sentence(trial: SparseOdeTrial) -> str:
+    """The verdict's sentence for a sparse ODE that the acceptance rule refused, with why."""
+    c = trial.candidate
+    why = "" if "refused:" in c.evidence else "; refused: " + "; ".join(c.reasons)
+    return (
+        f" Empirical step: {c.evidence}{why}; so the model stays the description of these records."
+    )
+
+
+def adopted_sentence(trial: SparseOdeTrial, before_pct: float | None) -> str:
+    """The verdict's paragraph for an adopted sparse ODE."""
+    c = trial.candidate
+    base = f" (the base model's: {before_pct:.3g} %)" if before_pct is not None else ""
+    return (
+        f" EMPIRICAL alternative base: {c.evidence}{base}. It replaces the model as the "
+        f"description of these records ({EMPIRICAL_NOTE}): the model's operator and relaxors "
+        f"miss a dynamics that its terms describe ({readings(trial.model)}); a drive it was "
+        "not identified on (other amplitudes and rates, a step) tells whether it holds."
+    )
+
+
+D = TypeVar("D", bound=DiagnosisLike)
+
+
+def adopt(
+    d: D,
+    trial: SparseOdeTrial,
+    setup: Setup,
+    settings: Settings,
+    before: Evidence,
+) -> D:
+    """``d`` with the sparse ODE recorded: a candidate row in a round of its own, and when
+    accepted, as the alternative base (``after``, ``effects_added``, class, headline, verdict,
+    predictions and the residual's evidence)."""
+    c = trial.candidate
+    d.rounds.append([c])
+    d.candidates.append(
+        {
+            "effect": NAME,
+            "round": c.round + 1,
+            "heldout_nrmse_pct": c.heldout_nrmse_pct
+            if math.isfinite(c.heldout_nrmse_pct or 0)
+            else None,
+            "evidence": c.evidence,
+        }
+    )
+    if not c.accepted:
+        d.verdict += refused_sentence(trial)
+        return d
+    ev = collect_evidence(list(setup.records), trial.predictions, settings.warmup_s)
+    d.after = {
+        "nrmse_pct": trial.nrmse_pct,
+        "heldout_nrmse_pct": trial.heldout_pct,
+        "per_entry": dict(trial.per_entry),
+    }
+    params = trial.model.params()
+    params["empirical"] = True
+    d.effects_added.append({"effect": NAME, "params": params, "evidence": c.evidence})
+    d.classification = "partially_explained"
+    if d.verdict.startswith(UNEXPLAINED):
+        d.verdict = (
+            "Partially explained by an EMPIRICAL alternative base (the sparse ODE below); of "
+            "the model's candidates: " + d.verdict[len(UNEXPLAINED) :]
+        )
+    d.verdict += adopted_sentence(trial, d.before.get("heldout_nrmse_pct"))
+    added = [f"{NAME} (EMPIRICAL alternative base, in place of {trial.replaced})"]
+    d.headline = headline(d.classification, before, ev, d.before, d.after, added)
+    d.evidence_after = ev
+    d.predictions_after = dict(trial.predictions)
+    return d
+
+
+def sparse_ode_step(
+    d: D,
+    setup: Setup,
+    settings: Settings,
+    before: Model,
+    current: Model,
+    rnd: int,
+    say: Progress,
+) -> D:
+    """The sparse-ODE candidate of the empirical step (module docstring), tried when the
+    final model is still above :data:`~.verdict.AT_FLOOR` times the noise floor."""
+    if current.evidence.ratio <= AT_FLOOR:
+        return d
+    try:
+        trial = sparse_ode_trial(setup, settings, current, rnd, say)
+    except ValueError as exc:
+        d.messages.append(f"sparse ODE not identified: {exc}")
+        d.verdict += f" Empirical step: no sparse ODE could be identified ({exc})."
+        return d
+    return adopt(d, trial, setup, settings, before.evidence)
