@@ -60,11 +60,12 @@ def report(
     """Model versus measurement as one HTML file; baselines fitted on the same data."""
     from labrig.commands.prepare import parse_entries
     from labrig.commands.progress import RichUI
-    from labrig.commands.report import build_run_report
+    from labrig.commands.report import build_run_report, named_training_files
     from labrig.core.outputs import write_text_output
     from labrig.store.reader import being_written
 
-    check_out(out, [run_file, params], overwrite)  # before the work
+    # before the work; the training files a parameter file names are inputs too
+    check_out(out, [run_file, params, *named_training_files(params)], overwrite)
     ui = RichUI()
     built = build_run_report(
         run_file,

@@ -11,6 +11,7 @@ the figures (:mod:`labrig.report.plots`, :mod:`labrig.report.control_section`) a
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -184,6 +185,19 @@ def training_files(doc: dict[str, Any], params_file: Path) -> list[Path] | None:
     if not isinstance(listed, list) or not listed or not all(isinstance(p, str) for p in listed):
         return None
     return [p if p.is_absolute() else params_file.parent / p for p in map(Path, listed)]
+
+
+def named_training_files(params_file: Path | None) -> list[Path]:
+    """The training files a parameter file names (:func:`training_files`), read leniently: an
+    unreadable or malformed file names none (it is refused, naming its field, when it is read
+    for the report)."""
+    if params_file is None:
+        return []
+    try:
+        doc = json.loads(Path(params_file).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return []
+    return training_files(doc, Path(params_file)) or []
 
 
 def _peers_elsewhere(setup: Setup, train: list[Path], kind: str, progress: Progress) -> Fitted:

@@ -358,3 +358,22 @@ def test_recorded_runs_are_chained_and_scored_without_offset(rig_runs, files) ->
     assert res.exit_code == 2 and "both as training and as test" in res.output
     res = invoke("validate", a, files[0], "--on", b)
     assert res.exit_code == 2 and "only training file" in res.output and str(a) in res.output
+
+
+def test_report_out_never_replaces_a_training_file_the_params_name(files, tmp_path: Path) -> None:
+    """The training files a parameter file names are inputs of ``labrig report``: ``--out``
+    onto one is exit 2 naming it, even with ``--overwrite``, and the file is left as it was;
+    a parameter file naming other files does not refuse the same ``--out``."""
+    train, test = files
+    before = train.read_bytes()
+    params = tmp_path / "train.json"
+    params.write_text(json.dumps({"params": {}, "train_files": [str(train)]}))
+    res = invoke("report", test, "--params", params, "--out", train, "--overwrite")
+    assert res.exit_code == 2 and str(train.name) in res.output, res.output
+    assert "Traceback" not in res.output and train.read_bytes() == before
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"params": {}, "train_files": [str(tmp_path / "elsewhere.h5")]}))
+    from labrig.commands.report import named_training_files
+
+    assert named_training_files(other) == [tmp_path / "elsewhere.h5"]
+    assert named_training_files(tmp_path / "missing.json") == []
