@@ -77,7 +77,7 @@ def make_data(labrig: str, work: Path) -> dict[str, Path]:
     if not real.exists():
         subprocess.run(
             [labrig, "import", str(REAL), "--out", str(real), "--voltage", "1", "--strain", "5",
-             "--rate-hz", "200"], check=True, capture_output=True,
+             "--rate-hz", "200", "--strain-units", "raw"], check=True, capture_output=True,
         )  # fmt: skip
     return {"paper campaign (seed 1)": paper, "real record Model_Vi_Do": real}
 

@@ -64,6 +64,13 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
+def cpu_s() -> float:
+    """User + system CPU seconds of this process and its reaped children."""
+    a = resource.getrusage(resource.RUSAGE_SELF)
+    b = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
+
+
 def noop(x: int) -> int:
     return x
 
@@ -180,7 +187,9 @@ def detect(n: int, out: Path, workers: int) -> None:
     if not (out / "truth.json").exists():
         write_fleet(n, out, ROOT / "experiments" / "paper.yaml", seed=1, defect_fraction=0.05)
     sim_s = time.perf_counter() - t0
+    cpu0 = cpu_s()
     o = run_batch("diagnose", [str(out)], out / "batch", Where("local", workers=workers))
+    batch_cpu = cpu_s() - cpu0
     s = score(o.rows, read_truth(out / "truth.json"))
     times = sorted(r["elapsed_s"] for r in o.rows if not r["skipped"])
     print(
@@ -190,6 +199,7 @@ def detect(n: int, out: Path, workers: int) -> None:
                 "simulation_s": sim_s,
                 "batch_wall_s": o.schedule.wall_s,
                 "task_s_median": times[len(times) // 2] if times else None,
+                "batch_cpu_s": batch_cpu,  # this process and its reaped children (workers)
                 "skipped": o.n_skipped,
                 "score": s,
             },

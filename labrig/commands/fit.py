@@ -14,14 +14,16 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from labrig.analysis.baselines import KINDS, BaselineResult, fit_baseline
 from labrig.analysis.fit import FitResult, fit_model
-from labrig.analysis.fit_effects import EffectsFit
 from labrig.commands.prepare import AnalysisError, Setup, prepare
 from labrig.model.effects import Effect
 from labrig.store import RunFile
+
+if TYPE_CHECKING:  # the effect library (and scipy.signal) only when --effect asks for it
+    from labrig.analysis.fit_effects import EffectsFit
 
 #: ``progress(stage, done, total)``; stages: ``model:fit``, ``model:<heldout stage>``, a
 #: baseline's kind, ``effects:<stage>`` of :func:`labrig.analysis.fit_effects.fit_effects`
@@ -170,17 +172,18 @@ def fit_run_file(
     """``labrig fit``: read the run file (:func:`~labrig.commands.prepare.prepare`; ``run``:
     as already read) and fit ``model`` (one of :data:`MODELS`) to it; with ``effects`` our
     model is fitted first, then refitted with them (held-out scores only for the refit)."""
-    from labrig.analysis.fit_effects import resolve_effects
-
     ui = ui or QuietUI()
     if model not in MODELS:
         raise AnalysisError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
     if effects and model != "dynamic":
         raise AnalysisError(f"--effect applies to the dynamic model, not to --model {model}")
-    try:
-        resolve_effects(effects)  # before any fitting
-    except ValueError as e:
-        raise AnalysisError(f"--effect {e}") from None
+    if effects:  # the effect library is imported only when asked for (scipy.signal: ~1.5 s)
+        from labrig.analysis.fit_effects import resolve_effects
+
+        try:
+            resolve_effects(effects)  # before any fitting
+        except ValueError as e:
+            raise AnalysisError(f"--effect {e}") from None
     setup = prepare(path, entries, warmup_s, offset, run=run)
     ui.announce(setup)
     with ui.fitting() as progress:

@@ -1,0 +1,228 @@
+"""Where the CPU of ``labrig fit`` and ``labrig diagnose`` goes, and what a larger library costs.
+
+Run from the repository root (a few minutes on a loaded 2-core machine)::
+
+    .venv/bin/python benchmarks/bench_speed.py phases RUN.h5        # fit and diagnose, by step
+    .venv/bin/python benchmarks/bench_speed.py library RUN.h5       # 4 more candidates
+
+``phases``: one fresh process each for ``fit`` and for ``diagnose`` (one worker), CPU seconds
+(``getrusage`` of the process and its children: the store reads a run file in a child process)
+at each step: the imports (numpy and scipy.optimize; labrig's command modules; numba and the
+compiled kernels), reading the run file, the fit or the diagnosis' steps (from its progress
+messages), and the whole.
+
+``library``: ``diagnose`` in this process (one worker) with the effect library as it is and with
+four more candidates registered for the benchmark only (``library`` is replaced in
+:mod:`labrig.analysis.diagnose.procedure` for the run): four copies of library effects under new
+names (they rank as their originals do, so they can displace others from the refitted top
+``top_k``), and four dummy gains the base model absorbs (ranked last: their cost is the
+ranking's). The variants interleaved, ``--repeats`` times each (default 2); CPU seconds
+(``time.process_time``), the ratio to the library as it is, the candidates ranked and refitted,
+the effects added and the held-out NRMSE, and a yardstick (``numpy.sort`` of 1e6 floats) timed
+in the same process.
+
+Prints markdown on stdout (copied into ``benchmarks/RESULTS.md``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+#: what the child process of ``phases`` runs: prints one JSON line of (step, CPU s) pairs
+PHASES = r"""
+import json, resource, sys, time
+def cpu():
+    a = resource.getrusage(resource.RUSAGE_SELF); b = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
+out = [("interpreter start", cpu())]
+import numpy, scipy.optimize
+out.append(("import numpy, scipy.optimize", cpu()))
+from pathlib import Path
+what, path = sys.argv[1], Path(sys.argv[2])
+if what == "fit":
+    from labrig.commands.fit import fit_run_file
+else:
+    from labrig.commands.diagnose import diagnose_run_file
+out.append(("import labrig's command modules", cpu()))
+import labrig.model.compiled
+from labrig.model.accel import kernels
+kernels()
+out.append(("import numba, load the operator's compiled kernels", cpu()))
+from labrig.store import read_run
+run = read_run(path)
+out.append(("read the run file (checked, in a child process)", cpu()))
+if what == "fit":
+    fit_run_file(path, run=run)
+    out.append(("fit with leave-one-entry-out", cpu()))
+else:
+    last = [None]
+    def say(msg):
+        if last[0] is not None:
+            out.append((last[0], cpu()))
+        last[0] = msg
+    diagnose_run_file(path, progress=say, workers=1, snapshot=run)
+    out.append((last[0] + " ... to the end", cpu()))
+print(json.dumps(out))
+"""
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def yardstick_s(repeats: int = 5) -> float:
+    """CPU seconds of ``np.sort`` of 1e6 uniform floats (median of ``repeats``)."""
+    x = np.random.default_rng(0).random(1_000_000)
+    out = []
+    for _ in range(repeats):
+        t = time.process_time()
+        np.sort(x)
+        out.append(time.process_time() - t)
+    return statistics.median(out)
+
+
+def header() -> str:
+    load = os.getloadavg()
+    return (
+        f"Run {datetime.now(UTC):%Y-%m-%d %H:%M} UTC on "
+        f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"Python {platform.python_version()}; load average "
+        f"{load[0]:.2f}; yardstick (np.sort of 1e6 floats) {1e3 * yardstick_s():.1f} ms CPU."
+    )
+
+
+def phases(path: Path, repeats: int) -> None:
+    print(header() + "\n")
+    for what in ("fit", "diagnose"):
+        runs = []
+        for _ in range(repeats):
+            res = subprocess.run(
+                [sys.executable, "-c", PHASES, what, str(path)],
+                capture_output=True,
+                text=True,
+                check=True,
+                cwd=ROOT,
+            )
+            runs.append(json.loads(res.stdout.strip().splitlines()[-1]))
+        print(f"`{what}` of {path.name}, CPU s per step (median of {repeats} processes):\n")
+        print("| step | CPU s |")
+        print("|---|---|")
+        steps = [name for name, _ in runs[0]]
+        prev = [0.0] * len(runs)
+        for i, name in enumerate(steps):
+            d = [r[i][1] - p for r, p in zip(runs, prev, strict=True)]
+            prev = [r[i][1] for r in runs]
+            print(f"| {name} | {statistics.median(d):.2f} |")
+        total = statistics.median(r[-1][1] for r in runs)
+        print(f"| **whole process** | **{total:.2f}** |\n")
+
+
+#: the library effects copied under new names for ``library`` (the duplicates variant)
+COPIED = ("offset_drift", "sensor_lowpass", "quadratic_term", "time_delay")
+
+
+def _gain_dummy(k: int):
+    """A cheap dummy candidate: an output gain ``(1 + g) S``, which the base model absorbs
+    entirely (its alpha0 and gamma), so the ranking puts it last and it is never refitted."""
+    from labrig.model.effects import Effect
+    from labrig.model.effects.base import Param
+
+    class Gain(Effect):
+        name = f"dummy_gain_{k}"
+        where = "output"
+        params = (Param("g", "", 0.0, -0.1, 0.1, 0.001),)
+
+        def apply(self, x, ctx, p):
+            return (1.0 + p.get("g", 0.0)) * x
+
+    return Gain()
+
+
+def library(path: Path, repeats: int) -> None:
+    from labrig.analysis.diagnose import procedure
+    from labrig.commands.prepare import prepare_diagnosis
+
+    setup = prepare_diagnosis(path, say=lambda _m: None)
+    real_library = procedure.library
+
+    def copies(**context):
+        lib = real_library(**context)
+        more = {}
+        for name in COPIED:
+            e = copy.copy(lib[name])
+            e.name = f"copy_of_{name}"
+            more[e.name] = e
+        return {**lib, **more}
+
+    def dummies(**context):
+        more = [_gain_dummy(k) for k in range(4)]
+        return {**real_library(**context), **{e.name: e for e in more}}
+
+    def one(lib) -> tuple[float, list[str], float, int, list[str]]:
+        procedure.library = lib
+        try:
+            names = None
+            if lib is not real_library:
+                names = [*procedure.EFFECT_NAMES, *(n for n in lib() if n not in real_library())]
+            t = time.process_time()
+            d = procedure.diagnose(
+                setup.records, setup.start, offset=setup.offset, effects=names, workers=1
+            )
+            cpu = time.process_time() - t
+        finally:
+            procedure.library = real_library
+        ranked = sum(len(r) for r in d.rounds)
+        tried = [c.effect for r in d.rounds for c in r if c.tried]
+        added = [e["effect"] for e in d.effects_added]
+        return cpu, added, d.after["heldout_nrmse_pct"], ranked, tried
+
+    print(header() + "\n")
+    one(real_library)  # warm: imports, compiled kernels
+    variants = {
+        "as it is": real_library,
+        "+ 4 copies of library effects (" + ", ".join(COPIED) + ")": copies,
+        "+ 4 dummy gains (absorbed by the base, ranked last)": dummies,
+    }
+    rows: dict[str, list] = {k: [] for k in variants}
+    for _ in range(repeats):
+        for k, lib in variants.items():
+            rows[k].append(one(lib))
+    print(f"`diagnose` of {path.name} in-process (one worker), CPU s:\n")
+    print(
+        "| library | CPU s (median / min) | ratio | candidates ranked | refitted (all rounds) "
+        "| effects added | held-out NRMSE % |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    ref = statistics.median(c for c, *_ in rows["as it is"])
+    for k, v in rows.items():
+        cpus = [c for c, *_ in v]
+        med = statistics.median(cpus)
+        _, added, ho, ranked, tried = v[-1]
+        print(
+            f"| {k} | {med:.2f} / {min(cpus):.2f} | {med / ref:.2f}x | {ranked} "
+            f"| {', '.join(tried)} | {', '.join(added) or '-'} | {ho:.6g} |"
+        )
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("what", choices=("phases", "library"))
+    ap.add_argument("run", type=Path)
+    ap.add_argument("--repeats", type=int, default=2)
+    a = ap.parse_args()
+    (phases if a.what == "phases" else library)(a.run.resolve(), a.repeats)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
