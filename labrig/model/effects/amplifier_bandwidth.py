@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal
 
 from labrig.model.effects.base import Effect, Param, plus_minus
 
@@ -69,6 +68,8 @@ class AmplifierBandwidth(Effect):
     params = (Param("tau_amp_s", "s", 0.0, 0.0, 5e-3, 1e-4, sign=+1, starts=(2e-5, 3e-4, 1e-3)),)
 
     def apply(self, x, ctx, p):
+        from scipy import signal  # lazy: a second of import CPU
+
         tau = p["tau_amp_s"]
         if tau <= 0:
             return x

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal
 
 from labrig.model.effects.base import Effect, Param, plus_minus
 
@@ -19,6 +18,8 @@ def resonance_filter(
     """``(b, a)`` (for ``lfilter``, ``a[0] = 1``) of ``1 / (1 + 2 zeta tau_r s + (tau_r s)^2)``
     sampled with a first-order hold (the strain is smooth between samples: exact for a strain
     linear between them; ``scipy.signal.cont2discrete``, method ``"foh"``)."""
+    from scipy import signal  # lazy: a second of import CPU
+
     bd, ad, _ = signal.cont2discrete(
         ([1.0], [tau_r * tau_r, 2.0 * zeta * tau_r, 1.0]), 1.0 / rate_hz, method="foh"
     )
@@ -75,6 +76,8 @@ class MechanicalResonance(Effect):
         )
 
     def apply(self, x, ctx, p):
+        from scipy import signal  # lazy: a second of import CPU
+
         tau = p["tau_r_s"]
         if tau <= 0:
             return x

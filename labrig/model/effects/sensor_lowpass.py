@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
 
 from labrig.model.effects.base import Effect, Param, plus_minus
 
@@ -38,6 +37,8 @@ class SensorLowpass(Effect):
     )
 
     def apply(self, x, ctx, p):
+        from scipy import signal  # lazy: a second of import CPU
+
         tau, zeta = p["tau_s"], p["zeta"]
         if tau <= 0:
             return x

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal
 
 from labrig.model.effects.base import Context, Effect, Param, fmt3, plus_minus
 
@@ -60,6 +59,8 @@ class ThermalDrift(Effect):
         return [{"k_rel": 0.01, "tau_th_s": tau} for tau in (3.0, 30.0, 300.0)]
 
     def theta(self, ctx: Context, tau_s: float | None = None) -> NDArray:
+        from scipy import signal  # lazy: a second of import CPU
+
         if self.temperature:
             T = ctx.temperature
             ref = T[0] if ctx.temperature_ref is None else ctx.temperature_ref

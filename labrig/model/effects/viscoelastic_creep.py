@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal
 
 from labrig.model.effects.base import Effect, Param, plus_minus
 
@@ -62,6 +61,8 @@ class ViscoelasticCreep(Effect):
     )
 
     def apply(self, x, ctx, p):
+        from scipy import signal  # lazy: a second of import CPU
+
         c = p["c"]
         if c == 0.0:
             return x
