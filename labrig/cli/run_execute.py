@@ -129,10 +129,12 @@ def serve_finished_run(console: Console, live, outcome: RunOutcome, hold: float 
         live.close()
         return
     until = "until Ctrl-C" if hold is None else f"for {hold:g} s (Ctrl-C to stop sooner)"
-    _say(console, f"live view: serving the finished run at {live.url} {until}")
     deadline = None if hold is None else time.monotonic() + hold
     with interrupt_once() as guard:
         try:
+            # said once the guard is on: a Ctrl-C the moment it is read ends the hold, exit
+            # code the run's (before, it met the default handler: exit 130)
+            _say(console, f"live view: serving the finished run at {live.url} {until}")
             while live.alive and (deadline is None or time.monotonic() < deadline):
                 time.sleep(0.2)
         except Interrupted:
