@@ -195,6 +195,6 @@ def fit_run_file(
                 res = fit_with_effects(setup, res, effects, heldout, progress)
         else:
             res = fit_base(setup, model, heldout, progress)
-    if isinstance(res, FitResult | EffectsFit):
+    if not isinstance(res, BaselineResult):  # our model, with or without effects
         res.train_files = [str(Path(path).resolve())]
     return FitOutcome(setup, res)
