@@ -195,7 +195,7 @@ def named_training_files(params_file: Path | None) -> list[Path]:
         return []
     try:
         doc = json.loads(Path(params_file).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError):
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
         return []
     return training_files(doc, Path(params_file)) or []
 
