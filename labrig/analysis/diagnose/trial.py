@@ -128,6 +128,11 @@ def refit(
     return best
 
 
+#: numerical breakdowns of a candidate's fit (a filter designed from parameters the optimiser
+#: drove to NaN, a singular system): the candidate is refused with the reason
+FIT_FAILURES = (np.linalg.LinAlgError, FloatingPointError, ValueError)
+
+
 def try_candidate(
     setup: Setup,
     settings: Settings,
@@ -145,7 +150,15 @@ def try_candidate(
     c = Candidate(eff.name, rnd, score)
     say(f"round {rnd + 1}: fitting base + {eff.name}")
     prob = setup.problem(settings, [*current.effects, eff])
-    fo = refit(setup, settings, current, prob, eff, probe, score)
+    try:
+        fo = refit(setup, settings, current, prob, eff, probe, score)
+    except FIT_FAILURES as e:  # a candidate whose fit breaks down is refused, not fatal
+        c.reasons.append(f"its fit failed ({type(e).__name__}: {e})")
+        c.evidence = (
+            f"{signature_clause(eff, current.evidence)}; base + {eff.name} could not be "
+            f"fitted ({type(e).__name__}: {e}); not added"
+        )
+        return c, prob
     c.tried, c.fit = True, fo
     c.insample_gain = 1.0 - fo.nrmse_pct / current.fit.nrmse_pct
     clause = signature_clause(eff, current.evidence)
@@ -158,7 +171,12 @@ def try_candidate(
         )
         return c, prob
     say(f"round {rnd + 1}: cross-validating base + {eff.name}")
-    c.heldout_per_entry = prob.heldout(fo, workers=workers)
+    try:
+        c.heldout_per_entry = prob.heldout(fo, workers=workers)
+    except FIT_FAILURES as e:
+        c.reasons.append(f"its cross-validation failed ({type(e).__name__}: {e})")
+        c.evidence = f"{clause}; adding {eff.name} ({desc}): cross-validation failed ({e})"
+        return c, prob
     c.heldout_nrmse_pct = mean_of(c.heldout_per_entry)
     a = accept(
         eff,
