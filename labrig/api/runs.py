@@ -515,7 +515,7 @@ def run(
     from labrig.runner.execute import check_run_output, default_out_path, execute, preflight
 
     rig_path = Path(rig) if rig is not None else None
-    plan, rig_path = preflight(protocol, rig_path)
+    plan, rig_path = preflight(protocol if isinstance(protocol, str) else Path(protocol), rig_path)
     target = Path(out) if out is not None else default_out_path(plan)
     check_run_output(plan, rig_path, target, overwrite)  # before anything is energised
     with _bar(plan.total_duration_s, progress) as callback:

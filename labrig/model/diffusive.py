@@ -43,6 +43,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -77,11 +78,13 @@ class Lattice:
     x_end: float
 
 
-def _phi(y: NDArray | complex, y_c: float) -> NDArray | complex:
+def _phi(y: Any, y_c: float) -> Any:
+    """``phi(y) = y - B exp(-(y - y_c) / B)`` for an array or a complex number."""
     return y - GRADING * np.exp(-(y - y_c) / GRADING)
 
 
-def _dphi(y: NDArray | complex, y_c: float) -> NDArray | complex:
+def _dphi(y: Any, y_c: float) -> Any:
+    """``phi'(y)`` for an array or a complex number."""
     return 1.0 + np.exp(-(y - y_c) / GRADING)
 
 
@@ -89,7 +92,7 @@ def _phi_inv(z: complex, y_c: float) -> complex:
     """``y`` with ``phi(y) = z`` (Newton; ``phi`` is increasing and convex on the real line)."""
     y = complex(z)
     if (y_c - z.real) / GRADING > 1.0:  # deep in the graded part: start from the asymptote
-        y = y_c - GRADING * np.log((y_c - z) / GRADING + 1.0)
+        y = complex(y_c - GRADING * np.log((y_c - z) / GRADING + 1.0))
     for _ in range(100):
         step = (_phi(y, y_c) - z) / _dphi(y, y_c)
         y -= step
@@ -107,7 +110,7 @@ def lattice(dt: float) -> Lattice:
     x_end = x_h + 7 * WINDOW_SIGMA  # chi < 1e-23 beyond
     y_lo = _phi_inv(complex(y_c + np.log(EPS_LO)), y_c).real  # phi(y_c) ~ y_c - B: ln(eps/T)
     k = np.arange(int(np.ceil(y_lo / H_STEP)), int(np.ceil(x_end / H_STEP)) + 1)
-    y = k * H_STEP
+    y = (k * H_STEP).astype(np.float64)
     x = _phi(y, y_c)
     w = H_STEP * _dphi(y, y_c) * 0.5 * special.erfc((x - x_h) / WINDOW_SIGMA)
     w[0] *= 0.5  # trapezoidal end point; the slow-tail mode takes the mass below
@@ -144,9 +147,9 @@ def _gauss(a: float, b: float, x0: float, theta: float) -> tuple[NDArray, NDArra
         s *= 2.0
     if a < x0 < b:
         pts.append(x0)
-    pts = np.unique(pts)
-    edges = [pts[0]]
-    for p in pts[1:]:
+    nodes = np.unique(pts)
+    edges = [nodes[0]]
+    for p in nodes[1:]:
         n = int(np.ceil((p - edges[-1]) / 1.0))
         edges.extend(np.linspace(edges[-1], p, n + 1)[1:])
     e = np.asarray(edges)
@@ -209,23 +212,23 @@ def modes(tau_s: float, lam: float, dt: float) -> tuple[ContinuousModes, ModeDer
     lt = float(np.log(tau_s))
     x0 = -lt
     if lam == 1.0:
-        q = np.array([-1.0 / tau_s + 0j])
-        c = np.array([1.0 / tau_s + 0j])
-        dq = np.array([[1.0 / tau_s + 0j], [0.0]])  # d/d ln tau of -1/tau
-        dc = np.array([[-1.0 / tau_s + 0j], [0.0]])
+        q1 = np.array([-1.0 / tau_s + 0j])
+        c1 = np.array([1.0 / tau_s + 0j])
+        dq1 = np.array([[1.0 / tau_s + 0j], [0.0]])  # d/d ln tau of -1/tau
+        dc1 = np.array([[-1.0 / tau_s + 0j], [0.0]])
         # d/dlam at lam = 1 exists (the realisation is smooth there) but is not needed by the
         # fit, whose lam stays off exactly 1; report 0 rather than a one-sided value
-        return ContinuousModes(q, c), ModeDerivatives(dq, dc, np.zeros(2), np.zeros(2))
+        return ContinuousModes(q1, c1), ModeDerivatives(dq1, dc1, np.zeros(2), np.zeros(2))
     lat = lattice(dt)
     theta = np.pi * abs(1.0 - lam) / lam
     mu, dmu_t, dmu_l = mu_parts(lat.x, x0, lam)
     xi = np.exp(lat.x)
     slow = ~lat.fast
-    q = [-xi[slow] + 0j]
-    c = [lat.w[slow] * mu[slow] * xi[slow] + 0j]
-    dq = [np.zeros((2, int(slow.sum())), dtype=complex)]
-    dc = [np.vstack([lat.w[slow] * dmu_t[slow] * xi[slow], lat.w[slow] * dmu_l[slow] * xi[slow]])
-          + 0j]  # fmt: skip
+    q: list[NDArray] = [-xi[slow] + 0j]
+    c: list[NDArray] = [lat.w[slow] * mu[slow] * xi[slow] + 0j]
+    dq: list[NDArray] = [np.zeros((2, int(slow.sum())), dtype=complex)]
+    w_s, xi_s = lat.w[slow], xi[slow]
+    dc: list[NDArray] = [np.vstack([w_s * dmu_t[slow] * xi_s, w_s * dmu_l[slow] * xi_s]) + 0j]
     # instantaneous part: the lattice above 40/dt, then mu (1 - chi) apart
     f = lat.fast
     m1 = np.array(

@@ -346,7 +346,9 @@ class QuasiStaticHysteresis:
         :meth:`sensitivities`' ``dS_du``.
         """
         du = np.asarray(du, dtype=float)
-        return self.sensitivities(u, held_V, du, params=False, engine=engine)[2]
+        dS_du = self.sensitivities(u, held_V, du, params=False, engine=engine)[2]
+        assert dS_du is not None  # given du, sensitivities returns its tangent
+        return dS_du
 
     def sensitivities(
         self,

@@ -305,7 +305,9 @@ class _LogChebyshevStep:
                 t = 10.0 ** (a + (x + 1.0) * self.width / 2)
                 return relaxor_step(t, tau_s, lam) - relaxor_step_pole_part(t, tau_s, lam)
 
-            self.coeffs.append(C.chebinterpolate(f, _CHEB_NODES - 1))
+            # numpy's stub wants f to return a scalar; chebinterpolate calls it with the array
+            # of nodes and needs the array of values
+            self.coeffs.append(C.chebinterpolate(f, _CHEB_NODES - 1))  # type: ignore[type-var]
 
     def branch(self, t: NDArray) -> NDArray:
         """The branch-cut part of the step response at ``t`` (s); compiled Clenshaw sums when

@@ -303,7 +303,7 @@ class Rig:
     # -- logging -------------------------------------------------------------------------------
     def describe(self) -> dict:
         """Identity and settings of every device (for the run file's NXinstrument groups)."""
-        out = {
+        out: dict[str, Any] = {
             "name": self.name,
             "seed": self.seed,
             "simulated": self.sim is not None,

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import h5py
 import numpy as np
@@ -26,6 +27,9 @@ from labrig.store.format import (
     sealed_members,
 )
 from labrig.store.isolated import allow_cpu
+
+#: the JSON type :meth:`json` is asked for (a dict or a list)
+J = TypeVar("J")
 
 
 @dataclass
@@ -237,7 +241,7 @@ class _Reader:
             raise self.error(f"{status[:40]!r} is not a status ({', '.join(STATUSES)})")
         return status
 
-    def json(self, group: h5py.Group, name: str, default: str, kind: type) -> object:
+    def json(self, group: h5py.Group, name: str, default: str, kind: type[J]) -> J:
         """A text dataset holding JSON of type ``kind`` (``default`` when absent)."""
         text = self.text(group, name, default)
         self.at(group, name)
@@ -332,7 +336,7 @@ class _Reader:
             start_time=self.text(g, "start_time"),
             end_time=self.text(g, "end_time"),
             rate_hz=rate,
-            step=dict(self.json(g, "step_definition", "{}", dict)),  # type: ignore[call-overload]
+            step=dict(self.json(g, "step_definition", "{}", dict)),
             data=data,
             units=units,
             long_names=long_names,
@@ -470,8 +474,8 @@ class _Reader:
             rig_text=self.text(notes["rig"], "data") if "rig" in notes else "",
             protocol_file=self.text(notes["protocol"], "file_name") if "protocol" in notes else "",
             rig_file=self.text(notes["rig"], "file_name") if "rig" in notes else "",
-            instrument=dict(instrument),  # type: ignore[call-overload]
-            planned_entries=[str(x) for x in planned],  # type: ignore[union-attr]
+            instrument=dict(instrument),
+            planned_entries=[str(x) for x in planned],
             exit_code=self.integer(run, "exit_code"),
             metadata=self.scalars(run, "metadata", "NXcollection"),
             resumes=self.resumes(run),

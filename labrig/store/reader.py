@@ -70,6 +70,7 @@ def read_run(path: Path | str, load_data: bool = True) -> RunFile:
             continue  # caught between two writes of a live writer: read it again
         _last = (key, load_data, run, shapes)
         break
+    assert _last is not None  # read above, or the cached read matched
     run, shapes = copy.deepcopy(_last[2:])
     run.path = Path(path)
     if run.status == "running":

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+from numpy.typing import NDArray
 
 from labrig.core.errors import InputFileError, StorageError
 from labrig.core.interrupts import reason_for, signum_of
@@ -432,7 +433,7 @@ class RunWriter:
     def add_run_collection(
         self,
         name: str,
-        arrays: Mapping[str, tuple[Sequence[float], str, str]],
+        arrays: Mapping[str, tuple[Sequence[float] | NDArray, str, str]],
         **attrs,
     ) -> None:
         """Store ``/run/<name>``, an NXcollection of 1-D float datasets (``arrays``: name ->
