@@ -65,7 +65,29 @@ _GX, _GW = np.polynomial.legendre.leggauss(16)
 @dataclass(frozen=True)
 class Lattice:
     """The fixed nodes for a sample period: ``x = ln xi`` (1/s), trapezoidal weights ``w``
-    (window and ``phi'`` included; half weight at the lower end), which are instantaneous."""
+    (window and ``phi'`` included; half weight at the lower end), which are instantaneous.
+
+    Parameters
+    ----------
+    dt : float
+        Sample period (s).
+    y : numpy.ndarray
+        The uniform grid, before grading.
+    x : numpy.ndarray
+        The nodes, ``x = phi(y) = ln xi``.
+    w : numpy.ndarray
+        The trapezoidal weights.
+    fast : numpy.ndarray
+        Which nodes lie above ``40/dt`` (instantaneous).
+    y_c : float
+        Where the grading starts (``ln(1 / T)``).
+    x_top : float
+        ``ln(40 / dt)``.
+    x_h : float
+        Centre of the window that hands the nodes over to the instantaneous part.
+    x_end : float
+        The last node's ``x``.
+    """
 
     dt: float
     y: NDArray[np.float64]
@@ -103,7 +125,18 @@ def _phi_inv(z: complex, y_c: float) -> complex:
 
 @lru_cache(maxsize=32)
 def lattice(dt: float) -> Lattice:
-    """The quadrature nodes for sample period ``dt`` (s)."""
+    """The quadrature nodes for sample period ``dt`` (s).
+
+    Parameters
+    ----------
+    dt : float
+        Sample period (s).
+
+    Returns
+    -------
+    Lattice
+        The nodes and weights (cached).
+    """
     y_c = float(np.log(1.0 / (HORIZON_SAMPLES * dt)))
     x_top = float(np.log(XI_TOP_DT / dt))
     x_h = x_top + 6 * WINDOW_SIGMA
@@ -124,6 +157,33 @@ def mu_parts(x: NDArray, x0: float, lam: float) -> tuple[NDArray, NDArray, NDArr
     written with ``e = e^-|l|`` so nothing overflows. ``dmu/dl = -mu (e^l - e^-l)/D``;
     ``dmu/dlam`` at fixed ``l`` ``= cos(pi lam)/D + 2 sin(pi lam)^2/D^2``;
     ``dl/d ln tau = lam``, ``dl/dlam = x - x0``.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        ``ln xi`` (``xi`` in 1/s).
+    x0 : float
+        ``-ln tau``.
+    lam : float
+        Order (``0 < lam < 2``).
+
+    Returns
+    -------
+    mu : numpy.ndarray
+        The density.
+    dmu_dln_tau : numpy.ndarray
+        Its derivative with respect to ``ln tau``.
+    dmu_dlam : numpy.ndarray
+        Its derivative with respect to ``lam``.
+
+    Examples
+    --------
+    For ``lam = 1/2`` the density at ``xi = 1/tau`` is ``1 / (2 pi)``:
+
+    >>> import numpy as np
+    >>> mu, _, _ = mu_parts(np.array([0.0]), 0.0, 0.5)
+    >>> round(float(mu[0]) * 2 * np.pi, 12)
+    1.0
     """
     lv = lam * (np.asarray(x, dtype=float) - x0)
     e = np.exp(-np.abs(lv))
@@ -194,7 +254,15 @@ def _tail_mass(X: float, x0: float, lam: float, above: bool) -> NDArray:
 @dataclass(frozen=True)
 class ModeDerivatives:
     """Derivatives of a :class:`ContinuousModes` with respect to ``(ln tau, lam)``: rows 0 and 1
-    of ``dq`` and ``dc`` (2, M) and of ``dm1``, ``dm2`` (2,)."""
+    of ``dq`` and ``dc`` (2, M) and of ``dm1``, ``dm2`` (2,).
+
+    Parameters
+    ----------
+    dq, dc : numpy.ndarray
+        Derivatives of the poles and residues, (2, M).
+    dm1, dm2 : numpy.ndarray
+        Derivatives of ``direct_m1`` and ``direct_m2``, (2,).
+    """
 
     dq: NDArray[np.complex128]
     dc: NDArray[np.complex128]
@@ -208,6 +276,22 @@ def modes(tau_s: float, lam: float, dt: float) -> tuple[ContinuousModes, ModeDer
     Mode order: the lattice nodes below ``40/dt`` (fixed for ``dt``), then the special modes:
     the complex pair (pole correction and, for ``lam > 1``, the poles of ``G``), the slow-tail
     mode. ``lam = 1`` is the single pole ``1 / (1 + tau s)``.
+
+    Parameters
+    ----------
+    tau_s : float
+        Time constant (s).
+    lam : float
+        Order (``0 < lam < 2``).
+    dt : float
+        Sample period (s).
+
+    Returns
+    -------
+    modes : ContinuousModes
+        The modes.
+    derivatives : ModeDerivatives
+        Their derivatives with respect to ``(ln tau, lam)``.
     """
     lt = float(np.log(tau_s))
     x0 = -lt
