@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     from labrig.analysis.fit import FitResult
     from labrig.analysis.fit_effects import EffectsFit
     from labrig.analysis.records import Record
+    from labrig.commands.fit import CommandUI
     from labrig.commands.report import BuiltReport
     from labrig.runner.execute import ProgressFn
     from labrig.store import RunEntry, RunFile
@@ -567,7 +568,7 @@ def _silent(message: str) -> None:
     pass
 
 
-def _ui(progress: bool):
+def _ui(progress: bool) -> CommandUI:
     """The analysis' :class:`~labrig.commands.fit.CommandUI`: bars on stderr or nothing."""
     if progress:
         from labrig.commands.progress import RichUI

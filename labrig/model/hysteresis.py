@@ -171,20 +171,20 @@ class Shape:
         return dg, dv
 
 
-def _exp_H(x, g, vc):
+def _exp_H(x: NDArray, g: float, vc: float) -> NDArray:
     return g * (x + vc * np.expm1(-x / vc))
 
 
-def _exp_dH_dvc(x, g, vc):
+def _exp_dH_dvc(x: NDArray, g: float, vc: float) -> NDArray:
     z = x / vc
     return g * (np.expm1(-z) + z * np.exp(-z))
 
 
-def _gauss_H(x, g, vc):
+def _gauss_H(x: NDArray, g: float, vc: float) -> NDArray:
     return g * (x - vc * np.sqrt(np.pi) / 2 * special.erf(x / vc))
 
 
-def _gauss_dH_dvc(x, g, vc):
+def _gauss_dH_dvc(x: NDArray, g: float, vc: float) -> NDArray:
     z = x / vc
     return g * (z * np.exp(-z * z) - np.sqrt(np.pi) / 2 * special.erf(z))
 

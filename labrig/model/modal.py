@@ -30,7 +30,7 @@ from functools import cached_property
 from types import ModuleType
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from labrig.core.blas import single_thread_blas
 from labrig.model.accel import kernels
@@ -246,7 +246,7 @@ class DiscreteBank:
     order: tuple[NDArray[np.intp], ...] = ()
 
     @classmethod
-    def from_arrays(cls, a, b0, b1, c) -> DiscreteBank:
+    def from_arrays(cls, a: ArrayLike, b0: ArrayLike, b1: ArrayLike, c: ArrayLike) -> DiscreteBank:
         """A bank from per-mode arrays (real modes grouped apart from complex ones).
 
         Parameters
@@ -577,7 +577,13 @@ def unscaled_state(bank: DiscreteBank, w_r: NDArray, w_c: NDArray, u_last: float
     return out
 
 
-def _run_bank_multi_numpy(bank, u, extra, states, up):
+def _run_bank_multi_numpy(
+    bank: DiscreteBank,
+    u: NDArray,
+    extra: NDArray | None,
+    states: list[list[NDArray]],
+    up: NDArray,
+) -> tuple[NDArray[np.float64], list[list[NDArray]]]:
     """:func:`run_bank_multi` with the numpy block realisation, one output row at a time."""
     rows = [None] if extra is None else [None, *list(extra)]
     n, kc = u.shape
@@ -598,7 +604,9 @@ def _run_bank_multi_numpy(bank, u, extra, states, up):
     return y, out_states
 
 
-def _run_bank(bank, u, state, u_prev, block):
+def _run_bank(
+    bank: DiscreteBank, u: NDArray, state: list[NDArray] | None, u_prev: float, block: int
+) -> tuple[NDArray[np.float64], list[NDArray]]:
     n = u.size
     state = bank.initial_state() if state is None else state
     feed = bank.feedthrough

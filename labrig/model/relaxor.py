@@ -41,6 +41,7 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass
 from functools import lru_cache
+from types import ModuleType
 
 import numpy as np
 from numpy.polynomial import chebyshev as C
@@ -67,7 +68,7 @@ from labrig.model.modal import (
 )
 
 
-def _scipy_signal():
+def _scipy_signal() -> ModuleType:
     """``scipy.signal``, imported on first use: it costs about a second of CPU to import (it
     loads scipy.stats), which the fast paths never need."""
     from scipy import signal

@@ -428,7 +428,7 @@ class Rig:
         self.ramp_to_zero()
 
     @contextmanager
-    def zero_on_error(self):
+    def zero_on_error(self) -> Iterator[Rig]:
         """``with rig.zero_on_error(): ...`` brings the output to 0 V on any exception."""
         try:
             yield self
@@ -457,5 +457,5 @@ class Rig:
     def __enter__(self) -> Rig:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()

@@ -7,6 +7,7 @@ child process with a time limit by :func:`labrig.store.reader.read_run`."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TypeVar
@@ -122,7 +123,7 @@ class RunFile:
     def __getitem__(self, name: str) -> RunEntry:
         return self.entries[name]
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[RunEntry]:
         return iter(self.entries.values())
 
     def __len__(self) -> int:
