@@ -10,11 +10,13 @@ go to stderr).
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 from typing import Any
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from labrig.cli.common import (
@@ -122,7 +124,7 @@ def diagnose_command(
         out=out_dir,
         overwrite=overwrite,
         say=err.print,
-        progress=lambda msg: err.print(f"[dim]{msg}[/dim]"),
+        progress=StepClock(err),
         workers=available_workers() if workers is None else workers,
     )
     hint = result.hint()
@@ -137,10 +139,25 @@ def diagnose_command(
     return 0
 
 
+class StepClock:
+    """The diagnosis' progress on stderr, each step with the time since the command began:
+    ``[  12.3 s] round 1: ranking 9 candidates``."""
+
+    def __init__(self, console: Console):
+        self.console = console
+        self.start = time.monotonic()
+
+    def __call__(self, msg: str) -> None:
+        elapsed = time.monotonic() - self.start
+        self.console.print(f"[dim]\\[{elapsed:6.1f} s] {escape(msg)}[/dim]")
+
+
 def print_diagnosis(doc: dict[str, Any], name: str) -> None:
     """The diagnosis as tables: NRMSE before and after, the effects added, the candidates, the
     verdict."""
     con = Console()
+    if doc.get("headline"):
+        con.print(f"[bold]{escape(doc['headline'])}[/bold]")
     t = Table(title=f"diagnose {name}")
     t.add_column("")
     t.add_column("NRMSE (%)", justify="right")
@@ -154,11 +171,17 @@ def print_diagnosis(doc: dict[str, Any], name: str) -> None:
     else:
         con.print("no effect added")
     c = Table(title="candidates")
+    c.add_column("round", justify="right")
     c.add_column("effect")
     c.add_column("held-out (%)", justify="right")
     c.add_column("evidence")
+    last = None
     for x in doc["candidates"]:
         h = x["heldout_nrmse_pct"]
-        c.add_row(x["effect"], "-" if h is None else f"{h:.3g}", x["evidence"])
+        rnd = x.get("round")
+        if last is not None and rnd != last:
+            c.add_section()  # a rule between rounds
+        last = rnd
+        c.add_row(str(rnd or ""), x["effect"], "-" if h is None else f"{h:.3g}", x["evidence"])
     con.print(c)
     con.print(f"[bold]verdict[/bold]: {doc['verdict']}")

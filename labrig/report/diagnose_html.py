@@ -89,6 +89,7 @@ def diagnosis_context(d: Diagnosis, records: list[Record], title: str) -> dict[s
         "num": number,
         "settled": d.classification in ("explained", "consistent_with_noise"),
         "verdict": d.verdict,
+        "headline": d.headline,
         "per_entry": [(k, v, after.get(k)) for k, v in d.before["per_entry"].items()],
         "before": d.before,
         "after": d.after,

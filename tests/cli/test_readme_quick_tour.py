@@ -22,8 +22,10 @@ from __future__ import annotations
 import re
 import shlex
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -73,6 +75,32 @@ def their_csv(run_file: Path, out: Path) -> None:
         np.savetxt(f, rows, fmt="%.9g", delimiter=",")
 
 
+def run_live(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    """``labrig run ... --live`` as a user runs it: the run ends and its view stays on until
+    Ctrl-C; the test presses Ctrl-C (SIGINT) once the terminal (stderr) says the finished run is
+    being served, and the command must then exit with the run's code (0). Bounded: 10 minutes."""
+    proc = subprocess.Popen(
+        [str(EXE), *args[1:]], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    said: list[str] = []
+    deadline = time.monotonic() + 600
+    assert proc.stderr is not None
+    try:
+        while time.monotonic() < deadline:
+            line = proc.stderr.readline()
+            if not line:  # the command ended without holding the view
+                break
+            said.append(line)
+            if "serving the finished run" in line:
+                proc.send_signal(signal.SIGINT)
+                break
+        out, rest = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, "".join(said) + rest)
+
+
 def run_tour(tmp_path: Path, fast: bool, analysis: bool = True) -> None:
     commands, python = tour()
     if not analysis:
@@ -93,9 +121,12 @@ def run_tour(tmp_path: Path, fast: bool, analysis: bool = True) -> None:
             assert first_run is not None
             their_csv(first_run, tmp_path / "their.csv")
         args = shlex.split(command, comments=True)
-        res = subprocess.run(
-            [str(EXE), *args[1:]], cwd=tmp_path, capture_output=True, text=True, timeout=7200
-        )
+        if "--live" in args:
+            res = run_live(args, tmp_path)
+        else:
+            res = subprocess.run(
+                [str(EXE), *args[1:]], cwd=tmp_path, capture_output=True, text=True, timeout=7200
+            )
         assert res.returncode == 0, f"{command}\n{res.stdout}\n{res.stderr}"
         assert "Traceback" not in res.stderr, command
         if args[1] == "run" and first_run is None:

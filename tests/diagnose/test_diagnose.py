@@ -31,7 +31,7 @@ from labrig.studies.campaign import (
 #: kernel, instantaneous loss power vs a measured temperature)
 CASES = {k: v for k, v in STUDY_CASES.items() if k not in ("none", "cubic_term")}
 
-KEYS = {"before", "after", "effects_added", "candidates", "verdict"}
+KEYS = {"before", "after", "effects_added", "candidates", "headline", "verdict"}
 
 
 def _check_contract(doc: dict) -> None:
@@ -43,8 +43,10 @@ def _check_contract(doc: dict) -> None:
         assert set(e) == {"effect", "params", "evidence"}
         assert isinstance(e["evidence"], str) and e["evidence"]
     for c in doc["candidates"]:
-        assert set(c) == {"effect", "heldout_nrmse_pct", "evidence"}
+        assert set(c) == {"effect", "round", "heldout_nrmse_pct", "evidence"}
+        assert isinstance(c["round"], int) and c["round"] >= 1
     assert isinstance(doc["verdict"], str) and len(doc["verdict"]) > 40
+    assert doc["headline"] and "\n" not in doc["headline"]
     json.dumps(doc)
 
 
@@ -499,6 +501,7 @@ def test_also_accepts_only_structural_effects(tmp_path):
 
 
 # two diagnoses of a hybrid campaign: 93 s on an idle machine, over 300 s with both cores busy
+@pytest.mark.slow  # the default tier's twin: test_also_accepts_only_structural_effects
 @pytest.mark.timeout(900)
 def test_also_adds_the_structural_effect_to_the_candidates(tmp_path, monkeypatch, capsys):
     import labrig.analysis.load as load

@@ -25,6 +25,7 @@ HEATING = {
 }
 
 
+@pytest.mark.slow  # a minute; thermal_drift's recovery on a short campaign: tests/diagnose
 @pytest.mark.timeout(600)
 def test_thermal_drift_is_found_in_imported_csv_files(tmp_path):
     recs = bench_campaign([HEATING], seed=3)

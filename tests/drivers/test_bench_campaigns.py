@@ -39,7 +39,7 @@ def labrig_cmd() -> list[str]:
     return [str(exe)] if exe.exists() else [sys.executable, "-m", "labrig.cli"]
 
 
-@pytest.mark.parametrize("drive", ["bipolar", "biased"])
+@pytest.mark.parametrize("drive", ["bipolar", pytest.param("biased", marks=pytest.mark.slow)])
 def test_labrig_run_plays_the_protocol_file_on_the_bipolar_rig(tmp_path, drive):
     """``labrig run`` exits 0; the run file holds every entry, its voltage is the plan's
     (ramp-in, settle and ramp back to 0 V included) and the amplifier followed it to -150 V."""

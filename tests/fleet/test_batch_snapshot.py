@@ -69,6 +69,7 @@ def test_fit_and_diagnosis_of_a_row_see_one_snapshot(run_copy: Path, tmp_path: P
     assert row["n_entries"] == 3
 
 
+@pytest.mark.slow  # the default tier's twin: test_fit_and_diagnosis_of_a_row_see_one_snapshot
 def test_a_run_file_being_written_is_not_analysed(run_copy: Path, tmp_path: Path):
     live = run_copy.parent / "live.h5"
     writer = start_writer(live)

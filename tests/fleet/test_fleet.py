@@ -128,6 +128,7 @@ def test_batch_diagnose_equals_the_one_by_one_commands_on_six_runs(tmp_path):
     assert "Control charts" in page and "data:image/png;base64," in page
 
 
+@pytest.mark.slow  # a local Dask cluster; the serial batch tests stay in the default tier
 def test_batch_fit_on_a_local_cluster_equals_serial(fleet, tmp_path):
     pytest.importorskip("distributed")
     serial, dask = tmp_path / "serial", tmp_path / "dask"
@@ -182,6 +183,7 @@ def test_bad_input_is_exit_2(fleet, tmp_path):
     assert res.exit_code == 2
 
 
+@pytest.mark.slow
 def test_rerun_skips_only_unchanged_runs(fleet, tmp_path):
     runs = tmp_path / "runs"
     shutil.copytree(fleet, runs, ignore=shutil.ignore_patterns("setup", "truth.json"))
@@ -214,6 +216,20 @@ def test_rerun_skips_only_unchanged_runs(fleet, tmp_path):
     # other options: nothing reused
     other = invoke("batch", "fit", *files, "--out", out, "--serial", "--json")
     assert json.loads(other.stdout)["skipped"] == 0
+
+
+def test_rerun_skips_an_unchanged_run_and_refits_a_changed_one(fleet, tmp_path):
+    """The default tier's twin of the test above: one run, fitted, skipped, then its content
+    replaced by another actuator's run and fitted again."""
+    runs = tmp_path / "runs"
+    shutil.copytree(fleet, runs, ignore=shutil.ignore_patterns("setup", "truth.json"))
+    first, other = sorted(runs.glob("*.h5"))[:2]
+    out = tmp_path / "out"
+    args = ["batch", "fit", first, "--out", out, "--serial", "--no-heldout", "--json"]
+    assert json.loads(invoke(*args).stdout)["skipped"] == 0
+    assert json.loads(invoke(*args).stdout)["skipped"] == 1
+    shutil.copyfile(other, first)
+    assert json.loads(invoke(*args).stdout)["skipped"] == 0
 
 
 def test_without_dask_serial_with_a_note_and_without_pyarrow_csv(fleet, tmp_path):

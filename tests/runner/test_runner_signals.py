@@ -135,10 +135,11 @@ RAMP_LIMIT_V_PER_S = 0.5 * 0.18 / (6e-6 * 1.7)
     [
         (signal.SIGINT, 1),
         (signal.SIGTERM, 1),
-        (signal.SIGHUP, 1),
-        (signal.SIGQUIT, 1),
-        (signal.SIGINT, 5),
-        (signal.SIGHUP, 3),
+        # the default tier keeps SIGINT and SIGTERM (and the closed terminal below: SIGHUP)
+        pytest.param(signal.SIGHUP, 1, marks=pytest.mark.slow),
+        pytest.param(signal.SIGQUIT, 1, marks=pytest.mark.slow),
+        pytest.param(signal.SIGINT, 5, marks=pytest.mark.slow),
+        pytest.param(signal.SIGHUP, 3, marks=pytest.mark.slow),
     ],
     ids=["SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT", "SIGINTx5", "SIGHUPx3"],
 )

@@ -219,7 +219,9 @@ ALL = (
     + [f"edited_{e}" for e in EDITS if e not in ADDITIONS]
     + [f"written_{e}" for e in EDITS]
 )
-FAST = ALL[::FAST_STRIDE]
+#: every FAST_STRIDE-th case; zeroed_22 and zeroed_43 (zeroed blocks that make libhdf5 loop
+#: until the reader's limit stops it, 40 s each) only in the slow tier's whole corpus
+FAST = [n for n in ALL[::FAST_STRIDE] if n not in ("zeroed_22", "zeroed_43")]
 
 
 def test_the_corpus_is_large_enough():

@@ -44,6 +44,7 @@ from labrig.analysis.diagnose.verdict import (
     AT_FLOOR,
     creep_added_sentence,
     creep_sentence,
+    headline,
     verdict,
 )
 from labrig.analysis.engine import LAM_GAP, SharedSimulations
@@ -94,6 +95,8 @@ class Diagnosis:
     after_creep_pct_per_decade: float | None = None
     elapsed_s: float = 0.0
     messages: list[str] = field(default_factory=list)
+    #: the verdict in one line (:func:`~labrig.analysis.diagnose.verdict.headline`)
+    headline: str = ""
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -101,6 +104,7 @@ class Diagnosis:
             "after": self.after,
             "effects_added": self.effects_added,
             "candidates": self.candidates,
+            "headline": self.headline,
             "verdict": self.verdict,
         }
 
@@ -418,6 +422,7 @@ def _candidates_json(rounds: list[list[Candidate]]) -> list[dict[str, Any]]:
     return [
         {
             "effect": c.effect,
+            "round": c.round + 1,
             "heldout_nrmse_pct": c.heldout_nrmse_pct,
             "evidence": c.evidence,
         }
@@ -482,6 +487,7 @@ def result(
         candidates=_candidates_json(rounds),
         verdict=text,
         classification=cls,
+        headline=headline(cls, before.evidence, after.evidence, sb, sa, [c.effect for c in added]),
         evidence_before=before.evidence,
         evidence_after=after.evidence,
         predictions_before=before.problem.predictions(bf.base, bf.effects),

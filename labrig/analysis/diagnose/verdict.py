@@ -281,3 +281,30 @@ def _effects_added(
         f"Partially explained: {head}, but {'; '.join(why)}.{conf}"
         + (f" What remains: {rest}." if rest and not at_floor else "")
     )
+
+
+#: the headline's words for each verdict class
+HEADLINE_WORDS = {
+    "consistent_with_noise": "Consistent with noise",
+    "unexplained": "Unexplained",
+    "explained": "Explained",
+    "partially_explained": "Partially explained",
+}
+
+
+def headline(
+    cls: str, ev_before: Evidence, ev_after: Evidence, before: dict, after: dict, added: list[str]
+) -> str:
+    """The verdict in one line, before its paragraph: the class, what was added, the held-out
+    NRMSE before and after (%) and how many times the noise floor (%) remains."""
+    hb, ha = before["heldout_nrmse_pct"], after["heldout_nrmse_pct"]
+    words = HEADLINE_WORDS[cls]
+    if not added:
+        return (
+            f"{words}: nothing added; held-out NRMSE {hb:.3g} % is {ev_before.ratio:.2g}x the "
+            f"noise floor ({ev_before.floor_pct:.3g} %)."
+        )
+    return (
+        f"{words}: added {' then '.join(added)}; held-out NRMSE {hb:.3g} % -> {ha:.3g} %, "
+        f"{ev_after.ratio:.2g}x the noise floor ({ev_after.floor_pct:.3g} %)."
+    )
