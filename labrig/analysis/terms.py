@@ -239,7 +239,7 @@ def empirical_effect(keys: Sequence[str], scales: TermScales) -> EmpiricalTerms:
     if unknown:
         raise ValueError(f"unknown terms {unknown}; known: {', '.join(lib)}")
     # Term's fields are frozen, TermLike's protocol attributes settable (docs/architecture.md,
-    # "Types": make them read-only properties)
+    # "Types and docstrings": make them read-only properties)
     return EmpiricalTerms([lib[k] for k in keys], scales.strain_ref_ue)  # type: ignore[misc]
 
 
