@@ -172,7 +172,11 @@ def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return d
 
 
-@pytest.mark.parametrize(("where", "expected"), SELECTIONS, ids=lambda x: str(x))
+@pytest.mark.parametrize(
+    ("where", "expected"),
+    SELECTIONS,
+    ids=lambda x: repr(sorted(x)) if isinstance(x, set) else str(x),
+)
 def test_where_selects_the_right_files(folder: Path, where: list[str], expected: set[str]):
     args = [str(folder), "--json"]
     for w in where:
@@ -387,7 +391,7 @@ def mixed(tmp_path_factory: pytest.TempPathFactory) -> Path:
         (["seed>=9223372036854775783"], {"big25.h5"}),
         (["seed<9223372036854775783", "protocol=big"], {"big26.h5"}),
     ],
-    ids=str,
+    ids=lambda x: repr(sorted(x)) if isinstance(x, set) else str(x),
 )
 def test_status_as_printed_and_seeds_exactly(mixed: Path, where: list[str], expected: set[str]):
     args = [str(mixed), "--json"]

@@ -1,9 +1,9 @@
-"""The paper's section-2 figures: files written, valid PNGs, fast enough for CI."""
+"""The paper's section-2 figures: files written, valid PNGs (their cost is a benchmark's
+business, not a timed test's)."""
 
 from __future__ import annotations
 
 import struct
-import time
 from pathlib import Path
 
 import pytest
@@ -17,26 +17,23 @@ EXPECTED = {
     "fig4_input_output.png",
     "fig5_step_response.png",
 }
-TIME_BUDGET_S = 20.0  # about 3 s on a 2-core CI runner; generous for a loaded machine
 
 
 @pytest.fixture(scope="module")
-def written(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[Path], float]:
+def written(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[Path]]:
     out = tmp_path_factory.mktemp("figs") / "nested" / "dir"  # must be created
-    t0 = time.perf_counter()
-    paths = write_model_figures(out)
-    return out, paths, time.perf_counter() - t0
+    return out, write_model_figures(out)
 
 
-def test_writes_expected_files(written: tuple[Path, list[Path], float]) -> None:
-    out, paths, _ = written
+def test_writes_expected_files(written: tuple[Path, list[Path]]) -> None:
+    out, paths = written
     assert {p.name for p in paths} == EXPECTED
     assert len(paths) == len(EXPECTED)
     assert all(p.parent == out for p in paths)
     assert {p.name for p in out.iterdir()} == EXPECTED
 
 
-def test_each_file_is_a_valid_png(written: tuple[Path, list[Path], float]) -> None:
+def test_each_file_is_a_valid_png(written: tuple[Path, list[Path]]) -> None:
     for p in written[1]:
         data = p.read_bytes()
         assert len(data) > 10_000, p  # a real plot, not an empty canvas
@@ -47,7 +44,3 @@ def test_each_file_is_a_valid_png(written: tuple[Path, list[Path], float]) -> No
         width, height = struct.unpack(">II", data[16:24])
         assert 400 <= width <= 3000 and 300 <= height <= 3000, (p, width, height)
         assert data[-12:] == b"\x00\x00\x00\x00IEND\xaeB`\x82", p
-
-
-def test_within_time_budget(written: tuple[Path, list[Path], float]) -> None:
-    assert written[2] < TIME_BUDGET_S
