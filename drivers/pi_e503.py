@@ -74,11 +74,12 @@ class GCSLink:
         self, url: str, baudrate: int = 115200, timeout_s: float = 0.5, device: str = "amplifier"
     ):
         self.url, self.baudrate, self.timeout_s, self.device = url, baudrate, timeout_s, device
-        self._ser: serial.SerialBase | None = None
+        self._ser: serial.Serial | None = None
 
-    def open(self) -> None:
+    def open(self) -> serial.Serial:
+        """The link, opened now unless it is open."""
         if self._ser is not None:
-            return
+            return self._ser
         try:
             self._ser = serial.serial_for_url(
                 self.url,
@@ -92,6 +93,7 @@ class GCSLink:
         if sock is not None:
             with contextlib.suppress(OSError):
                 sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        return self._ser
 
     def close(self) -> None:
         if self._ser is None:
@@ -103,7 +105,7 @@ class GCSLink:
             with contextlib.suppress(OSError):
                 sock.shutdown(socket.SHUT_RDWR)
             sock.close()
-            ser._socket = None
+            ser._socket = None  # type: ignore[attr-defined]  # socket:// links' own attribute
             ser.is_open = False
             return
         with contextlib.suppress(Exception):
@@ -115,17 +117,19 @@ class GCSLink:
 
     def send(self, command: str, operation: str) -> None:
         """Write one command line (no answer expected)."""
-        self.open()
+        ser = self.open()
         try:
-            self._ser.reset_input_buffer()  # drop a late answer to an earlier command
-            self._ser.write((command + "\n").encode("ascii"))
-            self._ser.flush()
+            ser.reset_input_buffer()  # drop a late answer to an earlier command
+            ser.write((command + "\n").encode("ascii"))
+            ser.flush()
         except (serial.SerialException, OSError) as e:
             raise self._io_error(f"{operation} ({command})", e) from e
 
     def _readline(self, command: str, operation: str) -> str:
+        ser = self._ser
+        assert ser is not None, "send() opened the link"
         try:
-            raw = self._ser.read_until(b"\n")
+            raw = ser.read_until(b"\n")
         except (serial.SerialException, OSError) as e:
             raise self._io_error(f"{operation} ({command})", e) from e
         if not raw.endswith(b"\n"):

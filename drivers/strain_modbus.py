@@ -83,7 +83,7 @@ class ModbusConditioner:
         self.device = (
             f"conditioner (Modbus {settings.transport} {self.address} unit {settings.unit})"
         )
-        self._client = None
+        self._client: ModbusTcpClient | ModbusSerialClient | None = None
         self._gain = float(settings.gain)
         self._idn: str | None = None
 
@@ -97,7 +97,9 @@ class ModbusConditioner:
                 host, _, port = self.address.rpartition(":")
                 if not host or not port.isdigit():
                     raise DeviceError(self.device, operation, "address must be host:port")
-                client = ModbusTcpClient(host, port=int(port), timeout=s.timeout_s, retries=0)
+                client: ModbusTcpClient | ModbusSerialClient = ModbusTcpClient(
+                    host, port=int(port), timeout=s.timeout_s, retries=0
+                )
             else:
                 client = ModbusSerialClient(
                     self.address,
@@ -140,7 +142,7 @@ class ModbusConditioner:
             raise DeviceError(self.device, where, f"link failure: {e}") from e
         if resp.isError():
             code = getattr(resp, "exception_code", None)
-            meaning = EXCEPTION_CODES.get(code, "unknown")
+            meaning = EXCEPTION_CODES.get(code, "unknown") if code is not None else "unknown"
             raise DeviceError(self.device, where, f"Modbus exception {code} ({meaning})")
         return resp
 

@@ -404,6 +404,7 @@ class _BoucWenFit:
                 p.w[:, None, None] * coef[None],
             )
         rtr = float(M[-1, -1])
+        out: tuple[NDArray, NDArray, NDArray | None]
         if not sens:
             out = (x, np.array([np.sqrt(rtr), 0.0, 0.0]), None)
         else:
@@ -575,7 +576,8 @@ def fit_baseline(
             return _fit_pi(items, n_ops, offset)
         if kind == "sindy":
             return fit_sindy([(q.seq, segs) for q, segs in items], offset, cache=sindy_cache)
-        return _fit_bw(items, None if warm is None else (warm.beta, warm.gamma), offset)
+        start = (warm.beta, warm.gamma) if isinstance(warm, BoucWen) else None  # warm: a BoucWen
+        return _fit_bw(items, start, offset)
 
     def predictions(model) -> dict[str, NDArray]:
         out = {}

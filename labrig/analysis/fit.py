@@ -214,6 +214,13 @@ def _one_frequency(records: Sequence[Record]) -> float | None:
     return min(fs)
 
 
+#: what every identification of one campaign shares: chain, method, family, initial
+#: parameters, warm-up (s), offset, bounds (the arguments of :func:`_fit_once` after ``scored``)
+Common = tuple[
+    bool, str, OperatorFamily, ModelParams | None, float, bool, dict[str, tuple[float, float]]
+]
+
+
 def _fit_once(
     records: Sequence[Record],
     scored: Sequence[str],
@@ -383,7 +390,8 @@ def _in_sample(
     """NRMSE per scored entry, the fitted offsets (``offset``) and the predictions (offsets
     included)."""
     preds = camp.predictions(th, nuisance=False)
-    per_entry, offsets = {}, {} if offset else None
+    per_entry: dict[str, float] = {}
+    offsets: dict[str, float] | None = {} if offset else None
     for g in (g for segs in camp.segments for g in segs):
         p = preds[g.name]
         c = float(np.mean(g.measured_ue - p[g.i0 :])) if offset else 0.0
@@ -397,7 +405,7 @@ def _in_sample(
 def _heldout(
     records: Sequence[Record],
     scored: list[str],
-    common: tuple,
+    common: Common,
     th: dict[str, float],
     progress: Progress | None,
     parent: Problem,
@@ -431,7 +439,7 @@ def _chord_fold(
     records: Sequence[Record],
     rest: list[str],
     th: dict[str, float],
-    common: tuple,
+    common: Common,
 ) -> dict[str, float] | None:
     """A held-out fold refitted from the full fit ``th`` by the chord method
     (:func:`~labrig.analysis.engine.chord_refit`), or ``None`` (then by least squares)."""

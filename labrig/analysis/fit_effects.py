@@ -83,7 +83,7 @@ def resolve_effects(names: Sequence[str], context: dict | None = None) -> list[E
     with ``context`` (:func:`~labrig.analysis.extended.effect_context`; default: the
     library's defaults, enough to check names)."""
     lib, ok = library(**(context or {})), known_effects()
-    out = []
+    out: list[Effect] = []
     for n in names:
         if n not in ok:
             raise ValueError(f"{n!r} is not a library effect; choose from: {', '.join(ok)}")

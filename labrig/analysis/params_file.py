@@ -151,9 +151,9 @@ def fitted_effects(
     values: dict[str, dict[str, float]] = {}
     if not check_params:
         return effects, values
-    for eff, e in zip(effects, listed, strict=True):
+    for eff, item in zip(effects, listed, strict=True):
         want = [q.name for q in eff.params]
-        p = e["params"]
+        p = item["params"]
         if sorted(p) != sorted(want) or not all(
             isinstance(p[k], int | float) and math.isfinite(p[k]) for k in want
         ):

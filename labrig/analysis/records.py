@@ -80,7 +80,8 @@ class Record:
     ) -> Record:
         """A record with time ``n / rate_hz`` and no auxiliary channels."""
         v = np.asarray(voltage_V, dtype=np.float64)
-        return cls(name, rate_hz, np.arange(v.size) / float(rate_hz), v, strain_ue, {}, hold, meta)
+        s = np.asarray(strain_ue, dtype=np.float64)
+        return cls(name, rate_hz, np.arange(v.size) / float(rate_hz), v, s, {}, hold, meta)
 
     @property
     def n(self) -> int:

@@ -249,9 +249,9 @@ def free_run_numpy(
     res = out.tolist()
     for i in range(n):
         sa = abs(s)
-        z = (B[i] + 2.0 * c * sa) * h
-        p1, p2 = _phis(z)
-        s = (1.0 + z * p1) * s + h * (p1 * (A0[i] - c * s * sa) + p2 * DA[i])
+        zi = (B[i] + 2.0 * c * sa) * h
+        q1, q2 = _phis(zi)
+        s = (1.0 + zi * q1) * s + h * (q1 * (A0[i] - c * s * sa) + q2 * DA[i])
         if not abs(s) <= limit_ue:
             s = math.copysign(limit_ue, s) if s == s else limit_ue
         res[i] = s
@@ -536,7 +536,8 @@ class _Scorer:
     def __call__(self, model: SindyBaseline) -> tuple[float, dict[str, float]]:
         """Mean training NRMSE (%) of the free run (:func:`~labrig.analysis.metrics.nrmse_pct`
         per segment) and each entry's offset (0 without ``offset``)."""
-        vals, offs = [], {}
+        vals: list[float] = []
+        offs: dict[str, float] = {}
         for seq, names, idx, n, starts, meas, span in self.parts:
             res = meas - model.predict(seq.voltage_V, seq.rest_V, seq.rate_hz)[idx]
             if self.offset:

@@ -159,7 +159,7 @@ def detect_mains_hz(records: Sequence[Record]) -> float | None:
             for fm in MAINS_CANDIDATES_HZ:
                 if abs(f - fm) <= max(1.0, 2 * bin_hz):
                     count[fm] += 1
-    best = max(count, key=count.get)
+    best = max(count, key=lambda fm: count[fm])
     if count[best] == 0:
         return None
     return best

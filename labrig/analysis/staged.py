@@ -171,15 +171,16 @@ def staged_fit(
     ``singles``: each record simulated on its own with its segment. ``run``: the whole run
     (chained): stages 2 and 3 then simulate it up to their last record."""
     kinds = classify(records)
-    periodic = [i for i in kinds if i.periodic and i.f_hz is not None]
-    if not periodic:
+    #: each periodic entry's drive frequency (Hz), by index
+    freq = {i.index: i.f_hz for i in kinds if i.periodic and i.f_hz is not None}
+    if not freq:
         raise ValueError(
             "staged identification needs periodic entries (sines at known or detectable "
             "frequencies); use method='global'"
         )
-    f_low = min(i.f_hz for i in periodic)
-    low = [i.index for i in periodic if i.f_hz <= 1.1 * f_low]
-    high = [i.index for i in periodic if i.f_hz > 1.1 * f_low]
+    f_low = min(freq.values())
+    low = [i for i, f in freq.items() if f <= 1.1 * f_low]
+    high = [i for i, f in freq.items() if f > 1.1 * f_low]
     free_static = ["alpha0_ue_per_V", "gamma_ue_per_V"]
     free_static += [] if family.shape == "linear" else ["vc_V"]
 
@@ -187,7 +188,7 @@ def staged_fit(
     wins = []
     for i in low:
         r = records[i]
-        sl = last_period(r.n, r.rate_hz, kinds[i].f_hz)
+        sl = last_period(r.n, r.rate_hz, freq[i])
         assert sl is not None
         wins.append(slice(max(sl.start, singles[i].segments[0].i0), sl.stop))
     static = _fit_static([records[i] for i in low], [singles[i] for i in low], family, wins, bounds)
@@ -214,7 +215,7 @@ def staged_fit(
             "(lam_d = 1.2, tau_d = 1e-5 s, negligible)"
         )
         return dict(th2, **NEGLIGIBLE_GD), nfev
-    f_high = max(kinds[i].f_hz for i in high)
+    f_high = max(freq[i] for i in high)
     w_high = 2 * np.pi * f_high
     prob3 = base_problem(
         _stage_problem_input(records, singles, high, run, warmup_s),

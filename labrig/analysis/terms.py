@@ -238,7 +238,9 @@ def empirical_effect(keys: Sequence[str], scales: TermScales) -> EmpiricalTerms:
     unknown = [k for k in keys if k not in lib]
     if unknown:
         raise ValueError(f"unknown terms {unknown}; known: {', '.join(lib)}")
-    return EmpiricalTerms([lib[k] for k in keys], scales.strain_ref_ue)
+    # Term's fields are frozen, TermLike's protocol attributes settable (docs/architecture.md,
+    # "Types and docstrings": make them read-only properties)
+    return EmpiricalTerms([lib[k] for k in keys], scales.strain_ref_ue)  # type: ignore[misc]
 
 
 # -- the regression data of a fitted extended-model problem ----------------------------------

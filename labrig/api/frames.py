@@ -27,14 +27,47 @@ XARRAY_MISSING = (
 
 
 def column_name(channel: str, units: str) -> str:
-    """``strain`` in ``ue`` -> ``strain_ue``; a channel without units keeps its name."""
+    """``strain`` in ``ue`` -> ``strain_ue``; a channel without units keeps its name.
+
+    Parameters
+    ----------
+    channel : str
+        The channel's name.
+    units : str
+        Its unit (characters other than letters and digits dropped).
+
+    Returns
+    -------
+    str
+        The column's name.
+
+    Examples
+    --------
+    >>> column_name("strain", "ue")
+    'strain_ue'
+    >>> column_name("command_voltage", "V")
+    'command_voltage_V'
+    >>> column_name("index", "")
+    'index'
+    """
     u = re.sub(r"[^A-Za-z0-9]+", "", units or "")
     return f"{channel}_{u}" if u else channel
 
 
 def step_values(e: RunEntry) -> dict[str, Any]:
     """The scalar keys of an entry's step definition (``kind``, ``amplitude_V``,
-    ``frequency_hz``, ``cycles``, ``rest_after_s``...; their units are in their names)."""
+    ``frequency_hz``, ``cycles``, ``rest_after_s``...; their units are in their names).
+
+    Parameters
+    ----------
+    e : labrig.store.RunEntry
+        An entry of a run file.
+
+    Returns
+    -------
+    dict
+        Key -> scalar value (str, int, float or bool).
+    """
     return {
         k: v
         for k, v in e.step.items()
@@ -48,7 +81,20 @@ def entries_frame(entries: Sequence[RunEntry], attrs: Mapping[str, Any]) -> pd.D
     then the entry's step definition, one column per scalar key (:func:`step_values`: ``kind``,
     ``amplitude_V``, ``frequency_hz``..., missing where an entry's step lacks the key; a key
     that is also a channel's column keeps the channel). ``attrs``: ``units`` and
-    ``long_names`` by column, plus ``attrs`` given."""
+    ``long_names`` by column, plus ``attrs`` given.
+
+    Parameters
+    ----------
+    entries : sequence of labrig.store.RunEntry
+        The entries, with their samples.
+    attrs : mapping
+        Copied into ``DataFrame.attrs``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The samples.
+    """
     import pandas as pd
 
     frames, units, long_names = [], {"entry": ""}, {"entry": "entry name"}
@@ -94,7 +140,20 @@ def _step_coordinate(entries: Sequence[RunEntry], key: str) -> np.ndarray | None
 def entries_dataset(entries: Sequence[RunEntry], attrs: Mapping[str, Any]) -> xr.Dataset:
     """The entries as one Dataset with dimensions ``entry`` and ``sample``: each channel a
     variable (NaN past an entry's last sample), ``time`` (s) a coordinate of both, and per
-    entry ``n_samples``, ``rate_hz``, ``kind``, ``amplitude_V``, ``frequency_hz``."""
+    entry ``n_samples``, ``rate_hz``, ``kind``, ``amplitude_V``, ``frequency_hz``.
+
+    Parameters
+    ----------
+    entries : sequence of labrig.store.RunEntry
+        The entries, with their samples.
+    attrs : mapping
+        The Dataset's attrs.
+
+    Returns
+    -------
+    xarray.Dataset
+        The samples.
+    """
     try:
         import xarray as xr
     except ImportError:

@@ -32,6 +32,7 @@ if TYPE_CHECKING:
     from labrig.analysis.fit import FitResult
     from labrig.analysis.fit_effects import EffectsFit
     from labrig.analysis.records import Record
+    from labrig.commands.fit import CommandUI
     from labrig.commands.report import BuiltReport
     from labrig.runner.execute import ProgressFn
     from labrig.store import RunEntry, RunFile
@@ -49,7 +50,35 @@ __all__ = ["EntryInfo", "Run", "as_json", "open", "run", "runs"]
 @dataclass(frozen=True)
 class EntryInfo:
     """One entry of a run without its samples: name, position, step kind and definition,
-    status, sample rate (Hz), number of samples, duration (s, ``(samples - 1) / rate``)."""
+    status, sample rate (Hz), number of samples, duration (s, ``(samples - 1) / rate``).
+
+    Parameters
+    ----------
+    name : str
+        The entry's name (``sine_100V_1Hz``).
+    index : int
+        Its position in the run, from 0.
+    title : str
+        Its title (the step's description).
+    kind : str
+        The step kind (``sine``, ``offset_sine``, ``ramp``...).
+    status : str
+        ``complete``, ``aborted``, ``failed`` or ``running``.
+    reason : str
+        Why it ended early (``""`` when complete).
+    rate_hz : float
+        Sample rate (Hz).
+    samples : int
+        Number of samples recorded.
+    duration_s : float
+        ``(samples - 1) / rate_hz`` (s), 0 for fewer than two samples.
+    start_time : str
+        When it began (ISO 8601, ``""`` when unknown).
+    step : dict
+        The step definition, keys with their units in their names.
+    units : dict
+        Each channel's unit.
+    """
 
     name: str
     index: int
@@ -98,6 +127,22 @@ class Run:
     :meth:`to_pandas`, :meth:`to_xarray`) and kept. ``metadata`` holds whatever the file
     records beyond the fixed fields, keyed by path below ``/run`` or below the entries
     (``instrument/amplifier/identity``, ``sample/name``), as ``labrig runs`` indexes it.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The run file.
+    header : labrig.store.RunFile
+        The file's metadata as the store read it (entries without their samples).
+    metadata : dict
+        The recorded metadata beyond the fixed fields, by path.
+    units : dict
+        The units of those metadata values that have one.
+
+    See Also
+    --------
+    open : Open a run file.
+    run : Run a protocol and open its file.
     """
 
     def __init__(
@@ -194,7 +239,18 @@ class Run:
     def records(self, entries: Sequence[str] | str | None = None) -> list[Record]:
         """The entries as the analysis sees them (:class:`~labrig.analysis.records.Record`:
         voltage, strain, auxiliary channels, step definition): the complete ones with voltage
-        and strain, or ``entries`` by name. What ``fit(...).predict(run)`` simulates."""
+        and strain, or ``entries`` by name. What ``fit(...).predict(run)`` simulates.
+
+        Parameters
+        ----------
+        entries : str or sequence of str, optional
+            Entry names (default: every complete entry with voltage and strain).
+
+        Returns
+        -------
+        list of labrig.analysis.records.Record
+            One record per entry, in run order.
+        """
         from labrig.analysis.load import records_of
 
         names = [entries] if isinstance(entries, str) else (list(entries) if entries else None)
@@ -221,7 +277,18 @@ class Run:
         ``command_voltage_V``, ``strain_ue``), then the entry's step definition (``kind``,
         ``amplitude_V``, ``frequency_hz``...; :func:`labrig.api.frames.step_values`);
         ``df.attrs["units"]`` and ``df.attrs["long_names"]`` by column. One entry:
-        ``df[df.entry == name]``."""
+        ``df[df.entry == name]``.
+
+        Parameters
+        ----------
+        entries : str or sequence of str, optional
+            Entry names (default: all, in run order).
+
+        Returns
+        -------
+        pandas.DataFrame
+            One row per sample of every entry chosen.
+        """
         from labrig.api.frames import entries_frame
 
         return entries_frame(self._chosen(entries), self._attrs())
@@ -229,7 +296,18 @@ class Run:
     def to_xarray(self, entries: Sequence[str] | str | None = None) -> xr.Dataset:
         """The samples as an xarray Dataset with dimensions ``entry`` and ``sample`` (shorter
         entries padded with NaN), units in each variable's attrs. Needs xarray
-        (``pip install 'labrig[xarray]'``): without it, an ImportError that says so."""
+        (``pip install 'labrig[xarray]'``): without it, an ImportError that says so.
+
+        Parameters
+        ----------
+        entries : str or sequence of str, optional
+            Entry names (default: all, in run order).
+
+        Returns
+        -------
+        xarray.Dataset
+            Dimensions ``entry`` and ``sample``.
+        """
         from labrig.api.frames import entries_dataset
 
         return entries_dataset(self._chosen(entries), self._attrs())
@@ -250,7 +328,35 @@ class Run:
     ) -> FitResult | BaselineResult | EffectsFit:
         """``labrig fit``: identify the model (or the baseline ``model``) from the run; the
         options are the command's. ``as_json(result)`` is what ``labrig fit --json`` prints;
-        ``result.params`` the parameters (our model)."""
+        ``result.params`` the parameters (our model).
+
+        Parameters
+        ----------
+        entries : sequence of str, optional
+            The entries fitted and scored (default: the command's choice).
+        method : str
+            ``global`` or ``staged`` (``labrig fit --method``).
+        model : str
+            ``dynamic`` (our model) or a baseline (``prandtl_ishlinskii``, ``bouc_wen``, ``sindy``).
+        memory : str
+            The operator's memory rule (``return_point``, ``return_point_open``,
+            ``last_reversal``).
+        effects : sequence of str
+            Library effects added to our model (``labrig fit --effect``).
+        warmup_s : float, optional
+            Start of each entry left out of the score (s).
+        heldout : bool
+            Also score each entry by leave-one-entry-out refits.
+        offset : bool, optional
+            Fit one strain offset per entry (default: the command's choice).
+        progress : bool
+            Show progress bars on stderr.
+
+        Returns
+        -------
+        FitResult or BaselineResult or EffectsFit
+            The fit, as ``labrig fit`` makes it.
+        """
         from labrig.commands.fit import fit_run_file
 
         outcome = fit_run_file(
@@ -282,7 +388,34 @@ class Run:
     ) -> BuiltReport:
         """``labrig report``: model versus measurement. Returns the report (``.page``, the
         HTML; ``.metrics``, what ``labrig report --json`` prints) and writes the page to
-        ``out`` when given (an existing file only with ``overwrite``)."""
+        ``out`` when given (an existing file only with ``overwrite``).
+
+        Parameters
+        ----------
+        out : str or os.PathLike, optional
+            Where to write the page (nothing written without it).
+        params : str or os.PathLike, optional
+            A ``labrig fit --out`` file whose parameters are reported (default: fitted now).
+        entries : sequence of str, optional
+            The entries fitted and shown.
+        method : str
+            ``global`` or ``staged``.
+        warmup_s : float, optional
+            Start of each entry left out of the metrics (s).
+        heldout : bool
+            Also score each entry by leave-one-entry-out refits.
+        offset : bool, optional
+            Fit one strain offset per entry.
+        overwrite : bool
+            Replace an existing ``out``.
+        progress : bool
+            Show progress bars on stderr.
+
+        Returns
+        -------
+        labrig.commands.report.BuiltReport
+            The page and its metrics.
+        """
         from labrig.commands.report import build_run_report
 
         target = Path(out) if out is not None else None
@@ -321,7 +454,30 @@ class Run:
         ``labrig diagnose --json`` prints; ``result.verdict`` the verdict in words.
         ``mains_hz``: the mains frequency (Hz; default: detected at 50 or 60 Hz). ``out``: a
         folder for ``diagnosis.json`` and ``diagnosis.html`` (existing ones replaced only with
-        ``overwrite``; checked before the work, written beside and renamed into place)."""
+        ``overwrite``; checked before the work, written beside and renamed into place).
+
+        Parameters
+        ----------
+        params : str or os.PathLike, optional
+            A ``labrig fit --out`` file to start from (default: fitted now).
+        also : sequence of str
+            Effects tried beside the default candidates.
+        max_effects : int
+            The most effects the verdict adds.
+        mains_hz : float, optional
+            The mains frequency (Hz).
+        out : str or os.PathLike, optional
+            A folder for ``diagnosis.json`` and ``diagnosis.html``.
+        overwrite : bool
+            Replace existing outputs in ``out``.
+        progress : bool
+            Show progress on stderr.
+
+        Returns
+        -------
+        labrig.analysis.diagnose.Diagnosis
+            The evidence, the candidates tried and the verdict.
+        """
         from labrig.commands.diagnose import OUTPUT_NAMES, diagnose_run_file
 
         folder = Path(out) if out is not None else None
@@ -412,8 +568,20 @@ def _silent(message: str) -> None:
     pass
 
 
-def command_ui(progress: bool):
-    """The analysis' :class:`~labrig.commands.fit.CommandUI`: bars on stderr or nothing."""
+def command_ui(progress: bool) -> CommandUI:
+    """The analysis' :class:`~labrig.commands.fit.CommandUI`: bars on stderr or nothing.
+
+    Parameters
+    ----------
+    progress : bool
+        Draw progress bars on stderr (:class:`~labrig.commands.progress.RichUI`); otherwise say
+        nothing.
+
+    Returns
+    -------
+    CommandUI
+        What the fits and reports call as they work.
+    """
     if progress:
         from labrig.commands.progress import RichUI
 
@@ -444,7 +612,18 @@ def _check_targets(targets: list[Path], inputs: list[Path | None], overwrite: bo
 def as_json(result: Any) -> dict[str, Any]:
     """What the command line prints with ``--json`` for a result of :meth:`Run.fit`,
     :meth:`Run.diagnose` (``to_json()``, undefined numbers as ``None``) or :meth:`Run.report`
-    (its metrics)."""
+    (its metrics).
+
+    Parameters
+    ----------
+    result : object
+        What :meth:`Run.fit`, :meth:`Run.diagnose` or :meth:`Run.report` returned.
+
+    Returns
+    -------
+    dict
+        JSON-ready values (undefined numbers as ``None``).
+    """
     from labrig.commands.report import BuiltReport
     from labrig.core.jsonsafe import json_safe
 
@@ -455,7 +634,18 @@ def as_json(result: Any) -> dict[str, Any]:
 
 def open(path: PathLike) -> Run:  # labrig.open (the builtin stays open inside labrig.api.runs)
     """Open a run file: metadata now, samples on first use. A missing, damaged or foreign file
-    raises :class:`~labrig.core.errors.InputFileError` naming it."""
+    raises :class:`~labrig.core.errors.InputFileError` naming it.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The run file.
+
+    Returns
+    -------
+    Run
+        The run, its metadata read.
+    """
     from labrig.catalogue.read import read_metadata
     from labrig.store import read_run
 
@@ -511,11 +701,35 @@ def run(
     signal raises ``SystemExit`` with the command's exit code (128 + the signal number). A run
     that ended on a device fault or a full disk is returned (``status`` says ``failed``, with
     a warning). Bad input raises :class:`~labrig.core.errors.InputFileError` before anything is
-    energised."""
+    energised.
+
+    Parameters
+    ----------
+    protocol : str or os.PathLike
+        A protocol file or the name of a shipped one (``paper``).
+    rig : str or os.PathLike, optional
+        A rig file or the name of a shipped one (default: the protocol's, else the simulated
+        rig).
+    out : str or os.PathLike, optional
+        The run file to write.
+    seed : int, optional
+        Seed of the simulated rig's noise.
+    progress : bool
+        Show a progress bar on stderr.
+    realtime : bool
+        Pace a simulated rig at the protocol's own speed.
+    overwrite : bool
+        Replace an existing ``out``.
+
+    Returns
+    -------
+    Run
+        The run file written, opened.
+    """
     from labrig.runner.execute import check_run_output, default_out_path, execute, preflight
 
     rig_path = Path(rig) if rig is not None else None
-    plan, rig_path = preflight(protocol, rig_path)
+    plan, rig_path = preflight(protocol if isinstance(protocol, str) else Path(protocol), rig_path)
     target = Path(out) if out is not None else default_out_path(plan)
     check_run_output(plan, rig_path, target, overwrite)  # before anything is energised
     with _bar(plan.total_duration_s, progress) as callback:
@@ -534,7 +748,22 @@ def runs(*paths: PathLike, where: Sequence[str] = (), reindex: bool = False) -> 
     files; default ``runs/``) that satisfy every ``where`` expression (docs/catalogue.md), one
     row per run, oldest first: path, status, protocol, start (a Timestamp), entries, kinds,
     amplitudes_V, frequencies_hz, duration_s, matching_entries, error, then one column per
-    metadata key (the instrument's in ``--json`` only)."""
+    metadata key (the instrument's in ``--json`` only).
+
+    Parameters
+    ----------
+    *paths : str or os.PathLike
+        Folders (searched recursively) or run files; default ``runs/``.
+    where : sequence of str
+        Filter expressions, all to hold (``"amplitude_V >= 100"``).
+    reindex : bool
+        Rebuild each folder's index first.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per matching run, oldest first.
+    """
     import pandas as pd
 
     from labrig.catalogue import entry_summary, list_runs

@@ -81,21 +81,28 @@ class Memory(StrEnum):
 def names_enum(name: str, values: Sequence[str], doc: str) -> type[StrEnum]:
     """A :class:`~enum.StrEnum` of ``values`` (members named by the upper-cased value), for
     choices whose names the library lists."""
-    enum = StrEnum(name, [(v.upper(), v) for v in values])
+    # mypy reads the functional API only with literal members; these come from the registry
+    enum = StrEnum(name, [(v.upper(), v) for v in values])  # type: ignore[misc]
     enum.__doc__ = doc
     return enum
 
 
-#: effects ``fit --effect`` adds to the model (the registry's, labrig.model.effects.registry)
-FitEffect = names_enum(
-    "FitEffect", FIT_EFFECT_NAMES, "Effects ``fit --effect`` adds to the model (the registry's)."
-)
-#: effects ``diagnose --also`` tries beside its default candidates (the registry's)
-StructuralEffect = names_enum(
-    "StructuralEffect",
-    STRUCTURAL_EFFECT_NAMES,
-    "Effects ``diagnose --also`` tries beside its default candidates (the registry's).",
-)
+if TYPE_CHECKING:  # enums made at run time: to the checker, StrEnums (valid in annotations)
+    FitEffect = StrEnum
+    StructuralEffect = StrEnum
+else:
+    #: effects ``fit --effect`` adds to the model (the registry's, labrig.model.effects.registry)
+    FitEffect = names_enum(
+        "FitEffect",
+        FIT_EFFECT_NAMES,
+        "Effects ``fit --effect`` adds to the model (the registry's).",
+    )
+    #: effects ``diagnose --also`` tries beside its default candidates (the registry's)
+    StructuralEffect = names_enum(
+        "StructuralEffect",
+        STRUCTURAL_EFFECT_NAMES,
+        "Effects ``diagnose --also`` tries beside its default candidates (the registry's).",
+    )
 
 
 class Preset(StrEnum):

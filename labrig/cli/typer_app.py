@@ -83,6 +83,11 @@ def usage_pieces(command: TyperCommand | TyperGroup, ctx: typer.Context) -> list
     return pieces
 
 
+#: the Context typer's base classes take and give: its vendored click's (``typer.Context``
+#: subclasses it), whose module is private to typer, so the overrides below name it ``Any``
+ClickContext = Any
+
+
 class LabrigCommand(TyperCommand):
     """A command with plain metavars and labrig's help layout."""
 
@@ -90,10 +95,10 @@ class LabrigCommand(TyperCommand):
         super().__init__(*args, **kwargs)
         name_params(self.params)
 
-    def collect_usage_pieces(self, ctx: typer.Context) -> list[str]:
+    def collect_usage_pieces(self, ctx: ClickContext) -> list[str]:
         return usage_pieces(self, ctx)
 
-    def format_help(self, ctx: typer.Context, formatter: Any) -> None:
+    def format_help(self, ctx: ClickContext, formatter: Any) -> None:
         formatter.write(render_help(self, ctx))
 
 
@@ -105,20 +110,20 @@ class LabrigGroup(TyperGroup):
         super().__init__(*args, **kwargs)
         name_params(self.params)
 
-    def collect_usage_pieces(self, ctx: typer.Context) -> list[str]:
+    def collect_usage_pieces(self, ctx: ClickContext) -> list[str]:
         return [*usage_pieces(self, ctx), "COMMAND [ARGS]..."]
 
-    def format_help(self, ctx: typer.Context, formatter: Any) -> None:
+    def format_help(self, ctx: ClickContext, formatter: Any) -> None:
         formatter.write(render_help(self, ctx))
 
-    def make_context(self, *args: Any, **kwargs: Any) -> typer.Context:
+    def make_context(self, *args: Any, **kwargs: Any) -> ClickContext:
         try:
             return super().make_context(*args, **kwargs)
         except USAGE_ERROR as e:
             e.exit_code = EXIT_USAGE  # type: ignore[attr-defined]
             raise
 
-    def invoke(self, ctx: typer.Context) -> Any:
+    def invoke(self, ctx: ClickContext) -> Any:
         try:
             return super().invoke(ctx)
         except USAGE_ERROR as e:

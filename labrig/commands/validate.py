@@ -469,7 +469,7 @@ def page_context(v: Validation) -> dict[str, Any]:
 
     scored = {k: m for k, m in v.models.items() if m.scores}
     best = {
-        w: min((m.mean(w) for m in scored.values()), default=None)
+        w: min((x for m in scored.values() if (x := m.mean(w)) is not None), default=None)
         for w in ("whole_nrmse_pct", "second_half_nrmse_pct")
     }
     rows = [

@@ -31,7 +31,9 @@ def _openblas_libs() -> list[tuple[Any, Any, Any]]:
         ("openblas_set_num_threads", "openblas_get_num_threads"),
     )
     for pkg in (numpy, scipy):
-        libdir = os.path.join(os.path.dirname(pkg.__file__), os.pardir, pkg.__name__ + ".libs")
+        libdir = os.path.join(
+            os.path.dirname(pkg.__file__ or ""), os.pardir, pkg.__name__ + ".libs"
+        )
         for path in glob.glob(os.path.join(libdir, "*openblas*.so*")):
             try:
                 lib = ctypes.CDLL(path, mode=os.RTLD_NOLOAD | os.RTLD_LAZY)

@@ -59,7 +59,7 @@ class Interrupted(KeyboardInterrupt):
         return reason_for(self.signum)
 
 
-def signum_of(exc: BaseException) -> int:
+def signum_of(exc: BaseException | None) -> int:
     """The signal behind a :class:`KeyboardInterrupt` (a plain one is Ctrl-C, SIGINT)."""
     return getattr(exc, "signum", signal.SIGINT)
 

@@ -86,7 +86,7 @@ def control_chart(rows: list[dict[str, Any]], q: str) -> bytes:
     for c, rig in enumerate(rigs):
         sel = [i for i in idx if str(rows[i].get("rig") or "") == rig]
         ax.plot(
-            [when[i] for i in sel],
+            [when[i] for i in sel],  # type: ignore[arg-type]  # stub: no datetimes; mpl plots them
             x[sel],
             "o",
             ms=3.5,

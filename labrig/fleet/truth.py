@@ -49,7 +49,8 @@ def read_truth(path: Path) -> dict[str, Any]:
 def score(rows: list[dict[str, Any]], truth: dict[str, Any]) -> dict[str, Any]:
     """Found, named and false alarms: counts, fractions, and the runs behind each."""
     by_file = {Path(str(r["run_file"])).name: r for r in rows}
-    defective, healthy = [], []
+    defective: list[tuple[dict[str, Any], dict[str, Any]]] = []
+    healthy: list[tuple[dict[str, Any], dict[str, Any]]] = []
     for a in truth["actuators"]:
         row = by_file.get(a["run_file"])
         if row is None or row.get("status") != "ok":

@@ -129,9 +129,9 @@ def parse_scales(opt: ImportOptions) -> dict[str, float]:
     """``--scale CHANNEL=FACTOR`` items and ``--voltage-scale``/``--strain-scale``."""
     scales: dict[str, float] = {}
     for spec in opt.scale:
-        name, sep, value = spec.partition("=")
+        name, sep, text = spec.partition("=")
         try:
-            factor = float(value) if sep else math.nan
+            factor = float(text) if sep else math.nan
         except ValueError:
             factor = math.nan
         if not name.strip() or not math.isfinite(factor) or factor == 0:

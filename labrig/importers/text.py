@@ -194,8 +194,9 @@ class _Reader:
             if k in text_columns:
                 table.skipped.append(f"{table.place(k)}: text, not numbers")
                 continue
-            table.columns[k].values = columns.pop(k).result()
-            table.columns[k].length = int(table.columns[k].values.size)
+            values = columns.pop(k).result()
+            table.columns[k].values = values
+            table.columns[k].length = int(values.size)
 
     def _not_a_number(self, table: Table, col: pd.Series, k: int, start: int) -> Exception:
         text = col.astype("string").str.strip()

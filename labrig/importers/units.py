@@ -52,7 +52,7 @@ def registry() -> Any:
     """The one pint registry (built on first use: about 0.2 s)."""
     import pint
 
-    reg = pint.UnitRegistry()
+    reg: Any = pint.UnitRegistry()
     reg.define("microstrain = 1e-6 = µε")
     return reg
 

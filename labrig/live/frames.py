@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -76,7 +77,7 @@ def _value(ds: h5py.Dataset) -> object:
     return v.decode("utf-8", "replace") if isinstance(v, bytes) else v
 
 
-def _get(g: h5py.Group, name: str, default: object = None) -> object:
+def _get(g: h5py.Group, name: str, default: Any = None) -> Any:
     ds = g.get(name)
     return _value(ds) if isinstance(ds, h5py.Dataset) and ds.shape == () else default
 
@@ -104,7 +105,7 @@ def _entry_info(name: str, g: h5py.Group, known: dict[str, StepFacts]) -> EntryI
     planned, freq = known[name] if name in known else _step_facts(g)
     return EntryInfo(
         name=name,
-        index=int(_get(g, "entry_index", -1)),  # type: ignore[arg-type]
+        index=int(_get(g, "entry_index", -1)),
         status=str(_get(g, "status", "running")),
         samples=min(lengths, default=0),
         planned_samples=planned,

@@ -24,7 +24,13 @@ from types import ModuleType
 
 @functools.cache
 def kernels() -> ModuleType | None:
-    """The module of compiled kernels, or ``None`` (one warning per process) without numba."""
+    """The module of compiled kernels, or ``None`` (one warning per process) without numba.
+
+    Returns
+    -------
+    module or None
+        :mod:`labrig.model.compiled`, or ``None`` when numba or its cache is not available.
+    """
     try:
         import numba  # noqa: F401
     except Exception as exc:  # ImportError, or numba's own errors on an unsupported platform
@@ -52,4 +58,3 @@ def kernels() -> ModuleType | None:
 def reset() -> None:
     """Forget whether numba loaded (for tests that hide it)."""
     kernels.cache_clear()
-

@@ -38,6 +38,25 @@ def max_slope(A: float, beta: float, gamma: float) -> float:
     gamma)``: the supremum is at ``h = -M``, ``A + (beta - gamma) M = 2 A beta / (beta +
     gamma)``. For ``A < 0`` (the mirror image ``-h(-A, beta, -gamma)``) ``h`` never rises with
     ``x``: the supremum is 0 (approached at saturation); ``A = 0`` keeps ``h = 0``.
+
+    Parameters
+    ----------
+    A : float
+        Gain of the element (ue/V).
+    beta, gamma : float
+        Shape parameters (1/V).
+
+    Returns
+    -------
+    float
+        The supremum of ``dh/dx`` (ue/V).
+
+    Examples
+    --------
+    >>> max_slope(1.0, 0.5, 0.5)
+    1.0
+    >>> max_slope(-1.0, 0.5, 0.5)
+    0.0
     """
     return 2.0 * A * beta / (beta + gamma) if A > 0 else 0.0
 
@@ -48,6 +67,25 @@ def monotone_runs(v: NDArray) -> tuple[NDArray, NDArray, NDArray]:
     Returns ``starts, stops, dirs``: run ``j`` goes from sample ``starts[j]`` (its start value)
     to ``stops[j]`` (inclusive) of the prefixed record, in direction ``dirs[j]`` (+1 or -1);
     flat stretches join the current run.
+
+    Parameters
+    ----------
+    v : numpy.ndarray
+        The rest-prefixed record (its first sample the rest value).
+
+    Returns
+    -------
+    starts, stops : numpy.ndarray
+        Each run's first and last sample (int).
+    dirs : numpy.ndarray
+        Each run's direction (+1.0 or -1.0).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> starts, stops, dirs = monotone_runs(np.array([0.0, 1.0, 2.0, 2.0, 1.0, 0.0]))
+    >>> starts.tolist(), stops.tolist(), dirs.tolist()
+    ([0, 3], [3, 5], [1.0, -1.0])
     """
     d = np.sign(np.diff(v))
     nz = np.flatnonzero(d)
@@ -74,7 +112,24 @@ def _phi(k: NDArray, u: NDArray) -> NDArray:
 def bouc_wen_exact(
     vp: NDArray, A: float, beta: float, gamma: float, runs: tuple | None = None
 ) -> NDArray:
-    """``h`` for ``n = 1`` at the samples of the rest-prefixed record ``vp`` (closed form)."""
+    """``h`` for ``n = 1`` at the samples of the rest-prefixed record ``vp`` (closed form).
+
+    Parameters
+    ----------
+    vp : numpy.ndarray
+        The input (V), prefixed with its rest value.
+    A : float
+        Gain (ue/V).
+    beta, gamma : float
+        Shape parameters (1/V).
+    runs : tuple, optional
+        :func:`monotone_runs` of ``vp``, when already known.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``h`` (ue) at each sample of ``vp`` (0 at the rest sample).
+    """
     if A < 0:  # the mirror image (module docstring)
         return -bouc_wen_exact(vp, -A, beta, -gamma, runs)
     starts, stops, dirs = monotone_runs(vp) if runs is None else runs
@@ -126,7 +181,31 @@ def bouc_wen_exact(
 
 
 def bouc_wen_step(h: float, dx: float, A: float, beta: float, gamma: float) -> float:
-    """``h`` after the input moves by ``dx`` (linearly) from state ``h`` (closed form)."""
+    """``h`` after the input moves by ``dx`` (linearly) from state ``h`` (closed form).
+
+    Parameters
+    ----------
+    h : float
+        The state before the step (ue).
+    dx : float
+        The input's change (V).
+    A : float
+        Gain (ue/V).
+    beta, gamma : float
+        Shape parameters (1/V).
+
+    Returns
+    -------
+    float
+        The state after the step (ue).
+
+    Examples
+    --------
+    From rest, one volt up with ``A = 1``, ``beta = gamma = 0.5``: ``h = 1 - exp(-1)``.
+
+    >>> round(bouc_wen_step(0.0, 1.0, 1.0, 0.5, 0.5), 12)
+    0.632120558829
+    """
     if A < 0:  # the mirror image (module docstring)
         return -bouc_wen_step(-h, dx, -A, beta, -gamma)
     if dx == 0.0:
@@ -158,7 +237,28 @@ def bouc_wen_stream(
     x: NDArray, h0: float, x0: float, A: float, beta: float, gamma: float
 ) -> tuple[NDArray[np.float64], float]:
     """``h`` after each sample of the block ``x``, from state ``h0`` at input ``x0``; returns
-    ``(h, h_last)`` to carry into the next block."""
+    ``(h, h_last)`` to carry into the next block.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        The block of input samples (V).
+    h0 : float
+        The state before the block (ue).
+    x0 : float
+        The input before the block (V).
+    A : float
+        Gain (ue/V).
+    beta, gamma : float
+        Shape parameters (1/V).
+
+    Returns
+    -------
+    h : numpy.ndarray
+        The state after each sample (ue).
+    h_last : float
+        The state after the last sample, for the next block.
+    """
     out = np.empty(x.size)
     h, xp = float(h0), float(x0)
     for n in range(x.size):

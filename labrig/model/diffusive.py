@@ -43,6 +43,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -64,7 +65,29 @@ _GX, _GW = np.polynomial.legendre.leggauss(16)
 @dataclass(frozen=True)
 class Lattice:
     """The fixed nodes for a sample period: ``x = ln xi`` (1/s), trapezoidal weights ``w``
-    (window and ``phi'`` included; half weight at the lower end), which are instantaneous."""
+    (window and ``phi'`` included; half weight at the lower end), which are instantaneous.
+
+    Parameters
+    ----------
+    dt : float
+        Sample period (s).
+    y : numpy.ndarray
+        The uniform grid, before grading.
+    x : numpy.ndarray
+        The nodes, ``x = phi(y) = ln xi``.
+    w : numpy.ndarray
+        The trapezoidal weights.
+    fast : numpy.ndarray
+        Which nodes lie above ``40/dt`` (instantaneous).
+    y_c : float
+        Where the grading starts (``ln(1 / T)``).
+    x_top : float
+        ``ln(40 / dt)``.
+    x_h : float
+        Centre of the window that hands the nodes over to the instantaneous part.
+    x_end : float
+        The last node's ``x``.
+    """
 
     dt: float
     y: NDArray[np.float64]
@@ -77,11 +100,13 @@ class Lattice:
     x_end: float
 
 
-def _phi(y: NDArray | complex, y_c: float) -> NDArray | complex:
+def _phi(y: Any, y_c: float) -> Any:
+    """``phi(y) = y - B exp(-(y - y_c) / B)`` for an array or a complex number."""
     return y - GRADING * np.exp(-(y - y_c) / GRADING)
 
 
-def _dphi(y: NDArray | complex, y_c: float) -> NDArray | complex:
+def _dphi(y: Any, y_c: float) -> Any:
+    """``phi'(y)`` for an array or a complex number."""
     return 1.0 + np.exp(-(y - y_c) / GRADING)
 
 
@@ -89,7 +114,7 @@ def _phi_inv(z: complex, y_c: float) -> complex:
     """``y`` with ``phi(y) = z`` (Newton; ``phi`` is increasing and convex on the real line)."""
     y = complex(z)
     if (y_c - z.real) / GRADING > 1.0:  # deep in the graded part: start from the asymptote
-        y = y_c - GRADING * np.log((y_c - z) / GRADING + 1.0)
+        y = complex(y_c - GRADING * np.log((y_c - z) / GRADING + 1.0))
     for _ in range(100):
         step = (_phi(y, y_c) - z) / _dphi(y, y_c)
         y -= step
@@ -100,14 +125,25 @@ def _phi_inv(z: complex, y_c: float) -> complex:
 
 @lru_cache(maxsize=32)
 def lattice(dt: float) -> Lattice:
-    """The quadrature nodes for sample period ``dt`` (s)."""
+    """The quadrature nodes for sample period ``dt`` (s).
+
+    Parameters
+    ----------
+    dt : float
+        Sample period (s).
+
+    Returns
+    -------
+    Lattice
+        The nodes and weights (cached).
+    """
     y_c = float(np.log(1.0 / (HORIZON_SAMPLES * dt)))
     x_top = float(np.log(XI_TOP_DT / dt))
     x_h = x_top + 6 * WINDOW_SIGMA
     x_end = x_h + 7 * WINDOW_SIGMA  # chi < 1e-23 beyond
     y_lo = _phi_inv(complex(y_c + np.log(EPS_LO)), y_c).real  # phi(y_c) ~ y_c - B: ln(eps/T)
     k = np.arange(int(np.ceil(y_lo / H_STEP)), int(np.ceil(x_end / H_STEP)) + 1)
-    y = k * H_STEP
+    y = (k * H_STEP).astype(np.float64)
     x = _phi(y, y_c)
     w = H_STEP * _dphi(y, y_c) * 0.5 * special.erfc((x - x_h) / WINDOW_SIGMA)
     w[0] *= 0.5  # trapezoidal end point; the slow-tail mode takes the mass below
@@ -121,6 +157,33 @@ def mu_parts(x: NDArray, x0: float, lam: float) -> tuple[NDArray, NDArray, NDArr
     written with ``e = e^-|l|`` so nothing overflows. ``dmu/dl = -mu (e^l - e^-l)/D``;
     ``dmu/dlam`` at fixed ``l`` ``= cos(pi lam)/D + 2 sin(pi lam)^2/D^2``;
     ``dl/d ln tau = lam``, ``dl/dlam = x - x0``.
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        ``ln xi`` (``xi`` in 1/s).
+    x0 : float
+        ``-ln tau``.
+    lam : float
+        Order (``0 < lam < 2``).
+
+    Returns
+    -------
+    mu : numpy.ndarray
+        The density.
+    dmu_dln_tau : numpy.ndarray
+        Its derivative with respect to ``ln tau``.
+    dmu_dlam : numpy.ndarray
+        Its derivative with respect to ``lam``.
+
+    Examples
+    --------
+    For ``lam = 1/2`` the density at ``xi = 1/tau`` is ``1 / (2 pi)``:
+
+    >>> import numpy as np
+    >>> mu, _, _ = mu_parts(np.array([0.0]), 0.0, 0.5)
+    >>> round(float(mu[0]) * 2 * np.pi, 12)
+    1.0
     """
     lv = lam * (np.asarray(x, dtype=float) - x0)
     e = np.exp(-np.abs(lv))
@@ -144,9 +207,9 @@ def _gauss(a: float, b: float, x0: float, theta: float) -> tuple[NDArray, NDArra
         s *= 2.0
     if a < x0 < b:
         pts.append(x0)
-    pts = np.unique(pts)
-    edges = [pts[0]]
-    for p in pts[1:]:
+    nodes = np.unique(pts)
+    edges = [nodes[0]]
+    for p in nodes[1:]:
         n = int(np.ceil((p - edges[-1]) / 1.0))
         edges.extend(np.linspace(edges[-1], p, n + 1)[1:])
     e = np.asarray(edges)
@@ -191,7 +254,15 @@ def _tail_mass(X: float, x0: float, lam: float, above: bool) -> NDArray:
 @dataclass(frozen=True)
 class ModeDerivatives:
     """Derivatives of a :class:`ContinuousModes` with respect to ``(ln tau, lam)``: rows 0 and 1
-    of ``dq`` and ``dc`` (2, M) and of ``dm1``, ``dm2`` (2,)."""
+    of ``dq`` and ``dc`` (2, M) and of ``dm1``, ``dm2`` (2,).
+
+    Parameters
+    ----------
+    dq, dc : numpy.ndarray
+        Derivatives of the poles and residues, (2, M).
+    dm1, dm2 : numpy.ndarray
+        Derivatives of ``direct_m1`` and ``direct_m2``, (2,).
+    """
 
     dq: NDArray[np.complex128]
     dc: NDArray[np.complex128]
@@ -205,27 +276,43 @@ def modes(tau_s: float, lam: float, dt: float) -> tuple[ContinuousModes, ModeDer
     Mode order: the lattice nodes below ``40/dt`` (fixed for ``dt``), then the special modes:
     the complex pair (pole correction and, for ``lam > 1``, the poles of ``G``), the slow-tail
     mode. ``lam = 1`` is the single pole ``1 / (1 + tau s)``.
+
+    Parameters
+    ----------
+    tau_s : float
+        Time constant (s).
+    lam : float
+        Order (``0 < lam < 2``).
+    dt : float
+        Sample period (s).
+
+    Returns
+    -------
+    modes : ContinuousModes
+        The modes.
+    derivatives : ModeDerivatives
+        Their derivatives with respect to ``(ln tau, lam)``.
     """
     lt = float(np.log(tau_s))
     x0 = -lt
     if lam == 1.0:
-        q = np.array([-1.0 / tau_s + 0j])
-        c = np.array([1.0 / tau_s + 0j])
-        dq = np.array([[1.0 / tau_s + 0j], [0.0]])  # d/d ln tau of -1/tau
-        dc = np.array([[-1.0 / tau_s + 0j], [0.0]])
+        q1 = np.array([-1.0 / tau_s + 0j])
+        c1 = np.array([1.0 / tau_s + 0j])
+        dq1 = np.array([[1.0 / tau_s + 0j], [0.0]])  # d/d ln tau of -1/tau
+        dc1 = np.array([[-1.0 / tau_s + 0j], [0.0]])
         # d/dlam at lam = 1 exists (the realisation is smooth there) but is not needed by the
         # fit, whose lam stays off exactly 1; report 0 rather than a one-sided value
-        return ContinuousModes(q, c), ModeDerivatives(dq, dc, np.zeros(2), np.zeros(2))
+        return ContinuousModes(q1, c1), ModeDerivatives(dq1, dc1, np.zeros(2), np.zeros(2))
     lat = lattice(dt)
     theta = np.pi * abs(1.0 - lam) / lam
     mu, dmu_t, dmu_l = mu_parts(lat.x, x0, lam)
     xi = np.exp(lat.x)
     slow = ~lat.fast
-    q = [-xi[slow] + 0j]
-    c = [lat.w[slow] * mu[slow] * xi[slow] + 0j]
-    dq = [np.zeros((2, int(slow.sum())), dtype=complex)]
-    dc = [np.vstack([lat.w[slow] * dmu_t[slow] * xi[slow], lat.w[slow] * dmu_l[slow] * xi[slow]])
-          + 0j]  # fmt: skip
+    q: list[NDArray] = [-xi[slow] + 0j]
+    c: list[NDArray] = [lat.w[slow] * mu[slow] * xi[slow] + 0j]
+    dq: list[NDArray] = [np.zeros((2, int(slow.sum())), dtype=complex)]
+    w_s, xi_s = lat.w[slow], xi[slow]
+    dc: list[NDArray] = [np.vstack([w_s * dmu_t[slow] * xi_s, w_s * dmu_l[slow] * xi_s]) + 0j]
     # instantaneous part: the lattice above 40/dt, then mu (1 - chi) apart
     f = lat.fast
     m1 = np.array(

@@ -24,7 +24,22 @@ from labrig.model.relaxor import Relaxor
 @dataclass(frozen=True)
 class DynamicHysteresisModel:
     """``predict(v, rate_hz)``: strain (ue) for a voltage record (V), system at rest at 0 V (or
-    held at ``rest_V``)."""
+    held at ``rest_V``).
+
+    Parameters
+    ----------
+    params : ModelParams
+        The model's parameters; the relaxors ``g_t``, ``g_d`` and the quasi-static ``operator``
+        are made from them.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from labrig.model import PAPER_TABLE1
+    >>> model = DynamicHysteresisModel(PAPER_TABLE1)
+    >>> model.predict(np.zeros(3), 1000.0)
+    array([0., 0., 0.])
+    """
 
     params: ModelParams
     g_t: Relaxor = field(init=False)
@@ -46,7 +61,26 @@ class DynamicHysteresisModel:
         rest_V: float = 0.0,
     ) -> NDArray[np.float64]:
         """``V* = G_d G_t V`` (V), the paper's Eq. 7, the relaxors at rest at ``rest_V`` before
-        the record (``G(0) = 1``, so ``V* = rest_V + G_d G_t (V - rest_V)``)."""
+        the record (``G(0) = 1``, so ``V* = rest_V + G_d G_t (V - rest_V)``).
+
+        Parameters
+        ----------
+        v : array_like
+            The voltage record (V).
+        rate_hz : float
+            Sample rate (Hz).
+        method : {"fast", "exact"}
+            The relaxors' realisation (:meth:`Relaxor.filter`).
+        hold : {"zoh", "linear"}
+            How ``v`` behaves between samples.
+        rest_V : float
+            The voltage held before the record (V).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``V*`` (V) at each sample.
+        """
         if rest_V == 0.0:
             vt = self.g_t.filter(v, rate_hz, method=method, hold=hold)
             return self.g_d.filter(vt, rate_hz, method=method, hold="linear")
@@ -64,7 +98,26 @@ class DynamicHysteresisModel:
     ) -> NDArray[np.float64]:
         """Strain (ue) for the voltage record ``v`` (V) sampled at ``rate_hz``, the actuator held
         at ``rest_V`` before it (brought there from rest at 0 V, its relaxors settled:
-        :meth:`~labrig.model.QuasiStaticHysteresis.held_state`)."""
+        :meth:`~labrig.model.QuasiStaticHysteresis.held_state`).
+
+        Parameters
+        ----------
+        v : array_like
+            The voltage record (V).
+        rate_hz : float
+            Sample rate (Hz).
+        method : {"fast", "exact"}
+            The relaxors' realisation (``fast``: the modal banks, compiled when numba is there).
+        hold : {"zoh", "linear"}
+            How ``v`` behaves between samples.
+        rest_V : float
+            The voltage held before the record (V).
+
+        Returns
+        -------
+        numpy.ndarray
+            Strain (ue) at each sample.
+        """
         op = self.operator
         kern = op._kernels("auto") if method == "fast" else None
         if kern is None:  # the exact method, a user shape, or no numba
@@ -87,7 +140,20 @@ class DynamicHysteresisModel:
         return out
 
     def stream(self, rate_hz: float, hold: str = "zoh") -> ModelStream:
-        """A stateful evaluator for records that arrive in blocks (simulators, control loops)."""
+        """A stateful evaluator for records that arrive in blocks (simulators, control loops).
+
+        Parameters
+        ----------
+        rate_hz : float
+            Sample rate (Hz).
+        hold : {"zoh", "linear"}
+            How the voltage behaves between samples.
+
+        Returns
+        -------
+        ModelStream
+            At rest at 0 V.
+        """
         return ModelStream(self, rate_hz, hold)
 
 
@@ -103,6 +169,26 @@ class ModelStream:
     Feeding a record in any split gives the same result as ``predict(..., method="fast")``:
     with numba, the banks' states stay in the compiled kernels' form between blocks
     (:func:`~labrig.model.compiled.model_run`); without, the numpy code carries them.
+
+    Parameters
+    ----------
+    model : DynamicHysteresisModel
+        The model evaluated.
+    rate_hz : float
+        Sample rate (Hz).
+    hold : {"zoh", "linear"}
+        How the voltage behaves between samples.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from labrig.model import PAPER_TABLE1
+    >>> model = DynamicHysteresisModel(PAPER_TABLE1)
+    >>> v = 50.0 * np.sin(np.linspace(0.0, 6.0, 400))
+    >>> stream = model.stream(1000.0)
+    >>> y = np.concatenate([stream.process(v[:150]), stream.process(v[150:])])
+    >>> bool(np.allclose(y, model.predict(v, 1000.0), rtol=0, atol=1e-9))
+    True
     """
 
     def __init__(self, model: DynamicHysteresisModel, rate_hz: float, hold: str = "zoh"):
@@ -113,6 +199,7 @@ class ModelStream:
         self.reset()
 
     def reset(self) -> None:
+        """Back to rest at 0 V (the relaxors' states and the operator's memory)."""
         self._xt = self._bank_t.initial_state()
         self._xd = self._bank_d.initial_state()
         self._v_prev = 0.0
@@ -123,6 +210,18 @@ class ModelStream:
             self._ups = np.zeros(2)
 
     def process(self, v_block: ArrayLike) -> NDArray[np.float64]:
+        """Strain for the next block of the record; the state carries on to the next call.
+
+        Parameters
+        ----------
+        v_block : array_like
+            The next samples of the voltage record (V).
+
+        Returns
+        -------
+        numpy.ndarray
+            Strain (ue) at those samples.
+        """
         v = np.ascontiguousarray(v_block, dtype=np.float64)
         if v.size == 0:
             return np.zeros(0)

@@ -84,7 +84,29 @@ Fn = Callable[[NDArray, float, float], NDArray]
 @dataclass(frozen=True)
 class Shape:
     """A hysteretic slope ``h(x; gamma, vc)``, optionally its integral ``H(x) = int_0^x h`` and
-    the integral's derivatives ``dH/dgamma`` and ``dH/dvc`` (for :meth:`sensitivities`)."""
+    the integral's derivatives ``dH/dgamma`` and ``dH/dvc`` (for :meth:`sensitivities`).
+
+    Parameters
+    ----------
+    name : str
+        The shape's name (reports, errors).
+    h : callable
+        ``h(x, gamma, vc)``: the slope's variation (ue/V) at distances ``x >= 0`` (V), with
+        ``h(0) = 0``.
+    H : callable, optional
+        ``H(x, gamma, vc) = int_0^x h`` (ue); by quadrature when not given.
+    dH_dgamma, dH_dvc : callable, optional
+        Derivatives of ``H``; by central differences when not given.
+
+    Examples
+    --------
+    A quadratic slope, its integral by quadrature: ``H(2) = gamma 2^3 / 3``.
+
+    >>> import numpy as np
+    >>> cubic = Shape("cubic", lambda x, g, vc: g * x**2)
+    >>> round(float(cubic.integral(np.array(2.0), 3.0, 1.0)), 12)
+    8.0
+    """
 
     name: str
     h: Fn
@@ -93,6 +115,22 @@ class Shape:
     dH_dvc: Fn | None = None
 
     def integral(self, x: NDArray, gamma: float, vc: float) -> NDArray:
+        """The integral of the slope's variation.
+
+        Parameters
+        ----------
+        x : numpy.ndarray
+            Distances from the turning point (V, ``>= 0``).
+        gamma : float
+            The shape's ``gamma`` (ue/V).
+        vc : float
+            The shape's ``vc`` (V).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``H(x) = int_0^x h`` (ue): the stated closed form, else 48-point Gauss-Legendre.
+        """
         if self.H is not None:
             return self.H(x, gamma, vc)
         x = np.asarray(x, dtype=float)
@@ -101,7 +139,24 @@ class Shape:
 
     def integral_derivatives(self, x: NDArray, gamma: float, vc: float) -> tuple[NDArray, NDArray]:
         """``(dH/dgamma, dH/dvc)`` at ``x >= 0``: the stated closed forms, else central
-        differences of :meth:`integral` with relative step :data:`FD_STEP`."""
+        differences of :meth:`integral` with relative step :data:`FD_STEP`.
+
+        Parameters
+        ----------
+        x : numpy.ndarray
+            Distances from the turning point (V).
+        gamma : float
+            The shape's ``gamma`` (ue/V).
+        vc : float
+            The shape's ``vc`` (V).
+
+        Returns
+        -------
+        dH_dgamma : numpy.ndarray
+            ``dH/dgamma`` at ``x``.
+        dH_dvc : numpy.ndarray
+            ``dH/dvc`` at ``x``.
+        """
         x = np.asarray(x, dtype=float)
         if self.dH_dgamma is not None:
             dg = self.dH_dgamma(x, gamma, vc)
@@ -116,20 +171,20 @@ class Shape:
         return dg, dv
 
 
-def _exp_H(x, g, vc):
+def _exp_H(x: NDArray, g: float, vc: float) -> NDArray:
     return g * (x + vc * np.expm1(-x / vc))
 
 
-def _exp_dH_dvc(x, g, vc):
+def _exp_dH_dvc(x: NDArray, g: float, vc: float) -> NDArray:
     z = x / vc
     return g * (np.expm1(-z) + z * np.exp(-z))
 
 
-def _gauss_H(x, g, vc):
+def _gauss_H(x: NDArray, g: float, vc: float) -> NDArray:
     return g * (x - vc * np.sqrt(np.pi) / 2 * special.erf(x / vc))
 
 
-def _gauss_dH_dvc(x, g, vc):
+def _gauss_dH_dvc(x: NDArray, g: float, vc: float) -> NDArray:
     z = x / vc
     return g * (z * np.exp(-z * z) - np.sqrt(np.pi) / 2 * special.erf(z))
 
@@ -164,7 +219,23 @@ ENGINES = ("auto", "compiled", "numpy")
 @dataclass
 class HysteresisState:
     """Memory of the operator between calls (streaming): the current branch's turning point, the
-    older turning points still remembered (``"return_point"`` memory) and the last input."""
+    older turning points still remembered (``"return_point"`` memory) and the last input.
+
+    Parameters
+    ----------
+    u_s : float
+        Input at the current branch's turning point (V).
+    s_s : float
+        Output there (ue).
+    u_last : float
+        The last input seen (V).
+    s_last : float
+        The last output (ue).
+    direction : float
+        +1 rising, -1 falling, 0 not yet moved.
+    older : list of tuple of float
+        Older turning points ``(u, S)`` still remembered, oldest first.
+    """
 
     u_s: float = 0.0  # input at the current branch's turning point (V)
     s_s: float = 0.0  # output there (ue)
@@ -177,7 +248,29 @@ class HysteresisState:
 
 @dataclass(frozen=True)
 class QuasiStaticHysteresis:
-    """The operator ``u (V) -> S (ue)``; see the module docstring."""
+    """The operator ``u (V) -> S (ue)``; see the module docstring.
+
+    Parameters
+    ----------
+    alpha0 : float
+        Small-signal coefficient (ue/V, > 0).
+    gamma : float
+        Largest variation of the slope (ue/V).
+    vc : float
+        Saturation voltage (V, > 0).
+    shape : {"exponential", "linear", "gaussian"} or Shape
+        Shape of the slope's variation ``h``.
+    memory : {"return_point", "last_reversal", "return_point_open"}
+        Which turning points the operator remembers (module docstring).
+
+    Examples
+    --------
+    A linear (Rayleigh) shape, ``F(x) = alpha0 x + gamma x^2 / 2``: up to 2 V and back to 0.
+
+    >>> op = QuasiStaticHysteresis(1.0, 0.5, shape="linear")
+    >>> op.apply([0.0, 1.0, 2.0, 1.0, 0.0]).tolist()
+    [0.0, 1.25, 3.0, 1.75, 0.0]
+    """
 
     alpha0: float
     gamma: float
@@ -203,12 +296,39 @@ class QuasiStaticHysteresis:
 
     # -- branch function ----------------------------------------------------------------------
     def branch(self, x: ArrayLike) -> NDArray[np.float64]:
-        """``F(x) = alpha0 x + int_0^x h`` for ``x >= 0`` (strain change along a branch, ue)."""
+        """``F(x) = alpha0 x + int_0^x h`` for ``x >= 0`` (strain change along a branch, ue).
+
+        Parameters
+        ----------
+        x : array_like
+            Distance from the turning point (V, ``>= 0``).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``F(x)`` (ue).
+
+        Examples
+        --------
+        >>> float(QuasiStaticHysteresis(1.0, 0.5, shape="linear").branch(2.0))
+        3.0
+        """
         x = np.asarray(x, dtype=float)
         return self.alpha0 * x + self._shape.integral(x, self.gamma, self.vc)
 
     def slope(self, x: ArrayLike) -> NDArray[np.float64]:
-        """``alpha = alpha0 + h(x)`` (ue/V) at distance ``x`` from the last reversal."""
+        """``alpha = alpha0 + h(x)`` (ue/V) at distance ``x`` from the last reversal.
+
+        Parameters
+        ----------
+        x : array_like
+            Distance from the last reversal (V).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``alpha`` (ue/V).
+        """
         x = np.asarray(x, dtype=float)
         return self.alpha0 + self._shape.h(x, self.gamma, self.vc)
 
@@ -216,7 +336,23 @@ class QuasiStaticHysteresis:
         return np.sign(d) * self.branch(np.abs(d))
 
     def branch_inverse(self, y: ArrayLike) -> NDArray[np.float64]:
-        """``x >= 0`` with ``F(x) = y`` for ``y >= 0`` (V)."""
+        """``x >= 0`` with ``F(x) = y`` for ``y >= 0`` (V).
+
+        Parameters
+        ----------
+        y : array_like
+            Strain change along a branch (ue, ``>= 0``).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``x`` (V).
+
+        Examples
+        --------
+        >>> float(QuasiStaticHysteresis(1.0, 0.5, shape="linear").branch_inverse(3.0))
+        2.0
+        """
         y = np.asarray(y, dtype=float)
         a0, g, vc = self.alpha0, self.gamma, self.vc
         name = self._shape.name if self._shape.H is not None else ""
@@ -265,7 +401,18 @@ class QuasiStaticHysteresis:
         """The state of an actuator brought from rest at 0 V to ``u0_V`` (V) and held there: the
         state before a record that begins at a held voltage. The rest point at 0 V stays the
         bottom of the memory, the input arrived at ``u0_V`` along the first branch
-        (strain ``sign(u0) F(|u0|)``)."""
+        (strain ``sign(u0) F(|u0|)``).
+
+        Parameters
+        ----------
+        u0_V : float
+            The voltage held (V).
+
+        Returns
+        -------
+        HysteresisState
+            The operator's memory at ``u0_V``.
+        """
         u0 = float(u0_V)
         d = float(np.sign(u0))
         return HysteresisState(0.0, 0.0, u0, d * float(self.branch(abs(u0))), d)
@@ -304,6 +451,20 @@ class QuasiStaticHysteresis:
         ``engine``: ``"auto"`` (compiled for the builtin shapes when numba is available),
         ``"compiled"`` or ``"numpy"`` (the vectorised branch search, the reference); the two
         agree to rounding (the same closed forms, summed in the same order).
+
+        Parameters
+        ----------
+        u : array_like
+            The voltage record (V), finite.
+        state : HysteresisState, optional
+            The memory before the record (default: at rest at 0 V); updated in place.
+        engine : {"auto", "compiled", "numpy"}
+            Which code runs.
+
+        Returns
+        -------
+        numpy.ndarray
+            Strain (ue) at each sample.
         """
         u = _finite(u, "voltage")
         kern = self._kernels(engine)
@@ -344,9 +505,27 @@ class QuasiStaticHysteresis:
         the ``"last_reversal"`` memory the structure changes when a tiny wiggle appears, which
         is why differences of ``apply`` itself are no derivative there. One column of
         :meth:`sensitivities`' ``dS_du``.
+
+        Parameters
+        ----------
+        u : array_like
+            The voltage record (V).
+        du : array_like
+            The direction of the change of ``u`` (same length).
+        held_V : float
+            The voltage held before the record (V).
+        engine : {"auto", "compiled", "numpy"}
+            Which code runs.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``dS`` along ``du`` at each sample.
         """
         du = np.asarray(du, dtype=float)
-        return self.sensitivities(u, held_V, du, params=False, engine=engine)[2]
+        dS_du = self.sensitivities(u, held_V, du, params=False, engine=engine)[2]
+        assert dS_du is not None  # given du, sensitivities returns its tangent
+        return dS_du
 
     def sensitivities(
         self,
@@ -373,6 +552,28 @@ class QuasiStaticHysteresis:
         ``engine`` as for :meth:`apply`. For a user :class:`Shape`, ``dH/dgamma`` and
         ``dH/dvc`` come from the shape if it states them, else from central differences
         (:meth:`Shape.integral_derivatives`).
+
+        Parameters
+        ----------
+        u : array_like
+            The voltage record (V).
+        held_V : float
+            The voltage held before the record (V).
+        du : array_like, optional
+            Directions of the change of ``u``: (N,) or (N, k).
+        params : bool
+            Whether to compute ``dS_dparams``.
+        engine : {"auto", "compiled", "numpy"}
+            Which code runs.
+
+        Returns
+        -------
+        S : numpy.ndarray
+            Strain (ue), (N,).
+        dS_dparams : numpy.ndarray or None
+            (N, 3), or ``None`` without ``params``.
+        dS_du : numpy.ndarray or None
+            (N,) or (N, k), or ``None`` without ``du``.
         """
         u = _finite(u, "voltage")
         n = u.size
@@ -445,6 +646,24 @@ class QuasiStaticHysteresis:
         ``F`` is increasing, so reversals and closed loops of the strain coincide with those of
         the voltage: the same branch structure is built on the strain record and each branch is
         inverted in closed form.
+
+        Parameters
+        ----------
+        strain : array_like
+            The strain record (ue), finite.
+        state : HysteresisState, optional
+            The memory before the record (default: at rest); updated in place.
+
+        Returns
+        -------
+        numpy.ndarray
+            Voltage (V) at each sample.
+
+        Examples
+        --------
+        >>> op = QuasiStaticHysteresis(1.0, 0.5, shape="linear")
+        >>> op.invert([0.0, 1.25, 3.0, 1.75, 0.0]).round(12).tolist()
+        [0.0, 1.0, 2.0, 1.0, 0.0]
         """
         s = _finite(strain, "strain")
         st = HysteresisState() if state is None else state

@@ -30,7 +30,7 @@ from functools import cached_property
 from types import ModuleType
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from labrig.core.blas import single_thread_blas
 from labrig.model.accel import kernels
@@ -74,7 +74,31 @@ def _phi(w: NDArray[np.complex128], order: int) -> NDArray[np.complex128]:
 
 def hold_gains(q: NDArray, dt: float, hold: str) -> tuple[NDArray, NDArray, NDArray]:
     """``(a, beta0, beta1)`` of the modes ``x' = q x + u`` sampled every ``dt`` (s) under
-    ``hold`` (module docstring): exact discretisation."""
+    ``hold`` (module docstring): exact discretisation.
+
+    Parameters
+    ----------
+    q : numpy.ndarray
+        The modes' poles (1/s), complex.
+    dt : float
+        Sample period (s).
+    hold : {"zoh", "linear"}
+        The input's hold.
+
+    Returns
+    -------
+    a, beta0, beta1 : numpy.ndarray
+        ``x[n] = a x[n-1] + beta0 u[n-1] + beta1 u[n]`` (``beta1 = 0`` for ``zoh``).
+
+    Examples
+    --------
+    ``zoh``: ``a = exp(q dt)`` and ``beta0 = (exp(q dt) - 1) / q``.
+
+    >>> import numpy as np
+    >>> a, b0, b1 = hold_gains(np.array([-1000.0]), 1e-3, "zoh")
+    >>> round(float(a[0].real), 12), round(float(b0[0].real) * 1000.0, 12), float(b1[0].real)
+    (0.367879441171, 0.632120558829, 0.0)
+    """
     if hold not in HOLDS:
         raise ValueError(f"hold must be one of {HOLDS}, got {hold!r}")
     w = np.asarray(q, dtype=np.complex128) * dt
@@ -88,7 +112,22 @@ def hold_gains(q: NDArray, dt: float, hold: str) -> tuple[NDArray, NDArray, NDAr
 def hold_gain_derivatives(q: NDArray, dt: float, hold: str) -> tuple[NDArray, NDArray, NDArray]:
     """``d(a, beta0, beta1)/dq`` for :func:`hold_gains`, from ``phi_k' = phi_k - k phi_(k+1)``:
     ``da = dt a``; zoh ``dbeta0 = dt^2 (phi1 - phi2)``; linear ``dbeta0 = dt^2 (phi1 - 2 phi2 +
-    2 phi3)``, ``dbeta1 = dt^2 (phi2 - 2 phi3)``."""
+    2 phi3)``, ``dbeta1 = dt^2 (phi2 - 2 phi3)``.
+
+    Parameters
+    ----------
+    q : numpy.ndarray
+        The modes' poles (1/s).
+    dt : float
+        Sample period (s).
+    hold : {"zoh", "linear"}
+        The input's hold.
+
+    Returns
+    -------
+    da, dbeta0, dbeta1 : numpy.ndarray
+        The derivatives with respect to ``q``.
+    """
     if hold not in HOLDS:
         raise ValueError(f"hold must be one of {HOLDS}, got {hold!r}")
     w = np.asarray(q, dtype=np.complex128) * dt
@@ -107,6 +146,17 @@ class ContinuousModes:
     response settles within a sample): for such a mode ``c/(s + xi)`` the discrete action is
     ``c/xi`` times the held input (``direct_m1 = sum c/xi``) with a linear-hold correction
     ``direct_m2 = sum c/xi^2``.
+
+    Parameters
+    ----------
+    q : numpy.ndarray
+        The poles (1/s), complex.
+    c : numpy.ndarray
+        The residues (1/s), complex.
+    direct_m1 : float
+        ``sum c / xi`` of the modes too fast to resolve.
+    direct_m2 : float
+        ``sum c / xi^2`` of those modes (s).
     """
 
     q: NDArray[np.complex128]
@@ -115,10 +165,36 @@ class ContinuousModes:
     direct_m2: float = 0.0
 
     def frequency_response(self, f_hz: NDArray[np.float64]) -> NDArray[np.complex128]:
+        """``H(j 2 pi f)`` of the modes and the instantaneous gain.
+
+        Parameters
+        ----------
+        f_hz : numpy.ndarray
+            Frequencies (Hz).
+
+        Returns
+        -------
+        numpy.ndarray
+            ``H(j 2 pi f)``, complex.
+        """
         s = 2j * np.pi * np.asarray(f_hz, dtype=float)[..., None]
         return np.sum(self.c / (s - self.q), axis=-1) + self.direct_m1
 
     def discretise(self, dt: float, hold: str) -> DiscreteBank:
+        """The modes discretised exactly for ``hold`` (:func:`hold_gains`).
+
+        Parameters
+        ----------
+        dt : float
+            Sample period (s).
+        hold : {"zoh", "linear"}
+            The input's hold.
+
+        Returns
+        -------
+        DiscreteBank
+            The bank, the instantaneous part one extra mode.
+        """
         a, b0, b1 = hold_gains(self.q, dt, hold)
         c = self.c
         # instantaneous part as one extra mode with a = 0 (exact to e^-40)
@@ -153,14 +229,38 @@ class DiscreteBank:
     """A bank of exactly discretised first-order modes (see module docstring).
 
     ``order[g]`` holds the positions, in the arrays given to :meth:`from_arrays`, of group
-    ``g``'s modes (extra output rows of :func:`run_bank_multi` are given in that order)."""
+    ``g``'s modes (extra output rows of :func:`run_bank_multi` are given in that order).
+
+    Parameters
+    ----------
+    groups : tuple
+        The modes, real and complex apart.
+    _cache : dict
+        Forms derived from the bank, kept (internal).
+    order : tuple of numpy.ndarray
+        Each group's positions among the modes given to :meth:`from_arrays`.
+    """
 
     groups: tuple[_Group, ...]
     _cache: dict = field(default_factory=dict, compare=False, repr=False)
     order: tuple[NDArray[np.intp], ...] = ()
 
     @classmethod
-    def from_arrays(cls, a, b0, b1, c) -> DiscreteBank:
+    def from_arrays(cls, a: ArrayLike, b0: ArrayLike, b1: ArrayLike, c: ArrayLike) -> DiscreteBank:
+        """A bank from per-mode arrays (real modes grouped apart from complex ones).
+
+        Parameters
+        ----------
+        a, b0, b1 : array_like
+            ``x[n] = a x[n-1] + b0 u[n-1] + b1 u[n]`` per mode.
+        c : array_like
+            Output weights: ``y = Re sum c x``.
+
+        Returns
+        -------
+        DiscreteBank
+            The modes grouped into real and complex ones.
+        """
         a, b0, b1, c = (np.asarray(x, dtype=np.complex128) for x in (a, b0, b1, c))
         is_real = (np.abs(a.imag) == 0) & (np.abs(b0.imag) == 0) & (np.abs(b1.imag) == 0)
         is_real &= np.abs(c.imag) == 0
@@ -185,12 +285,30 @@ class DiscreteBank:
         return float(sum(np.sum(g.c * g.b1).real for g in self.groups))
 
     def impulse_response(self, n: int) -> NDArray[np.float64]:
-        """``y`` for a unit sample at index 0 (system at rest), length ``n``."""
+        """``y`` for a unit sample at index 0 (system at rest), length ``n``.
+
+        Parameters
+        ----------
+        n : int
+            Number of samples.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``y``, length ``n``.
+        """
         u = np.zeros(n)
         u[0] = 1.0
         return run_bank(self, u)[0]
 
     def initial_state(self) -> list[NDArray]:
+        """The state at rest.
+
+        Returns
+        -------
+        list of numpy.ndarray
+            One zero array per group.
+        """
         return [np.zeros(g.size, dtype=g.a.dtype) for g in self.groups]
 
 
@@ -249,6 +367,28 @@ def run_bank(
     (compiled when numba is available), ``"compiled"`` (the recursion sample by sample), or
     ``"numpy"`` (blocks of ``block`` samples with matrix products: the same recursion,
     reordered). The two agree to rounding.
+
+    Parameters
+    ----------
+    bank : DiscreteBank
+        The bank.
+    u : numpy.ndarray
+        The input record.
+    state : list of numpy.ndarray, optional
+        The state before the record (default: at rest).
+    u_prev : float
+        The input before the record.
+    block : int
+        Block length of the numpy engine.
+    engine : {"auto", "compiled", "numpy"}
+        Which code runs.
+
+    Returns
+    -------
+    y : numpy.ndarray
+        The output at each sample.
+    final_state : list of numpy.ndarray
+        The state after the record.
     """
     u = np.ascontiguousarray(u, dtype=np.float64)
     kern = _engine_kernels(engine)
@@ -304,6 +444,28 @@ def run_bank_multi(
     follows from its weights). Returns ``y`` (N, k, 1 + r) and each column's final state.
     ``state`` (one :meth:`DiscreteBank.initial_state`-like list per column) and ``u_prev`` (k,)
     carry the recursion across calls; ``None``: at rest with zero input before the record.
+
+    Parameters
+    ----------
+    bank : DiscreteBank
+        The bank.
+    u : numpy.ndarray
+        The inputs, (N, k).
+    extra_outputs : numpy.ndarray, optional
+        Weight vectors of further outputs, (r, M).
+    state : list, optional
+        Each column's state before the record (default: at rest).
+    u_prev : numpy.ndarray, optional
+        Each column's input before the record, (k,).
+    engine : {"auto", "compiled", "numpy"}
+        Which code runs.
+
+    Returns
+    -------
+    y : numpy.ndarray
+        The outputs, (N, k, 1 + r).
+    final_states : list
+        Each column's state after the record.
     """
     u = np.asarray(u, dtype=np.float64)
     if u.ndim != 2:
@@ -335,7 +497,18 @@ def run_bank_multi(
 
 def scaled_form(bank: DiscreteBank) -> tuple:
     """``(a, cw, feed, ca, ccw)``: the bank as the compiled kernels run it (real modes' poles and
-    output weights ``c (a b1 + b0)``, the feedthrough, complex modes' poles and weights)."""
+    output weights ``c (a b1 + b0)``, the feedthrough, complex modes' poles and weights).
+
+    Parameters
+    ----------
+    bank : DiscreteBank
+        The bank.
+
+    Returns
+    -------
+    tuple
+        ``(a, cw, feed, ca, ccw)``.
+    """
     key = ("scaled", None)
     if key not in bank._cache:
         bank._cache[key] = _scaled(bank, None)
@@ -347,7 +520,22 @@ def scaled_state(
     bank: DiscreteBank, state: list[NDArray], u_prev: float
 ) -> tuple[NDArray, NDArray]:
     """A state of :meth:`DiscreteBank.initial_state`'s form as the compiled kernels keep it:
-    ``w = (x - b1 u_prev) / b`` for the modes that are driven, real and complex apart."""
+    ``w = (x - b1 u_prev) / b`` for the modes that are driven, real and complex apart.
+
+    Parameters
+    ----------
+    bank : DiscreteBank
+        The bank.
+    state : list of numpy.ndarray
+        A state of :meth:`DiscreteBank.initial_state`'s form.
+    u_prev : float
+        The last input.
+
+    Returns
+    -------
+    w_r, w_c : numpy.ndarray
+        The real and complex modes' scaled states.
+    """
     if ("scaled", None) not in bank._cache:
         bank._cache[("scaled", None)] = _scaled(bank, None)
     parts = bank._cache[("scaled", None)][5]
@@ -362,7 +550,22 @@ def scaled_state(
 
 
 def unscaled_state(bank: DiscreteBank, w_r: NDArray, w_c: NDArray, u_last: float) -> list[NDArray]:
-    """The inverse of :func:`scaled_state` after a record whose last input was ``u_last``."""
+    """The inverse of :func:`scaled_state` after a record whose last input was ``u_last``.
+
+    Parameters
+    ----------
+    bank : DiscreteBank
+        The bank.
+    w_r, w_c : numpy.ndarray
+        The real and complex modes' scaled states.
+    u_last : float
+        The record's last input.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        The state in :meth:`DiscreteBank.initial_state`'s form.
+    """
     if ("scaled", None) not in bank._cache:
         bank._cache[("scaled", None)] = _scaled(bank, None)
     parts = bank._cache[("scaled", None)][5]
@@ -374,7 +577,13 @@ def unscaled_state(bank: DiscreteBank, w_r: NDArray, w_c: NDArray, u_last: float
     return out
 
 
-def _run_bank_multi_numpy(bank, u, extra, states, up):
+def _run_bank_multi_numpy(
+    bank: DiscreteBank,
+    u: NDArray,
+    extra: NDArray | None,
+    states: list[list[NDArray]],
+    up: NDArray,
+) -> tuple[NDArray[np.float64], list[list[NDArray]]]:
     """:func:`run_bank_multi` with the numpy block realisation, one output row at a time."""
     rows = [None] if extra is None else [None, *list(extra)]
     n, kc = u.shape
@@ -395,7 +604,9 @@ def _run_bank_multi_numpy(bank, u, extra, states, up):
     return y, out_states
 
 
-def _run_bank(bank, u, state, u_prev, block):
+def _run_bank(
+    bank: DiscreteBank, u: NDArray, state: list[NDArray] | None, u_prev: float, block: int
+) -> tuple[NDArray[np.float64], list[NDArray]]:
     n = u.size
     state = bank.initial_state() if state is None else state
     feed = bank.feedthrough
@@ -442,7 +653,24 @@ def _run_bank(bank, u, state, u_prev, block):
 
 
 class BankStepper:
-    """Sample-by-sample evaluation of a :class:`DiscreteBank` (O(M) work, no history kept)."""
+    """Sample-by-sample evaluation of a :class:`DiscreteBank` (O(M) work, no history kept).
+
+    Parameters
+    ----------
+    bank : DiscreteBank
+        The bank, at rest at the start.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from labrig.model.relaxor import Relaxor
+    >>> bank = Relaxor(1e-3, 0.5).bank(1000.0)
+    >>> stepper = BankStepper(bank)
+    >>> u = np.sin(np.arange(20) / 3.0)
+    >>> y = [stepper.step(float(x)) for x in u]
+    >>> bool(np.allclose(y, run_bank(bank, u)[0], rtol=0, atol=1e-12))
+    True
+    """
 
     def __init__(self, bank: DiscreteBank):
         self.bank = bank
@@ -453,11 +681,23 @@ class BankStepper:
         self.reset()
 
     def reset(self) -> None:
+        """Back to rest (zero state, zero last input)."""
         self._x = self.bank.initial_state()
         self._u_prev = 0.0
 
     def step(self, u: float) -> float:
-        """Advance one sample with input ``u[n]``; return ``y[n]``."""
+        """Advance one sample with input ``u[n]``; return ``y[n]``.
+
+        Parameters
+        ----------
+        u : float
+            The input ``u[n]``.
+
+        Returns
+        -------
+        float
+            The output ``y[n]``.
+        """
         y = 0.0
         for i, x in enumerate(self._x):
             x *= self._a[i]
@@ -467,7 +707,18 @@ class BankStepper:
         return y
 
     def peek(self, u: float) -> float:
-        """``y[n]`` that :meth:`step` would return for input ``u``, without advancing."""
+        """``y[n]`` that :meth:`step` would return for input ``u``, without advancing.
+
+        Parameters
+        ----------
+        u : float
+            A candidate input ``u[n]``.
+
+        Returns
+        -------
+        float
+            The output ``y[n]`` it would give.
+        """
         y = 0.0
         for i, x in enumerate(self._x):
             xn = self._a[i] * x + self._b0[i] * self._u_prev + self._b1[i] * u

@@ -16,6 +16,30 @@ class ModelParams(BaseModel):
     """Parameters of the paper's Fig. 2: ``V -> G_t -> G_d -> quasi-static operator -> strain``.
 
     Units are in the names: ue/V, V, s; the orders ``lam_*`` are dimensionless (0 < lam < 2).
+
+    Parameters
+    ----------
+    alpha0_ue_per_V : float
+        Small-signal coefficient ``alpha0`` (ue/V, > 0).
+    gamma_ue_per_V : float
+        Largest variation of the slope ``gamma`` (ue/V).
+    vc_V : float
+        Saturation voltage of the hysteretic slope (V, > 0).
+    shape : {"exponential", "linear", "gaussian"}
+        Shape of the slope's variation ``h``.
+    memory : {"return_point", "last_reversal", "return_point_open"}
+        Which turning points the operator remembers.
+    lam_t, tau_t_s : float
+        Order and time constant (s) of the transient relaxor ``G_t``.
+    lam_d, tau_d_s : float
+        Order and time constant (s) of the harmonic relaxor ``G_d``.
+
+    Examples
+    --------
+    >>> PAPER_TABLE1.alpha0_ue_per_V, PAPER_TABLE1.tau_t_s
+    (8.9, 0.000155)
+    >>> PAPER_TEXT.tau_t_s
+    1.55e-05
     """
 
     model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
@@ -34,7 +58,13 @@ class ModelParams(BaseModel):
     tau_d_s: float = Field(gt=0, description="time constant of G_d")
 
     def operator(self) -> QuasiStaticHysteresis:
-        """The quasi-static operator of these parameters (the paper's Eq. 1, 2, 10)."""
+        """The quasi-static operator of these parameters (the paper's Eq. 1, 2, 10).
+
+        Returns
+        -------
+        QuasiStaticHysteresis
+            ``alpha0``, ``gamma``, ``vc``, shape and memory of these parameters.
+        """
         return QuasiStaticHysteresis(
             self.alpha0_ue_per_V, self.gamma_ue_per_V, self.vc_V, self.shape, self.memory
         )

@@ -41,6 +41,7 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass
 from functools import lru_cache
+from types import ModuleType
 
 import numpy as np
 from numpy.polynomial import chebyshev as C
@@ -67,7 +68,7 @@ from labrig.model.modal import (
 )
 
 
-def _scipy_signal():
+def _scipy_signal() -> ModuleType:
     """``scipy.signal``, imported on first use: it costs about a second of CPU to import (it
     loads scipy.stats), which the fast paths never need."""
     from scipy import signal
@@ -97,7 +98,27 @@ def _check_rate(rate_hz: float) -> float:
 
 @dataclass(frozen=True)
 class Relaxor:
-    """``G(s) = 1 / (1 + (tau_s s)^lam)``, ``0 < lam < 2``; DC gain 1."""
+    """``G(s) = 1 / (1 + (tau_s s)^lam)``, ``0 < lam < 2``; DC gain 1.
+
+    Parameters
+    ----------
+    tau_s : float
+        Time constant ``tau`` (s, > 0).
+    lam : float
+        Order ``lam`` (``0 < lam < 2``).
+
+    Examples
+    --------
+    For ``lam = 1``, the first-order lag: a unit step held by a DAQ gives ``1 - exp(-t/tau)`` at
+    the samples.
+
+    >>> import numpy as np
+    >>> g = Relaxor(1e-3, 1.0)
+    >>> g.filter(np.ones(3), 1000.0).round(9).tolist()
+    [0.0, 0.632120559, 0.864664717]
+    >>> complex(g.frequency_response(0.0))
+    (1+0j)
+    """
 
     tau_s: float
     lam: float
@@ -107,20 +128,59 @@ class Relaxor:
 
     # -- closed forms -------------------------------------------------------------------------
     def frequency_response(self, f_hz: ArrayLike) -> NDArray[np.complex128]:
-        """``G(j 2 pi f) = 1 / (1 + (tau w)^lam exp(j lam pi/2))`` (the paper's Eq. 6)."""
+        """``G(j 2 pi f) = 1 / (1 + (tau w)^lam exp(j lam pi/2))`` (the paper's Eq. 6).
+
+        Parameters
+        ----------
+        f_hz : array_like
+            Frequencies (Hz); negative ones give the conjugate.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``G(j 2 pi f)``, complex.
+        """
         w = 2.0 * np.pi * np.abs(np.asarray(f_hz, dtype=float))
         g = 1.0 / (1.0 + (self.tau_s * w) ** self.lam * np.exp(1j * self.lam * np.pi / 2))
         return np.where(np.asarray(f_hz) < 0, np.conj(g), g)
 
     def step_response(self, t_s: ArrayLike) -> NDArray[np.float64]:
-        """Unit-step response ``1 - E_lam(-(t/tau)^lam)`` (0 for t <= 0), by direct evaluation."""
+        """Unit-step response ``1 - E_lam(-(t/tau)^lam)`` (0 for t <= 0), by direct evaluation.
+
+        Parameters
+        ----------
+        t_s : array_like
+            Times (s).
+
+        Returns
+        -------
+        numpy.ndarray
+            The step response at ``t_s``.
+        """
         return relaxor_step(t_s, self.tau_s, self.lam)
 
     # -- sampled filtering --------------------------------------------------------------------
     def filter(
         self, v: ArrayLike, rate_hz: float, method: str = "exact", hold: str = "zoh"
     ) -> NDArray[np.float64]:
-        """Filter the record ``v`` sampled at ``rate_hz`` (see the module docstring for holds)."""
+        """Filter the record ``v`` sampled at ``rate_hz`` (see the module docstring for holds).
+
+        Parameters
+        ----------
+        v : array_like
+            The input record, 1-D.
+        rate_hz : float
+            Sample rate (Hz).
+        method : {"exact", "fast"}
+            FFT convolution with the exact kernel, or the modal bank (module docstring).
+        hold : {"zoh", "linear"}
+            How the input behaves between samples (module docstring).
+
+        Returns
+        -------
+        numpy.ndarray
+            The output at each sample (the input's unit), at rest before the record.
+        """
         v = np.asarray(v, dtype=np.float64)
         if v.ndim != 1:
             raise ValueError("v must be a 1-D record")
@@ -151,6 +211,26 @@ class Relaxor:
         beta1' u[n]`` (:func:`~labrig.model.modal.hold_gain_derivatives`; the mode applied to
         its own state). Exact up to rounding: it differentiates what ``filter(method="fast")``
         computes, and agrees with its central differences (tests/model/test_sensitivities.py).
+
+        Parameters
+        ----------
+        v : array_like
+            The input record (V), 1-D.
+        rate_hz : float
+            Sample rate (Hz).
+        hold : {"zoh", "linear"}
+            How the input behaves between samples (module docstring).
+        rest_V : float
+            The input held before the record (V).
+
+        Returns
+        -------
+        y : numpy.ndarray
+            The output (V).
+        dy_dln_tau : numpy.ndarray
+            Its derivative with respect to ``ln tau``.
+        dy_dlam : numpy.ndarray
+            Its derivative with respect to ``lam``.
         """
         v = np.asarray(v, dtype=np.float64)
         if v.ndim != 1:
@@ -200,18 +280,71 @@ class Relaxor:
         return y[:, 0] + rest_V, y[:, 1], y[:, 2]
 
     def kernel(self, n: int, rate_hz: float, hold: str = "zoh") -> NDArray[np.float64]:
-        """Exact sampled kernel ``k`` with ``y = k * v`` (length ``n``)."""
+        """Exact sampled kernel ``k`` with ``y = k * v`` (length ``n``).
+
+        Parameters
+        ----------
+        n : int
+            Number of samples.
+        rate_hz : float
+            Sample rate (Hz).
+        hold : {"zoh", "linear"}
+            How the input behaves between samples (module docstring).
+
+        Returns
+        -------
+        numpy.ndarray
+            The kernel, length ``n``.
+        """
         return sampled_kernel(self.tau_s, self.lam, _check_rate(rate_hz), n, hold)
 
     def modes(self, rate_hz: float) -> ContinuousModes:
-        """Continuous modal (diffusive) approximation used by ``method="fast"``."""
+        """Continuous modal (diffusive) approximation used by ``method="fast"``.
+
+        Parameters
+        ----------
+        rate_hz : float
+            Sample rate (Hz).
+
+        Returns
+        -------
+        ContinuousModes
+            The modes and instantaneous gains of the diffusive realisation.
+        """
         return diffusive_modes(self.tau_s, self.lam, _check_rate(rate_hz))
 
     def bank(self, rate_hz: float, hold: str = "zoh") -> DiscreteBank:
+        """The discrete modal bank of ``method="fast"``.
+
+        Parameters
+        ----------
+        rate_hz : float
+            Sample rate (Hz).
+        hold : {"zoh", "linear"}
+            How the input behaves between samples (module docstring).
+
+        Returns
+        -------
+        DiscreteBank
+            The modes discretised exactly for ``hold`` (cached).
+        """
         return _bank(self.tau_s, self.lam, _check_rate(rate_hz), hold)
 
     def stepper(self, rate_hz: float, hold: str = "zoh") -> BankStepper:
-        """Per-sample realisation for a control loop: ``y_n = stepper.step(v_n)``."""
+        """Per-sample realisation for a control loop: ``y_n = stepper.step(v_n)``.
+
+        Parameters
+        ----------
+        rate_hz : float
+            Sample rate (Hz).
+        hold : {"zoh", "linear"}
+            How the input behaves between samples (module docstring).
+
+        Returns
+        -------
+        BankStepper
+            At rest.
+        """
         return BankStepper(self.bank(rate_hz, hold))
 
     def inverse_filter(self, y: ArrayLike, rate_hz: float) -> NDArray[np.float64]:
@@ -240,6 +373,18 @@ class Relaxor:
         sample rate); ``filter(v, method="exact", hold="zoh")`` reproduces ``y`` with a residual
         that falls as ``(f/rate)^1.4`` for the paper's ``G_d`` (measured: 4e-5 of full scale at
         1 Hz, 2e-4 at 5 Hz, 4e-3 at 40 Hz, 1 kHz sampling).
+
+        Parameters
+        ----------
+        y : array_like
+            The wanted output record.
+        rate_hz : float
+            Sample rate (Hz).
+
+        Returns
+        -------
+        numpy.ndarray
+            The drive ``v``, one value per sample of ``y``.
         """
         y = np.asarray(y, dtype=np.float64)
         dt = _check_rate(rate_hz)
@@ -263,6 +408,16 @@ class Relaxor:
         weights, real poles and interlacing real zeros, so its exact inverse is stable (checked by
         :func:`check_inverse_stable`). For ``lam > 1`` the truncated bank is not minimum-phase and
         this raises ``ValueError``; use :meth:`inverse_filter` offline.
+
+        Parameters
+        ----------
+        rate_hz : float
+            Sample rate (Hz).
+
+        Returns
+        -------
+        InverseStepper
+            At rest.
         """
         if self.lam > 1.0:
             raise ValueError(
@@ -272,7 +427,13 @@ class Relaxor:
 
 
 class InverseStepper:
-    """``v[n]`` such that the bank's output at ``n`` equals ``y[n]`` (O(M) per sample)."""
+    """``v[n]`` such that the bank's output at ``n`` equals ``y[n]`` (O(M) per sample).
+
+    Parameters
+    ----------
+    bank : DiscreteBank
+        A bank with a positive instantaneous gain (the linear hold).
+    """
 
     def __init__(self, bank: DiscreteBank):
         self._g = bank.feedthrough
@@ -281,6 +442,18 @@ class InverseStepper:
         self._fwd = BankStepper(bank)
 
     def step(self, y: float) -> float:
+        """The input ``v[n]`` whose output is ``y``; the bank advances with it.
+
+        Parameters
+        ----------
+        y : float
+            The wanted output at this sample.
+
+        Returns
+        -------
+        float
+            The input that gives it.
+        """
         v = (y - self._fwd.peek(0.0)) / self._g
         self._fwd.step(v)
         return v
@@ -305,7 +478,9 @@ class _LogChebyshevStep:
                 t = 10.0 ** (a + (x + 1.0) * self.width / 2)
                 return relaxor_step(t, tau_s, lam) - relaxor_step_pole_part(t, tau_s, lam)
 
-            self.coeffs.append(C.chebinterpolate(f, _CHEB_NODES - 1))
+            # numpy's stub wants f to return a scalar; chebinterpolate calls it with the array
+            # of nodes and needs the array of values
+            self.coeffs.append(C.chebinterpolate(f, _CHEB_NODES - 1))  # type: ignore[type-var]
 
     def branch(self, t: NDArray) -> NDArray:
         """The branch-cut part of the step response at ``t`` (s); compiled Clenshaw sums when
@@ -375,7 +550,26 @@ def _interval_means(tau_s: float, lam: float, dt: float, n: int) -> NDArray[np.f
 
 
 def sampled_kernel(tau_s: float, lam: float, dt: float, n: int, hold: str) -> NDArray[np.float64]:
-    """Exact sampled kernel of the relaxor for a hold (module docstring), length ``n``."""
+    """Exact sampled kernel of the relaxor for a hold (module docstring), length ``n``.
+
+    Parameters
+    ----------
+    tau_s : float
+        Time constant (s).
+    lam : float
+        Order (``0 < lam < 2``).
+    dt : float
+        Sample period (s).
+    n : int
+        Number of samples.
+    hold : {"zoh", "linear"}
+        The input's hold.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``k`` with ``y = k * v`` (discrete convolution).
+    """
     _validate(tau_s, lam)
     if hold == "zoh":
         s = _step_grid(tau_s, lam, dt, n)
@@ -391,7 +585,26 @@ def sampled_kernel(tau_s: float, lam: float, dt: float, n: int, hold: str) -> ND
 
 def series_reciprocal(h: NDArray) -> NDArray:
     """Causal inverse ``r`` of the sequence ``h`` (``h * r = delta``), by Newton's iteration on
-    power series with FFT products: O(N log N); requires ``h[0] != 0``; real or complex."""
+    power series with FFT products: O(N log N); requires ``h[0] != 0``; real or complex.
+
+    Parameters
+    ----------
+    h : numpy.ndarray
+        The sequence (``h[0] != 0``).
+
+    Returns
+    -------
+    numpy.ndarray
+        ``r``, the length of ``h``.
+
+    Examples
+    --------
+    The inverse of ``1 - z^-1`` is the running sum:
+
+    >>> import numpy as np
+    >>> series_reciprocal(np.array([1.0, -1.0, 0.0, 0.0])).round(12).tolist()
+    [1.0, 1.0, 1.0, 1.0]
+    """
     n = h.size
     r = np.array([1.0 / h[0]])
     m = 1
@@ -410,6 +623,20 @@ def power_ramp_kernel(mu: float, dt: float, n: int) -> NDArray[np.float64]:
     kernel is its second difference divided by ``dt``. For large ``m`` the second difference of
     ``m^p`` is evaluated as ``m^p [expm1(p log1p(1/m)) + expm1(p log1p(-1/m))]`` to avoid
     cancellation (relative error ~1e-16 m instead of 1e-16 m^2).
+
+    Parameters
+    ----------
+    mu : float
+        The power (``-1 < mu < 1``).
+    dt : float
+        Sample period (s).
+    n : int
+        Number of samples.
+
+    Returns
+    -------
+    numpy.ndarray
+        The kernel, length ``n``.
     """
     from scipy.special import gamma as gamma_fn
 
@@ -436,7 +663,22 @@ def _modes(tau_s: float, lam: float, dt: float) -> tuple[ContinuousModes, ModeDe
 
 
 def diffusive_modes(tau_s: float, lam: float, dt: float) -> ContinuousModes:
-    """Modal realisation of the relaxor at sample period ``dt`` (s) (labrig.model.diffusive)."""
+    """Modal realisation of the relaxor at sample period ``dt`` (s) (labrig.model.diffusive).
+
+    Parameters
+    ----------
+    tau_s : float
+        Time constant (s).
+    lam : float
+        Order (``0 < lam < 2``).
+    dt : float
+        Sample period (s).
+
+    Returns
+    -------
+    ContinuousModes
+        The modes (cached).
+    """
     return _modes(tau_s, lam, dt)[0]
 
 
@@ -450,6 +692,16 @@ def check_inverse_stable(bank: DiscreteBank) -> float:
 
     The slowest mode (1e-10 rad/s) puts a zero within a few ulps of 1, which double-precision
     eigenvalues cannot resolve: radii within 1e-12 of 1 are rounding, not instability.
+
+    Parameters
+    ----------
+    bank : DiscreteBank
+        A bank with a non-zero instantaneous gain.
+
+    Returns
+    -------
+    float
+        The largest eigenvalue modulus of the inverse's recursion.
     """
     # inverse system: state update x[n] = A x[n-1] + b0 u[n-1] + b1 u[n], with
     # u[n] = (y[n] - c.(A x[n-1] + b0 u[n-1])) / g; closed loop on (x, u_prev).

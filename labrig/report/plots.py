@@ -136,7 +136,7 @@ def frequency_figure(
     """Seed Fig. 10: loop area (a) and strain at zero voltage (b) versus frequency, per
     amplitude; ``None`` unless periodic entries cover two frequencies or more."""
     rows = [e for e in entries if e.periodic and e.frequency_hz and e.metrics]
-    fs = sorted(e.frequency_hz for e in rows)
+    fs = sorted(e.frequency_hz for e in rows if e.frequency_hz)
     if not rows or fs[-1] <= 1.05 * fs[0]:  # one frequency (within 5 %): nothing to plot against
         return None
     amps = sorted({e.amplitude_V for e in rows})
@@ -154,7 +154,9 @@ def frequency_figure(
     )
     for ax, meas_key, pred_key, ylabel in panels:
         for a in amps:
-            group = sorted((e for e in rows if e.amplitude_V == a), key=lambda e: e.frequency_hz)
+            group = sorted(
+                (e for e in rows if e.amplitude_V == a), key=lambda e: e.frequency_hz or 0.0
+            )
             f = np.array([e.frequency_hz for e in group])
             first = next(iter(group[0].metrics.values()))
             if first.get(meas_key) is None:

@@ -109,7 +109,9 @@ def _providers() -> dict[str, str]:
     return out
 
 
-def _report(name: str, ref: str, provided_by: str, info: DriverInfo, import_it: bool):
+def _report(
+    name: str, ref: str, provided_by: str, info: DriverInfo, import_it: bool
+) -> DriverReport:
     return DriverReport(
         name,
         info.role,

@@ -303,7 +303,7 @@ class Rig:
     # -- logging -------------------------------------------------------------------------------
     def describe(self) -> dict:
         """Identity and settings of every device (for the run file's NXinstrument groups)."""
-        out = {
+        out: dict[str, Any] = {
             "name": self.name,
             "seed": self.seed,
             "simulated": self.sim is not None,
@@ -428,7 +428,7 @@ class Rig:
         self.ramp_to_zero()
 
     @contextmanager
-    def zero_on_error(self):
+    def zero_on_error(self) -> Iterator[Rig]:
         """``with rig.zero_on_error(): ...`` brings the output to 0 V on any exception."""
         try:
             yield self
@@ -457,5 +457,5 @@ class Rig:
     def __enter__(self) -> Rig:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()

@@ -176,7 +176,8 @@ def _outline() -> type[BaseModel]:
         amplifier=(_Role, ...),
         conditioner=(_Role, ...),
         limits=(RigLimits, RigLimits()),
-        bench=(_bench_model() | None, None),
+        # the bench's model is made at run time: its optional type is a runtime union
+        bench=(_bench_model() | None, None),  # type: ignore[arg-type]
         simulator=(SimulatorSettings, SimulatorSettings()),
     )
 
@@ -324,13 +325,11 @@ def load_rig(path: Path | str | None = None) -> RigSpec:
         drivers[role] = info
     if issues:
         raise InputFileError(issues)
-    full = create_model(
-        "RigFileResolved",
-        __base__=outline_model,
-        **{role: (drivers[role].settings, ...) for role in ROLES},
-    )
+    fields: dict[str, Any] = {role: (drivers[role].settings, ...) for role in ROLES}
+    full = create_model("RigFileResolved", __base__=outline_model, **fields)
     try:
-        resolved = full.model_validate(data)
+        # a model made at run time: its fields are known to the checker as Any
+        resolved: Any = full.model_validate(data)
     except ValidationError as e:
         raise InputFileError(issues_from_validation(name, e, lines)) from e
     return RigSpec(

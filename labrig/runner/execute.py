@@ -354,7 +354,7 @@ def execute(
         job.resume = resume if isinstance(resume, ResumePlan) else check_resume_of(plan, resume)
         job.metadata = (metadata or RunMetadata()).over(RunMetadata(job.resume.metadata))
         job.options = metadata or RunMetadata()
-        out = resume
+        out = job.resume.path  # the file resumed (a ResumePlan names it)
     else:
         job.metadata = combine(getattr(plan.protocol, "metadata", None), metadata)
         out = out or default_out_path(plan)

@@ -22,6 +22,7 @@ import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
+from typing import Any
 
 import h5py
 import numpy as np
@@ -259,7 +260,7 @@ def _check_current(
     text = values[SEAL_ATTR]
     text = text.decode("utf-8", "replace") if isinstance(text, bytes) else text
     try:
-        seal = json.loads(text) if isinstance(text, str) else None
+        seal: Any = json.loads(text) if isinstance(text, str) else None
         crc = int(seal["crc"], 16)
         attrs = [str(a) for a in seal["attrs"]]
         sealed_members = [str(m) for m in seal.get("members", [])]

@@ -149,7 +149,7 @@ def _child(write_fd: int, size_bytes: int, fn: Callable[..., Any], args: tuple) 
 
 def _receive(fd: int, deadline: float) -> bytes | None:
     """Everything the child writes to ``fd`` until it closes it; ``None`` past ``deadline``."""
-    chunks = []
+    chunks: list[bytes] = []
     while True:
         left = deadline - time.monotonic()
         if left <= 0:

@@ -7,8 +7,10 @@ child process with a time limit by :func:`labrig.store.reader.read_run`."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import h5py
 import numpy as np
@@ -26,6 +28,9 @@ from labrig.store.format import (
     sealed_members,
 )
 from labrig.store.isolated import allow_cpu
+
+#: the JSON type :meth:`json` is asked for (a dict or a list)
+J = TypeVar("J")
 
 
 @dataclass
@@ -118,7 +123,7 @@ class RunFile:
     def __getitem__(self, name: str) -> RunEntry:
         return self.entries[name]
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[RunEntry]:
         return iter(self.entries.values())
 
     def __len__(self) -> int:
@@ -237,7 +242,7 @@ class _Reader:
             raise self.error(f"{status[:40]!r} is not a status ({', '.join(STATUSES)})")
         return status
 
-    def json(self, group: h5py.Group, name: str, default: str, kind: type) -> object:
+    def json(self, group: h5py.Group, name: str, default: str, kind: type[J]) -> J:
         """A text dataset holding JSON of type ``kind`` (``default`` when absent)."""
         text = self.text(group, name, default)
         self.at(group, name)
@@ -332,7 +337,7 @@ class _Reader:
             start_time=self.text(g, "start_time"),
             end_time=self.text(g, "end_time"),
             rate_hz=rate,
-            step=dict(self.json(g, "step_definition", "{}", dict)),  # type: ignore[call-overload]
+            step=dict(self.json(g, "step_definition", "{}", dict)),
             data=data,
             units=units,
             long_names=long_names,
@@ -470,8 +475,8 @@ class _Reader:
             rig_text=self.text(notes["rig"], "data") if "rig" in notes else "",
             protocol_file=self.text(notes["protocol"], "file_name") if "protocol" in notes else "",
             rig_file=self.text(notes["rig"], "file_name") if "rig" in notes else "",
-            instrument=dict(instrument),  # type: ignore[call-overload]
-            planned_entries=[str(x) for x in planned],  # type: ignore[union-attr]
+            instrument=dict(instrument),
+            planned_entries=[str(x) for x in planned],
             exit_code=self.integer(run, "exit_code"),
             metadata=self.scalars(run, "metadata", "NXcollection"),
             resumes=self.resumes(run),

@@ -15,6 +15,7 @@ import os
 import re
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -22,6 +23,9 @@ from labrig.core.errors import InputFileError, InputIssue
 from labrig.store.isolated import IsolatedReadError, call_isolated
 from labrig.store.parse import RunEntry, RunFile, read_run_here
 from labrig.store.writing import writer_of
+
+if TYPE_CHECKING:
+    from rich.console import RenderableType
 
 __all__ = [
     "RunEntry",
@@ -70,6 +74,7 @@ def read_run(path: Path | str, load_data: bool = True) -> RunFile:
             continue  # caught between two writes of a live writer: read it again
         _last = (key, load_data, run, shapes)
         break
+    assert _last is not None  # read above, or the cached read matched
     run, shapes = copy.deepcopy(_last[2:])
     run.path = Path(path)
     if run.status == "running":
@@ -164,7 +169,7 @@ def run_summary(path: Path | str) -> dict:
     }
 
 
-def run_info(path: Path | str):
+def run_info(path: Path | str) -> RenderableType:
     """A rich renderable summarising a run file (for ``labrig info RUN``)."""
     from rich.console import Group
     from rich.table import Table

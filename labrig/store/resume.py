@@ -128,7 +128,7 @@ def check_resume(
         )
     verify_samples(path)
     names = {e.name for e in run}
-    superseded = {}
+    superseded: dict[str, str] = {}
     for n in to_run:
         if n in names:
             k = 1

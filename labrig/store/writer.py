@@ -23,9 +23,12 @@ import os
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from types import TracebackType
+from typing import Any
 
 import h5py
 import numpy as np
+from numpy.typing import NDArray
 
 from labrig.core.errors import InputFileError, StorageError
 from labrig.core.interrupts import reason_for, signum_of
@@ -343,7 +346,12 @@ class RunWriter:
     def __enter__(self) -> RunWriter:
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> None:
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
         try:
             if self.status == "running" and self._f:
                 if exc_type is None:
@@ -409,7 +417,12 @@ class RunWriter:
         self._reserve.release()
 
     def set_run_value(
-        self, name: str, value: float | int | str, units: str = "", long_name: str = "", **attrs
+        self,
+        name: str,
+        value: float | int | str,
+        units: str = "",
+        long_name: str = "",
+        **attrs: Any,
     ) -> None:
         """Store a run-level scalar as ``/run/<name>`` (replacing one of that name), with
         ``units``, ``long_name`` and any other attributes; flushed. Releases the reserve first;
@@ -432,8 +445,8 @@ class RunWriter:
     def add_run_collection(
         self,
         name: str,
-        arrays: Mapping[str, tuple[Sequence[float], str, str]],
-        **attrs,
+        arrays: Mapping[str, tuple[Sequence[float] | NDArray, str, str]],
+        **attrs: Any,
     ) -> None:
         """Store ``/run/<name>``, an NXcollection of 1-D float datasets (``arrays``: name ->
         ``(values, units, long_name)``, checksummed) and attributes; flushed. Releases the

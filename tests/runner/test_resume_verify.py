@@ -18,6 +18,7 @@ import yaml
 
 from labrig.core.errors import InputFileError
 from labrig.runner import execute as runner
+from labrig.store import read_run
 
 from helpers import invoke
 
@@ -105,3 +106,16 @@ def test_a_sound_file_is_still_resumed(aborted):
     plan, rig = runner.preflight(proto, None)
     o = runner.execute(plan, rig, None, seed=4, resume=out)
     assert (o.status, o.entries) == ("complete", ["sine_80V_5Hz"])
+
+
+def test_the_command_resumes_a_sound_file(aborted):
+    """``labrig run --resume FILE`` on a sound file finishes it in place. The command hands the
+    runner the checked resume (a ``ResumePlan``), which the runner once took for the output
+    path: a TypeError traceback after the check (found by the type check, tests/test_types.py)."""
+    proto, out = aborted
+    res = invoke("run", proto, "--resume", out)
+    assert res.exit_code == 0, res.output
+    assert "Traceback" not in res.output
+    after = read_run(out)
+    assert after.status == "complete"
+    assert [e.name for e in after if e.status == "complete"][-1] == "sine_80V_5Hz"

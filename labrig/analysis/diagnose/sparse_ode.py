@@ -220,7 +220,7 @@ def sparse_ode_trial(
         eff,
         fo,
         held,
-        current.heldout,
+        dict(current.heldout),
         settings.min_gain,
         setup.span_s,
         current.evidence.floor_pct,
