@@ -10,7 +10,9 @@ that calls it (the reference of the tests, and the fallback without numba):
 - :func:`bank_run`: the relaxor banks of :mod:`labrig.model.modal`, one sample at a time over
   all modes (the recursion itself, in place of the numpy block form);
 - :func:`chebyshev_panels`: the exact method's log-time Chebyshev interpolant of the step
-  response (:mod:`labrig.model.relaxor`), one Clenshaw sum per sample.
+  response (:mod:`labrig.model.relaxor`), one Clenshaw sum per sample;
+- :func:`rate_hysteresis_run`: the rate-dependent Duhem state of the ``rate_hysteresis``
+  effect (:mod:`labrig.model.effects.rate_hysteresis`), its exact per-interval recurrence.
 
 Shapes are passed as integer codes (their index in ``labrig.model.hysteresis.SHAPES``:
 exponential 0, linear 1, gaussian 2), memory rules as a flag; every array argument is
@@ -350,6 +352,37 @@ def chebyshev_panels(t: np.ndarray, u0: float, width: float, coeffs: np.ndarray)
             out[i + 3] = coeffs[p3, 0] + x3 * d1 - d2
         i += 4
     return out
+
+
+# -- the rate-dependent hysteresis state -------------------------------------------------------
+
+
+@njit(cache=True)
+def rate_hysteresis_run(x: np.ndarray, A: float, beta: float, inv_tau_dt: float) -> np.ndarray:
+    """``h`` (ue) of ``dh/dt = A dx/dt - beta |dx/dt| h - h / tau_h`` over ``x`` (V), at rest
+    (``h = 0``) at ``x[0]``, ``x`` linear between samples; ``inv_tau_dt = dt / tau_h``.
+
+    Exact per interval: with ``d = x[n] - x[n-1]`` the rate is constant, the equation linear
+    with constant coefficients, so with ``z = beta |d| + dt / tau_h``
+    ``h[n] = h[n-1] exp(-z) + A d (1 - exp(-z)) / z`` (the ratio ``-expm1(-z) / z``, 1 at
+    ``z = 0``).
+    """
+    n = x.shape[0]
+    h = np.empty(n)
+    if n == 0:
+        return h
+    hk = 0.0
+    h[0] = 0.0
+    for k in range(1, n):
+        d = x[k] - x[k - 1]
+        z = beta * abs(d) + inv_tau_dt
+        if z > 1e-12:
+            e = math.exp(-z)
+            hk = hk * e + A * d * (-math.expm1(-z) / z)
+        else:
+            hk = hk * (1.0 - z) + A * d * (1.0 - 0.5 * z)
+        h[k] = hk
+    return h
 
 
 # -- the whole fast model ----------------------------------------------------------------------

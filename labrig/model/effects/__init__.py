@@ -69,8 +69,12 @@ LAZY: dict[str, str] = {
     "Param": "base",
     "EMPIRICAL_NOTE": "empirical",
     "EmpiricalTerms": "empirical",
+    "drift_basis": "sensor_drift",
+    "first_order_lowpass": "amplifier_bandwidth",
     "kelvin_voigt_filter": "viscoelastic_creep",
     "measured_voltage": "amplifier_current_limit",
+    "rate_hysteresis_state": "rate_hysteresis",
+    "resonance_filter": "mechanical_resonance",
     "slew_limit": "amplifier_current_limit",
     **{r.cls: r.name for r in REGISTRY},
 }

@@ -146,6 +146,23 @@ REGISTRY: tuple[Registration, ...] = (
     # structural and path-dependent: where the base misses it, it can come before an injected
     # effect, so it is tried only when asked (docs/diagnose.md)
     Registration("remanence", "Remanence", "operator", candidate=False, also=True, invertible=True),
+    # structural candidates of the base model (docs/diagnose.md, "Structural candidates"): each
+    # costs a refit and its folds, so they are tried only when asked
+    Registration(
+        "amplifier_bandwidth", "AmplifierBandwidth", "voltage", candidate=False, also=True
+    ),
+    Registration(
+        "mechanical_resonance", "MechanicalResonance", "output", candidate=False, also=True
+    ),
+    Registration(
+        "negative_field_asymmetry",
+        "NegativeFieldAsymmetry",
+        "voltage",
+        candidate=False,
+        also=True,
+    ),
+    Registration("rate_hysteresis", "RateHysteresis", "operator", candidate=False, also=True),
+    Registration("sensor_drift", "SensorDrift", "output", candidate=False, also=True),
     Registration("time_delay", "TimeDelay", "output"),
     Registration("quadratic_term", "QuadraticTerm", "voltage", context=("v_ref",)),
     Registration("field_saturation", "FieldSaturation", "voltage", context=("v_ref",)),

@@ -1,0 +1,338 @@
+"""The structural candidates of the base model (labrig.model.effects: amplifier_bandwidth,
+mechanical_resonance, negative_field_asymmetry, rate_hysteresis, sensor_drift): each null leaves
+the prediction unchanged exactly, each form against an independent reference (scipy's lsim,
+solve_ivp, the Bouc-Wen element, closed forms), their bounds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import integrate, signal
+
+from labrig.analysis.extended import ExtendedProblem
+from labrig.analysis.records import Record
+from labrig.model import accel
+from labrig.model.bouc_wen import bouc_wen_exact
+from labrig.model.effects import Context, library
+from labrig.model.effects.rate_hysteresis import rate_hysteresis_state
+from labrig.model.effects.sensor_drift import drift_basis
+
+NEW = (
+    "amplifier_bandwidth",
+    "mechanical_resonance",
+    "negative_field_asymmetry",
+    "rate_hysteresis",
+    "sensor_drift",
+)
+FS = 10_000.0
+
+
+def _ctx(v, hold="zoh", fs=FS):
+    v = np.asarray(v, float)
+    return Context(fs, v, {"e": slice(0, v.size)}, hold=hold)
+
+
+def _bipolar(n=4000, f=50.0, a=100.0, fs=FS):
+    t = np.arange(n) / fs
+    return a * np.sin(2 * np.pi * f * t) * np.minimum(1.0, t / 0.01)
+
+
+def _away(eff):
+    """Parameters away from the null, inside the bounds."""
+    return {
+        q.name: (q.init if q.init != q.null else q.lo + 0.3 * (q.hi - q.lo)) for q in eff.params
+    }
+
+
+@pytest.mark.parametrize("name", NEW)
+def test_the_null_leaves_the_prediction_unchanged_exactly(name):
+    eff = library()[name]
+    v = _bipolar()
+    ctx = _ctx(v)
+    x = 9.0 * v + 3.0
+    if eff.where == "operator":
+        np.testing.assert_array_equal(eff.apply(v, ctx, eff.null), np.zeros(v.size))
+    else:
+        inp = v if eff.where == "voltage" else x
+        np.testing.assert_array_equal(eff.apply(inp, ctx, eff.null), inp)
+    # and away from the null it changes something (the check above can fail)
+    inp = x if eff.where == "output" else v
+    moved = eff.apply(inp, ctx, _away(eff))
+    base = np.zeros(v.size) if eff.where == "operator" else inp
+    assert np.max(np.abs(moved - base)) > 1e-6 * np.max(np.abs(inp))
+
+
+@pytest.mark.parametrize("name", NEW)
+def test_every_registered_structural_candidate_is_opt_in(name):
+    from labrig.model.effects.registry import EFFECT_NAMES, STRUCTURAL_EFFECT_NAMES
+
+    assert name in STRUCTURAL_EFFECT_NAMES and name not in EFFECT_NAMES
+    eff = library()[name]
+    assert eff.confusable and eff.tell_apart and eff.__doc__
+    for q in eff.params:
+        assert q.lo <= q.init <= q.hi
+        assert q.lo <= q.null <= q.hi or q.log
+
+
+# -- amplifier_bandwidth -------------------------------------------------------------------------
+
+
+def test_amplifier_bandwidth_is_lsims_first_order_lowpass_for_a_linear_hold():
+    """A voltage linear between samples: the filter's samples are lsim's (which interpolates
+    its input linearly), to 1e-9 of the drive."""
+    eff = library()["amplifier_bandwidth"]
+    tau = 4e-4
+    t = np.arange(3000) / FS
+    rng = np.random.default_rng(1)
+    v = np.cumsum(rng.normal(0, 2.0, t.size))  # rough: every interval has its own slope
+    v -= v[0]
+    got = eff.apply(v, _ctx(v, "linear"), {"tau_amp_s": tau})
+    _, ref, _ = signal.lsim(([1.0], [tau, 1.0]), v, t, interp=True)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9 * np.max(np.abs(v)))
+
+
+def test_amplifier_bandwidth_is_the_interval_mean_of_the_filtered_held_voltage():
+    """A held (zoh) voltage: each sample is the mean of the continuous filter's output over the
+    interval its input is held, the reference from lsim on a grid 64 times finer (trapezoid
+    mean; agreement 1e-4 of the drive)."""
+    eff = library()["amplifier_bandwidth"]
+    tau, m, n = 2.5e-4, 64, 400
+    rng = np.random.default_rng(2)
+    v = np.r_[0.0, rng.uniform(-100, 100, n - 1)]  # a PRBS-like held drive from rest
+    got = eff.apply(v, _ctx(v, "zoh"), {"tau_amp_s": tau})
+    tf = np.arange(n * m + 1) / (FS * m)
+    vf = np.repeat(np.r_[v, v[-1]], m)[: tf.size]
+    _, yf, _ = signal.lsim(([1.0], [tau, 1.0]), vf, tf, interp=False)
+    means = np.array([np.trapezoid(yf[k * m : (k + 1) * m + 1]) / m for k in range(n)])
+    np.testing.assert_allclose(got, means, rtol=0, atol=1e-4 * 100)
+
+
+# -- mechanical_resonance ------------------------------------------------------------------------
+
+
+def test_mechanical_resonance_is_lsims_second_order_section():
+    eff = library()["mechanical_resonance"]
+    tau, zeta = 1 / (2 * np.pi * 700.0), 0.03
+    t = np.arange(4000) / FS
+    x = np.sin(2 * np.pi * 60 * t) ** 3 + 0.3 * np.sin(2 * np.pi * 650 * t)
+    got = eff.apply(x, _ctx(x), {"tau_r_s": tau, "zeta": zeta})
+    _, ref, _ = signal.lsim(([1.0], [tau * tau, 2 * zeta * tau, 1.0]), x, t, interp=True)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-8)
+
+
+@pytest.mark.parametrize("zeta", [0.02, 0.1, 0.4])
+def test_mechanical_resonance_gain_at_f_r_is_one_over_two_zeta(zeta):
+    """A sine at ``f_r`` in steady state: gain ``1 / (2 zeta)``, phase -90 deg (1 %, 1 deg)."""
+    eff = library()["mechanical_resonance"]
+    fr = 500.0
+    n = int(FS * 10.0 / (2 * np.pi * fr * zeta)) + 2000  # settled: 10 time constants
+    t = np.arange(n) / FS
+    x = np.sin(2 * np.pi * fr * t)
+    y = eff.apply(x, _ctx(x), {"tau_r_s": 1 / (2 * np.pi * fr), "zeta": zeta})
+    tail = slice(n - 2000, n)  # 100 periods
+    e = np.exp(-2j * np.pi * fr * t[tail])
+    g = np.sum(y[tail] * e) / np.sum(x[tail] * e)
+    assert abs(g) == pytest.approx(1 / (2 * zeta), rel=0.01)
+    assert np.degrees(np.angle(g)) == pytest.approx(-90.0, abs=1.0)
+
+
+def test_mechanical_resonance_is_stable_at_its_bounds():
+    """The lightest damping with the highest and the lowest resonance the bounds allow
+    (f_r far above Nyquist at a tiny tau_r) stays bounded."""
+    eff = library()["mechanical_resonance"]
+    (qt, qz) = eff.params
+    x = np.sign(np.sin(2 * np.pi * 20 * np.arange(20000) / FS))
+    for tau in (qt.hi, 1e-6):
+        y = eff.apply(x, _ctx(x), {"tau_r_s": tau, "zeta": qz.lo})
+        assert np.all(np.isfinite(y)) and np.max(np.abs(y)) < 1.0 / qz.lo
+
+
+# -- negative_field_asymmetry --------------------------------------------------------------------
+
+
+def test_negative_field_asymmetry_on_a_triangle_is_the_analytic_asymmetric_gain():
+    """A bipolar triangle of peak ``P``: the negative half scaled by ``1 - a``, the positive
+    half untouched, so ``f(V) + f(-V) = a |V|`` (not point-symmetric)."""
+    eff = library()["negative_field_asymmetry"]
+    P, a = 150.0, 0.3
+    t = np.arange(10000) / FS
+    tri = P * (2 / np.pi) * np.arcsin(np.sin(2 * np.pi * 1.0 * t))  # the analytic triangle
+    got = eff.apply(tri, _ctx(tri), {"a": a})
+    expected = np.where(tri >= 0, tri, (1 - a) * tri)
+    np.testing.assert_allclose(got, expected, rtol=1e-15, atol=1e-12)
+    both = eff.apply(tri, _ctx(tri), {"a": a}) + eff.apply(-tri, _ctx(-tri), {"a": a})
+    np.testing.assert_allclose(both, a * np.abs(tri), atol=1e-12)
+    # the peak of the negative half is -(1 - a) P
+    assert np.min(got) == pytest.approx(-(1 - a) * P, rel=1e-6)
+
+
+def test_negative_field_asymmetry_bounds_keep_the_map_monotone():
+    """At the upper bound (a = 0.9) the negative gain is 0.1 > 0 (the map stays monotone);
+    just outside the engine clips to the bound; -0.5 (a stronger negative response) is the
+    lower bound."""
+    eff = library()["negative_field_asymmetry"]
+    (q,) = eff.params
+    assert (q.lo, q.hi) == (-0.5, 0.9)
+    v = np.linspace(-100, 100, 2001)
+    assert np.all(np.diff(eff.apply(v, _ctx(v), {"a": q.hi})) > 0)
+
+
+# -- rate_hysteresis -----------------------------------------------------------------------------
+
+
+def _duhem_rhs(A, beta, tau, dv):
+    def rhs(t, h):
+        r = dv(t)
+        return [A * r - beta * abs(r) * h[0] - h[0] / tau]
+
+    return rhs
+
+
+def _smooth_drive(f):
+    def v(t):
+        return 100 * np.sin(2 * np.pi * f * t) + 20 * np.sin(6 * np.pi * f * t)
+
+    def dv(t):
+        w = 2 * np.pi * f
+        return 100 * w * np.cos(w * t) + 60 * w * np.cos(3 * w * t)
+
+    return v, dv
+
+
+@pytest.mark.parametrize("tau_h", [5e-4, 3e-3, 0.1])
+def test_rate_hysteresis_recurrence_is_exact_for_a_drive_linear_between_samples(tau_h):
+    """The recurrence against solve_ivp (RK45, rtol = atol = 1e-11) on the same drive, linear
+    between its samples (integrated interval by interval, the rate constant in each): equal to
+    1e-8 of the term's peak, whatever ``dt / tau_h`` (0.2 to 0.001)."""
+    A, beta = -1.5, 0.02
+    v, _ = _smooth_drive(40.0)
+    t = np.arange(301) / FS
+    x = v(t)
+    h = rate_hysteresis_state(x, A, beta, tau_h, FS)
+    ref = np.zeros(t.size)
+    for k in range(1, t.size):
+        r = (x[k] - x[k - 1]) * FS
+        sol = integrate.solve_ivp(_duhem_rhs(A, beta, tau_h, lambda _t, r=r: r), (t[k - 1], t[k]),
+                                  [ref[k - 1]], rtol=1e-11, atol=1e-11)  # fmt: skip
+        ref[k] = sol.y[0, -1]
+    assert np.max(np.abs(h - ref)) <= 1e-8 * np.max(np.abs(ref))
+
+
+@pytest.mark.parametrize("tau_h", [5e-4, 3e-3, 0.1])
+def test_rate_hysteresis_matches_solve_ivp_on_a_smooth_drive(tau_h):
+    """A smooth bipolar drive (a 40 Hz sine plus its third harmonic, 0.1 s at 10 kHz): the
+    recurrence on the samples against solve_ivp (LSODA, rtol = atol = 1e-10) on the continuous
+    drive. They differ only by reading the drive as linear between samples, an O(dt^2) error
+    that grows as ``tau_h`` nears ``dt``: within 2e-3 of the term's peak at ``tau_h = 5 dt``,
+    2e-4 from ``30 dt`` on."""
+    A, beta = -1.5, 0.02
+    v, dv = _smooth_drive(40.0)
+    t = np.arange(1001) / FS
+    h = rate_hysteresis_state(v(t), A, beta, tau_h, FS)
+    sol = integrate.solve_ivp(_duhem_rhs(A, beta, tau_h, dv), (0.0, t[-1]), [0.0],
+                              method="LSODA", rtol=1e-10, atol=1e-10, dense_output=True,
+                              max_step=1e-4)  # fmt: skip
+    ref = sol.sol(t)[0]
+    tol = 2e-3 if tau_h * FS < 30 else 2e-4
+    assert np.max(np.abs(h - ref)) <= tol * np.max(np.abs(ref))
+
+
+def test_rate_hysteresis_without_relaxation_is_the_bouc_wen_element():
+    """``tau_h -> infinity`` (1e9 s): the rate-independent Bouc-Wen element with ``gamma = 0``
+    of :mod:`labrig.model.bouc_wen` (closed form per monotone run), to 1e-6 of its peak."""
+    rng = np.random.default_rng(3)
+    v = np.r_[0.0, np.cumsum(rng.normal(0, 3.0, 3000))]
+    A, beta = 2.0, 0.03
+    h = rate_hysteresis_state(v, A, beta, 1e9, FS)
+    ref = bouc_wen_exact(v, A, beta, 0.0)
+    assert np.max(np.abs(h - ref)) <= 1e-6 * np.max(np.abs(ref))
+
+
+def test_rate_hysteresis_compiled_kernel_matches_its_numpy_loop(monkeypatch):
+    v = _bipolar(3000)
+    fast = rate_hysteresis_state(v, -1.0, 0.02, 2e-3, FS)
+    monkeypatch.setattr(accel, "kernels", lambda: None)
+    import labrig.model.effects.rate_hysteresis as rh
+
+    monkeypatch.setattr(rh, "kernels", lambda: None)
+    slow = rate_hysteresis_state(v, -1.0, 0.02, 2e-3, FS)
+    np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12)
+
+
+def _loop_area(v, h):
+    """The area the loop ``h(v)`` encloses over the last whole period (ue V)."""
+    return abs(0.5 * np.sum(v[1:] * h[:-1] - v[:-1] * h[1:]))
+
+
+def test_rate_hysteresis_loop_widens_with_the_rate():
+    """The same amplitude at 1 to 200 Hz (tau_h = 3 ms, ``1/(2 pi tau_h)`` = 53 Hz): the loop's
+    area and the term's span grow with the frequency (a viscous ellipse ``h ~ A tau_h dV/dt``
+    at low rate, area 18 times smaller at 1 Hz than at 50 Hz) and saturate at the
+    rate-independent Bouc-Wen element's loop (within 5 % at 200 Hz)."""
+    eff = library()["rate_hysteresis"]
+    p = {"A_ue_per_V": -1.0, "beta_per_V": 0.02, "tau_h_s": 3e-3}
+    areas, spans = [], []
+    for f in (1.0, 5.0, 20.0, 50.0, 200.0):
+        per = int(FS / f)
+        t = np.arange(4 * per) / FS
+        v = 100 * np.sin(2 * np.pi * f * t)
+        h = eff.apply(v, _ctx(v), p)
+        areas.append(_loop_area(v[-per - 1 :], h[-per - 1 :]))
+        spans.append(np.ptp(h[-per:]))
+    assert np.all(np.diff(areas) > 0) and np.all(np.diff(spans) > 0)
+    assert areas[0] < 0.1 * areas[3]
+    ref_v = 100 * np.sin(2 * np.pi * np.arange(4 * 2000 + 1) / 2000)  # rate independent
+    ref = _loop_area(ref_v[-2001:], bouc_wen_exact(ref_v, -1.0, 0.02, 0.0)[-2001:])
+    assert areas[4] == pytest.approx(ref, rel=0.05)
+
+
+# -- sensor_drift --------------------------------------------------------------------------------
+
+
+def test_sensor_drift_adds_cosines_over_the_sequence_and_passes_the_strain_through():
+    eff = library()["sensor_drift"]
+    n = 5000
+    x = 9.0 * _bipolar(n)
+    c = {"c1_ue": 20.0, "c2_ue": -7.0, "c3_ue": 3.0}
+    got = eff.apply(x, _ctx(x), c)
+    T = n / FS
+    tm = (np.arange(n) + 0.5) / FS  # mid-sample times
+    ref = x + sum(c[f"c{k}_ue"] * np.cos(np.pi * k * tm / T) for k in (1, 2, 3))
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9)
+    # orthogonal columns of mean 0: no constant (the per-entry offset's)
+    B = drift_basis(n)
+    np.testing.assert_allclose(B.T @ B, 0.5 * n * np.eye(3), atol=1e-8 * n)
+    np.testing.assert_allclose(B.mean(axis=0), 0.0, atol=1e-12)
+    # additive: the tangent along the strain is the identity, not the effect
+    dx = np.random.default_rng(0).normal(size=n)
+    np.testing.assert_array_equal(eff.tangent(x, dx, _ctx(x), c), dx)
+
+
+# -- bounds --------------------------------------------------------------------------------------
+
+
+def _problem(name):
+    t = np.arange(2000) / FS
+    v = _bipolar(2000)
+    rec = Record("e", FS, t, v, 9.0 * v, {}, "zoh", {})
+    return ExtendedProblem([rec], [library()[name]], chain=True, offset=True)
+
+
+@pytest.mark.parametrize("name", NEW)
+def test_parameters_just_inside_their_bounds_are_kept_and_just_outside_clipped(name):
+    """Each parameter of each effect: 1 % of its range inside a bound is kept as given, 1 %
+    outside is clipped to the bound (the engine's coordinates read the declared bounds)."""
+    from labrig.model import PAPER_TABLE1
+
+    eff = library()[name]
+    prob = _problem(name)
+    base = PAPER_TABLE1.model_dump()
+    for q in eff.params:
+        span = (np.log(q.hi) - np.log(q.lo)) if q.log else (q.hi - q.lo)
+        for bound, inward in ((q.lo, +1), (q.hi, -1)):
+            for step, expect_clip in ((inward * 0.01, False), (-inward * 0.01, True)):
+                v = bound * np.exp(step * span) if q.log else bound + step * span
+                p = {**eff.init, q.name: v}
+                _, got = prob.unpack(prob.z_of(base, {name: p}), base)
+                want = bound if expect_clip else v
+                assert got[name][q.name] == pytest.approx(want, rel=1e-9, abs=1e-12), (q.name, v)
