@@ -5,11 +5,14 @@ the whole campaigns through diagnose are ``slow``)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from labrig.analysis.diagnose import diagnose
 from labrig.model.effects import EFFECT_NAMES, STRUCTURAL_EFFECT_NAMES
+from labrig.protocol.check import load_plan
 from labrig.studies.campaign import bench_campaign
 from labrig.studies.structural import CASES, DRIVES, STRUCTURAL_NAMES, structural_campaign
 
@@ -38,6 +41,15 @@ SMALL = (
     },
 )
 ASK = ("negative_field_asymmetry",)
+
+
+def test_the_wideband_campaign_is_the_protocol_file():
+    """experiments/wideband.yaml plans the samples the in-process campaign plays."""
+    plan = load_plan(Path(__file__).parents[2] / "experiments" / "wideband.yaml")
+    recs = structural_campaign(None, 1, drive="wideband")
+    assert [s.name for s in plan.steps] == [r.name for r in recs]
+    for step, rec in zip(plan.steps, recs, strict=True):
+        np.testing.assert_array_equal(step.samples(), rec.voltage_V)
 
 
 def test_every_structural_library_effect_has_a_case():
