@@ -24,9 +24,12 @@ name                        form                                        acts on
                             ``+-r_i``, beyond it ``dz_i/dt = (|v -
                             z_i| - r_i) sign(v - z_i) / tau``; ``S +=
                             -g mean_i (v - z_i)``
-``stack_resonance``         the stack's free stroke drives a mass on    strain (the gauge is on
-                            its spring: ``m x'' + c x' + k x = k        the mass; after creep
-                            x_free``, ``f_n = sqrt(k/m) / (2 pi)``      and heating)
+``stack_resonance``         the stack (stiffness ``k``, internal        strain (the gauge is on
+                            damping ``c``, Kelvin-Voigt) drives a mass  the mass; after creep
+                            by its force on the relative motion:        and heating)
+                            ``m x'' = k (x_f - x) + c (x_f' - x')``,
+                            ``H = (c s + k) / (m s^2 + c s + k)``,
+                            ``f_n = sqrt(k/m) / (2 pi)``
 ``gauge_warmup``            the gauge and conditioner warming after     strain at the bridge
                             power-on: zero ``D (1 - exp(-t/tau))`` and
                             span ``1 + s (1 - exp(-t/tau))``
@@ -108,7 +111,10 @@ class ViscousSlip(_Effect):
 
 
 class StackResonance(_Effect):
-    """The stack drives a mass on its own stiffness; the gauge sees the mass's motion."""
+    """The stack drives a mass through its own stiffness and internal (Kelvin-Voigt) damping,
+    both acting on the motion of the free stroke relative to the mass; the gauge sees the
+    mass's motion. The damping on the relative motion puts a zero at ``-k/c`` in the response
+    (a pole pair alone would be a base-excited damper)."""
 
     name: Literal["stack_resonance"]
     stiffness_N_per_um: float = Field(20.0, gt=0, description="k: the stack's stiffness")
@@ -215,13 +221,14 @@ class ViscousSlipElements:
 
 
 class Resonance:
-    """``stack_resonance``: ``x'' + 2 zeta w x' + w^2 x = w^2 x_free`` (strain units), the
-    free strain taken as piecewise linear between samples (first-order hold), run with
-    ``lfilter`` state; starts at rest."""
+    """``stack_resonance``: ``x'' + 2 zeta w (x' - x_f') + w^2 (x - x_f) = 0`` (strain units;
+    ``c / m = 2 zeta w``, ``k / m = w^2``), the free strain ``x_f`` taken as piecewise linear
+    between samples (first-order hold), run with ``lfilter`` state; starts at rest."""
 
     def __init__(self, cfg: StackResonance, rate_hz: float):
         w = 2.0 * math.pi * cfg.resonance_hz
-        b, a = [w * w], [1.0, 2.0 * cfg.damping_ratio * w, w * w]
+        two_zw = 2.0 * cfg.damping_ratio * w
+        b, a = [two_zw, w * w], [1.0, two_zw, w * w]
         bd, ad, _ = signal.cont2discrete((b, a), 1.0 / rate_hz, method="foh")
         self.b = np.atleast_1d(np.squeeze(bd)) / ad[0]
         self.a = np.asarray(ad, dtype=float) / ad[0]

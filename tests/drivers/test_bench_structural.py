@@ -221,8 +221,10 @@ def test_viscous_slip_hysteresis_widens_with_rate():
 
 
 def test_resonance_frequency_response():
-    """Steady-state gain of the mass on the stack's spring against
-    ``1 / sqrt((1 - r^2)^2 + (2 zeta r)^2)``, r = f / f_n, below, at and above resonance."""
+    """Steady-state gain of the mass on the stack's spring and damper against
+    ``|H| = sqrt(1 + (2 zeta r)^2) / sqrt((1 - r^2)^2 + (2 zeta r)^2)``, r = f / f_n, below, at
+    and above resonance (the damper on the relative motion: ``H = (c s + k)/(m s^2 + c s +
+    k)``)."""
     cfg = StackResonance(name="stack_resonance")
     assert cfg.resonance_hz == pytest.approx(math.sqrt(20e6 / 8.0) / (2 * math.pi))
     rate = 20000.0
@@ -232,7 +234,8 @@ def test_resonance_frequency_response():
         y = Resonance(cfg, rate).process(np.sin(2 * np.pi * f * t))
         tail = t >= 1.0  # 1 s: 80 time constants of the decay (1 / (zeta w_n) = 12.6 ms)
         gain = math.sqrt(2 * np.mean(y[tail] ** 2))
-        want = 1 / math.sqrt((1 - r * r) ** 2 + (2 * cfg.damping_ratio * r) ** 2)
+        zr = 2 * cfg.damping_ratio * r
+        want = math.sqrt(1 + zr * zr) / math.sqrt((1 - r * r) ** 2 + zr * zr)
         # 5e-3: the first-order hold takes the sine as piecewise linear (40 samples a cycle)
         assert gain == pytest.approx(want, rel=5e-3), r
 
