@@ -108,7 +108,9 @@ def _done(log: Path | None, part: str) -> dict[tuple, dict]:
     return {(r["drive"], r["seed"]): r for r in rows if r.get("part") == part}
 
 
-def effects(seeds: list[int], max_effects: int, log: Path | None) -> list[dict]:
+def effects(
+    seeds: list[int], max_effects: int, log: Path | None, report_only: bool = False
+) -> list[dict]:
     print("\n## Structural truths: first effect named, held-out against the noise floor\n")
     print(
         "| library effect | bench truth | campaign | seed | first added | all added | verdict "
@@ -120,6 +122,8 @@ def effects(seeds: list[int], max_effects: int, log: Path | None) -> list[dict]:
     for seed in seeds:  # every case on seed 1 first: a cut-short run still covers them all
         for case, (planted, drive) in CASES.items():
             r = done.get((case, seed))
+            if r is None and report_only:
+                continue
             if r is None:
                 r = run_diagnose(structural_campaign(case, seed), STRUCTURAL_NAMES, max_effects)
                 r.update(part="effect", case=case, truth=planted[0]["name"], drive=drive, seed=seed)
@@ -141,7 +145,9 @@ def effects(seeds: list[int], max_effects: int, log: Path | None) -> list[dict]:
     return rows
 
 
-def nulls(n_seeds: int, max_effects: int, log: Path | None) -> list[dict]:
+def nulls(
+    n_seeds: int, max_effects: int, log: Path | None, report_only: bool = False
+) -> list[dict]:
     print("\n## Nulls: no structural truth, without and with --also the structural names\n")
     print(
         "| campaign | seed | without: added, verdict | with --also: added, verdict | changed "
@@ -149,22 +155,28 @@ def nulls(n_seeds: int, max_effects: int, log: Path | None) -> list[dict]:
     )
     print("|---|---|---|---|---|---|")
     rows = []
+    done = _done(log, "null")
     for drive in NULL_DRIVES:
         for seed in range(1, n_seeds + 1):
-            recs = structural_campaign(None, seed, drive=drive)
-            plain = run_diagnose(recs, (), max_effects)
-            asked = run_diagnose(recs, STRUCTURAL_NAMES, max_effects)
-            changed = (plain["class"], plain["added"]) != (asked["class"], asked["added"])
-            row = {
-                "part": "null",
-                "drive": drive,
-                "seed": seed,
-                "without": plain,
-                "with": asked,
-                "changed": changed,
-            }
+            row = done.get((drive, seed))
+            if row is None and report_only:
+                continue
+            if row is None:
+                recs = structural_campaign(None, seed, drive=drive)
+                plain = run_diagnose(recs, (), max_effects)
+                asked = run_diagnose(recs, STRUCTURAL_NAMES, max_effects)
+                changed = (plain["class"], plain["added"]) != (asked["class"], asked["added"])
+                row = {
+                    "part": "null",
+                    "drive": drive,
+                    "seed": seed,
+                    "without": plain,
+                    "with": asked,
+                    "changed": changed,
+                }
+                _log(log, row)
             rows.append(row)
-            _log(log, row)
+            plain, asked, changed = row["without"], row["with"], row["changed"]
             print(
                 f"| {drive} | {seed} | {', '.join(plain['added']) or 'none'}, {plain['class']} | "
                 f"{', '.join(asked['added']) or 'none'}, {asked['class']} | "
@@ -187,6 +199,9 @@ def main(argv: list[str] | None = None) -> None:
         help="append each row as a JSON line; rows already in it are not run again",
     )
     ap.add_argument("--skip-effects", action="store_true", help="run the nulls only")
+    ap.add_argument(
+        "--report-only", action="store_true", help="print the rows in --log, run nothing"
+    )
     a = ap.parse_args(argv)
     seeds = [int(s) for s in a.seeds.split(",") if s]
     y0 = yardstick()
@@ -198,9 +213,9 @@ def main(argv: list[str] | None = None) -> None:
         f"1e6) {y0 * 1e3:.1f} ms CPU"
     )
     if not a.skip_effects:
-        effects(seeds, a.max_effects, a.log)
+        effects(seeds, a.max_effects, a.log, a.report_only)
     if a.nulls:
-        nulls(a.nulls, a.max_effects, a.log)
+        nulls(a.nulls, a.max_effects, a.log, a.report_only)
     y1 = yardstick()
     print(f"\nyardstick at the end {y1 * 1e3:.1f} ms CPU; load average {os.getloadavg()[0]:.2f}")
 
