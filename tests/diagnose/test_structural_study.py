@@ -83,6 +83,7 @@ def test_each_truth_changes_its_campaign(case):
     assert [r.name for r in recs] == [r.name for r in null]
 
 
+@pytest.mark.slow
 def test_depoling_is_found_on_a_small_campaign():
     """With the library's one candidate asked for (the full library is the slow test's: on this
     small campaign ``quadratic_term`` takes the residual first)."""
@@ -93,6 +94,7 @@ def test_depoling_is_found_on_a_small_campaign():
 
 
 def test_the_null_of_the_small_campaign_stays_noise():
+    """The default tier's run of a campaign through diagnose (the depoled one above is slow)."""
     recs = bench_campaign([], seed=1, entries=SMALL, rig="bipolar")
     d = diagnose(recs, effects=ASK, always=ASK, max_effects=1)
     assert not d.effects_added
