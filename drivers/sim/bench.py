@@ -7,8 +7,9 @@ simulated DAQ (in-process), the GCS responder (amplifier, over a socket) and the
     AO[n] --DAC(range, bits)--> amplifier: u = gain AO (OFFLINE) | SVA (ONLINE) | 0 (over-temp)
           --clip [max(out_min, VMI), min(out_max, VMA)]--> current limit |C_eff dv/dt| <= I
           --> v[n] (actuator voltage, held over interval n; also the amp_monitor channel)
-    v --[field_saturation]--[viscoelastic_mode]--> u --truth (paper | hybrid)--> strain
-          --[+ cubic_term]--[log_creep]--[self_heating gain]--> S[n] (ue)
+    v --[amplifier_output_rc]--[depoling]--[field_saturation]--[viscoelastic_mode]--> u
+          --truth (paper | hybrid)--> strain --[+ cubic_term]--[+ viscous_slip]--[log_creep]
+          --[self_heating gain]--[stack_resonance]--> S[n] (ue) --[gauge_warmup]-->
     S + bridge offset [+ offset_drift] + noise (ue at the bridge)
           --x sensitivity (mV/ue, scaled by excitation) [conditioner_lowpass] [filter setting]
           --x gain - balance--> conditioner output (V, clipped at +-10.5 V) [+ mains_pickup]
@@ -61,6 +62,18 @@ from labrig.drivers.sim.effects import (
     saturated_drive,
 )
 from labrig.drivers.sim.hybrid import HybridParams
+from labrig.drivers.sim.structural import (
+    AmplifierOutputRC,
+    Depoling,
+    GaugeWarmup,
+    OutputRC,
+    Resonance,
+    StackResonance,
+    ViscousSlip,
+    ViscousSlipElements,
+    depoled_drive,
+    warmup,
+)
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -325,8 +338,24 @@ class VirtualBench:
                 thermal=Thermal(self._heat_cfg, rate_hz) if self._heat_cfg else None,
                 retardation=Retardation(mode, rate_hz) if mode else None,
             )
+            self._chain.extra = self._structural_chain(rate_hz)
             if self._chain.thermal is not None and self.last.get("temperature_degC"):
                 self._chain.thermal.T = self.last["temperature_degC"]
+
+    def _structural_chain(self, rate_hz: float) -> dict:
+        """The rate-dependent processors of the structural effects that are on, at rest."""
+        c, out = self.config, {}
+        rc = c.effect(AmplifierOutputRC)
+        if rc is not None:
+            a, lim = c.amplifier, self.limits
+            out["output_rc"] = OutputRC(rc, a.capacitance_F or lim.capacitance_F, rate_hz)
+        slip = c.effect(ViscousSlip)
+        if slip is not None:
+            out["viscous_slip"] = ViscousSlipElements(slip, rate_hz)
+        res = c.effect(StackResonance)
+        if res is not None:
+            out["stack_resonance"] = Resonance(res, rate_hz)
+        return out
 
     def set_filter(self, filter_hz: int) -> None:
         with self.lock:
@@ -417,7 +446,12 @@ class VirtualBench:
         """Strain (ue) for the actuator voltage ``v`` held over each sample interval (the
         voltage before the block was ``v_before``), before creep and heating."""
         c, ch = self.config, self._chain
+        if "output_rc" in ch.extra:
+            v = ch.extra["output_rc"].process(v)
         u = v
+        dep = c.effect(Depoling)
+        if dep is not None:
+            u = depoled_drive(u, dep)
         sat = c.effect(FieldSaturation)
         if sat is not None:
             u = saturated_drive(u, sat)
@@ -429,6 +463,8 @@ class VirtualBench:
             # the voltage on the actuator at each sampling instant: the one held over the
             # interval before it (the strain sampled at n has seen v[0..n-1])
             s = s + cubic_strain(np.concatenate(([v_before], v[:-1])), cubic)
+        if "viscous_slip" in ch.extra:
+            s = s + ch.extra["viscous_slip"].process(v)
         return s
 
     def step(self, ao: NDArray) -> dict[str, NDArray]:
@@ -469,7 +505,13 @@ class VirtualBench:
         if ch.thermal is not None:
             temp = ch.thermal.process(v, i)
             s = s * ch.thermal.gain(temp)
+        if "stack_resonance" in ch.extra:
+            s = ch.extra["stack_resonance"].process(s)
         # gauge and conditioner
+        warm = c.effect(GaugeWarmup)
+        if warm is not None:
+            zero, span = warmup(t, warm)
+            s = s * span + zero
         bridge = s + c.gauge.bridge_offset_ue
         if self._drift is not None:
             bridge = bridge + self._drift.process(t, 1.0 / fs)

@@ -41,6 +41,10 @@ name                      form                                          acts on
                           library effect has): 20 ue at V_ref 100 V     ``log_creep``)
 ========================  ============================================  ==========================
 
+The structural effects (``amplifier_output_rc``, ``depoling``, ``viscous_slip``,
+``stack_resonance``, ``gauge_warmup``) are in :mod:`labrig.drivers.sim.structural`, with their
+table.
+
 The actuator effects differ in form from the fitted library's on purpose (the model's effects
 live in ``labrig/model/effects/``): saturation is a tanh of the drive, not a polynomial softening
 of the strain; the viscoelastic mode retards the drive before the hysteresis and the model's
@@ -55,6 +59,14 @@ import math
 from typing import Annotated, Literal
 
 import numpy as np
+from labrig.drivers.sim.structural import (
+    STRUCTURAL_BENCH_EFFECTS,
+    AmplifierOutputRC,
+    Depoling,
+    GaugeWarmup,
+    StackResonance,
+    ViscousSlip,
+)
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 from scipy import signal
@@ -180,7 +192,12 @@ Effect = Annotated[
     | LogCreep
     | FieldSaturation
     | ViscoelasticMode
-    | CubicTerm,
+    | CubicTerm
+    | AmplifierOutputRC
+    | Depoling
+    | ViscousSlip
+    | StackResonance
+    | GaugeWarmup,
     Field(discriminator="name"),
 ]
 
@@ -194,6 +211,7 @@ EFFECT_NAMES = (
     "field_saturation",
     "viscoelastic_mode",
     "cubic_term",
+    *STRUCTURAL_BENCH_EFFECTS,
 )
 
 

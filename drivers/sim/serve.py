@@ -189,4 +189,3 @@ def start_for_rig(spec: RigSpec, seed: int | None) -> Simulators:
         ).start()
     except SimulatorPortError as e:
         raise InputFileError([InputIssue(spec.source, None, e.field, e.detail)]) from None
-

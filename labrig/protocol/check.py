@@ -129,7 +129,8 @@ def _fmt(x: float | None, spec: str = "g") -> str:
 
 def _volts(step: PlannedStep) -> str:
     """The table's voltage column: the amplitude, or ``offset+-amplitude`` around a bias."""
-    offset = step.definition.get("offset_V") if step.kind == "offset_sine" else None
+    around = ("offset_sine", "triangle", "prbs", "multisine")
+    offset = step.definition.get("offset_V") if step.kind in around else None
     if offset is None:
         return _fmt(step.amplitude_V)
     return f"{offset:g}+-{step.amplitude_V:g}"
@@ -143,7 +144,7 @@ def format_plan(plan: Plan) -> Table:
     table = Table(
         title=f"{escape(plan.name)}: {n} {'entry' if n == 1 else 'entries'} at {plan.rate_hz:g} Hz",
         caption=(
-            "V: amplitude (offset_sine: offset +- amplitude); Hz: frequency; s: duration; "
+            "V: amplitude (around a bias: offset +- amplitude); Hz: frequency; s: duration; "
             "peak A: peak current into the stack; rest s: 0 V after the entry\n"
             f"recorded {plan.recorded_duration_s:.1f} s, total with rests "
             f"{plan.total_duration_s:.1f} s"

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from labrig.core.errors import InputFileError, InputIssue
+from labrig.protocol import broadband as bb
 from labrig.protocol import waveforms as wf
 from labrig.protocol.concrete import Concrete, intervals, num_tag, sanitize
 from labrig.protocol.csvsource import CsvError, load_csv, resolve_csv_path
@@ -34,7 +35,9 @@ from labrig.protocol.plan import Plan, PlannedStep, Where, field_name, line_of
 from labrig.protocol.schema import (
     CsvStep,
     HoldStep,
+    MultisineStep,
     OffsetSineStep,
+    PrbsStep,
     Protocol,
     RampStep,
     SineStep,
@@ -42,6 +45,7 @@ from labrig.protocol.schema import (
     StrainSineStep,
     StrainVanishingStep,
     SweepStep,
+    TriangleStep,
     VanishingStep,
 )
 
@@ -287,6 +291,57 @@ class _Builder:
         name = s.name or f"csv_{sanitize(resolve_csv_path(s, self.base_dir).stem)}"[:60]
         seg = wf.table_segment(v, self.rate, "path")
         return [Concrete("csv", name, [seg], definition, where, float(np.max(np.abs(v))))]
+
+    # --- triangle, PRBS, multisine (labrig.protocol.broadband) ---
+
+    def _around_where(self, base: tuple, keys: tuple[str, ...], length_key: str) -> dict:
+        where = {k: self.where((*base, k)) for k in ("offset_V", "amplitude_V", *keys)}
+        where["step"] = self.where(base)
+        where["length"] = self.where((*base, length_key))
+        return where
+
+    def triangle(self, s: TriangleStep, base: tuple) -> list[Concrete]:
+        lkey = "cycles" if s.cycles is not None else "duration_s"
+        where = self._around_where(base, ("frequency_hz", "start"), lkey)
+        seconds = s.cycles / s.frequency_hz if s.cycles is not None else s.duration_s
+        what = f"the {s.amplitude_V:g} V, {s.frequency_hz:g} Hz triangle"
+        n = self.n_of(seconds, where["length"], what)
+        if n is None:
+            return []
+        pieces, definition = bb.triangle_parts(s, n, self.rate)
+        name = s.name or bb.triangle_name(s)
+        a, f = s.amplitude_V, s.frequency_hz
+        return [Concrete("triangle", name, pieces, definition, where, a, f)]
+
+    def prbs(self, s: PrbsStep, base: tuple) -> list[Concrete]:
+        lkey = "periods" if s.periods is not None else "duration_s"
+        keys = ("clock_hz", "order", "seed", "transition_s")
+        where = self._around_where(base, keys, lkey)
+        chips = bb.prbs_chips(s)
+        n = self.n_of(chips / s.clock_hz, where["length"], "the prbs")
+        if n is None:
+            return []
+        if s.transition_s * self.rate < 1.0 - 1e-9:
+            self.issue(
+                where["transition_s"],
+                f"transition_s {s.transition_s:g} s is shorter than one sample at "
+                f"{self.rate:g} Hz: the DAC would step; use transition_s >= {1 / self.rate:g} "
+                "or raise rate_hz",
+            )
+            return []
+        pieces, definition = bb.prbs_parts(s, n, self.rate)
+        name = s.name or bb.prbs_name(s)
+        return [Concrete("prbs", name, pieces, definition, where, s.amplitude_V, None)]
+
+    def multisine(self, s: MultisineStep, base: tuple) -> list[Concrete]:
+        where = self._around_where(base, ("frequencies_hz",), "duration_s")
+        n = self.n_of(s.duration_s, where["length"], "the multisine")
+        if n is None:
+            return []
+        pieces, definition = bb.multisine_parts(s, n, self.rate)
+        name = s.name or bb.multisine_name(s)
+        c = Concrete("multisine", name, pieces, definition, where, s.amplitude_V, None)
+        return [c]
 
     # --- strain-command steps: the command is a strain, the controller makes the voltage ---
 

@@ -101,6 +101,23 @@ class PlannedStep:
                 f"{d['frequency_hz']:g} Hz, {d['cycles']:g} cycles, after a {d['ramp_s']:g} s "
                 f"ramp and {d['settle_s']:g} s settle"
             )
+        elif self.kind == "triangle":
+            what = (
+                f"triangle {d['offset_V']:g} V +- {d['amplitude_V']:g} V, "
+                f"{d['frequency_hz']:g} Hz, {d['cycles']:g} cycles"
+            )
+        elif self.kind == "prbs":
+            what = (
+                f"prbs {d['low_V']:g} / {d['high_V']:g} V, {d['clock_hz']:g} Hz clock, "
+                f"{d['chips']} chips (LFSR order {d['order']}, seed {d['seed']}), "
+                f"{d['transition_s']:g} s edges"
+            )
+        elif self.kind == "multisine":
+            f = d["frequencies_hz"]
+            what = (
+                f"multisine {d['offset_V']:g} V +- {d['amplitude_V']:g} V, {len(f)} lines "
+                f"{f[0]:g}..{f[-1]:g} Hz (Schroeder phases)"
+            )
         elif self.kind == "vanishing":
             what = (
                 f"vanishing envelope {d['amplitude_V']:g} V, {d['frequency_hz']:g} Hz carrier, "

@@ -53,11 +53,13 @@ from labrig.rig.limits import RigLimits
 
 __all__ = [
     "AVG_WINDOW_S",
+    "BROADBAND_KINDS",
     "MIN_SAMPLES_PER_CYCLE",
     "OVERSAMPLE",
     "max_offset_sine_frequency_hz",
     "max_sine_amplitude_V",
     "max_sine_frequency_hz",
+    "max_triangle_frequency_hz",
     "measure",
     "preflight",
     "preflight_checks",
@@ -371,6 +373,101 @@ def _offset_sine_issues(
     return [x for x in found if x is not None] + _offset_sine_current_issues(step, chk, lim, what)
 
 
+#: step kinds around a bias checked by :func:`_broadband_issues`
+BROADBAND_KINDS = ("triangle", "prbs", "multisine")
+
+
+def max_triangle_frequency_hz(amplitude_V: float, limits: RigLimits) -> float:
+    """Highest frequency of a triangle of amplitude ``amplitude_V`` (swing ``2 A``) within both
+    current limits: its slope is ``4 A f`` throughout, so ``min(i_peak, i_avg) / (4 C_eff A)``."""
+    c = limits.effective_capacitance_F
+    return min(limits.i_peak_A, limits.i_avg_A) / (4.0 * c * amplitude_V)
+
+
+def _broadband_what(step: PlannedStep) -> str:
+    d = step.definition
+    around = f"around {d['offset_V']:g} V"
+    if step.kind == "triangle":
+        return f"the {d['amplitude_V']:g} V, {d['frequency_hz']:g} Hz triangle {around}"
+    if step.kind == "prbs":
+        return f"the +-{d['amplitude_V']:g} V prbs {around} at {d['clock_hz']:g} Hz"
+    return f"the {d['amplitude_V']:g} V multisine {around}"
+
+
+def _broadband_peak_issue(
+    step: PlannedStep, chk: DriveLoad, lim: RigLimits, what: str
+) -> tuple[Where, str]:
+    c = lim.effective_capacitance_F
+    d = step.definition
+    a = d["amplitude_V"]
+    where, seg = _blame_segment(step, chk.peak_time_s)
+    need = amps(chk.peak_current_A, lim.i_peak_A)
+    gives = f"the amplifier gives {amps(lim.i_peak_A)}"
+    if seg == "edge":
+        return where, (
+            f"the 0 V edge ramps of {step.name} need {need} peak; {gives}; use "
+            f"edge_slew_V_per_s <= {at_most(lim.i_peak_A / c)}"
+        )
+    if step.kind == "triangle":
+        f_max = fixed(max_triangle_frequency_hz(a, lim), 1)
+        return step.blame("frequency_hz"), (
+            f"{what} needs {need} peak (4 C_eff A f); {gives}; max frequency at {a:g} V is "
+            f"{f_max} Hz"
+        )
+    if step.kind == "prbs":
+        shortest = at_least(2.0 * a * c / lim.i_peak_A)
+        return step.blame("transition_s"), (
+            f"each {2 * a:g} V level change of {what} in {d['transition_s']:g} s needs {need} "
+            f"peak (2 C_eff A / transition_s); {gives}; use transition_s >= {shortest}"
+        )
+    return step.blame("amplitude_V"), (
+        f"{what} needs {need} peak; {gives}; the current scales with amplitude_V: use "
+        f"amplitude_V <= {at_most(a * lim.i_peak_A / chk.peak_current_A)} or lower frequencies"
+    )
+
+
+def _broadband_mean_issue(
+    step: PlannedStep, chk: DriveLoad, lim: RigLimits, what: str
+) -> tuple[Where, str]:
+    d = step.definition
+    a = d["amplitude_V"]
+    window = "a cycle" if step.frequency_hz else f"{chk.window_s:g} s"
+    draws = f"{what} draws {amps(chk.mean_current_A, lim.i_avg_A)} on average over {window}"
+    limit = f"the amplifier's average limit is {amps(lim.i_avg_A)}"
+    if step.kind == "triangle":
+        f_max = fixed(max_triangle_frequency_hz(a, lim), 1)
+        return step.blame("frequency_hz"), (
+            f"{draws}; {limit}; max frequency at {a:g} V is {f_max} Hz"
+        )
+    if step.kind == "prbs":
+        return step.blame("clock_hz"), (
+            f"{draws} (each level change carries 2 C_eff A); {limit}; lower clock_hz or amplitude_V"
+        )
+    return step.blame("amplitude_V"), (
+        f"{draws}; {limit}; use amplitude_V <= "
+        f"{at_most(a * lim.i_avg_A / chk.mean_current_A)} or lower frequencies"
+    )
+
+
+def _broadband_issues(step: PlannedStep, chk: DriveLoad, lim: RigLimits) -> list[tuple[Where, str]]:
+    """Every limit a triangle, prbs or multisine breaks (range, samples per cycle, currents),
+    each blamed on the key to change with the value that would pass."""
+    what = _broadband_what(step)
+    found = [_offset_sine_range_issue(step, chk, lim, what)]
+    if step.kind == "triangle":
+        found.append(_samples_per_cycle_issue(step, step.frequency_hz))
+    elif step.kind == "multisine":
+        f_hi = max(step.definition["frequencies_hz"])
+        cycles = _samples_per_cycle_issue(step, f_hi)
+        if cycles is not None:
+            found.append((step.blame("frequencies_hz"), cycles[1]))
+    if chk.over_peak(lim):
+        found.append(_broadband_peak_issue(step, chk, lim, what))
+    if chk.over_mean(lim):
+        found.append(_broadband_mean_issue(step, chk, lim, what))
+    return [x for x in found if x is not None]
+
+
 def _step_issues(step: PlannedStep, chk: DriveLoad, lim: RigLimits) -> list[tuple[Where, str]]:
     """Every limit ``step`` breaks, in the order: voltage range, samples per cycle, peak
     current, mean current."""
@@ -378,6 +475,8 @@ def _step_issues(step: PlannedStep, chk: DriveLoad, lim: RigLimits) -> list[tupl
         return _strain_issues(step, chk, lim)
     if step.kind == "offset_sine":
         return _offset_sine_issues(step, chk, lim)
+    if step.kind in BROADBAND_KINDS:
+        return _broadband_issues(step, chk, lim)
     a, f = step.amplitude_V, step.frequency_hz
     periodic = step.kind in ("sine", "vanishing") and a is not None and f is not None
     what = f"{a:g} V at {f:g} Hz" if periodic else f"entry {step.name}"

@@ -15,6 +15,7 @@ from pydantic import (
     ConfigDict,
     Field,
     StringConstraints,
+    ValidationInfo,
     field_validator,
     model_validator,
 )
@@ -39,6 +40,9 @@ STEP_KINDS = (
     "ramp",
     "csv",
     "sweep",
+    "triangle",
+    "prbs",
+    "multisine",
     "strain_sine",
     "strain_vanishing",
     "strain_csv",
@@ -236,6 +240,112 @@ class SweepStep(_StepBase):
         return self
 
 
+class TriangleStep(_StepBase):
+    """Triangle ``V = offset_V + A tri(f t)`` (``tri``: slopes +-4, between -1 and 1).
+
+    ``start: bias`` (default): ``tri(0) = 0``, rising (a triangle in phase with ``sin``);
+    ``start: low``: ``tri(0) = -1``, rising (with ``offset_V = A`` a unipolar triangle 0..2A
+    from 0 V). The slope is ``+-4 A f`` everywhere, so the current is ``4 C_eff A f``.
+    """
+
+    kind: Literal["triangle"]
+    amplitude_V: Positive = Field(description="A: the triangle swings offset_V - A .. offset_V + A")
+    offset_V: Finite = Field(0.0, description="the bias it swings around (0: bipolar)")
+    frequency_hz: Positive
+    start: Literal["bias", "low"] = Field(
+        "bias", description="bias: rising through offset_V at t = 0; low: rising from offset_V - A"
+    )
+    cycles: Positive | None = Field(None, description="number of cycles (or give duration_s)")
+    duration_s: Positive | None = Field(None, description="length in seconds (or give cycles)")
+
+    @model_validator(mode="after")
+    def _length(self):
+        _one_of_cycles_duration(self)
+        return self
+
+
+#: LFSR lengths (bits) a ``prbs`` step may use: period ``2**order - 1`` chips
+PRBS_ORDERS = (3, 24)
+
+
+class PrbsStep(_StepBase):
+    """Pseudo-random binary sequence between ``offset_V - A`` and ``offset_V + A``.
+
+    The bits are a maximal-length LFSR sequence (``scipy.signal.max_len_seq`` with its tap
+    table, ``order`` bits, period ``2**order - 1`` chips) started from the state whose bits are
+    those of ``seed``; bit 1 is the high level. Chip ``k`` lasts ``1/clock_hz`` from ``k /
+    clock_hz``. Edges are **slew-limited**: each level change is a straight ramp lasting
+    ``transition_s`` at the start of the chip (slope ``2 A / transition_s``, current ``2 C_eff A
+    / transition_s``), so preflight checks exactly what the amplifier must follow.
+    """
+
+    kind: Literal["prbs"]
+    amplitude_V: Positive = Field(description="A: the levels are offset_V - A and offset_V + A")
+    offset_V: Finite = Field(0.0, description="the mid level (0: levels -A and +A)")
+    clock_hz: Positive = Field(description="chip rate: the level may change every 1/clock_hz s")
+    order: int = Field(
+        10, ge=PRBS_ORDERS[0], le=PRBS_ORDERS[1], description="LFSR bits (period 2**order - 1)"
+    )
+    seed: int = Field(1, ge=1, description="LFSR start state, 1 .. 2**order - 1")
+    transition_s: Positive = Field(
+        description="length of each level change (a straight ramp); at most half a chip"
+    )
+    periods: int | None = Field(
+        None, ge=1, le=1_000_000, description="whole sequence periods (or give duration_s)"
+    )
+    duration_s: Positive | None = Field(None, description="length in seconds (or give periods)")
+
+    @field_validator("seed")
+    @classmethod
+    def _seed_fits(cls, v: int, info: ValidationInfo) -> int:
+        order = info.data.get("order")
+        if order is not None and v >= 2**order:
+            raise ValueError(
+                f"seed must be between 1 and 2**order - 1 = {2**order - 1} (order {order})"
+            )
+        return v
+
+    @field_validator("transition_s")
+    @classmethod
+    def _within_chip(cls, v: float, info: ValidationInfo) -> float:
+        clock = info.data.get("clock_hz")
+        if clock is not None and v > 0.5 / clock:
+            raise ValueError(
+                f"transition_s is longer than half a chip (0.5 / clock_hz = {0.5 / clock:g} s): "
+                "lower clock_hz or transition_s"
+            )
+        return v
+
+    @model_validator(mode="after")
+    def _length(self):
+        if (self.periods is None) == (self.duration_s is None):
+            raise ValueError("give exactly one of periods or duration_s for a prbs step")
+        return self
+
+
+class MultisineStep(_StepBase):
+    """Sum of equal-amplitude cosines with Schroeder phases, scaled to a peak amplitude.
+
+    With the ``K`` frequencies sorted ascending, ``m(t) = sum_k cos(2 pi f_k t + phi_k)``,
+    ``phi_k = -pi k (k - 1) / K`` (k = 1..K, Schroeder 1970: a low crest factor), and
+    ``V = offset_V + A m(t) / M`` where ``M = max |m|`` over the step's length (on a grid 16
+    times finer than the output rate), so ``|V - offset_V|`` peaks at exactly ``A``.
+    """
+
+    kind: Literal["multisine"]
+    frequencies_hz: list[Positive] = Field(min_length=1, max_length=1000)
+    amplitude_V: Positive = Field(description="A: the peak of |V - offset_V|")
+    offset_V: Finite = Field(0.0, description="the bias it swings around (0: bipolar)")
+    duration_s: Positive = Field(description="length in seconds")
+
+    @field_validator("frequencies_hz")
+    @classmethod
+    def _distinct(cls, v: list[float]) -> list[float]:
+        if len(set(v)) != len(v):
+            raise ValueError("frequencies_hz must not repeat a frequency")
+        return v
+
+
 class _StrainStepBase(_StepBase):
     """Keys of the strain-command steps: the command is a strain (ue); the voltage played is
     computed from it by a controller (:mod:`labrig.control`) with fitted model parameters."""
@@ -304,6 +414,9 @@ Step = Annotated[
     | RampStep
     | CsvStep
     | SweepStep
+    | TriangleStep
+    | PrbsStep
+    | MultisineStep
     | StrainSineStep
     | StrainVanishingStep
     | StrainCsvStep,
