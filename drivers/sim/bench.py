@@ -344,7 +344,8 @@ class VirtualBench:
 
     def _structural_chain(self, rate_hz: float) -> dict:
         """The rate-dependent processors of the structural effects that are on, at rest."""
-        c, out = self.config, {}
+        c = self.config
+        out: dict[str, OutputRC | ViscousSlipElements | Resonance] = {}
         rc = c.effect(AmplifierOutputRC)
         if rc is not None:
             a, lim = c.amplifier, self.limits

@@ -98,7 +98,7 @@ def triangle_parts(s: TriangleStep, n: int, rate_hz: float) -> tuple[list[wf.Seg
         "amplitude_V": s.amplitude_V,
         "frequency_hz": s.frequency_hz,
         "start": s.start,
-        "cycles": s.cycles if s.cycles is not None else s.duration_s * s.frequency_hz,
+        "cycles": s.cycles if s.cycles is not None else float(s.duration_s or 0.0) * s.frequency_hz,
         "duration_s": n / rate_hz,
     }
     return [seg], definition
@@ -134,7 +134,7 @@ def prbs_chips(s: PrbsStep) -> int:
     """Chips played: ``periods (2**order - 1)`` or ``ceil(duration_s clock_hz)``."""
     if s.periods is not None:
         return s.periods * (2**s.order - 1)
-    return max(1, math.ceil(s.duration_s * s.clock_hz - 1e-9))
+    return max(1, math.ceil(float(s.duration_s or 0.0) * s.clock_hz - 1e-9))
 
 
 def prbs_parts(s: PrbsStep, n: int, rate_hz: float) -> tuple[list[wf.Segment], dict]:
@@ -142,7 +142,7 @@ def prbs_parts(s: PrbsStep, n: int, rate_hz: float) -> tuple[list[wf.Segment], d
     chips = prbs_chips(s)
     bits = prbs_bits(s.order, s.seed, chips)
     levels = s.offset_V + s.amplitude_V * (2.0 * bits - 1.0)
-    seg = prbs_segment(levels, s.clock_hz, s.transition_s, n)
+    seg = prbs_segment(np.asarray(levels, dtype=np.float64), s.clock_hz, s.transition_s, n)
     definition = {
         "kind": "prbs",
         "offset_V": s.offset_V,
