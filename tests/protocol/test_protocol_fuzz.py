@@ -23,7 +23,7 @@ from labrig.protocol.check import check_protocol
 from labrig.protocol.schema import STEP_KINDS, Protocol
 
 FUZZ = settings(
-    max_examples=150,
+    max_examples=60,  # the default tier's share of generated protocols
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
 )
