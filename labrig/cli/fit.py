@@ -133,10 +133,13 @@ def fit(
 def print_floor_and_time(con: Console, outcome: FitOutcome) -> None:
     """The noise floor of the scored records (when known) and the fit's time."""
     from labrig.analysis.fit import FitResult
-    from labrig.report.data import noise_floor
+    from labrig.analysis.fit_effects import EffectsFit
+    from labrig.analysis.noise_floor import noise_floor
 
     setup, res = outcome.setup, outcome.result
-    floor = noise_floor(setup.scored_records, setup.run.instrument, setup.warmup_s)
+    # a fit with effects keeps no predictions: its floor is printed by `labrig diagnose`
+    preds = {} if isinstance(res, EffectsFit) else res.predictions
+    floor = noise_floor(setup.scored_records, preds, setup.warmup_s)
     if floor is not None:
         con.print(
             f"noise floor (NRMSE of a perfect model): {floor.nrmse_pct:.3g} % "

@@ -23,6 +23,7 @@ import numpy as np
 
 from labrig.analysis.baselines import KINDS
 from labrig.analysis.fit import FitResult, predict_record
+from labrig.analysis.noise_floor import noise_floor
 from labrig.analysis.params_file import fitted_effects, read_fit_output
 from labrig.analysis.records import Record
 from labrig.commands.fit import (
@@ -45,7 +46,6 @@ from labrig.report.data import (
     ReportData,
     build_report,
     metrics_json,
-    noise_floor,
 )
 
 
@@ -397,7 +397,7 @@ def report_data(setup: Setup, fitted: FittedModels, heldout: bool, from_file: bo
         provenance(setup),
         settings,
         notes,
-        noise_floor(scored, run.instrument, setup.warmup_s),
+        noise_floor(scored, fitted.models["dynamic"].predictions or {}, setup.warmup_s),
         datetime.now().astimezone().isoformat(timespec="seconds"),
         __version__,
     )

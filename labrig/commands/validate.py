@@ -23,9 +23,9 @@ columns of any nuisance effect diagnose accepted) fitted by least squares:
   in percent of the whole entry's span (:func:`~labrig.analysis.metrics.second_half_nrmse_pct`;
   the held-out score of ``labrig diagnose``).
 
-The noise floor (the NRMSE of a perfect model) is the report's when it is known
-(:func:`~labrig.report.data.noise_floor`), else the residual's period-to-period scatter of our
-model on the test records, as ``labrig diagnose`` measures it.
+The noise floor (the NRMSE of a perfect model) is the period-to-period scatter of our model's
+residual on the test records (:func:`~labrig.analysis.noise_floor.noise_floor`, the estimator
+of every command).
 
 Several training files are fitted together when each entry is simulated on its own (imported
 data); a recorded run is one chain and is the only training (or test) file of its side. A file
@@ -345,32 +345,26 @@ def _diagnose_now(setup: Setup, ui: CommandUI) -> dict[str, Any]:
 
 
 def _floor(tests: Sequence[Setup], ours: ValidatedModel) -> tuple[float | None, str]:
-    """The noise floor of the test records (module docstring) and where it comes from."""
-    from labrig.report.data import noise_floor
+    """The noise floor of the test records from our model's residual (module docstring) and
+    where it comes from."""
+    from labrig.analysis.noise_floor import SOURCE, noise_floor
 
-    vals, sources = [], set()
+    vals = []
     for s in tests:
-        nf = noise_floor(s.scored_records, s.run.instrument, s.warmup_s)
-        if nf is not None:
-            vals += [nf.nrmse_pct] * len(s.scored)
-            sources.add(nf.source)
-            continue
-        if not ours.scores:
-            continue
-        from labrig.analysis.diagnose.evidence import collect_evidence
-
         preds = {}
         for r in s.scored_records:
-            p = ours.predictions[(str(s.path), r.name)]
+            p = ours.predictions.get((str(s.path), r.name))
+            if p is None:
+                continue
             i0 = round(max(s.warmup_s, 0.0) * r.rate_hz)
             offset = float(np.mean(r.strain_ue[i0:] - p[i0:])) if s.offset else 0.0
             preds[r.name] = p + offset
-        ev = collect_evidence(s.scored_records, preds, s.warmup_s)
-        vals += [e.floor_pct for e in ev.entries.values()]
-        sources.add("the period-to-period scatter of our model's residual (as diagnose)")
+        nf = noise_floor(s.scored_records, preds, s.warmup_s)
+        if nf is not None:
+            vals += [nf.nrmse_pct] * len(preds)
     if not vals:
         return None, "unknown"
-    return float(np.mean(vals)), "; ".join(sorted(sources))
+    return float(np.mean(vals)), f"{SOURCE} (our model on the test records)"
 
 
 def validate_runs(

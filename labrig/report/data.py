@@ -14,10 +14,8 @@ Metrics (one definition each, :mod:`labrig.analysis.metrics`), per entry and per
 - ``strain_shift_error_ue``: predicted minus measured strain at zero voltage over the last full
   period (periodic entries only).
 
-The noise floor is the NRMSE a perfect model would reach: the gauge noise RMS over each entry's
-strain span, averaged like the NRMSE. Its noise RMS comes from the simulated bench's configured
-gauge noise (plus the ADC's quantisation) when the run file describes one, else from stretches
-of constant voltage at least 0.5 s long (first differences of the strain, robust to slow creep).
+The noise floor (the NRMSE a perfect model would reach) is measured on our model's residual by
+:func:`labrig.analysis.noise_floor.noise_floor`, the estimator every command uses.
 """
 
 from __future__ import annotations
@@ -31,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from labrig.analysis.metrics import compare, drive_frequency_hz, is_periodic, last_period
+from labrig.analysis.noise_floor import NoiseFloor
 from labrig.analysis.records import Record
 from labrig.core.jsonsafe import json_safe
 
@@ -133,15 +132,6 @@ class Provenance:
     seed: int | None = None
     instrument: dict[str, Any] = field(default_factory=dict)
     n_entries: int = 0
-
-
-@dataclass
-class NoiseFloor:
-    """The NRMSE of a perfect model (percent) and where the noise RMS came from."""
-
-    nrmse_pct: float
-    noise_ue: float
-    source: str
 
 
 @dataclass
@@ -263,80 +253,3 @@ def metrics_json(data: ReportData) -> dict[str, dict[str, float | None]]:
                 row[f"{key}.{metric}"] = None if v is None else float(v)
         out[e.name] = row
     return out
-
-
-# -- noise floor ---------------------------------------------------------------------------------
-
-
-def _quantisation_ue(instrument: Mapping[str, Any]) -> float:
-    """RMS quantisation of the strain channel (ue) from the DAQ's AI range and bits."""
-    try:
-        daq = instrument.get("daq", {})
-        lo, hi = daq.get("ai_range_V", [-10.0, 10.0])
-        bits = daq.get("ai_bits")
-        cal = instrument.get("calibration", {})
-        sens = float(cal["sensitivity_mV_per_ue"]) * float(cal.get("conditioner_gain", 1.0))
-        if not bits or sens <= 0:
-            return 0.0
-        lsb_ue = (float(hi) - float(lo)) / 2 ** int(bits) / (sens * 1e-3)
-        return lsb_ue / math.sqrt(12.0)
-    except (KeyError, TypeError, ValueError):
-        return 0.0
-
-
-def configured_noise_ue(instrument: Mapping[str, Any]) -> float | None:
-    """The simulated bench's gauge noise (ue rms, with the ADC quantisation), or ``None`` when
-    the run file does not describe a simulated bench with one (real hardware)."""
-    try:
-        gauge = instrument["bench"]["config"]["gauge"]
-        noise = float(gauge["noise_ue"])
-    except (KeyError, TypeError, ValueError):
-        return None
-    effects = instrument["bench"]["config"].get("effects") or []
-    if effects:  # other disturbances (pickup, drift...) add to it: not a floor then
-        return None
-    return math.sqrt(noise**2 + _quantisation_ue(instrument) ** 2)
-
-
-def hold_noise_ue(records: Sequence[Record], min_s: float = 0.5) -> float | None:
-    """Noise RMS (ue) from stretches where the voltage stays constant for ``min_s`` or longer:
-    ``std(diff(strain)) / sqrt(2)`` (first differences remove the slow creep at constant
-    voltage), pooled over the stretches. ``None`` without such a stretch."""
-    diffs = []
-    for r in records:
-        v = r.voltage_V
-        tol = 1e-6 * max(float(np.ptp(v)), 1e-12)
-        same = np.abs(np.diff(v)) <= tol
-        n_min = max(round(min_s * r.rate_hz), 8)
-        # runs of constant voltage (boundaries of True runs in `same`)
-        edges = np.flatnonzero(np.diff(np.r_[0, same.astype(np.int8), 0]))
-        for a, b in zip(edges[::2], edges[1::2], strict=True):
-            if b - a + 1 >= n_min:
-                d = np.diff(r.strain_ue[a : b + 1])
-                diffs.append(d - d.mean())
-    if not diffs:
-        return None
-    d = np.concatenate(diffs)
-    return float(np.sqrt(np.mean(d**2) / 2.0))
-
-
-def noise_floor(
-    records: Sequence[Record], instrument: Mapping[str, Any], warmup_s: float = 0.0
-) -> NoiseFloor | None:
-    """The NRMSE of a perfect model on these records (module docstring), or ``None``."""
-    sigma = configured_noise_ue(instrument)
-    source = "the simulated bench's configured gauge noise and ADC quantisation"
-    if sigma is None:
-        sigma = hold_noise_ue(records)
-        source = "the strain's sample-to-sample scatter where the voltage is held constant"
-    if sigma is None:
-        return None
-    pct = []
-    for r in records:
-        i0 = min(round(warmup_s * r.rate_hz), r.n - 1)
-        span = float(np.ptp(r.strain_ue[i0:]))
-        if span > 0:
-            pct.append(100.0 * sigma / span)
-    if not pct:
-        return None
-    return NoiseFloor(float(np.mean(pct)), sigma, source)

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from labrig.core.errors import DeviceError, InputFileError, InputIssue, LabrigError
+from labrig.core.errors import DeviceError, InputFileError, InputIssue, LabrigError, StorageError
 from labrig.core.interrupts import SignalGuard, exit_code_for, interrupt_once, reason_for, signum_of
 from labrig.core.metadata import RunMetadata, combine
 from labrig.core.outputs import Staged, check_outputs, stage
@@ -50,7 +50,7 @@ from labrig.runner.rigfile import load_rig, open_rig
 from labrig.store import Channel, RunWriter, estimate_run_bytes, free_bytes
 from labrig.store.reader import being_written
 from labrig.store.resume import ResumePlan, check_resume, check_same_rig, record_resume
-from labrig.store.space import RESERVE_BYTES
+from labrig.store.space import DISK_FULL, RESERVE_BYTES, is_disk_full
 
 #: acquisition block length (s): the most a crash can lose
 BLOCK_S = 0.1
@@ -590,6 +590,9 @@ def _record(
             status, reason, code = "failed", str(e), e.exit_code
         except Exception as e:
             status, reason, code = "failed", f"{type(e).__name__}: {e}", 1
+            if is_disk_full(e):  # HDF5 met the full disk outside a wrapped write
+                full = StorageError(str(out), "writing the run file", DISK_FULL)
+                status, reason, code = "failed", f"{full} ({reason})", full.exit_code
         ramp = rig.ramp_to_zero()
         reason = _late_signals(guard, status, reason)
         problems = record_end(writer, rig, ramp, status, reason, code)

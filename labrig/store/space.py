@@ -38,6 +38,8 @@ BLOCK_MARGIN_BYTES = 64 * 1024
 RESERVE_BYTES = 1024 * 1024
 #: errno values that mean the disk (or the user's quota) is full
 FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
+#: what a run's reason says when the disk or quota is full
+DISK_FULL = "disk full (no space left on the device or quota exceeded)"
 
 
 def chunk_length(rate_hz: float) -> int:

@@ -58,6 +58,7 @@ from labrig.store.nexus import (
 )
 from labrig.store.space import (
     BLOCK_MARGIN_BYTES,
+    DISK_FULL,
     Reserve,
     chunk_bytes,
     chunk_length,
@@ -407,7 +408,7 @@ class RunWriter:
     def storage_error(self, operation: str, exc: BaseException) -> StorageError:
         """A :class:`StorageError` for a write HDF5 refused (disk full named as such)."""
         if is_disk_full(exc):
-            detail = "disk full (no space left on the device or quota exceeded)"
+            detail = DISK_FULL
         else:
             detail = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:200]
         return StorageError(str(self.path), operation, detail)

@@ -151,7 +151,8 @@ def test_modbus_illegal_value_is_reported(rig):
 
 def test_modbus_rtu_timeout(tmp_path):
     data = yaml.safe_load(DEFAULT_RIG_YAML)
-    data["conditioner"].update(transport="rtu", timeout_s=0.2)
+    # 1 s, not less: the timeout also bounds opening the rig, which a loaded machine can slow
+    data["conditioner"].update(transport="rtu", timeout_s=1.0)
     p = tmp_path / "rig.yaml"
     p.write_text(yaml.safe_dump(data))
     with open_rig(p, seed=0) as r:

@@ -212,3 +212,63 @@ def test_a_disk_too_small_for_the_run_is_refused_before_it_starts(namespace, tmp
     assert "not enough disk space" in err and "--out" in err and "run.h5" in err
     assert "Traceback" not in err
     assert r["left"] == []  # no run file, no reserve
+
+
+def test_a_raw_hdf5_disk_full_anywhere_in_the_run_is_exit_3(tmp_path, monkeypatch):
+    """HDF5's own error (a ``RuntimeError`` carrying ``errno = 28``) raised where the writer
+    does not wrap it (here: creating the second entry, as when the disk fills between two
+    entries) is still a full disk: exit 3 naming it, the output ramped to 0 V, the file
+    readable. Without the classification the run ended with exit 1 ("internal error")."""
+    from labrig.runner.execute import execute
+    from labrig.store.writer import RunWriter
+
+    proto = tmp_path / "p.yaml"
+    proto.write_text(
+        "name: two sines\nrate_hz: 500\nrest_s: 0.05\nsteps:\n"
+        "  - {kind: sine, amplitude_V: 20, frequency_hz: 5, cycles: 2}\n"
+        "  - {kind: sine, amplitude_V: 20, frequency_hz: 5, cycles: 2}\n"
+    )
+    real_begin = RunWriter.begin_entry
+    calls = []
+
+    def begin_entry(self, *a, **kw):
+        calls.append(1)
+        if len(calls) == 2:
+            raise RuntimeError(
+                "Unable to flush file (file write failed: errno = 28, error message = "
+                "'No space left on device')"
+            )
+        return real_begin(self, *a, **kw)
+
+    monkeypatch.setattr(RunWriter, "begin_entry", begin_entry)
+    plan, rig = preflight(proto, None)
+    out = tmp_path / "run.h5"
+    o = execute(plan, rig, out, seed=1)
+    assert (o.status, o.exit_code) == ("failed", 3), o.reason
+    assert "disk full" in o.reason and str(out) in o.reason
+    f = read_run(out)
+    assert f.status == "failed" and [e.status for e in f] == ["complete"]
+    with h5py.File(out, "r") as h:
+        assert float(h["run/final_amplifier_voltage_V"][()]) == 0.0
+
+
+def test_an_error_that_is_not_a_full_disk_stays_exit_1(tmp_path, monkeypatch):
+    """The other side of the rule: an unexpected error without errno 28 is not called a full
+    disk."""
+    from labrig.runner.execute import execute
+    from labrig.store.writer import RunWriter
+
+    proto = tmp_path / "p.yaml"
+    proto.write_text(
+        "name: one sine\nrate_hz: 500\nsteps:\n"
+        "  - {kind: sine, amplitude_V: 20, frequency_hz: 5, cycles: 2}\n"
+    )
+
+    def begin_entry(self, *a, **kw):
+        raise RuntimeError("Unable to flush file (file write failed: errno = 5, I/O error)")
+
+    monkeypatch.setattr(RunWriter, "begin_entry", begin_entry)
+    plan, rig = preflight(proto, None)
+    o = execute(plan, rig, tmp_path / "run.h5", seed=1)
+    assert (o.status, o.exit_code) == ("failed", 1), o.reason
+    assert "disk full" not in o.reason

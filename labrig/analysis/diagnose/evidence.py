@@ -4,10 +4,8 @@ Everything here *describes* residuals (``measured - predicted``, ue) for the rep
 candidates' evidence; nothing here decides (docs/method.md: with 1e4-1e5 samples almost
 any structure is "significant"; the decision is made by held-out prediction error).
 
-- **Noise floor** of an entry: for a periodic entry, the RMS of the residual's period-to-period
-  difference over its second half divided by sqrt 2 (model errors locked to the drive cancel,
-  noise does not); otherwise the RMS of the residual's second difference divided by sqrt 6.
-  In percent of the measured span, like the NRMSE.
+- **Noise floor** of an entry (:mod:`labrig.analysis.noise_floor`, the one estimator of every
+  command): the residual's period-to-period scatter, in percent of the measured span.
 - **Harmonic table** of a periodic entry: the residual's Fourier coefficients at ``k f0``
   (``k = 1..5``) over its whole periods, in percent of the measured strain's fundamental, with
   the phase relative to that fundamental (-90 deg: the residual *lags*... see ``quadrature``).
@@ -28,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic
+from labrig.analysis.noise_floor import residual_noise
 from labrig.analysis.records import Record
 from labrig.analysis.signals import step_hold
 from labrig.analysis.spectra import spectral_lines
@@ -84,16 +83,6 @@ def _corr(a: NDArray, b: NDArray) -> float:
     b = b - b.mean()
     den = float(np.sqrt((a @ a) * (b @ b)))
     return float(a @ b / den) if den > 0 else 0.0
-
-
-def _floor(res: NDArray, period: int | None) -> float:
-    if period and res.size >= 2 * period:
-        # the second half, or the last two periods if that is longer
-        x = res[-max(res.size // 2, 2 * period) :]
-        d = x[period:] - x[:-period]
-        return float(np.sqrt(np.mean(d * d)) / np.sqrt(2.0))
-    d = np.diff(res, 2)
-    return float(np.sqrt(np.mean(d * d)) / np.sqrt(6.0)) if d.size else 0.0
 
 
 def _fourier(x: NDArray, rate: float, f: float) -> complex:
@@ -153,7 +142,7 @@ def _entry_evidence(r: Record, m: NDArray, p: NDArray) -> EntryEvidence:
     e = EntryEvidence(
         r.name,
         100 * rms / span,
-        100 * _floor(res, period) / span,
+        100 * residual_noise(res, period) / span,
         span,
         rms,
         f0,

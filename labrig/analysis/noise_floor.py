@@ -1,0 +1,122 @@
+"""The noise floor: the NRMSE a perfect model would reach on a set of records.
+
+One estimator serves every command that prints a floor (``labrig fit``, ``report``,
+``validate`` and ``diagnose``), so one file gets one floor. It is measured on a model's
+residual ``r = measured - predicted`` (ue), after the warm-up:
+
+- a periodic entry of period ``P`` samples: over its second half (at least two periods),
+  ``sigma = RMS(r[k + P] - r[k]) / sqrt 2``: errors of the model locked to the drive repeat
+  every period and cancel, white noise adds in quadrature;
+- any other entry: ``sigma = RMS(second difference of r) / sqrt 6``: a smooth model error
+  cancels, white noise of RMS ``sigma`` gives ``6 sigma^2``.
+
+The floor of an entry is ``100 sigma / (max m - min m)`` percent, like the NRMSE, and the floor
+of the records is the mean over entries (the NRMSE is averaged the same way). A model that
+misses an effect changing from period to period (a drift, a slow creep) raises the estimate a
+little; a configured gauge noise is not used, so a simulated bench and a real one are measured
+alike.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from labrig.analysis.metrics import drive_frequency_hz, is_periodic
+from labrig.analysis.records import Record
+
+__all__ = ["SOURCE", "NoiseFloor", "entry_period", "noise_floor", "residual_noise"]
+
+#: where the floor's noise RMS comes from, in words (printed beside the floor)
+SOURCE = "the period-to-period scatter of the model's residual"
+
+
+@dataclass(frozen=True)
+class NoiseFloor:
+    """The NRMSE of a perfect model (percent), the noise RMS behind it (ue, mean over
+    entries) and where that RMS came from."""
+
+    nrmse_pct: float
+    noise_ue: float
+    source: str
+
+
+def residual_noise(res: NDArray[np.float64], period: int | None) -> float:
+    """The white-noise RMS in a residual ``res`` (its unit), module docstring.
+
+    Parameters
+    ----------
+    res : ndarray
+        Residual, measured minus predicted, after the warm-up.
+    period : int or None
+        Samples per period of a periodic entry, else ``None``.
+
+    Returns
+    -------
+    float
+        The noise RMS; 0.0 for a residual too short to tell.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> locked = np.tile(np.sin(np.linspace(0, 6.3, 100)), 40)  # repeats every 100 samples
+    >>> round(residual_noise(locked + rng.normal(0, 0.1, 4000), 100), 2)
+    0.1
+    """
+    if period and res.size >= 2 * period:
+        x = res[-max(res.size // 2, 2 * period) :]
+        d = x[period:] - x[:-period]
+        return float(np.sqrt(np.mean(d * d)) / np.sqrt(2.0))
+    d = np.diff(res, 2)
+    return float(np.sqrt(np.mean(d * d)) / np.sqrt(6.0)) if d.size else 0.0
+
+
+def entry_period(record: Record) -> int | None:
+    """Samples per period of ``record``'s drive when it is periodic, else ``None``."""
+    f0 = drive_frequency_hz(record)
+    if f0 and is_periodic(record.voltage_V, record.rate_hz, f0):
+        return round(record.rate_hz / f0)
+    return None
+
+
+def noise_floor(
+    records: Sequence[Record],
+    predictions: Mapping[str, NDArray[np.float64]],
+    warmup_s: float = 0.0,
+) -> NoiseFloor | None:
+    """The noise floor of ``records`` from a model's ``predictions`` (module docstring).
+
+    Parameters
+    ----------
+    records : sequence of Record
+        The scored entries.
+    predictions : mapping
+        Entry name -> predicted strain (ue) over the whole record, offsets included; entries
+        without a prediction are left out.
+    warmup_s : float
+        Seconds at the start of each entry left out of the score.
+
+    Returns
+    -------
+    NoiseFloor or None
+        ``None`` when no entry has a prediction and a strain span.
+    """
+    pct, ue = [], []
+    for r in records:
+        if r.name not in predictions:
+            continue
+        i0 = min(round(max(warmup_s, 0.0) * r.rate_hz), r.n - 1)
+        m = r.strain_ue[i0:]
+        span = float(np.ptp(m))
+        if span <= 0:
+            continue
+        sigma = residual_noise(m - predictions[r.name][i0:], entry_period(r))
+        pct.append(100.0 * sigma / span)
+        ue.append(sigma)
+    if not pct:
+        return None
+    return NoiseFloor(float(np.mean(pct)), float(np.mean(ue)), SOURCE)
