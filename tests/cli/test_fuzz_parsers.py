@@ -41,11 +41,18 @@ from labrig.rig.rigspec import load_rig
 #: the longest any one parse or request may take (s): generous for a loaded machine (a sound
 #: call takes well under 1 s), finite for a hang
 MAX_CALL_S = 20.0
-FUZZ = settings(
-    max_examples=60,  # the default tier; the slow tier's corpora go further
-    deadline=None,
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
-)
+_QUIET = [HealthCheck.too_slow, HealthCheck.data_too_large]
+#: the default tier: 20 generated inputs per parser (a few seconds each) ...
+FUZZ = settings(max_examples=20, deadline=None, suppress_health_check=_QUIET)
+#: ... the slow tier (``-m slow``): the same properties on 300
+FUZZ_LONG = settings(max_examples=300, deadline=None, suppress_health_check=_QUIET)
+
+
+def long(case, strategy):
+    """``case`` under :data:`FUZZ_LONG`, marked slow: the default tier keeps its 20-input twin."""
+    return pytest.mark.slow(FUZZ_LONG(given(strategy)(case)))
+
+
 pytestmark = pytest.mark.timeout(600)
 
 PROTOCOL_KEYS = ["name", "rig", "rate_hz", "rest_s", "steps", "kind", "amplitude_V",
@@ -139,33 +146,39 @@ def only_input_errors(fn, path: Path) -> None:
         assert e.exit_code == 2 and str(path) in str(e)
 
 
-@FUZZ
-@given(yaml_texts(PROTOCOL_KEYS))
-def test_protocol_loader_on_generated_yaml(text: str):
+def _protocol_case(text: str):
     with tempfile.TemporaryDirectory() as d:
         p = Path(d) / "p.yaml"
         p.write_text(text, encoding="utf-8", errors="surrogatepass")
         only_input_errors(check_protocol, p)
 
 
-@FUZZ
-@given(yaml_texts(RIG_KEYS))
-def test_rig_loader_on_generated_yaml(text: str):
+test_protocol_loader_on_generated_yaml = FUZZ(given(yaml_texts(PROTOCOL_KEYS))(_protocol_case))
+test_protocol_loader_on_300_generated_yamls = long(_protocol_case, yaml_texts(PROTOCOL_KEYS))
+
+
+def _rig_case(text: str):
     with tempfile.TemporaryDirectory() as d:
         p = Path(d) / "rig.yaml"
         p.write_text(text, encoding="utf-8", errors="surrogatepass")
         only_input_errors(load_rig, p)
 
 
-@FUZZ
-@given(json_texts())
-def test_params_readers_on_generated_json(text: str):
+test_rig_loader_on_generated_yaml = FUZZ(given(yaml_texts(RIG_KEYS))(_rig_case))
+test_rig_loader_on_300_generated_yamls = long(_rig_case, yaml_texts(RIG_KEYS))
+
+
+def _params_case(text: str):
     with tempfile.TemporaryDirectory() as d:
         p = Path(d) / "params.json"
         p.write_text(text, encoding="utf-8", errors="surrogatepass")
         only_input_errors(lambda q: read_params_file(q, "the test", bare_ok=True), p)
         only_input_errors(read_fit_output, p)
         only_input_errors(lambda q: start_params(q, lambda _msg: None), p)
+
+
+test_params_readers_on_generated_json = FUZZ(given(json_texts())(_params_case))
+test_params_readers_on_300_generated_jsons = long(_params_case, json_texts())
 
 
 # -- the simulators --------------------------------------------------------------------------
@@ -260,9 +273,7 @@ mbap_frames = st.builds(
 )
 
 
-@settings(max_examples=60, deadline=None)
-@given(st.lists(mbap_frames, min_size=1, max_size=3))
-def test_modbus_server_over_tcp_on_generated_frames(modbus, frames):
+def _modbus_case(modbus, frames):
     for tid, (fc, body, unit, bad_length) in enumerate(frames, start=1):
         pdu = bytes([fc]) + body
         length = len(pdu) + 1 + (7 if bad_length else 0)
@@ -282,3 +293,10 @@ def test_modbus_server_over_tcp_on_generated_frames(modbus, frames):
         assert head is not None, "the Modbus simulator stopped answering"
         body = _read_exactly(s, struct.unpack(">H", head[4:6])[0] - 1)
         assert body is not None and body[0] == 4
+
+
+_frames = st.lists(mbap_frames, min_size=1, max_size=3)
+test_modbus_server_over_tcp_on_generated_frames = FUZZ(given(frames=_frames)(_modbus_case))
+test_modbus_server_over_tcp_on_300_generated_frames = pytest.mark.slow(
+    FUZZ_LONG(given(frames=_frames)(_modbus_case))
+)
