@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from labrig.analysis.diagnose.acceptance import MIN_GAIN, Candidate
+from labrig.analysis.diagnose.eta import RoundClock
 from labrig.analysis.diagnose.evidence import Evidence, modelled_creep_per_decade
 from labrig.analysis.diagnose.ranking import jacobian_basis, rank
 from labrig.analysis.diagnose.sparse_ode import sparse_ode_step
@@ -332,9 +333,18 @@ def next_round(
         say(f"round {rnd + 1}: fitting and cross-validating {len(chosen)} candidates on "
             f"{min(settings.workers, len(chosen))} processes")  # fmt: skip
 
+    clock = RoundClock(len(chosen))
+
     def trial(k: int) -> Candidate:
         eff, score, probe = chosen[k]
         quiet = settings.workers > 1 and len(chosen) > 1
+        first = [True]
+
+        def say_k(msg: str) -> None:  # the candidate's first line says how far the round is
+            if first[0]:
+                msg, first[0] = f"{msg} ({clock.before(k)})", False
+            say(msg)
+
         c, _ = try_candidate(
             setup,
             settings,
@@ -343,7 +353,7 @@ def next_round(
             probe,
             rnd,
             score,
-            (lambda _m: None) if quiet else say,
+            (lambda _m: None) if quiet else say_k,
             1 if quiet else settings.workers,
         )
         return c
