@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from labrig.model.hysteresis import HysteresisState, QuasiStaticHysteresis
-from labrig.model.modal import DiscreteBank, run_bank, scaled_form
+from labrig.model.modal import DiscreteBank, compact_form, run_bank
 from labrig.model.params import ModelParams
 from labrig.model.relaxor import Relaxor
 
@@ -158,8 +158,12 @@ class DynamicHysteresisModel:
 
 
 def _fresh(bank: DiscreteBank) -> tuple:
-    """A bank in the compiled kernels' form with zero (rest) states."""
-    a, cw, feed, ca, ccw = scaled_form(bank)
+    """A bank in the compiled kernels' compact form (:func:`~labrig.model.modal.compact_form`)
+    with zero (rest) states."""
+    key = ("compact", None)
+    if key not in bank._cache:
+        bank._cache[key] = compact_form(bank)
+    a, cw, feed, ca, ccw = bank._cache[key]
     return a, cw, feed, ca, ccw, np.zeros(a.size), np.zeros(ca.size, dtype=np.complex128)
 
 
