@@ -562,6 +562,7 @@ def model_run(
     a0: float,
     g: float,
     vc: float,
+    out: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
     """The fast dynamic model over ``v`` (V): ``G_t``'s bank, ``G_d``'s bank, the operator, fused
     in one loop over blocks of eight samples (no intermediate arrays: each block's ``V_t`` and
@@ -570,11 +571,12 @@ def model_run(
     ``bt``, ``bd``: each bank as ``(a, cw, feed, ca, ccw, w, wc)`` (single output row, states
     ``w``, ``wc`` updated in place); ``ups`` = ``[v_prev, vt_prev]`` (updated); the relaxors
     act on ``v - rest`` and ``rest`` is added back before the operator; the operator's memory
-    as in :func:`operator_pass`. Returns the strain and the operator's new memory (stack,
-    direction, last input).
+    as in :func:`operator_pass`. The strain is written to ``out`` (as long as ``v``; allocated
+    by the caller: numpy asks the kernel for huge pages, so a long record's first touch costs
+    half of what numba's own allocation does). Returns ``out`` and the operator's new memory
+    (stack, direction, last input).
     """
     n = v.shape[0]
-    out = np.empty(n)
     m = stack_x.shape[0]
     cap = max(64, 2 * m)
     sx, sy = np.empty(cap), np.empty(cap)

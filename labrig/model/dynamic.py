@@ -135,7 +135,7 @@ class DynamicHysteresisModel:
         out = kern.model_run(
             v, float(rest_V), _fresh(bt), _fresh(bd), np.zeros(2), np.zeros(1), np.zeros(1),
             held.u_last, held.direction, op._wipe, op._code, float(op.alpha0), float(op.gamma),
-            float(op.vc),
+            float(op.vc), np.empty(v.size),
         )[0]  # fmt: skip
         return out
 
@@ -241,7 +241,7 @@ class ModelStream:
         ys = np.array([p[1] for p in st.older] + [st.s_s], dtype=np.float64)
         out, xs, ys, d, last = self._kern.model_run(
             v, 0.0, self._bt, self._bd, self._ups, xs, ys, float(st.u_last), float(st.direction),
-            op._wipe, op._code, float(op.alpha0), float(op.gamma), float(op.vc),
+            op._wipe, op._code, float(op.alpha0), float(op.gamma), float(op.vc), np.empty(v.size),
         )  # fmt: skip
         pts = list(zip(xs.tolist(), ys.tolist(), strict=True))
         st.older, (st.u_s, st.s_s), st.direction = pts[:-1], pts[-1], float(d)
