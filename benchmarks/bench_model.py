@@ -79,7 +79,7 @@ from labrig.model import (  # noqa: E402
     HysteresisState,
     Relaxor,
 )
-from labrig.model.modal import run_bank  # noqa: E402
+from labrig.model.modal import compact_form, run_bank  # noqa: E402
 
 RATE_HZ = 1000.0
 G_T = Relaxor(PAPER_TABLE1.tau_t_s, PAPER_TABLE1.lam_t)  # 15.5e-5 s, 0.15
@@ -299,9 +299,15 @@ def agreement(n: int) -> dict[str, float]:
     stages = op.apply(vd, engine="numpy")
     exact_vd = model.equivalent_static_voltage(v, RATE_HZ, method="exact")
     prev = previous_predict(v)
+    # the arithmetic of the fast path before the fused loop and the compact banks: the full
+    # banks by the compiled recursion, then the compiled operator
+    cvt = rb(model.g_t.bank(RATE_HZ, "zoh"), v)[0]
+    before = op.apply(rb(model.g_d.bank(RATE_HZ, "linear"), cvt)[0])
     return {
-        "fast (one compiled pass) vs the numpy stages (numpy blocks, numpy operator)":
-            float(np.max(np.abs(fast - stages))) / fs_strain,
+        "fast (fused, compact banks) vs the numpy stages (full banks by numpy blocks, numpy "
+        "operator)": float(np.max(np.abs(fast - stages))) / fs_strain,
+        "fast (fused, compact banks) vs the compiled stages with the full banks (the fast path "
+        "before the fused loop)": float(np.max(np.abs(fast - before))) / fs_strain,
         "compiled operator vs numpy operator on the same V*":
             float(np.max(np.abs(op.apply(vd, engine="compiled") - stages))) / fs_strain,
         "V* of the banks vs V* of exact": float(np.max(np.abs(vd - exact_vd))) / FULL_SCALE_V,
@@ -310,6 +316,54 @@ def agreement(n: int) -> dict[str, float]:
         "strain of fast vs strain of the previous fast path":
             float(np.max(np.abs(fast - prev))) / fs_strain,
     }  # fmt: skip
+
+
+def compact_sizes(model: DynamicHysteresisModel) -> str:
+    """The modes the fused loop runs: real modes with a weight (padded count), complex ones."""
+    parts = []
+    for name, bank in (("G_t", model.g_t.bank(RATE_HZ, "zoh")),
+                       ("G_d", model.g_d.bank(RATE_HZ, "linear"))):  # fmt: skip
+        a, cw, _, ca, _ = compact_form(bank)
+        parts.append(f"{name} {np.count_nonzero(cw)} real (padded to {a.size}) + {ca.size} "
+                     f"complex, of {bank.size}")  # fmt: skip
+    return "; ".join(parts)
+
+
+def split_exact(n: int, repeats: int) -> dict[str, float]:
+    """CPU best of the exact method's parts: the two sampled kernels, the FFT products (what
+    ``fftconvolve`` does: three real transforms of a length >= 2N - 1 each), the operator."""
+    from scipy import fft
+
+    from labrig.model.relaxor import sampled_kernel
+
+    model = DynamicHysteresisModel(PAPER_TABLE1)
+    v = sweep_input(n)
+    dt = 1.0 / RATE_HZ
+    kt = sampled_kernel(G_T.tau_s, G_T.lam, dt, n, "zoh")
+    kd = sampled_kernel(G_D.tau_s, G_D.lam, dt, n, "linear")
+    size = fft.next_fast_len(2 * n - 1, real=True)
+    vd = model.equivalent_static_voltage(v, RATE_HZ, method="exact")
+    stages = {
+        "the two sampled kernels (closed forms, Chebyshev interpolant)": lambda: (
+            sampled_kernel(G_T.tau_s, G_T.lam, dt, n, "zoh"),
+            sampled_kernel(G_D.tau_s, G_D.lam, dt, n, "linear"),
+        ),
+        f"one real FFT of length {size} (the method needs six)": lambda: fft.rfft(v, size),
+        "both convolutions (scipy.signal.fftconvolve)": lambda: _two_convolutions(v, kt, kd),
+        "operator (compiled)": lambda: model.operator.apply(vd),
+        "the whole exact prediction": lambda: model.predict(v, RATE_HZ, method="exact"),
+    }
+    out = {}
+    for k, fn in stages.items():
+        fn()
+        out[k] = min(paired(fn, repeats).cpu)
+    return out
+
+
+def _two_convolutions(v: np.ndarray, kt: np.ndarray, kd: np.ndarray) -> np.ndarray:
+    from scipy.signal import fftconvolve
+
+    return fftconvolve(fftconvolve(v, kt)[: v.size], kd)[: v.size]
 
 
 def split_fast(n: int, repeats: int) -> dict[str, float]:
@@ -325,8 +379,9 @@ def split_fast(n: int, repeats: int) -> dict[str, float]:
         f"G_d bank alone ({bd.size} modes, linear)": lambda: run_bank(bd, vt),
         "operator alone (compiled)": lambda: op.apply(vd),
         "operator alone (numpy)": lambda: op.apply(vd, engine="numpy"),
-        "the whole prediction (one pass)": lambda: model.predict(v, RATE_HZ),
-    }
+        f"the whole prediction (fused, compact banks: {compact_sizes(model)})":
+            lambda: model.predict(v, RATE_HZ),
+    }  # fmt: skip
     out = {}
     for k, fn in stages.items():
         fn()
@@ -651,7 +706,8 @@ def bench_stepper(n_samples: int, rates: list[float]) -> list[dict]:
                 stream.process(a)
 
         rows.append({"what": "`ModelStream.process` on 1-sample blocks", "rate": rate,
-                     "modes": stream._bank_t.size + stream._bank_d.size,
+                     "modes": sum(np.count_nonzero(compact_form(b)[1]) + compact_form(b)[3].size
+                                  for b in (stream._bank_t, stream._bank_d)),
                      **per_sample(loop_s)})  # fmt: skip
         print(f"  per-sample costs at {rate:g} Hz measured", flush=True)
     return rows
@@ -791,7 +847,8 @@ def render(info: dict, rows: list[dict], cold: dict, agree: dict, split: dict, s
     a("sampled at 1 kHz (N = 1e7 is 2.8 h of signal). Kernels loaded and banks built first (the")
     a(f"first call at N = 1e4 in this process: {fmt_time(cold['fast'])} CPU; compilation is in")
     a("section 3). *fast* runs the compiled model in one pass (`compiled.model_run`: both banks")
-    a("and the operator in chunks of 4096 samples); the *ModelStream* row feeds the same")
+    a("and the operator fused in one loop over blocks of eight samples, no intermediate arrays,")
+    a("on the compact banks of `modal.compact_form`); the *ModelStream* row feeds the same")
     a(f"computation in {CHUNK}-sample blocks; the *previous fast path* is what `fast` was before")
     a("this change, timed in this run: the Gauss-Legendre banks (`benchmarks/previous_quadrature")
     a(".py`, 242 + 285 modes) run by the numpy block realisation, then the numpy operator.")
@@ -832,8 +889,22 @@ def render(info: dict, rows: list[dict], cold: dict, agree: dict, split: dict, s
     a("| stage | CPU | samples/s |")
     a("|---|---:|---:|")
     for k, x in split.items():
-        a(f"| {k} | {fmt_time(x)} | {fmt_rate(split_n / x)} |")
+        if k != "exact":
+            a(f"| {k} | {fmt_time(x)} | {fmt_rate(split_n / x)} |")
     a("")
+    ex = split.get("exact")
+    if ex:
+        a(f"The exact method's parts at N = {split_n:.0e}, each timed alone (CPU best of 3, so")
+        a("the shares need not add up to 100 %): the two sampled kernels, the two convolutions")
+        a("(`scipy.signal.fftconvolve`: six real transforms of a length >= 2N - 1, pocketfft)")
+        a("and the operator.")
+        a("")
+        a("| part | CPU | share of the whole |")
+        a("|---|---:|---:|")
+        whole = ex["the whole exact prediction"]
+        for k, x in ex.items():
+            a(f"| {k} | {fmt_time(x)} | {x / whole:.0%} |")
+        a("")
     a(f"The banks' recursion, N = {split_n:.0e}: compiled (one sample at a time over all modes,")
     a("eight samples per sweep) against the numpy block realisation (blocks of 256 samples,")
     a("BLAS matrix products), at the new and the previous bank sizes; CPU best of 3:")
@@ -1033,6 +1104,7 @@ def main(argv: list[str] | None = None) -> int:
     rows, cold = bench_predict(sizes, reps)
     agree = agreement(split_n)
     split = split_fast(split_n, 5)
+    split["exact"] = split_exact(split_n, 3)
     recursion = bench_recursion(split_n, 3)
     print("2. banks", flush=True)
     banks = bench_banks(bank_n, [1000.0, 10000.0])
