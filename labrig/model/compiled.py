@@ -10,7 +10,7 @@ that calls it (the reference of the tests, and the fallback without numba):
 - :func:`bank_run`: the relaxor banks of :mod:`labrig.model.modal`, one sample at a time over
   all modes (the recursion itself, in place of the numpy block form);
 - :func:`chebyshev_panels`: the exact method's log-time Chebyshev interpolant of the step
-  response (:mod:`labrig.model.relaxor`), one Clenshaw sum per sample;
+  response (:mod:`labrig.model.relaxor`), Clenshaw sums eight samples at a time;
 - :func:`rate_hysteresis_run`: the rate-dependent Duhem state of the ``rate_hysteresis``
   effect (:mod:`labrig.model.effects.rate_hysteresis`), its exact per-interval recurrence.
 
@@ -312,45 +312,76 @@ def mode_derivative(
 
 
 @njit(cache=True)
-def _panel_x(t: float, u0: float, width: float, npan: int) -> tuple[int, float]:
-    u = math.log10(t)
-    p = min(max(int((u - u0) / width), 0), npan - 1)
-    return p, 2.0 * (u - (u0 + p * width)) / width - 1.0
+def _clenshaw1(coeffs: np.ndarray, p: int, x: float) -> float:
+    """``sum_k coeffs[p, k] T_k(x)`` by Clenshaw's recurrence."""
+    b1 = b2 = 0.0
+    tx = 2.0 * x
+    for k in range(coeffs.shape[1] - 1, 0, -1):
+        b0 = coeffs[p, k] + tx * b1 - b2
+        b2, b1 = b1, b0
+    return coeffs[p, 0] + x * b1 - b2
 
 
 @njit(cache=True)
-def chebyshev_panels(t: np.ndarray, u0: float, width: float, coeffs: np.ndarray) -> np.ndarray:
-    """``sum_k coeffs[p, k] T_k(x)`` at each ``t`` (s): ``u = log10 t`` falls in panel
-    ``p = floor((u - u0) / width)`` (clipped to the panels), ``x`` is ``u`` mapped onto
-    ``[-1, 1]`` within it; Clenshaw's recurrence, four samples at a time (four independent
-    chains keep the multiplier busy; each sum is the same as alone)."""
-    n = t.shape[0]
+def chebyshev_panels(u: np.ndarray, u0: float, width: float, coeffs: np.ndarray) -> np.ndarray:
+    """``sum_k coeffs[p, k] T_k(x)`` at each ``u = log10 t`` (``t`` in s): ``u`` falls in
+    panel ``p = floor((u - u0) / width)`` (clipped to the panels), ``x`` is ``u`` mapped onto
+    ``[-1, 1]`` within it; Clenshaw's recurrence. Eight samples in one panel (sorted times: the
+    kernels') run as eight independent chains sharing each coefficient (they keep the
+    multiplier busy); the others one at a time. Each sum is the same as alone."""
+    n = u.shape[0]
     npan, nk = coeffs.shape
     out = np.empty(n)
+    pan = np.empty(8, dtype=np.int64)
     i = 0
     while i < n:
-        p0, x0 = _panel_x(t[i], u0, width, npan)
-        p1, x1 = _panel_x(t[min(i + 1, n - 1)], u0, width, npan)
-        p2, x2 = _panel_x(t[min(i + 2, n - 1)], u0, width, npan)
-        p3, x3 = _panel_x(t[min(i + 3, n - 1)], u0, width, npan)
+        m = min(8, n - i)
+        same = m == 8
+        for j in range(m):
+            pan[j] = min(max(int((u[i + j] - u0) / width), 0), npan - 1)
+            same = same and pan[j] == pan[0]
+        if not same:
+            for j in range(m):
+                lo = u0 + pan[j] * width
+                out[i + j] = _clenshaw1(coeffs, pan[j], 2.0 * (u[i + j] - lo) / width - 1.0)
+            i += m
+            continue
+        p = pan[0]
+        lo = u0 + p * width
+        x0 = 2.0 * (u[i] - lo) / width - 1.0
+        x1 = 2.0 * (u[i + 1] - lo) / width - 1.0
+        x2 = 2.0 * (u[i + 2] - lo) / width - 1.0
+        x3 = 2.0 * (u[i + 3] - lo) / width - 1.0
+        x4 = 2.0 * (u[i + 4] - lo) / width - 1.0
+        x5 = 2.0 * (u[i + 5] - lo) / width - 1.0
+        x6 = 2.0 * (u[i + 6] - lo) / width - 1.0
+        x7 = 2.0 * (u[i + 7] - lo) / width - 1.0
+        t0, t1, t2, t3 = 2.0 * x0, 2.0 * x1, 2.0 * x2, 2.0 * x3
+        t4, t5, t6, t7 = 2.0 * x4, 2.0 * x5, 2.0 * x6, 2.0 * x7
         a1 = a2 = b1 = b2 = c1 = c2 = d1 = d2 = 0.0
+        e1 = e2 = f1 = f2 = g1 = g2 = h1 = h2 = 0.0
         for k in range(nk - 1, 0, -1):
-            a0 = coeffs[p0, k] + 2.0 * x0 * a1 - a2
-            b0 = coeffs[p1, k] + 2.0 * x1 * b1 - b2
-            c0 = coeffs[p2, k] + 2.0 * x2 * c1 - c2
-            d0 = coeffs[p3, k] + 2.0 * x3 * d1 - d2
-            a2, a1 = a1, a0
-            b2, b1 = b1, b0
-            c2, c1 = c1, c0
-            d2, d1 = d1, d0
-        out[i] = coeffs[p0, 0] + x0 * a1 - a2
-        if i + 1 < n:
-            out[i + 1] = coeffs[p1, 0] + x1 * b1 - b2
-        if i + 2 < n:
-            out[i + 2] = coeffs[p2, 0] + x2 * c1 - c2
-        if i + 3 < n:
-            out[i + 3] = coeffs[p3, 0] + x3 * d1 - d2
-        i += 4
+            c = coeffs[p, k]
+            a0 = c + t0 * a1 - a2
+            b0 = c + t1 * b1 - b2
+            c0 = c + t2 * c1 - c2
+            d0 = c + t3 * d1 - d2
+            e0 = c + t4 * e1 - e2
+            f0 = c + t5 * f1 - f2
+            g0 = c + t6 * g1 - g2
+            h0 = c + t7 * h1 - h2
+            a2, a1, b2, b1, c2, c1, d2, d1 = a1, a0, b1, b0, c1, c0, d1, d0
+            e2, e1, f2, f1, g2, g1, h2, h1 = e1, e0, f1, f0, g1, g0, h1, h0
+        c = coeffs[p, 0]
+        out[i] = c + x0 * a1 - a2
+        out[i + 1] = c + x1 * b1 - b2
+        out[i + 2] = c + x2 * c1 - c2
+        out[i + 3] = c + x3 * d1 - d2
+        out[i + 4] = c + x4 * e1 - e2
+        out[i + 5] = c + x5 * f1 - f2
+        out[i + 6] = c + x6 * g1 - g2
+        out[i + 7] = c + x7 * h1 - h2
+        i += 8
     return out
 
 

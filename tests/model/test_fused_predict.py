@@ -146,3 +146,24 @@ def test_compact_paper_banks_are_smaller_and_agree(tau: float, lam: float, hold:
     np.testing.assert_allclose(
         _bank_output(small, u), _bank_output(full, u), rtol=0, atol=1e-13 * 100
     )
+
+
+# -- the exact method's compiled interpolant --------------------------------------------------
+
+
+@needs_numba
+@pytest.mark.parametrize("order", ["sorted", "shuffled"])
+def test_compiled_chebyshev_sums_equal_numpy_chebval(order: str, monkeypatch) -> None:
+    # blocks of eight in one panel run as eight chains, mixed blocks one at a time: both against
+    # numpy's chebval per panel (the same recurrence), on times crossing many panels
+    import labrig.model.relaxor as relaxor
+
+    interp = relaxor._LogChebyshevStep(2e-3, 1.35, 2.048, 3e3)
+    rng = np.random.default_rng(7)
+    t = np.sort(10 ** rng.uniform(np.log10(2.048), np.log10(3e3), 5_003))
+    if order == "shuffled":
+        t = rng.permutation(t)
+    got = interp.branch(t)
+    monkeypatch.setattr(relaxor, "kernels", lambda: None)
+    want = interp.branch(t)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-15 * np.max(np.abs(want)))
