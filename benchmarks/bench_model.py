@@ -79,7 +79,7 @@ from labrig.model import (  # noqa: E402
     HysteresisState,
     Relaxor,
 )
-from labrig.model.modal import run_bank  # noqa: E402
+from labrig.model.modal import compact_form, run_bank  # noqa: E402
 
 RATE_HZ = 1000.0
 G_T = Relaxor(PAPER_TABLE1.tau_t_s, PAPER_TABLE1.lam_t)  # 15.5e-5 s, 0.15
@@ -234,6 +234,7 @@ def paired(fn: Callable[[], object], repeats: int) -> Paired:
 
 
 CHUNK = 65_536  # block size of the streamed variant
+BEFORE_FUSED = "fast before the fused loop (chunks of 4096, full banks; same run)"
 
 
 def previous_predict(v: np.ndarray, rest: float = 0.0) -> np.ndarray:
@@ -244,6 +245,21 @@ def previous_predict(v: np.ndarray, rest: float = 0.0) -> np.ndarray:
     vt = run_bank(bt, v - rest, engine="numpy")[0]
     vd = run_bank(bd, vt, engine="numpy")[0] + rest
     return op.apply(vd, op.held_state(rest), engine="numpy")
+
+
+def before_fused(v: np.ndarray) -> np.ndarray:
+    """``predict(v, method="fast")`` as it ran before the fused loop (benchmarks/
+    previous_fused.py: chunks of 4096 samples through the full banks, then the operator)."""
+    from previous_fused import previous_form, previous_model_run
+
+    op = PREVIOUS_OP
+    bt, bd = G_T.bank(RATE_HZ, "zoh"), G_D.bank(RATE_HZ, "linear")
+    held = op.held_state(0.0)
+    return previous_model_run(
+        np.ascontiguousarray(v, dtype=np.float64), 0.0, previous_form(bt), previous_form(bd),
+        np.zeros(2), np.zeros(1), np.zeros(1), held.u_last, held.direction, op._wipe, op._code,
+        float(op.alpha0), float(op.gamma), float(op.vc),
+    )[0]  # fmt: skip
 
 
 PREVIOUS_OP = DynamicHysteresisModel(PAPER_TABLE1).operator
@@ -265,6 +281,7 @@ def bench_predict(sizes: list[int], repeats: dict[int, int]) -> tuple[list[dict]
     variants: dict[str, Callable[[np.ndarray], np.ndarray]] = {
         "fast": lambda v: model.predict(v, RATE_HZ, method="fast"),
         f"fast, ModelStream in {CHUNK}-sample blocks": chunked,
+        BEFORE_FUSED: before_fused,
         "previous fast (numpy blocks, 242 + 285 modes, numpy operator)": previous_predict,
         "exact": lambda v: model.predict(v, RATE_HZ, method="exact"),
     }
@@ -299,9 +316,17 @@ def agreement(n: int) -> dict[str, float]:
     stages = op.apply(vd, engine="numpy")
     exact_vd = model.equivalent_static_voltage(v, RATE_HZ, method="exact")
     prev = previous_predict(v)
+    # the arithmetic of the fast path before the fused loop and the compact banks: the full
+    # banks by the compiled recursion, then the compiled operator
+    cvt = rb(model.g_t.bank(RATE_HZ, "zoh"), v)[0]
+    before = op.apply(rb(model.g_d.bank(RATE_HZ, "linear"), cvt)[0])
     return {
-        "fast (one compiled pass) vs the numpy stages (numpy blocks, numpy operator)":
-            float(np.max(np.abs(fast - stages))) / fs_strain,
+        "fast (fused, compact banks) vs the numpy stages (full banks by numpy blocks, numpy "
+        "operator)": float(np.max(np.abs(fast - stages))) / fs_strain,
+        "fast (fused, compact banks) vs the compiled stages with the full banks": float(
+            np.max(np.abs(fast - before))) / fs_strain,
+        "fast (fused, compact banks) vs the fast path before the fused loop":
+            float(np.max(np.abs(fast - before_fused(v)))) / fs_strain,
         "compiled operator vs numpy operator on the same V*":
             float(np.max(np.abs(op.apply(vd, engine="compiled") - stages))) / fs_strain,
         "V* of the banks vs V* of exact": float(np.max(np.abs(vd - exact_vd))) / FULL_SCALE_V,
@@ -310,6 +335,54 @@ def agreement(n: int) -> dict[str, float]:
         "strain of fast vs strain of the previous fast path":
             float(np.max(np.abs(fast - prev))) / fs_strain,
     }  # fmt: skip
+
+
+def compact_sizes(model: DynamicHysteresisModel) -> str:
+    """The modes the fused loop runs: real modes with a weight (padded count), complex ones."""
+    parts = []
+    for name, bank in (("G_t", model.g_t.bank(RATE_HZ, "zoh")),
+                       ("G_d", model.g_d.bank(RATE_HZ, "linear"))):  # fmt: skip
+        a, cw, _, ca, _ = compact_form(bank)
+        parts.append(f"{name} {np.count_nonzero(cw)} real (padded to {a.size}) + {ca.size} "
+                     f"complex, of {bank.size}")  # fmt: skip
+    return "; ".join(parts)
+
+
+def split_exact(n: int, repeats: int) -> dict[str, float]:
+    """CPU best of the exact method's parts: the two sampled kernels, the FFT products (what
+    ``fftconvolve`` does: three real transforms of a length >= 2N - 1 each), the operator."""
+    from scipy import fft
+
+    from labrig.model.relaxor import sampled_kernel
+
+    model = DynamicHysteresisModel(PAPER_TABLE1)
+    v = sweep_input(n)
+    dt = 1.0 / RATE_HZ
+    kt = sampled_kernel(G_T.tau_s, G_T.lam, dt, n, "zoh")
+    kd = sampled_kernel(G_D.tau_s, G_D.lam, dt, n, "linear")
+    size = fft.next_fast_len(2 * n - 1, real=True)
+    vd = model.equivalent_static_voltage(v, RATE_HZ, method="exact")
+    stages = {
+        "the two sampled kernels (closed forms, Chebyshev interpolant)": lambda: (
+            sampled_kernel(G_T.tau_s, G_T.lam, dt, n, "zoh"),
+            sampled_kernel(G_D.tau_s, G_D.lam, dt, n, "linear"),
+        ),
+        f"one real FFT of length {size} (the method needs six)": lambda: fft.rfft(v, size),
+        "both convolutions (scipy.signal.fftconvolve)": lambda: _two_convolutions(v, kt, kd),
+        "operator (compiled)": lambda: model.operator.apply(vd),
+        "the whole exact prediction": lambda: model.predict(v, RATE_HZ, method="exact"),
+    }
+    out = {}
+    for k, fn in stages.items():
+        fn()
+        out[k] = min(paired(fn, repeats).cpu)
+    return out
+
+
+def _two_convolutions(v: np.ndarray, kt: np.ndarray, kd: np.ndarray) -> np.ndarray:
+    from scipy.signal import fftconvolve
+
+    return fftconvolve(fftconvolve(v, kt)[: v.size], kd)[: v.size]
 
 
 def split_fast(n: int, repeats: int) -> dict[str, float]:
@@ -325,8 +398,9 @@ def split_fast(n: int, repeats: int) -> dict[str, float]:
         f"G_d bank alone ({bd.size} modes, linear)": lambda: run_bank(bd, vt),
         "operator alone (compiled)": lambda: op.apply(vd),
         "operator alone (numpy)": lambda: op.apply(vd, engine="numpy"),
-        "the whole prediction (one pass)": lambda: model.predict(v, RATE_HZ),
-    }
+        f"the whole prediction (fused, compact banks: {compact_sizes(model)})":
+            lambda: model.predict(v, RATE_HZ),
+    }  # fmt: skip
     out = {}
     for k, fn in stages.items():
         fn()
@@ -651,7 +725,8 @@ def bench_stepper(n_samples: int, rates: list[float]) -> list[dict]:
                 stream.process(a)
 
         rows.append({"what": "`ModelStream.process` on 1-sample blocks", "rate": rate,
-                     "modes": stream._bank_t.size + stream._bank_d.size,
+                     "modes": sum(np.count_nonzero(compact_form(b)[1]) + compact_form(b)[3].size
+                                  for b in (stream._bank_t, stream._bank_d)),
                      **per_sample(loop_s)})  # fmt: skip
         print(f"  per-sample costs at {rate:g} Hz measured", flush=True)
     return rows
@@ -692,12 +767,25 @@ def summary(a, rows: list[dict], agree: dict, banks: list[dict], comp: dict,
             f"| fast vs the previous fast path, N = 1e6, same run: median time in yardsticks | "
             f"{f['ratio']:.2f} vs {p['ratio']:.2f} | - | x{p['ratio'] / f['ratio']:.1f} |"
         )
-    key = "fast (one compiled pass) vs the numpy stages (numpy blocks, numpy operator)"
-    if key in agree:
-        a(
-            f"| fast (compiled) vs the same maths in numpy, max difference / full scale | "
-            f"{agree[key]:.1e} | <= 1e-12 | {'met' if agree[key] <= 1e-12 else '**missed**'} |"
-        )
+    for n in (1_000_000, 10_000_000):
+        f, b = by.get(("fast", n)), by.get((BEFORE_FUSED, n))
+        if f and b:
+            a(
+                f"| fast vs the fast path before the fused loop (chunks of 4096, full banks), "
+                f"N = {n:.0e}, same run: CPU median | {fmt_time(f['cpu_median'])} vs "
+                f"{fmt_time(b['cpu_median'])} | - | x{b['cpu_median'] / f['cpu_median']:.2f} |"
+            )
+    for key, label in (
+        ("fast (fused, compact banks) vs the numpy stages (full banks by numpy blocks, numpy "
+         "operator)", "fast (compiled) vs the same maths in numpy"),
+        ("fast (fused, compact banks) vs the fast path before the fused loop",
+         "fast vs the fast path before the fused loop"),
+    ):  # fmt: skip
+        if key in agree:
+            a(
+                f"| {label}, max difference / full scale | {agree[key]:.1e} | <= 1e-12 | "
+                f"{'met' if agree[key] <= 1e-12 else '**missed**'} |"
+            )
     if banks:
         worst = max(max(r["err_zoh"], r["err_linear"]) for r in banks)
         worst_zoh = max(r["err_zoh"] for r in banks)
@@ -791,10 +879,14 @@ def render(info: dict, rows: list[dict], cold: dict, agree: dict, split: dict, s
     a("sampled at 1 kHz (N = 1e7 is 2.8 h of signal). Kernels loaded and banks built first (the")
     a(f"first call at N = 1e4 in this process: {fmt_time(cold['fast'])} CPU; compilation is in")
     a("section 3). *fast* runs the compiled model in one pass (`compiled.model_run`: both banks")
-    a("and the operator in chunks of 4096 samples); the *ModelStream* row feeds the same")
-    a(f"computation in {CHUNK}-sample blocks; the *previous fast path* is what `fast` was before")
-    a("this change, timed in this run: the Gauss-Legendre banks (`benchmarks/previous_quadrature")
-    a(".py`, 242 + 285 modes) run by the numpy block realisation, then the numpy operator.")
+    a("and the operator fused in one loop over blocks of eight samples, no intermediate arrays,")
+    a("on the compact banks of `modal.compact_form`); the *ModelStream* row feeds the same")
+    a(f"computation in {CHUNK}-sample blocks; *fast before the fused loop* is the compiled loop")
+    a("it replaced (`benchmarks/previous_fused.py`: chunks of 4096 samples through the full")
+    a("banks into arrays, then the operator), timed in this run; the *previous fast path* is")
+    a("what `fast` was before the compiled kernels and the new quadrature, timed in this run:")
+    a("the Gauss-Legendre banks (`benchmarks/previous_quadrature.py`, 242 + 285 modes) run by")
+    a("the numpy block realisation, then the numpy operator.")
     a("")
     a("| method | N | repeats | CPU best | CPU median | samples/s (CPU best) | samples/s "
       "(CPU median) | yardstick best / median | yardsticks |")  # fmt: skip
@@ -832,8 +924,22 @@ def render(info: dict, rows: list[dict], cold: dict, agree: dict, split: dict, s
     a("| stage | CPU | samples/s |")
     a("|---|---:|---:|")
     for k, x in split.items():
-        a(f"| {k} | {fmt_time(x)} | {fmt_rate(split_n / x)} |")
+        if k != "exact":
+            a(f"| {k} | {fmt_time(x)} | {fmt_rate(split_n / x)} |")
     a("")
+    ex = split.get("exact")
+    if ex:
+        a(f"The exact method's parts at N = {split_n:.0e}, each timed alone (CPU best of 3, so")
+        a("the shares need not add up to 100 %): the two sampled kernels, the two convolutions")
+        a("(`scipy.signal.fftconvolve`: six real transforms of a length >= 2N - 1, pocketfft)")
+        a("and the operator.")
+        a("")
+        a("| part | CPU | share of the whole |")
+        a("|---|---:|---:|")
+        whole = ex["the whole exact prediction"]
+        for k, x in ex.items():
+            a(f"| {k} | {fmt_time(x)} | {x / whole:.0%} |")
+        a("")
     a(f"The banks' recursion, N = {split_n:.0e}: compiled (one sample at a time over all modes,")
     a("eight samples per sweep) against the numpy block realisation (blocks of 256 samples,")
     a("BLAS matrix products), at the new and the previous bank sizes; CPU best of 3:")
@@ -1033,6 +1139,7 @@ def main(argv: list[str] | None = None) -> int:
     rows, cold = bench_predict(sizes, reps)
     agree = agreement(split_n)
     split = split_fast(split_n, 5)
+    split["exact"] = split_exact(split_n, 3)
     recursion = bench_recursion(split_n, 3)
     print("2. banks", flush=True)
     banks = bench_banks(bank_n, [1000.0, 10000.0])

@@ -10,7 +10,7 @@ that calls it (the reference of the tests, and the fallback without numba):
 - :func:`bank_run`: the relaxor banks of :mod:`labrig.model.modal`, one sample at a time over
   all modes (the recursion itself, in place of the numpy block form);
 - :func:`chebyshev_panels`: the exact method's log-time Chebyshev interpolant of the step
-  response (:mod:`labrig.model.relaxor`), one Clenshaw sum per sample;
+  response (:mod:`labrig.model.relaxor`), Clenshaw sums eight samples at a time;
 - :func:`rate_hysteresis_run`: the rate-dependent Duhem state of the ``rate_hysteresis``
   effect (:mod:`labrig.model.effects.rate_hysteresis`), its exact per-interval recurrence.
 
@@ -312,45 +312,76 @@ def mode_derivative(
 
 
 @njit(cache=True)
-def _panel_x(t: float, u0: float, width: float, npan: int) -> tuple[int, float]:
-    u = math.log10(t)
-    p = min(max(int((u - u0) / width), 0), npan - 1)
-    return p, 2.0 * (u - (u0 + p * width)) / width - 1.0
+def _clenshaw1(coeffs: np.ndarray, p: int, x: float) -> float:
+    """``sum_k coeffs[p, k] T_k(x)`` by Clenshaw's recurrence."""
+    b1 = b2 = 0.0
+    tx = 2.0 * x
+    for k in range(coeffs.shape[1] - 1, 0, -1):
+        b0 = coeffs[p, k] + tx * b1 - b2
+        b2, b1 = b1, b0
+    return coeffs[p, 0] + x * b1 - b2
 
 
 @njit(cache=True)
-def chebyshev_panels(t: np.ndarray, u0: float, width: float, coeffs: np.ndarray) -> np.ndarray:
-    """``sum_k coeffs[p, k] T_k(x)`` at each ``t`` (s): ``u = log10 t`` falls in panel
-    ``p = floor((u - u0) / width)`` (clipped to the panels), ``x`` is ``u`` mapped onto
-    ``[-1, 1]`` within it; Clenshaw's recurrence, four samples at a time (four independent
-    chains keep the multiplier busy; each sum is the same as alone)."""
-    n = t.shape[0]
+def chebyshev_panels(u: np.ndarray, u0: float, width: float, coeffs: np.ndarray) -> np.ndarray:
+    """``sum_k coeffs[p, k] T_k(x)`` at each ``u = log10 t`` (``t`` in s): ``u`` falls in
+    panel ``p = floor((u - u0) / width)`` (clipped to the panels), ``x`` is ``u`` mapped onto
+    ``[-1, 1]`` within it; Clenshaw's recurrence. Eight samples in one panel (sorted times: the
+    kernels') run as eight independent chains sharing each coefficient (they keep the
+    multiplier busy); the others one at a time. Each sum is the same as alone."""
+    n = u.shape[0]
     npan, nk = coeffs.shape
     out = np.empty(n)
+    pan = np.empty(8, dtype=np.int64)
     i = 0
     while i < n:
-        p0, x0 = _panel_x(t[i], u0, width, npan)
-        p1, x1 = _panel_x(t[min(i + 1, n - 1)], u0, width, npan)
-        p2, x2 = _panel_x(t[min(i + 2, n - 1)], u0, width, npan)
-        p3, x3 = _panel_x(t[min(i + 3, n - 1)], u0, width, npan)
+        m = min(8, n - i)
+        same = m == 8
+        for j in range(m):
+            pan[j] = min(max(int((u[i + j] - u0) / width), 0), npan - 1)
+            same = same and pan[j] == pan[0]
+        if not same:
+            for j in range(m):
+                lo = u0 + pan[j] * width
+                out[i + j] = _clenshaw1(coeffs, pan[j], 2.0 * (u[i + j] - lo) / width - 1.0)
+            i += m
+            continue
+        p = pan[0]
+        lo = u0 + p * width
+        x0 = 2.0 * (u[i] - lo) / width - 1.0
+        x1 = 2.0 * (u[i + 1] - lo) / width - 1.0
+        x2 = 2.0 * (u[i + 2] - lo) / width - 1.0
+        x3 = 2.0 * (u[i + 3] - lo) / width - 1.0
+        x4 = 2.0 * (u[i + 4] - lo) / width - 1.0
+        x5 = 2.0 * (u[i + 5] - lo) / width - 1.0
+        x6 = 2.0 * (u[i + 6] - lo) / width - 1.0
+        x7 = 2.0 * (u[i + 7] - lo) / width - 1.0
+        t0, t1, t2, t3 = 2.0 * x0, 2.0 * x1, 2.0 * x2, 2.0 * x3
+        t4, t5, t6, t7 = 2.0 * x4, 2.0 * x5, 2.0 * x6, 2.0 * x7
         a1 = a2 = b1 = b2 = c1 = c2 = d1 = d2 = 0.0
+        e1 = e2 = f1 = f2 = g1 = g2 = h1 = h2 = 0.0
         for k in range(nk - 1, 0, -1):
-            a0 = coeffs[p0, k] + 2.0 * x0 * a1 - a2
-            b0 = coeffs[p1, k] + 2.0 * x1 * b1 - b2
-            c0 = coeffs[p2, k] + 2.0 * x2 * c1 - c2
-            d0 = coeffs[p3, k] + 2.0 * x3 * d1 - d2
-            a2, a1 = a1, a0
-            b2, b1 = b1, b0
-            c2, c1 = c1, c0
-            d2, d1 = d1, d0
-        out[i] = coeffs[p0, 0] + x0 * a1 - a2
-        if i + 1 < n:
-            out[i + 1] = coeffs[p1, 0] + x1 * b1 - b2
-        if i + 2 < n:
-            out[i + 2] = coeffs[p2, 0] + x2 * c1 - c2
-        if i + 3 < n:
-            out[i + 3] = coeffs[p3, 0] + x3 * d1 - d2
-        i += 4
+            c = coeffs[p, k]
+            a0 = c + t0 * a1 - a2
+            b0 = c + t1 * b1 - b2
+            c0 = c + t2 * c1 - c2
+            d0 = c + t3 * d1 - d2
+            e0 = c + t4 * e1 - e2
+            f0 = c + t5 * f1 - f2
+            g0 = c + t6 * g1 - g2
+            h0 = c + t7 * h1 - h2
+            a2, a1, b2, b1, c2, c1, d2, d1 = a1, a0, b1, b0, c1, c0, d1, d0
+            e2, e1, f2, f1, g2, g1, h2, h1 = e1, e0, f1, f0, g1, g0, h1, h0
+        c = coeffs[p, 0]
+        out[i] = c + x0 * a1 - a2
+        out[i + 1] = c + x1 * b1 - b2
+        out[i + 2] = c + x2 * c1 - c2
+        out[i + 3] = c + x3 * d1 - d2
+        out[i + 4] = c + x4 * e1 - e2
+        out[i + 5] = c + x5 * f1 - f2
+        out[i + 6] = c + x6 * g1 - g2
+        out[i + 7] = c + x7 * h1 - h2
+        i += 8
     return out
 
 
@@ -456,6 +487,96 @@ def _sweep8(a, cw, w, us):  # fmt: skip
     return s0, s1, s2, s3, s4, s5, s6, s7
 
 
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _sweep8s(a, cw, w, u0, u1, u2, u3, u4, u5, u6, u7):  # fmt: skip
+    """:func:`_sweep8` with the eight inputs as scalars (they stay in registers)."""
+    s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = 0.0
+    for i in range(a.shape[0]):
+        ai = a[i]
+        ci = cw[i]
+        w0 = ai * w[i] + u0
+        w1 = ai * w0 + u1
+        w2 = ai * w1 + u2
+        w3 = ai * w2 + u3
+        w4 = ai * w3 + u4
+        w5 = ai * w4 + u5
+        w6 = ai * w5 + u6
+        w7 = ai * w6 + u7
+        w[i] = w7
+        s0 += ci * w0
+        s1 += ci * w1
+        s2 += ci * w2
+        s3 += ci * w3
+        s4 += ci * w4
+        s5 += ci * w5
+        s6 += ci * w6
+        s7 += ci * w7
+    return s0, s1, s2, s3, s4, s5, s6, s7
+
+
+@njit(cache=True)
+def _complex8(ca, ccw, wc, u0, u1, u2, u3, u4, u5, u6, u7):  # fmt: skip
+    """The complex modes' outputs for eight inputs (real arithmetic); the states updated."""
+    s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = 0.0
+    for i in range(ca.shape[0]):
+        ar, ai = ca[i].real, ca[i].imag
+        cr, ci = ccw[i].real, ccw[i].imag
+        wr, wi = wc[i].real, wc[i].imag
+        wr, wi = ar * wr - ai * wi + u0, ar * wi + ai * wr
+        s0 += cr * wr - ci * wi
+        wr, wi = ar * wr - ai * wi + u1, ar * wi + ai * wr
+        s1 += cr * wr - ci * wi
+        wr, wi = ar * wr - ai * wi + u2, ar * wi + ai * wr
+        s2 += cr * wr - ci * wi
+        wr, wi = ar * wr - ai * wi + u3, ar * wi + ai * wr
+        s3 += cr * wr - ci * wi
+        wr, wi = ar * wr - ai * wi + u4, ar * wi + ai * wr
+        s4 += cr * wr - ci * wi
+        wr, wi = ar * wr - ai * wi + u5, ar * wi + ai * wr
+        s5 += cr * wr - ci * wi
+        wr, wi = ar * wr - ai * wi + u6, ar * wi + ai * wr
+        s6 += cr * wr - ci * wi
+        wr, wi = ar * wr - ai * wi + u7, ar * wi + ai * wr
+        s7 += cr * wr - ci * wi
+        wc[i] = complex(wr, wi)
+    return s0, s1, s2, s3, s4, s5, s6, s7
+
+
+@njit(cache=True)
+def _bank1(a, cw, feed, ca, ccw, w, wc, up, x):  # fmt: skip
+    """One sample ``x`` (``up`` before it) through a bank; its output."""
+    y = feed * x
+    for i in range(a.shape[0]):
+        w[i] = a[i] * w[i] + up
+        y += cw[i] * w[i]
+    for i in range(ca.shape[0]):
+        z = ca[i] * wc[i] + up
+        wc[i] = z
+        y += (ccw[i] * z).real
+    return y
+
+
+@njit(cache=True)
+def _turn(x, prev, cur, top, sx, sy, wipe, shape, a0, g, vc):  # fmt: skip
+    """The operator's memory update at an input ``x`` that reverses, first moves or closes a
+    loop (see :func:`_pass`); returns ``(cur, top, xa, ya, thr)``. ``sx``, ``sy`` have room
+    for one more turning point."""
+    xa, ya = sx[top - 1], sy[top - 1]
+    if (x - prev) * cur < 0.0:  # prev is a turning point
+        t = top if wipe else 0
+        sy[t] = ya + _odd(prev - xa, shape, a0, g, vc)
+        sx[t] = prev
+        top = t + 1
+        cur = -cur
+    elif cur == 0.0 and x != prev:  # first move
+        cur = 1.0 if x > prev else -1.0
+    if wipe and cur != 0.0:  # close the minor loops the input reaches
+        while top >= wipe and cur * x >= cur * sx[top - 2]:
+            top -= 2 if top >= 3 else 1
+    thr = cur * sx[top - 2] if wipe and top >= wipe and cur != 0.0 else _INF
+    return cur, top, sx[top - 1], sy[top - 1], thr
+
+
 @njit(cache=True)
 def model_run(
     v: np.ndarray,
@@ -472,57 +593,79 @@ def model_run(
     a0: float,
     g: float,
     vc: float,
+    out: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
-    """The fast dynamic model over ``v`` (V): ``G_t``'s bank, ``G_d``'s bank, the operator, in
-    chunks of 4096 samples that stay in cache (the same arithmetic as running them one after
-    the other over the whole record).
+    """The fast dynamic model over ``v`` (V): ``G_t``'s bank, ``G_d``'s bank, the operator, fused
+    in one loop over blocks of eight samples (no intermediate arrays: each block's ``V_t`` and
+    ``V*`` stay in registers; the same arithmetic as running the stages one after the other).
 
     ``bt``, ``bd``: each bank as ``(a, cw, feed, ca, ccw, w, wc)`` (single output row, states
     ``w``, ``wc`` updated in place); ``ups`` = ``[v_prev, vt_prev]`` (updated); the relaxors
     act on ``v - rest`` and ``rest`` is added back before the operator; the operator's memory
-    as in :func:`operator_pass`. Returns the strain and the operator's new memory (stack,
-    direction, last input).
+    as in :func:`operator_pass`. The strain is written to ``out`` (as long as ``v``; allocated
+    by the caller: numpy asks the kernel for huge pages, so a long record's first touch costs
+    half of what numba's own allocation does). Returns ``out`` and the operator's new memory
+    (stack, direction, last input).
     """
     n = v.shape[0]
-    chunk = 4096
-    ub = np.empty(chunk)
-    vt = np.empty(chunk)
-    vd = np.empty(chunk)
-    out = np.empty(n)
     m = stack_x.shape[0]
     cap = max(64, 2 * m)
     sx, sy = np.empty(cap), np.empty(cap)
     _copy_rows(stack_x, sx, m)
     _copy_rows(stack_y, sy, m)
-    sp, su, sd = np.zeros((cap, 3)), np.zeros((cap, 0)), np.zeros((cap, 0))
-    none2 = np.empty((0, 0))
-    dp = np.empty((0, 3))
-    tmp = np.empty(3)
+    at, cwt, ft, cat, ccwt, wt, wct = bt
+    ad, cwd, fd, cad, ccwd, wd, wcd = bd
+    vd = np.empty(8)
+    up_t, up_d = ups[0], ups[1]
     prev, cur, top = u_last, direction, m
-    for c0 in range(0, n, chunk):
-        nc = min(chunk, n - c0)
-        for i in range(nc):
-            ub[i] = v[c0 + i] - rest
-        _bank_block(bt[0], bt[1], bt[2], bt[3], bt[4], bt[5], bt[6], ub, nc, ups[0], vt)
-        _bank_block(bd[0], bd[1], bd[2], bd[3], bd[4], bd[5], bd[6], vt, nc, ups[1], vd)
-        ups[0] = ub[nc - 1]
-        ups[1] = vt[nc - 1]
-        for i in range(nc):
-            vd[i] += rest
-        o = out[c0 : c0 + nc]
-        x = vd[:nc]
-        k = 0
-        while True:
-            k, prev, cur, top = _pass(x, k, prev, cur, sx, sy, sp, su, sd, top, wipe, shape,
-                                      a0, g, vc, False, none2, o, dp, none2, tmp)  # fmt: skip
-            if k >= nc:
-                break
+    xa, ya = sx[top - 1], sy[top - 1]
+    thr = cur * sx[top - 2] if wipe and top >= wipe and cur != 0.0 else _INF
+    k = 0
+    while k < n:
+        nb = min(8, n - k)
+        if top + 8 >= sx.shape[0]:  # room for a turning point per sample of the block
             c2 = 2 * sx.shape[0]
             nx, ny = np.empty(c2), np.empty(c2)
             _copy_rows(sx, nx, top)
             _copy_rows(sy, ny, top)
             sx, sy = nx, ny
-            sp, su, sd = np.zeros((c2, 3)), np.zeros((c2, 0)), np.zeros((c2, 0))
+        if nb == 8:
+            u0, u1, u2, u3 = v[k] - rest, v[k + 1] - rest, v[k + 2] - rest, v[k + 3] - rest
+            u4, u5, u6, u7 = v[k + 4] - rest, v[k + 5] - rest, v[k + 6] - rest, v[k + 7] - rest
+            s0, s1, s2, s3, s4, s5, s6, s7 = _sweep8s(at, cwt, wt, up_t, u0, u1, u2, u3, u4,
+                                                      u5, u6)  # fmt: skip
+            if cat.shape[0]:
+                c0, c1, c2, c3, c4, c5, c6, c7 = _complex8(cat, ccwt, wct, up_t, u0, u1, u2,
+                                                           u3, u4, u5, u6)  # fmt: skip
+                s0, s1, s2, s3, s4, s5, s6, s7 = (s0 + c0, s1 + c1, s2 + c2, s3 + c3, s4 + c4,
+                                                  s5 + c5, s6 + c6, s7 + c7)  # fmt: skip
+            t0, t1, t2, t3 = s0 + ft * u0, s1 + ft * u1, s2 + ft * u2, s3 + ft * u3
+            t4, t5, t6, t7 = s4 + ft * u4, s5 + ft * u5, s6 + ft * u6, s7 + ft * u7
+            s0, s1, s2, s3, s4, s5, s6, s7 = _sweep8s(ad, cwd, wd, up_d, t0, t1, t2, t3, t4,
+                                                      t5, t6)  # fmt: skip
+            if cad.shape[0]:
+                c0, c1, c2, c3, c4, c5, c6, c7 = _complex8(cad, ccwd, wcd, up_d, t0, t1, t2,
+                                                           t3, t4, t5, t6)  # fmt: skip
+                s0, s1, s2, s3, s4, s5, s6, s7 = (s0 + c0, s1 + c1, s2 + c2, s3 + c3, s4 + c4,
+                                                  s5 + c5, s6 + c6, s7 + c7)  # fmt: skip
+            vd[0], vd[1], vd[2], vd[3] = s0 + fd * t0, s1 + fd * t1, s2 + fd * t2, s3 + fd * t3
+            vd[4], vd[5], vd[6], vd[7] = s4 + fd * t4, s5 + fd * t5, s6 + fd * t6, s7 + fd * t7
+            up_t, up_d = u7, t7
+        else:
+            for t in range(nb):
+                x = v[k + t] - rest
+                xt = _bank1(at, cwt, ft, cat, ccwt, wt, wct, up_t, x)
+                vd[t] = _bank1(ad, cwd, fd, cad, ccwd, wd, wcd, up_d, xt)
+                up_t, up_d = x, xt
+        for t in range(nb):
+            x = vd[t] + rest
+            if (x - prev) * cur < 0.0 or (cur == 0.0 and x != prev) or cur * x >= thr:
+                cur, top, xa, ya, thr = _turn(x, prev, cur, top, sx, sy, wipe, shape, a0, g,
+                                              vc)  # fmt: skip
+            out[k + t] = ya + _odd(x - xa, shape, a0, g, vc)
+            prev = x
+        k += nb
+    ups[0], ups[1] = up_t, up_d
     rx, ry = np.empty(top), np.empty(top)
     _copy_rows(sx, rx, top)
     _copy_rows(sy, ry, top)

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from labrig.model.hysteresis import HysteresisState, QuasiStaticHysteresis
-from labrig.model.modal import DiscreteBank, run_bank, scaled_form
+from labrig.model.modal import DiscreteBank, compact_form, run_bank
 from labrig.model.params import ModelParams
 from labrig.model.relaxor import Relaxor
 
@@ -135,7 +135,7 @@ class DynamicHysteresisModel:
         out = kern.model_run(
             v, float(rest_V), _fresh(bt), _fresh(bd), np.zeros(2), np.zeros(1), np.zeros(1),
             held.u_last, held.direction, op._wipe, op._code, float(op.alpha0), float(op.gamma),
-            float(op.vc),
+            float(op.vc), np.empty(v.size),
         )[0]  # fmt: skip
         return out
 
@@ -158,8 +158,12 @@ class DynamicHysteresisModel:
 
 
 def _fresh(bank: DiscreteBank) -> tuple:
-    """A bank in the compiled kernels' form with zero (rest) states."""
-    a, cw, feed, ca, ccw = scaled_form(bank)
+    """A bank in the compiled kernels' compact form (:func:`~labrig.model.modal.compact_form`)
+    with zero (rest) states."""
+    key = ("compact", None)
+    if key not in bank._cache:
+        bank._cache[key] = compact_form(bank)
+    a, cw, feed, ca, ccw = bank._cache[key]
     return a, cw, feed, ca, ccw, np.zeros(a.size), np.zeros(ca.size, dtype=np.complex128)
 
 
@@ -237,7 +241,7 @@ class ModelStream:
         ys = np.array([p[1] for p in st.older] + [st.s_s], dtype=np.float64)
         out, xs, ys, d, last = self._kern.model_run(
             v, 0.0, self._bt, self._bd, self._ups, xs, ys, float(st.u_last), float(st.direction),
-            op._wipe, op._code, float(op.alpha0), float(op.gamma), float(op.vc),
+            op._wipe, op._code, float(op.alpha0), float(op.gamma), float(op.vc), np.empty(v.size),
         )  # fmt: skip
         pts = list(zip(xs.tolist(), ys.tolist(), strict=True))
         st.older, (st.u_s, st.s_s), st.direction = pts[:-1], pts[-1], float(d)

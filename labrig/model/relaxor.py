@@ -488,9 +488,9 @@ class _LogChebyshevStep:
         t = np.ascontiguousarray(t, dtype=np.float64)
         coeffs = np.ascontiguousarray(self.coeffs)
         kern = kernels()
-        if kern is not None:
-            return kern.chebyshev_panels(t, self.u0, self.width, coeffs)
         u = np.log10(t)
+        if kern is not None:
+            return kern.chebyshev_panels(u, self.u0, self.width, coeffs)
         pan = np.clip(((u - self.u0) / self.width).astype(int), 0, len(self.coeffs) - 1)
         x = 2.0 * (u - (self.u0 + pan * self.width)) / self.width - 1.0
         out = np.empty_like(t)
