@@ -104,7 +104,7 @@ def is_harmonic(
 
 def _local_snr(amp: NDArray, i: int) -> float:
     lo, hi = max(i - LOCAL_BINS, 1), min(i + LOCAL_BINS + 1, amp.size)
-    near = np.r_[amp[lo : max(i - 3, lo)], amp[min(i + 4, hi) : hi]]
+    near = np.concatenate((amp[lo : max(i - 3, lo)], amp[min(i + 4, hi) : hi]))
     if near.size < 5:
         return 0.0
     return float(amp[i] / (np.median(near) + 1e-300))
