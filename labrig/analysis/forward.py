@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -178,6 +179,13 @@ def _direct(_key: Hashable, make: Callable[[], Any]) -> Any:
     return make()
 
 
+def _about_rest(
+    tau: float, lam: float, rate_hz: float, hold: str, dx: NDArray, drest: float
+) -> NDArray:
+    """A column ``dx`` through a relaxor (linear), its rest ``drest`` held before the sequence."""
+    return drest + relaxor_output(tau, lam, rate_hz, hold, dx - drest)
+
+
 def relaxed_input(
     seq: SimSequence,
     base: Mapping[str, float],
@@ -243,9 +251,7 @@ def relaxed_input(
     for j, (dvin, drest) in dv.items():
         dx[j] = run(
             ("gt_col", vkey, gt, coords[j]),
-            lambda dvin=dvin, drest=drest: (
-                drest + relaxor_output(tau_t, lam_t, rate, hold, dvin - drest)
-            ),
+            partial(_about_rest, tau_t, lam_t, rate, hold, dvin, drest),
         )
 
     # 3. G_d (linear hold: its input is G_t's smooth output), the columns so far through it
@@ -257,9 +263,7 @@ def relaxed_input(
             drest = dv[j][1] if j in dv else 0.0
             dx[j] = run(
                 ("gd_col", xkey, gd, coords[j]),
-                lambda x=dx[j], drest=drest: (
-                    drest + relaxor_output(tau_d, lam_d, rate, "linear", x - drest)
-                ),
+                partial(_about_rest, tau_d, lam_d, rate, "linear", dx[j], drest),
             )
         if want_d:
             xd, d_logtau, d_lam = run(
