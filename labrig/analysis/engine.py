@@ -34,6 +34,7 @@ from labrig.analysis.simulate import (
     LOG_PARAMS,
     LOOSE,
     PARAM_NAMES,
+    LRUCache,
     OperatorFamily,
     Scored,
     Segment,
@@ -67,6 +68,9 @@ RELAXOR_NAMES = ("lam_t", "tau_t_s", "lam_d", "tau_d_s")
 
 #: evaluations kept per problem family (each a full-length strain and Jacobian per sequence)
 CACHE_SIZE = 6
+#: relaxor passes kept per problem family (:func:`~labrig.analysis.forward.relaxed_input`'s
+#: ``memo``: each one to three sequence-length arrays)
+PASS_CACHE_SIZE = 32
 
 
 @dataclass(frozen=True)
@@ -324,6 +328,9 @@ class SharedSimulations:
     cache: OrderedDict = field(default_factory=OrderedDict)  # whole simulations
     relaxed: OrderedDict = field(default_factory=OrderedDict)  # V* and its derivatives
     evaluations: int = 0  # forward passes computed (cache misses)
+    #: the relaxor passes behind ``relaxed`` (each relaxor's output or sensitivities, each
+    #: column's tangent), reused across evaluations that share them
+    passes: LRUCache = field(default_factory=lambda: LRUCache(PASS_CACHE_SIZE))
 
 
 class Problem:
@@ -446,7 +453,9 @@ class Problem:
                 rkey = (id(seq), fam, vkey, moving)
                 relaxed = self._shared.relaxed.get(rkey)
                 if relaxed is None:
-                    relaxed = relaxed_input(seq, base, eff, vol, coords, self.with_gd)
+                    relaxed = relaxed_input(
+                        seq, base, eff, vol, coords, self.with_gd, self._shared.passes
+                    )
                     self._shared.relaxed[rkey] = relaxed
                     while len(self._shared.relaxed) > CACHE_SIZE * max(1, len(self.sequences)):
                         self._shared.relaxed.popitem(last=False)

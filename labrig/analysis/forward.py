@@ -24,13 +24,16 @@ difference of that effect alone. Every column is then passed through the output 
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from labrig.analysis.simulate import (
+    LRUCache,
     OperatorFamily,
     SimSequence,
     pad_to_block,
@@ -164,6 +167,25 @@ class Relaxed:
     dx: dict[tuple[str, str], NDArray[np.float64]]
 
 
+def _effects_key(effects: Sequence[Effect], eff: Mapping[str, Mapping[str, float]]) -> tuple:
+    """The effects ``effects`` and their parameter values, as a hashable key."""
+    return tuple(
+        (e.name, tuple(sorted((k, float(v)) for k, v in eff.get(e.name, {}).items())))
+        for e in effects
+    )
+
+
+def _direct(_key: Hashable, make: Callable[[], Any]) -> Any:
+    return make()
+
+
+def _about_rest(
+    tau: float, lam: float, rate_hz: float, hold: str, dx: NDArray, drest: float
+) -> NDArray:
+    """A column ``dx`` through a relaxor (linear), its rest ``drest`` held before the sequence."""
+    return drest + relaxor_output(tau, lam, rate_hz, hold, dx - drest)
+
+
 def relaxed_input(
     seq: SimSequence,
     base: Mapping[str, float],
@@ -171,19 +193,31 @@ def relaxed_input(
     vol: Sequence[Effect],
     coords: Sequence,
     with_gd: bool = True,
+    memo: LRUCache | None = None,
 ) -> Relaxed:
     """Steps 1-3 of the chain (module docstring): the voltage effects and the two relaxors, and
     the derivatives of ``V*`` with respect to the coordinates among ``coords`` that move it
-    (the relaxors' parameters, the voltage effects' parameters)."""
+    (the relaxors' parameters, the voltage effects' parameters).
+
+    ``memo``: a cache of the passes over the sequence (each relaxor's output or sensitivities,
+    each column's difference or tangent), keyed by what each pass depends on (the sequence,
+    the voltage effects' values, the relaxors' parameters up to that pass, the column's
+    coordinate): a pass already made for another evaluation (the same relaxors with other
+    operator or effect parameters, the residual before its Jacobian, another start or fold) is
+    taken from it instead of being run again, the very same numbers."""
     ctx = seq.context
     n = seq.n
     vol_names = {e.name for e in vol}
     relax = {name: key for key, names in RELAXOR_PARAMS.items() for name in names}
+    run = memo.get if memo is not None else _direct
+    vkey = (id(seq), _effects_key(vol, eff))
 
     # 1. the voltage, and each voltage-effect coordinate's change of it
-    v = _voltage(seq.voltage_V, vol, ctx, eff)
-    rest = _rest(seq, v, bool(vol))
-    vin = pad_to_block(v) if vol else seq.padded
+    def voltage() -> tuple[float, NDArray]:
+        v = _voltage(seq.voltage_V, vol, ctx, eff)
+        return _rest(seq, v, bool(vol)), (pad_to_block(v) if vol else seq.padded)
+
+    rest, vin = run(("voltage", vkey), voltage)
     dv: dict[int, tuple[NDArray, float]] = {}  # j -> (dV'/dz_j padded, d rest / dz_j)
     for j, c in enumerate(coords):
         if c.who in vol_names:
@@ -192,37 +226,56 @@ def relaxed_input(
                 vp = _voltage(seq.voltage_V, vol, ctx, _shifted(eff, c.who, c.name, x))
                 return np.append(pad_to_block(vp), _rest(seq, vp, True))
 
-            d = _difference(c, c.coordinate(eff[c.who][c.name]), shifted)
-            dv[j] = (d[:-1], float(d[-1]))
+            def column(c=c, shifted=shifted) -> tuple[NDArray, float]:
+                d = _difference(c, c.coordinate(eff[c.who][c.name]), shifted)
+                return d[:-1], float(d[-1])
+
+            dv[j] = run(("dv", vkey, c), column)
 
     # 2. G_t, its sensitivities, and the voltage columns through it (linear)
     lam_t, tau_t = base["lam_t"], base["tau_t_s"]
+    gt = (float(tau_t), float(lam_t))
     want_t = [j for j, c in enumerate(coords) if c.who == "base" and relax.get(c.name) == "t"]
     dx: dict[int, NDArray] = {}
+    rate, hold = seq.rate_hz, seq.hold
     if want_t:
-        xt, d_logtau, d_lam = relaxor_sensitivities(tau_t, lam_t, seq.rate_hz, seq.hold, vin, rest)
+        xkey: tuple = ("gt_sens", vkey, gt)
+        xt, d_logtau, d_lam = run(
+            xkey, lambda: relaxor_sensitivities(tau_t, lam_t, rate, hold, vin, rest)
+        )
         for j in want_t:
             dx[j] = d_lam if coords[j].name == "lam_t" else d_logtau
     else:
-        xt = relaxor_output(tau_t, lam_t, seq.rate_hz, seq.hold, vin, rest)
+        xkey = ("gt", vkey, gt)
+        xt = run(xkey, lambda: relaxor_output(tau_t, lam_t, rate, hold, vin, rest))
     for j, (dvin, drest) in dv.items():
-        dx[j] = drest + relaxor_output(tau_t, lam_t, seq.rate_hz, seq.hold, dvin - drest)
+        dx[j] = run(
+            ("gt_col", vkey, gt, coords[j]),
+            partial(_about_rest, tau_t, lam_t, rate, hold, dvin, drest),
+        )
 
     # 3. G_d (linear hold: its input is G_t's smooth output), the columns so far through it
     if with_gd:
         lam_d, tau_d = base["lam_d"], base["tau_d_s"]
+        gd = (float(tau_d), float(lam_d))
         want_d = [j for j, c in enumerate(coords) if c.who == "base" and relax.get(c.name) == "d"]
         for j in list(dx):
             drest = dv[j][1] if j in dv else 0.0
-            dx[j] = drest + relaxor_output(tau_d, lam_d, seq.rate_hz, "linear", dx[j] - drest)
+            dx[j] = run(
+                ("gd_col", xkey, gd, coords[j]),
+                partial(_about_rest, tau_d, lam_d, rate, "linear", dx[j], drest),
+            )
         if want_d:
-            xd, d_logtau, d_lam = relaxor_sensitivities(
-                tau_d, lam_d, seq.rate_hz, "linear", xt, rest
+            xd, d_logtau, d_lam = run(
+                ("gd_sens", xkey, gd),
+                lambda: relaxor_sensitivities(tau_d, lam_d, rate, "linear", xt, rest),
             )
             for j in want_d:
                 dx[j] = d_lam if coords[j].name == "lam_d" else d_logtau
         else:
-            xd = relaxor_output(tau_d, lam_d, seq.rate_hz, "linear", xt, rest)
+            xd = run(
+                ("gd", xkey, gd), lambda: relaxor_output(tau_d, lam_d, rate, "linear", xt, rest)
+            )
     else:
         xd = xt
     return Relaxed(xd[:n], rest, {(coords[j].who, coords[j].name): dx[j][:n] for j in sorted(dx)})

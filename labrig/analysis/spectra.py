@@ -104,10 +104,25 @@ def is_harmonic(
 
 def _local_snr(amp: NDArray, i: int) -> float:
     lo, hi = max(i - LOCAL_BINS, 1), min(i + LOCAL_BINS + 1, amp.size)
-    near = np.r_[amp[lo : max(i - 3, lo)], amp[min(i + 4, hi) : hi]]
+    near = np.concatenate((amp[lo : max(i - 3, lo)], amp[min(i + 4, hi) : hi]))
     if near.size < 5:
         return 0.0
     return float(amp[i] / (np.median(near) + 1e-300))
+
+
+#: a bin's neighbourhood in :func:`_local_snr` when it is whole: offsets from the bin
+_NEAR = np.r_[np.arange(-LOCAL_BINS, -3), np.arange(4, LOCAL_BINS + 1)]
+
+
+def _interior_snr(amp: NDArray, bins: NDArray) -> dict[int, float]:
+    """:func:`_local_snr` of the bins whose neighbourhood is whole (the same numbers: each
+    row's median is its own), all medians in one call."""
+    i = bins[(bins - LOCAL_BINS >= 1) & (bins + LOCAL_BINS + 1 <= amp.size)]
+    if i.size == 0:
+        return {}
+    near = amp[i[:, None] + _NEAR[None, :]]
+    snr = amp[i] / (np.median(near, axis=1) + 1e-300)
+    return dict(zip(i.tolist(), snr.tolist(), strict=True))
 
 
 def spectral_lines(
@@ -127,11 +142,15 @@ def spectral_lines(
     freqs, amp = amplitude_spectrum(x, rate_hz)
     bin_hz = rate_hz / x.size
     out: list[dict[str, float]] = []
-    for i in np.argsort(amp)[::-1][:200]:
+    top = np.argsort(amp)[::-1][:200]
+    snr_of = _interior_snr(amp, top)
+    for i in top:
         f = float(freqs[i])
         if f < min_hz or i < 1 or amp[i] < amp[max(i - 2, 0) : i + 3].max():
             continue
-        s = _local_snr(amp, int(i))
+        s = snr_of.get(int(i))
+        if s is None:
+            s = _local_snr(amp, int(i))
         if s < snr or is_harmonic(f, f0_hz, bin_hz, f0_uncertainty_hz):
             continue
         if any(abs(f - o["frequency_hz"]) < 3 * bin_hz for o in out):

@@ -203,3 +203,53 @@ def test_a_narrow_loop_keeps_its_width() -> None:
     assert q == pytest.approx(1e-3)
     # the Rayleigh limit: opening = gamma / vc * A^2 with A half the stroke
     assert w == pytest.approx(gamma / vc * 50.0**2, rel=1e-3)
+
+
+def test_relaxor_passes_are_reused_only_where_they_are_the_same() -> None:
+    """The relaxor passes kept across evaluations (:func:`relaxed_input`'s ``memo``): a problem
+    that reused passes from earlier evaluations (other starts, effect values, a residual
+    before its Jacobian) gives bit for bit the residual and Jacobian of a problem that
+    computed everything afresh, and runs fewer relaxor passes doing so; a pass is not reused
+    for other relaxor parameters or another voltage."""
+    import labrig.analysis.forward as fwd
+
+    recs = _records()
+    lib = library()
+    effects = [lib["quadratic_term"], lib["offset_drift"]]
+    shared = ExtendedProblem(recs, effects, chain=True, offset=True)
+    eff = {"quadratic_term": {"c2": 0.02}}
+    z = shared.z_of(START, eff)
+    calls = {"n": 0}
+    real_output = fwd.relaxor_output
+
+    def counted(*a, **k):
+        calls["n"] += 1
+        return real_output(*a, **k)
+
+    fwd.relaxor_output = counted
+    try:
+        # earlier evaluations: the same relaxors with other operator gains, other relaxors,
+        # another voltage
+        shared.residual(shared.z_of({**START, "alpha0_ue_per_V": 8.5}, eff), START)
+        shared.residual(shared.z_of({**START, "tau_t_s": 4e-4}, eff), START)
+        shared.jacobian(shared.z_of(START, {**eff, "quadratic_term": {"c2": 0.03}}), START)
+        before = calls["n"]
+        r1, J1 = shared.residual(z, START), shared.jacobian(z, START)
+        reused = calls["n"] - before
+        fresh = ExtendedProblem(recs, effects, chain=True, offset=True)
+        before = calls["n"]
+        r2, J2 = fresh.residual(z, START), fresh.jacobian(z, START)
+        afresh = calls["n"] - before
+    finally:
+        fwd.relaxor_output = real_output
+    np.testing.assert_array_equal(r1, r2)
+    np.testing.assert_array_equal(J1, J2)
+    assert reused < afresh
+    # other relaxor parameters or another voltage: other numbers, not a stale pass
+    r3 = shared.residual(shared.z_of({**START, "tau_t_s": 4e-4}, eff), START)
+    r4 = shared.residual(shared.z_of(START, {**eff, "quadratic_term": {"c2": 0.03}}), START)
+    assert not np.array_equal(r3, r1) and not np.array_equal(r4, r1)
+    fresh3 = ExtendedProblem(recs, effects, chain=True, offset=True)
+    np.testing.assert_array_equal(
+        r3, fresh3.residual(fresh3.z_of({**START, "tau_t_s": 4e-4}, eff), START)
+    )

@@ -169,10 +169,40 @@ def diagnose(
       ``viscoelastic_creep`` is otherwise left out without a long, slow entry.
     - ``workers``: processes for the held-out folds and the candidates of a round
       (:func:`~labrig.analysis.parallel.map_tasks`); the result does not depend on it.
+
+    The whole procedure runs with one BLAS thread (:func:`~labrig.core.blas.single_thread_blas`,
+    as the fits always did): its products are small or memory-bound, and on a shared machine
+    OpenBLAS's waiting threads cost far more CPU than they save (a correlation of two
+    87 500-sample residuals: 1.2 ms of CPU on one thread, 18 ms on two at load 10).
     """
     t0 = time.perf_counter()
     if len(records) < 3:
         raise ValueError("diagnose needs at least 3 entries (leave-one-entry-out)")
+    with single_thread_blas():
+        d = _procedure(
+            records, params, chain, offset, warmup_s, effects, max_effects, top_k, min_gain,
+            mains_hz, always, progress, workers,
+        )  # fmt: skip
+    d.elapsed_s = time.perf_counter() - t0
+    return d
+
+
+def _procedure(
+    records: list[Record],
+    params: ModelParams | None,
+    chain: bool | None,
+    offset: bool,
+    warmup_s: float,
+    effects: Sequence[str] | None,
+    max_effects: int,
+    top_k: int,
+    min_gain: float,
+    mains_hz: float | None,
+    always: Sequence[str],
+    progress: Progress | None,
+    workers: int,
+) -> Diagnosis:
+    """The steps of :func:`diagnose` (its arguments, in order)."""
     settings = Settings(
         chain=_default_chain(records) if chain is None else chain,
         offset=offset,
@@ -203,9 +233,7 @@ def diagnose(
         current = nxt
         added.append(best)
     d = result(setup, settings, before, current, rounds, added, messages)
-    d = sparse_ode_step(d, setup, settings, before, current, len(rounds), say)
-    d.elapsed_s = time.perf_counter() - t0
-    return d
+    return sparse_ode_step(d, setup, settings, before, current, len(rounds), say)
 
 
 # -- 1. the base model -----------------------------------------------------------------------

@@ -83,14 +83,41 @@ class Creep(Effect):
         return ctx.cached(("creep_spectra", t0_s), make)
 
     def _convolve(self, ds: NDArray, spectrum: NDArray, nf: int) -> NDArray:
-        """``ds * kernel`` (causal, the first ``N`` samples), column-wise for a 2-D ``ds``."""
-        out = sp_fft.irfft(sp_fft.rfft(ds, nf, axis=0) * _col(spectrum, ds), nf, axis=0)
-        return out[: ds.shape[0]]
+        """``ds * kernel`` (causal, the first ``N`` samples), column-wise for a 2-D ``ds``: the
+        columns are transformed as the rows of a transposed copy (the same numbers as along
+        axis 0, a quarter less CPU)."""
+        if ds.ndim == 1:
+            return sp_fft.irfft(sp_fft.rfft(ds, nf) * spectrum, nf)[: ds.size]
+        rows = np.ascontiguousarray(ds.T)
+        spec = spectrum.T if spectrum.ndim == 2 else spectrum
+        out = sp_fft.irfft(sp_fft.rfft(rows, nf, axis=1) * spec, nf, axis=1)
+        return out[:, : ds.shape[0]].T
+
+    def _steps(self, x: NDArray, ctx: Context, t0_s: float) -> tuple[NDArray, NDArray]:
+        """For a strain ``x`` (1-D): the spectrum of its steps ``dS`` and ``dS * kernel``. The
+        last strain's are kept on the context (one entry, compared sample by sample), so the
+        Jacobian pass that applies the effect to a strain and then differentiates it with
+        respect to ``c`` and ``t0`` transforms that strain once."""
+        nf, K, _ = self._spectra(ctx, t0_s)
+        last = ctx.cache.get(_LAST)
+        if (
+            last is not None
+            and last[0] == (t0_s, nf)
+            and last[1].shape == x.shape
+            and np.array_equal(last[1], x)
+        ):
+            return last[2], last[3]
+        spec = sp_fft.rfft(np.diff(x, prepend=0.0), nf)
+        conv = sp_fft.irfft(spec * K, nf)[: x.size]
+        ctx.cache[_LAST] = ((t0_s, nf), x.copy(), spec, conv)
+        return spec, conv
 
     def apply(self, x, ctx, p):
         c = p["c_per_decade"]
         if c == 0.0:
             return x
+        if np.ndim(x) == 1:
+            return x + c * self._steps(np.asarray(x, dtype=float), ctx, p["t0_s"])[1]
         nf, K, _ = self._spectra(ctx, p["t0_s"])
         return x + c * self._convolve(np.diff(x, axis=0, prepend=0.0), K, nf)
 
@@ -98,10 +125,10 @@ class Creep(Effect):
         return self.apply(dX, ctx, p)
 
     def parameter_derivatives(self, x, ctx, p):
-        nf, K, dK = self._spectra(ctx, p["t0_s"])
-        ds = np.diff(x, prepend=0.0)
-        both = self._convolve(np.column_stack([ds, ds]), np.column_stack([K, dK]), nf)
-        return {"c_per_decade": both[:, 0], "t0_s": p["c_per_decade"] * both[:, 1]}
+        nf, _, dK = self._spectra(ctx, p["t0_s"])
+        spec, conv = self._steps(np.asarray(x, dtype=float), ctx, p["t0_s"])
+        d_t0 = sp_fft.irfft(spec * dK, nf)[: conv.size]
+        return {"c_per_decade": conv, "t0_s": p["c_per_decade"] * d_t0}
 
     def describe(self, p, sd):
         s, s0 = sd.get("c_per_decade"), sd.get("t0_s")
@@ -112,7 +139,5 @@ class Creep(Effect):
         )
 
 
-def _col(spectrum: NDArray, like: NDArray) -> NDArray:
-    """``spectrum`` shaped to multiply the FFT of ``like`` (column-wise when ``like`` is 2-D and
-    the spectrum one vector)."""
-    return spectrum[:, None] if like.ndim == 2 and spectrum.ndim == 1 else spectrum
+#: the context's cache key of the last strain's step spectrum (:meth:`Creep._steps`)
+_LAST = ("creep_last_steps",)
