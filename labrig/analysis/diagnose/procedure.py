@@ -178,31 +178,6 @@ def diagnose(
     t0 = time.perf_counter()
     if len(records) < 3:
         raise ValueError("diagnose needs at least 3 entries (leave-one-entry-out)")
-    with single_thread_blas():
-        d = _procedure(
-            records, params, chain, offset, warmup_s, effects, max_effects, top_k, min_gain,
-            mains_hz, always, progress, workers,
-        )  # fmt: skip
-    d.elapsed_s = time.perf_counter() - t0
-    return d
-
-
-def _procedure(
-    records: list[Record],
-    params: ModelParams | None,
-    chain: bool | None,
-    offset: bool,
-    warmup_s: float,
-    effects: Sequence[str] | None,
-    max_effects: int,
-    top_k: int,
-    min_gain: float,
-    mains_hz: float | None,
-    always: Sequence[str],
-    progress: Progress | None,
-    workers: int,
-) -> Diagnosis:
-    """The steps of :func:`diagnose` (its arguments, in order)."""
     settings = Settings(
         chain=_default_chain(records) if chain is None else chain,
         offset=offset,
@@ -215,6 +190,22 @@ def _procedure(
         workers=max(1, int(workers)),
     )
     say = progress or (lambda _msg: None)
+    with single_thread_blas():
+        d = _procedure(records, settings, effects, max_effects, mains_hz, always, say)
+    d.elapsed_s = time.perf_counter() - t0
+    return d
+
+
+def _procedure(
+    records: list[Record],
+    settings: Settings,
+    effects: Sequence[str] | None,
+    max_effects: int,
+    mains_hz: float | None,
+    always: Sequence[str],
+    say: Progress,
+) -> Diagnosis:
+    """The steps of :func:`diagnose` (its arguments)."""
     messages: list[str] = []
     setup, before = fit_base(records, settings, effects, mains_hz, always, say, messages)
     current, rounds, added = before, [], []
