@@ -128,10 +128,9 @@ def test_ctrl_c_stops_a_command_reading_a_looping_file(hanging: list[Path]):
             child = _children(proc.pid)
         assert child, "the reading child never started"
         time.sleep(0.2)
-        t0 = time.monotonic()
         proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=5)
-        assert time.monotonic() - t0 < 2.0
+        _, err = proc.communicate(timeout=5)  # bounded; no wall-clock assert a load breaks
+        # 130 is the Ctrl-C: the read's own CPU limit would have ended it with exit 2
         assert proc.returncode == 130, err.decode()
         assert b"Traceback" not in err
         time.sleep(0.1)
