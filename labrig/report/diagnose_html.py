@@ -20,7 +20,7 @@ from labrig.analysis.records import Record
 from labrig.report.plots import png
 from labrig.report.templating import render
 
-__all__ = ["diagnosis_context", "render_diagnosis", "residual_figure"]
+__all__ = ["diagnosis_context", "grid_margins", "render_diagnosis", "residual_figure"]
 
 
 def residual_figure(d: Diagnosis, records: list[Record]) -> Figure:
@@ -29,10 +29,14 @@ def residual_figure(d: Diagnosis, records: list[Record]) -> Figure:
     recs = [r for r in records if r.name in d.predictions_before]
     n = len(recs)
     cols = 2
-    rows = -(-n // cols)
-    fig = Figure(figsize=(11, 2.2 * rows + 0.5))
+    rows = max(-(-n // cols), 1)
+    height = 2.2 * rows + 0.5
+    fig = Figure(figsize=(11, height))
+    # fixed margins (inches: tick labels and axis labels, the titles): a tight layout would
+    # lay every panel out, then draw the figure twice (most of the page's time)
+    gs = fig.add_gridspec(rows, cols, **grid_margins(11.0, height, rows, cols))
     for k, r in enumerate(recs):
-        ax = fig.add_subplot(rows, cols, k + 1)
+        ax = fig.add_subplot(gs[k // cols, k % cols])
         rb = r.strain_ue - d.predictions_before[r.name]
         ax.plot(r.time_s, rb, lw=0.6, color="0.55", label="before")
         if r.name in d.predictions_after:
@@ -46,8 +50,35 @@ def residual_figure(d: Diagnosis, records: list[Record]) -> Figure:
         unit = r.meta.get("strain_units", "ue") if isinstance(r.meta, dict) else "ue"
         ax.set_ylabel(f"residual ({unit})", fontsize=8)
         ax.set_xlabel("time (s)", fontsize=8)
-    fig.tight_layout()
     return fig
+
+
+def grid_margins(
+    width_in: float,
+    height_in: float,
+    rows: int,
+    cols: int,
+    *,
+    left_in: float = 0.75,
+    right_in: float = 0.15,
+    bottom_in: float = 0.45,
+    top_in: float = 0.3,
+    wgap_in: float = 0.85,
+    hgap_in: float = 0.75,
+) -> dict[str, float]:
+    """``Figure.add_gridspec`` keywords for a grid of ``rows x cols`` panels with fixed
+    margins and gaps given in inches (``left`` ... ``top`` as fractions of the figure,
+    ``wspace`` and ``hspace`` as fractions of a panel's width and height)."""
+    w = (width_in - left_in - right_in - (cols - 1) * wgap_in) / cols
+    h = (height_in - bottom_in - top_in - (rows - 1) * hgap_in) / rows
+    return {
+        "left": left_in / width_in,
+        "right": 1.0 - right_in / width_in,
+        "bottom": bottom_in / height_in,
+        "top": 1.0 - top_in / height_in,
+        "wspace": wgap_in / w,
+        "hspace": hgap_in / h,
+    }
 
 
 def _candidates_figure(d: Diagnosis) -> bytes | None:
