@@ -17,10 +17,10 @@ from matplotlib.figure import Figure
 
 from labrig.analysis.diagnose import Diagnosis
 from labrig.analysis.records import Record
-from labrig.report.plots import png
+from labrig.report.plots import grid_margins, png
 from labrig.report.templating import render
 
-__all__ = ["diagnosis_context", "grid_margins", "render_diagnosis", "residual_figure"]
+__all__ = ["diagnosis_context", "render_diagnosis", "residual_figure"]
 
 
 def residual_figure(d: Diagnosis, records: list[Record]) -> Figure:
@@ -51,34 +51,6 @@ def residual_figure(d: Diagnosis, records: list[Record]) -> Figure:
         ax.set_ylabel(f"residual ({unit})", fontsize=8)
         ax.set_xlabel("time (s)", fontsize=8)
     return fig
-
-
-def grid_margins(
-    width_in: float,
-    height_in: float,
-    rows: int,
-    cols: int,
-    *,
-    left_in: float = 0.75,
-    right_in: float = 0.15,
-    bottom_in: float = 0.45,
-    top_in: float = 0.3,
-    wgap_in: float = 0.85,
-    hgap_in: float = 0.75,
-) -> dict[str, float]:
-    """``Figure.add_gridspec`` keywords for a grid of ``rows x cols`` panels with fixed
-    margins and gaps given in inches (``left`` ... ``top`` as fractions of the figure,
-    ``wspace`` and ``hspace`` as fractions of a panel's width and height)."""
-    w = (width_in - left_in - right_in - (cols - 1) * wgap_in) / cols
-    h = (height_in - bottom_in - top_in - (rows - 1) * hgap_in) / rows
-    return {
-        "left": left_in / width_in,
-        "right": 1.0 - right_in / width_in,
-        "bottom": bottom_in / height_in,
-        "top": 1.0 - top_in / height_in,
-        "wspace": wgap_in / w,
-        "hspace": hgap_in / h,
-    }
 
 
 def _candidates_figure(d: Diagnosis) -> bytes | None:
