@@ -208,24 +208,21 @@ def report_phases(run: str) -> None:
 
     import numpy as np
 
-    from labrig.commands.fit import fit_base, fit_dynamic
+    from labrig.commands.fit import fit_dynamic
     from labrig.commands.prepare import prepare
-    from labrig.commands.report import _fitted_now, metrics_table, render_page, report_data
-    from labrig.report.data import Fitted
+    from labrig.commands.report import fit_report_models, metrics_table, render_page, report_data
 
     lap("import numpy, labrig's report command (scipy.optimize, h5py, numba)")
     setup = prepare(Path(run), None, None, None)
     lap("read the run file (its child's CPU not counted)")
-    fitted = _fitted_now(setup, "global", True, None, fit_dynamic(setup, "global", True, None))
+    ours = fit_dynamic(setup, "global", True, None)
     lap("our model: fit with leave-one-entry-out")
-    for kind in KINDS:
-        b = fit_base(setup, kind, True, None)
-        bj = b.to_json()
-        fitted.models[kind] = Fitted(
-            kind, b.predictions, b.heldout_per_entry, bj["heldout_nrmse_pct"], bj["params"],
-            method=kind,
-        )  # fmt: skip
-        lap(f"{LABEL[kind]} with leave-one-entry-out (first in the process: its imports)")
+
+    def progress(stage: str, done: int, total: int) -> None:
+        if stage in KINDS and done == total:  # a peer fitted, with its held-out folds
+            lap(f"{LABEL[stage]} with leave-one-entry-out (first in the process: its imports)")
+
+    fitted = fit_report_models(setup, None, None, "global", True, progress, ours)
     data = report_data(setup, fitted, True, False)
     metrics_table(setup, data)
     lap("the metrics (report --json)")

@@ -123,7 +123,11 @@ LOCAL_CLUSTER_CONFIG: dict[str, Any] = {
 }
 
 
-def _client(where: Where, stack: ExitStack):
+def cluster_client(where: Where, stack: ExitStack):
+    """A Dask client for ``where`` (``local`` or ``address``), closed with ``stack``: on a
+    running scheduler, or on a LocalCluster of ``where.workers`` processes (one thread each, on
+    127.0.0.1, with :data:`LOCAL_CLUSTER_CONFIG`); :class:`ClusterError` when the scheduler
+    cannot be reached."""
     from distributed import Client, LocalCluster
 
     if where.kind == "address":
@@ -171,7 +175,7 @@ def run_dask(
     from distributed import as_completed
 
     with ExitStack() as stack:
-        client = _client(where, stack)
+        client = cluster_client(where, stack)
         if where.kind == "address":
             client.wait_for_workers(1, timeout=60)
         info.n_workers = check_versions(client)

@@ -32,7 +32,7 @@ def test_nanny_environment_has_no_trim_threshold() -> None:
 @pytest.mark.cluster
 @pytest.mark.timeout(300)
 def test_local_cluster_workers_run_without_trim_threshold() -> None:
-    from labrig.fleet.schedule import Where, _client
+    from labrig.fleet.schedule import Where, cluster_client
 
     def worker_env() -> tuple[str | None, str | None, bool]:
         import dask
@@ -44,6 +44,6 @@ def test_local_cluster_workers_run_without_trim_threshold() -> None:
         )
 
     with ExitStack() as stack:
-        client = _client(Where("local", workers=1), stack)
+        client = cluster_client(Where("local", workers=1), stack)
         (got,) = client.run(worker_env).values()
     assert got == (None, "1", False)
