@@ -202,7 +202,7 @@ def frequency_figure(
                 lw = 1.6 if key == "dynamic" else 1.0
                 ax.plot(
                     f,
-                    vals,
+                    np.array(vals, dtype=float),
                     STYLES.get(key, "-."),
                     color=colors[a],
                     lw=lw,
