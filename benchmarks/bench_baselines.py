@@ -5,6 +5,7 @@ Run from the repository root (about 3 minutes on a loaded 2-core machine):
     .venv/bin/python benchmarks/bench_baselines.py                 # against commit 6fe3c46
     .venv/bin/python benchmarks/bench_baselines.py --before REV    # against another commit
     .venv/bin/python benchmarks/bench_baselines.py --quick         # this tree only, 1 repeat
+    .venv/bin/python benchmarks/bench_baselines.py --report-phases RUN.h5  # report, step by step
 
 Prints a report in markdown (stdout); the figures of record are copied into the "Baselines"
 section of benchmarks/RESULTS.md by hand. What is measured, and how:
@@ -190,14 +191,68 @@ def agreement(a: dict, b: dict) -> dict:
     return out
 
 
+def report_phases(run: str) -> None:
+    """``--report-phases RUN``: the CPU seconds of each step of ``labrig report RUN --out ...``
+    in this process (``time.process_time``; the file is read in a child process, not counted),
+    as :func:`labrig.commands.report.build_run_report` runs them: imports, our model's fit with
+    leave-one-entry-out, each peer with its own, the metrics, the figures and the page; with the
+    yardstick of the same process."""
+    t0 = time.process_time()
+    steps: list[tuple[str, float]] = []
+
+    def lap(name: str) -> None:
+        nonlocal t0
+        t = time.process_time()
+        steps.append((name, t - t0))
+        t0 = t
+
+    import numpy as np
+
+    from labrig.commands.fit import fit_dynamic
+    from labrig.commands.prepare import prepare
+    from labrig.commands.report import fit_report_models, metrics_table, render_page, report_data
+
+    lap("import numpy, labrig's report command (scipy.optimize, h5py, numba)")
+    setup = prepare(Path(run), None, None, None)
+    lap("read the run file (its child's CPU not counted)")
+    ours = fit_dynamic(setup, "global", True, None)
+    lap("our model: fit with leave-one-entry-out")
+
+    def progress(stage: str, done: int, total: int) -> None:
+        if stage in KINDS and done == total:  # a peer fitted, with its held-out folds
+            lap(f"{LABEL[stage]} with leave-one-entry-out (first in the process: its imports)")
+
+    fitted = fit_report_models(setup, None, None, "global", True, progress, ours)
+    data = report_data(setup, fitted, True, False)
+    metrics_table(setup, data)
+    lap("the metrics (report --json)")
+    render_page(setup, data)
+    lap("the figures and the page (matplotlib imported here)")
+    x = np.random.default_rng(0).random(1_000_000)
+    ys = []
+    for _ in range(5):
+        t = time.process_time()
+        np.sort(x)
+        ys.append(time.process_time() - t)
+    print(f"{run}: load {os.getloadavg()[0]:.1f}, yardstick {1e3 * min(ys):.1f} ms\n")
+    print("| step | CPU s |\n|---|---|")
+    for name, dt in steps:
+        print(f"| {name} | {dt:.2f} |")
+    print(f"| **in all** | **{sum(dt for _, dt in steps):.2f}** |")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--before", default=DEFAULT_BEFORE, help="commit to compare with")
     ap.add_argument("--repeats", type=int, default=2, help="fits after the first, per peer")
     ap.add_argument("--quick", action="store_true", help="this tree only, one repeat, no CLI")
+    ap.add_argument("--report-phases", metavar="RUN", help="the steps of labrig report RUN")
     ap.add_argument("--child", nargs=3, metavar=("SRC", "RUN", "REPEATS"), help=argparse.SUPPRESS)
     ap.add_argument("--numba-child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.report_phases:
+        report_phases(args.report_phases)
+        return 0
     if args.child:
         print(json.dumps(child(args.child[0], args.child[1], int(args.child[2]))))
         return 0

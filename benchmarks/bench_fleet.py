@@ -18,6 +18,16 @@ over the tasks), speed-up against one worker; the round trip of 200 empty tasks 
 ``detect``: ``labrig sim fleet N`` (``experiments/paper.yaml``, seed 1, 5 % defects), then
 ``labrig batch diagnose`` on a LocalCluster of 2 workers, scored against ``truth.json``
 (:func:`labrig.fleet.truth.score`); resumable (a rerun skips the runs already done).
+``tasks FILES``: where the CPU of a ``batch diagnose`` (or ``--command report``) task goes, per
+run file, in this process (the imports made by a first task, not counted): reading the file
+(checked, in a child process), ``fit_part`` (``labrig fit`` with leave-one-entry-out), the
+diagnosis itself (:func:`labrig.analysis.diagnose.diagnose`), its documents
+(``diagnosis.json`` and the figures of ``diagnosis.html``), ``report_part``; then the whole
+``labrig batch diagnose FILES --serial`` and ``--workers 2`` as child processes (CPU of the
+command and every process it started: the LocalCluster's scheduler, nannies and workers),
+per task. Run it with another installation's Python (its ``labrig`` is then the one measured)
+for the figures before a change.
+
 Every section prints the load average before and after.
 """
 
@@ -209,9 +219,108 @@ def detect(n: int, out: Path, workers: int) -> None:
     print(f"load average after: {load()}")
 
 
+def yardstick_ms() -> float:
+    """CPU milliseconds of ``numpy.sort`` of 1e6 uniform floats (best of 5)."""
+    import numpy as np
+
+    x = np.random.default_rng(0).random(1_000_000)
+    best = float("inf")
+    for _ in range(5):
+        t = time.process_time()
+        np.sort(x)
+        best = min(best, time.process_time() - t)
+    return 1e3 * best
+
+
+def task_parts(command: str, files: list[Path]) -> list[dict]:
+    """CPU seconds of each part of one batch task per run file, in this process (a first task
+    made the imports; each part's time includes the children it reaped)."""
+    import labrig.analysis.diagnose as dg
+    import labrig.commands.diagnose as cd
+    import labrig.fleet.tasks as tasks
+    from labrig.fleet.tasks import TaskSpec, run_task
+
+    parts: dict[str, float] = {}
+    saved = []
+
+    def wrap(owner, name: str, label: str) -> None:
+        f = getattr(owner, name)
+        saved.append((owner, name, f))
+
+        def timed(*a, **k):
+            t = cpu_s()
+            try:
+                return f(*a, **k)
+            finally:
+                parts[label] = parts.get(label, 0.0) + cpu_s() - t
+
+        setattr(owner, name, timed)
+
+    wrap(tasks, "read_snapshot", "read the run file")
+    wrap(tasks, "fit_part", "fit (with leave-one-out)")
+    wrap(dg, "diagnose", "the diagnosis itself")
+    wrap(cd.RunDiagnosis, "documents", "diagnosis.json + diagnosis.html")
+    wrap(tasks, "report_part", "report (peers, figures, page)")
+    saved_parts = dict(tasks.PARTS)
+    tasks.PARTS = {k: tuple(getattr(tasks, f.__name__) for f in v) for k, v in saved_parts.items()}
+    rows = []
+    try:
+        for k, f in enumerate([files[0], *files]):
+            parts.clear()
+            t = cpu_s()
+            res = run_task(TaskSpec(command, str(f.resolve()), f.stem, TaskOptions()))
+            total = cpu_s() - t
+            if k == 0:  # the imports
+                continue
+            rows.append({"run": f.name, "ok": res.ok, "task_cpu_s": total, **parts})
+    finally:
+        tasks.PARTS = saved_parts
+        for owner, name, f in saved:
+            setattr(owner, name, f)
+    return rows
+
+
+def batch_cpu(command: str, files: list[Path], flags: list[str], out: Path) -> float:
+    """CPU seconds of ``labrig batch COMMAND FILES --out OUT FLAGS`` and every process it
+    started (reaped children: the LocalCluster's processes)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    subprocess.run(
+        [str(BIN / "labrig"), "batch", command, *map(str, files), "--out", str(out), *flags],
+        check=True,
+        capture_output=True,
+    )
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def task_costs(command: str, files: list[Path]) -> None:
+    import labrig
+
+    print(f"labrig {labrig.__file__}; load average before: {load()}; "
+          f"yardstick {yardstick_ms():.1f} ms")  # fmt: skip
+    rows = task_parts(command, files)
+    for r in rows:
+        print(json.dumps(r))
+    n = len(rows)
+    keys = dict.fromkeys(k for r in rows for k in r if k not in ("run", "ok"))
+    mean = {k: sum(r.get(k, 0.0) for r in rows) / n for k in keys}
+    print("mean per task:", json.dumps({k: round(v, 2) for k, v in mean.items()}))
+    with tempfile.TemporaryDirectory(prefix="bench-tasks-") as d:
+        for label, flags in (
+            ("serial", ["--serial"]),
+            ("LocalCluster 2 workers", ["--workers", "2"]),
+        ):
+            cpu = batch_cpu(command, files, flags, Path(d) / label.replace(" ", "_"))
+            print(f"batch {command} {label}: {cpu:.1f} s CPU in all, {cpu / n:.2f} s per task")
+    print(f"load average after: {load()}; yardstick {yardstick_ms():.1f} ms")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="what", required=True)
+    ta = sub.add_parser("tasks")
+    ta.add_argument("files", type=Path, nargs="+")
+    ta.add_argument("--command", default="diagnose", choices=("diagnose", "report"))
     sc = sub.add_parser("scaling")
     sc.add_argument("--n", type=int, default=8)
     de = sub.add_parser("detect")
@@ -221,6 +330,8 @@ def main() -> None:
     a = ap.parse_args()
     if a.what == "scaling":
         scaling(a.n)
+    elif a.what == "tasks":
+        task_costs(a.command, a.files)
     else:
         detect(a.n, a.out, a.workers)
 

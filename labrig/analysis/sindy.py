@@ -100,6 +100,7 @@ __all__ = [
     "free_run",
     "free_run_numpy",
     "library_matrix",
+    "same_run_up_to",
     "smoothed_derivative",
     "smoothing_window",
     "stlsq",
@@ -449,21 +450,48 @@ def stlsq(
     with scikit-learn's input checks off (the rows are finite and the parameters fixed here;
     those checks are most of the cost of a call on this 10-column problem).
 
+    A threshold is fitted only when the previous fit's result does not already answer it
+    (:func:`same_run_up_to`): each iterate of STLSQ keeps the ridge coefficients ``|c| >=
+    threshold``, so a threshold ``lam2 >= lam1`` at or below every coefficient ``lam1``'s
+    iterates kept (``STLSQ.history_``) cuts every iterate alike, and its fit is ``lam1``'s step
+    for step (same supports, same solves, same unbiased refit): its coefficients are ``lam1``'s,
+    to the bit.
+
     Returns ``(threshold, coefficients)`` for every threshold."""
     import sklearn
     from pysindy.optimizers import STLSQ
 
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
-    out = []
+    out: list[tuple[float, NDArray[np.float64]]] = []
+    last: tuple[float, float, NDArray[np.float64]] | None = None  # (lam1, reach, coefficients)
     with sklearn.config_context(assume_finite=True, skip_parameter_validation=True):
         for lam in thresholds:
+            if last is not None and last[0] <= lam <= last[1]:
+                out.append((float(lam), last[2].copy()))
+                continue
             opt = STLSQ(threshold=float(lam), alpha=RIDGE, max_iter=MAX_ITER, unbias=True)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 opt.fit(x, y)
-            out.append((float(lam), np.asarray(opt.coef_, dtype=float).ravel()))
+            coef = np.asarray(opt.coef_, dtype=float).ravel()
+            last = (float(lam), same_run_up_to(opt.history_, float(lam)), coef)
+            out.append((float(lam), coef.copy()))
     return out
+
+
+def same_run_up_to(history: Sequence[ArrayLike], threshold: float) -> float:
+    """The largest threshold whose STLSQ run is step for step the run that left ``history``
+    (``STLSQ.history_`` after a fit at ``threshold > 0``: the start, then each iterate with the
+    coefficients below the threshold cut to 0): the smallest ``|c|`` kept by any iterate
+    (``inf`` when none kept one); ``-inf`` for ``threshold <= 0`` (an exact 0 is then kept, so
+    the iterates do not tell the coefficients cut)."""
+    if not threshold > 0:
+        return -math.inf
+    kept = [np.abs(np.asarray(h, dtype=float)) for h in history[1:]]
+    kept = [k[k > 0] for k in kept]
+    kept = [k for k in kept if k.size]
+    return float(min(np.min(k) for k in kept)) if kept else math.inf
 
 
 def _equation_offsets(

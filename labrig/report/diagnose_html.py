@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 
 from labrig.analysis.diagnose import Diagnosis
 from labrig.analysis.records import Record
-from labrig.report.plots import png
+from labrig.report.plots import grid_margins, png
 from labrig.report.templating import render
 
 __all__ = ["diagnosis_context", "render_diagnosis", "residual_figure"]
@@ -29,10 +29,14 @@ def residual_figure(d: Diagnosis, records: list[Record]) -> Figure:
     recs = [r for r in records if r.name in d.predictions_before]
     n = len(recs)
     cols = 2
-    rows = -(-n // cols)
-    fig = Figure(figsize=(11, 2.2 * rows + 0.5))
+    rows = max(-(-n // cols), 1)
+    height = 2.2 * rows + 0.5
+    fig = Figure(figsize=(11, height))
+    # fixed margins (inches: tick labels and axis labels, the titles): a tight layout would
+    # lay every panel out, then draw the figure twice (most of the page's time)
+    gs = fig.add_gridspec(rows, cols, **grid_margins(11.0, height, rows, cols))
     for k, r in enumerate(recs):
-        ax = fig.add_subplot(rows, cols, k + 1)
+        ax = fig.add_subplot(gs[k // cols, k % cols])
         rb = r.strain_ue - d.predictions_before[r.name]
         ax.plot(r.time_s, rb, lw=0.6, color="0.55", label="before")
         if r.name in d.predictions_after:
@@ -46,7 +50,6 @@ def residual_figure(d: Diagnosis, records: list[Record]) -> Figure:
         unit = r.meta.get("strain_units", "ue") if isinstance(r.meta, dict) else "ue"
         ax.set_ylabel(f"residual ({unit})", fontsize=8)
         ax.set_xlabel("time (s)", fontsize=8)
-    fig.tight_layout()
     return fig
 
 

@@ -48,6 +48,34 @@ def style_axes(ax: Axes) -> None:
 _style = style_axes
 
 
+def grid_margins(
+    width_in: float,
+    height_in: float,
+    rows: int,
+    cols: int,
+    *,
+    left_in: float = 0.75,
+    right_in: float = 0.15,
+    bottom_in: float = 0.45,
+    top_in: float = 0.3,
+    wgap_in: float = 0.85,
+    hgap_in: float = 0.75,
+) -> dict[str, float]:
+    """``Figure.add_gridspec`` keywords for a grid of ``rows x cols`` panels with fixed
+    margins and gaps given in inches (``left`` ... ``top`` as fractions of the figure,
+    ``wspace`` and ``hspace`` as fractions of a panel's width and height)."""
+    w = (width_in - left_in - right_in - (cols - 1) * wgap_in) / cols
+    h = (height_in - bottom_in - top_in - (rows - 1) * hgap_in) / rows
+    return {
+        "left": left_in / width_in,
+        "right": 1.0 - right_in / width_in,
+        "bottom": bottom_in / height_in,
+        "top": 1.0 - top_in / height_in,
+        "wspace": wgap_in / w,
+        "hspace": hgap_in / h,
+    }
+
+
 def entry_figure(
     entry: EntryView,
     predicted: NDArray[np.float64],
@@ -141,8 +169,12 @@ def frequency_figure(
         return None
     amps = sorted({e.amplitude_V for e in rows})
     colors = {a: AMPLITUDE_COLORS[i % len(AMPLITUDE_COLORS)] for i, a in enumerate(amps)}
-    fig = Figure(figsize=(11.0, 4.0), layout="constrained")
-    ax_a, ax_b = fig.subplots(1, 2)
+    # fixed margins, the legend in the right one: a constrained layout draws the figure twice
+    fig = Figure(figsize=(11.0, 4.0))
+    gs = fig.add_gridspec(
+        1, 2, **grid_margins(11.0, 4.0, 1, 2, left_in=0.8, right_in=2.0, top_in=0.35, bottom_in=0.5)
+    )
+    ax_a, ax_b = fig.add_subplot(gs[0, 0]), fig.add_subplot(gs[0, 1])
     panels = (
         (ax_a, "loop_area_Vue", "loop_area_pred_Vue", f"loop area (V·{strain_unit})"),
         (
@@ -170,7 +202,7 @@ def frequency_figure(
                 lw = 1.6 if key == "dynamic" else 1.0
                 ax.plot(
                     f,
-                    vals,
+                    np.array(vals, dtype=float),
                     STYLES.get(key, "-."),
                     color=colors[a],
                     lw=lw,
@@ -200,7 +232,13 @@ def frequency_figure(
                 label=MODEL_LABELS.get(key, key),
             )
         )
-    fig.legend(handles=handles, loc="outside right center", fontsize=8, frameon=False)
+    fig.legend(
+        handles=handles,
+        loc="center left",
+        bbox_to_anchor=(1.0 - 1.9 / 11.0, 0.5),
+        fontsize=8,
+        frameon=False,
+    )
     return png(fig)
 
 

@@ -32,3 +32,43 @@ def test_every_residual_panel_has_axis_labels() -> None:
     for ax in panels:
         assert ax.get_xlabel() == "time (s)"
         assert ax.get_ylabel().startswith("residual (")
+
+
+def test_residual_panels_fit_the_figure_without_overlapping() -> None:
+    """The fixed margins (no tight layout) leave room for every panel's tick labels, axis labels
+    and title: each panel's drawn extent lies inside the figure and no two panels' extents
+    overlap, for 1, 2 and 5 panels and wide tick labels (strain in the tens of thousands)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    for n in (1, 2, 5):
+        recs = [
+            Record.from_arrays(
+                f"entry_{k}_with_a_long_name",
+                100.0,
+                np.linspace(0, 10, 300),
+                -25000.0 * np.sin(np.arange(300) / 9),
+            )
+            for k in range(n)
+        ]
+        d = Diagnosis(
+            before={},
+            after={},
+            effects_added=[],
+            candidates=[],
+            verdict="",
+            classification="unexplained",
+            evidence_before=None,  # type: ignore[arg-type]
+            evidence_after=None,  # type: ignore[arg-type]
+            predictions_before={r.name: 0.5 * r.strain_ue for r in recs},
+            predictions_after={r.name: 0.9 * r.strain_ue for r in recs},
+        )
+        fig = residual_figure(d, recs)
+        renderer = FigureCanvasAgg(fig).get_renderer()
+        boxes = [ax.get_tightbbox(renderer) for ax in fig.axes]
+        page = fig.bbox
+        for b in boxes:
+            assert b.x0 >= page.x0 and b.y0 >= page.y0, (n, b)
+            assert b.x1 <= page.x1 and b.y1 <= page.y1, (n, b)
+        for i, a in enumerate(boxes):
+            for b in boxes[i + 1 :]:
+                assert not a.overlaps(b), (n, a, b)
