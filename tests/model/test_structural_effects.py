@@ -478,3 +478,33 @@ def test_the_engines_jacobian_with_each_effect_matches_differences(name):
         col = (prob.residual(zp, base) - prob.residual(zm, base)) / (2 * h)
         err = np.linalg.norm(J[:, j] - col)
         assert err <= 1e-4 * max(np.linalg.norm(col), 1e-12), (who, _n, err / np.linalg.norm(col))
+
+
+@pytest.mark.parametrize(("tau_h", "doubtful"), [(1.0, True), (0.49, False), (3e-3, False)])
+def test_rate_hysteresis_without_resolved_relaxation_is_kept_with_a_caveat(tau_h, doubtful):
+    """``tau_h`` at its upper bound (1 s) is the physical limit "no relaxation seen" (the
+    rate-independent Bouc-Wen element), not an unphysical fit: the acceptance rule does not
+    reject it for the bound (a parameter that must not end on its bound would be), and reports
+    it as doubtful from half the bound on (just below: not)."""
+    from labrig.analysis.diagnose import accept
+    from labrig.analysis.extended import FitOutcome
+
+    eff = library()["rate_hysteresis"]
+    p = {"A_ue_per_V": -1.0, "beta_per_V": 0.02, "tau_h_s": tau_h}
+    fo = FitOutcome(
+        base={},
+        effects={eff.name: p},
+        sd={eff.name: {k: abs(v) / 10 for k, v in p.items()}},
+        base_sd={},
+        per_entry={},
+        cost=0.0,
+        at_bound={eff.name: ["tau_h_s"]} if tau_h >= 1.0 else {},
+    )
+    names = [f"e{k}" for k in range(4)]
+    a = accept(eff, fo, dict.fromkeys(names, 0.5), dict.fromkeys(names, 1.0), span_s=20.0)
+    assert a.accepted, a.reasons
+    assert any("no relaxation is resolved" in s for s in a.suspicious) is doubtful
+    # the amplitude A has a bound that does reject: its end is not a physical limit
+    fo.at_bound = {eff.name: ["A_ue_per_V"]}
+    fo.effects[eff.name]["A_ue_per_V"] = -8.0
+    assert not accept(eff, fo, dict.fromkeys(names, 0.5), dict.fromkeys(names, 1.0)).accepted
