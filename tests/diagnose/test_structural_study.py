@@ -103,7 +103,6 @@ def test_the_null_of_the_small_campaign_stays_noise():
 
 #: cases the study (docs/diagnose.md, "The structural study") does not find first, and why
 NOT_FIRST = {
-    "mechanical_resonance": "sensor_lowpass takes the residual first",
     "sensor_drift": "the default offset_drift takes the warm-up down to the floor",
 }
 
