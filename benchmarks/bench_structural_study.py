@@ -2,7 +2,8 @@
 asking for them leave the nulls alone?
 
 Run from the repository root (markdown on stdout; each finished diagnosis is also appended as
-one JSON line to ``--log``, so a cut-short run keeps what it measured):
+one JSON line to ``--log``, with every candidate of every round: its ranking score, its
+held-out NRMSE and why it was refused; so a cut-short run keeps what it measured):
 
     .venv/bin/python benchmarks/bench_structural_study.py                 # seeds 1-3, 30 nulls
     .venv/bin/python benchmarks/bench_structural_study.py --seeds 1 --nulls 1   # a quick look
@@ -99,9 +100,23 @@ def run_diagnose(records, also: tuple[str, ...], max_effects: int) -> dict:
     added = [e["effect"] for e in d.effects_added]
     floor = d.evidence_before.floor_pct
     after = d.after["heldout_nrmse_pct"]
+    tried = [
+        {
+            "round": c.round + 1,
+            "effect": c.effect,
+            "score": round(float(c.score), 4),
+            "heldout_pct": c.heldout_nrmse_pct,
+            "accepted": c.accepted,
+            "why": "; ".join(c.reasons) if c.tried else "not refitted",
+        }
+        for cands in d.rounds
+        for c in cands
+    ]
     return {
         "first": added[0] if added else "none",
         "added": added,
+        "params": [e["params"] for e in d.effects_added],
+        "candidates": tried,
         "class": d.classification,
         "before": d.before["heldout_nrmse_pct"],
         "after": after,

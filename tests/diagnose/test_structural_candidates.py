@@ -65,8 +65,12 @@ def _drives(kind: str, fs: float) -> list[tuple[str, np.ndarray]]:
 
 #: effect -> (planted parameters, drive, sampling rate)
 CASES: dict[str, tuple[dict[str, float], str, float]] = {
-    "amplifier_bandwidth": ({"tau_amp_s": 3e-4}, "sines", 10_000.0),
-    "mechanical_resonance": ({"tau_r_s": 1 / (2 * np.pi * 800.0), "zeta": 0.05}, "edges", 10_000.0),
+    "amplifier_bandwidth": ({"tau_amp_s": 3e-4, "rise": 0.5}, "sines", 10_000.0),
+    "mechanical_resonance": (
+        {"tau_r_s": 1 / (2 * np.pi * 800.0), "zeta": 0.05, "internal": 0.6},
+        "edges",
+        10_000.0,
+    ),
     "negative_field_asymmetry": ({"a": 0.2}, "bipolar", 2000.0),
     "rate_hysteresis": (
         {"A_ue_per_V": -1.0, "beta_per_V": 0.02, "tau_h_s": 2e-3},
@@ -107,6 +111,8 @@ def planted(name: str, seed: int = 1) -> list[Record]:
 #: relative (or, for parameters planted at 0-ish scales, absolute) tolerance of the recovery
 TOL = {
     "tau_amp_s": 0.02,
+    "rise": 0.05,
+    "internal": 0.05,
     "tau_r_s": 0.01,
     "zeta": 0.05,
     "a": 0.02,

@@ -103,9 +103,6 @@ def test_the_null_of_the_small_campaign_stays_noise():
 
 #: cases the study (docs/diagnose.md, "The structural study") does not find first, and why
 NOT_FIRST = {
-    "mechanical_resonance": "diagnose raises LinAlgError in a sensor_lowpass refit",
-    "negative_field_asymmetry": "quadratic_term and field_saturation take the residual first",
-    "rate_hysteresis": "time_delay then quadratic_term take the residual",
     "sensor_drift": "the default offset_drift takes the warm-up down to the floor",
 }
 

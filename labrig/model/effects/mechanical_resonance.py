@@ -13,33 +13,56 @@ __all__ = ["MechanicalResonance", "resonance_filter"]
 
 
 def resonance_filter(
-    tau_r: float, zeta: float, rate_hz: float
+    tau_r: float, zeta: float, rate_hz: float, internal: float = 0.0
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(b, a)`` (for ``lfilter``, ``a[0] = 1``) of ``1 / (1 + 2 zeta tau_r s + (tau_r s)^2)``
+    """``(b, a)`` (for ``lfilter``, ``a[0] = 1``) of ``(1 + 2 q zeta tau_r s) / (1 + 2 zeta
+    tau_r s + (tau_r s)^2)`` (``q = internal``, the share of the damping inside the stack)
     sampled with a first-order hold (the strain is smooth between samples: exact for a strain
     linear between them; ``scipy.signal.cont2discrete``, method ``"foh"``)."""
     from scipy import signal  # lazy: a second of import CPU
 
+    num = [2.0 * internal * zeta * tau_r, 1.0] if internal > 0 else [1.0]
     bd, ad, _ = signal.cont2discrete(
-        ([1.0], [tau_r * tau_r, 2.0 * zeta * tau_r, 1.0]), 1.0 / rate_hz, method="foh"
+        (num, [tau_r * tau_r, 2.0 * zeta * tau_r, 1.0]),
+        1.0 / rate_hz,
+        method="foh",
     )
     b = np.atleast_1d(np.squeeze(bd)).astype(float)
     a = np.asarray(ad, float)
     return b / a[0], a / a[0]
 
 
+#: the ranking's probes (:meth:`MechanicalResonance.probes`): resonances an octave apart from
+#: this frequency (Hz; ``tau_r``'s upper bound, 5 ms, is 32 Hz) ...
+PROBE_LOWEST_HZ = 50.0
+#: ... up to below this share of the records' Nyquist frequency ...
+PROBE_NYQUIST_SHARE = 0.9
+#: ... at most this many (the highest kept)
+PROBE_COUNT = 6
+
+
 class MechanicalResonance(Effect):
     """The first mechanical resonance of the stack with its load and the sensor's mount:
-    ``S -> S / (1 + 2 zeta tau_r s + (tau_r s)^2)``, ``f_r = 1 / (2 pi tau_r)``, damping
-    ``zeta`` (0.005-0.5, fitted on a log scale).
+    ``S -> S (1 + 2 q zeta tau_r s) / (1 + 2 zeta tau_r s + (tau_r s)^2)``, ``f_r = 1 / (2 pi
+    tau_r)``, damping ``zeta`` (0.005-0.5, fitted on a log scale), ``q`` (``internal``, 0-1)
+    the share of the damping that is the stack's own.
 
     Physics: the stack is a spring of stiffness ``k`` driving its own effective mass and the
-    load ``m``; the strain the operator predicts is the free (quasi-static) stroke, the measured
-    one follows ``m x'' + c x' + k x = k x_free``, a second-order low-pass with ``f_r =
-    sqrt(k/m) / (2 pi)`` (kHz for a bare stack, hundreds of Hz with a heavy load) and a small
-    damping (``zeta`` 0.01-0.2). Sine sweeps far below ``f_r`` barely see it; a PRBS, a
-    triangle's corners and steps excite it (ringing at ``f_r``). Acts on the measured output
-    (linear in the strain).
+    load ``m``; the strain the operator predicts is the free (quasi-static) stroke ``x_f``.
+    The stack's own losses (the ceramic's internal friction, a Kelvin-Voigt damper ``c_i``)
+    act on its deformation ``x_f - x``, like its stiffness; the load's guides and the air
+    (``c_e``) act on the motion ``x`` itself:
+
+        m x'' = k (x_f - x) + c_i (x_f' - x') - c_e x'
+
+    so ``X / X_f = (k + c_i s) / (m s^2 + (c_i + c_e) s + k)``: a second-order low-pass with
+    ``f_r = sqrt(k/m) / (2 pi)`` (kHz for a bare stack, hundreds of Hz with a heavy load), a
+    small damping (``zeta = (c_i + c_e) / (2 sqrt(k m))``, 0.01-0.2) and, from the internal
+    share ``q = c_i / (c_i + c_e)``, a zero at ``-k / c_i``. The zero cancels the poles'
+    first-order phase lag below ``f_r`` (with ``q = 1`` the response is ``1 + (f/f_r)^2`` in
+    gain with no phase to first order); ``q = 0`` is a mass damped from outside only. Sine
+    sweeps far below ``f_r`` barely see it; a PRBS, a triangle's corners and steps excite it
+    (ringing at ``f_r``). Acts on the measured output (linear in the strain).
 
     Signature: ringing at ``f_r`` after every edge (PRBS, triangle corners, steps), a residual
     spectrum peaked at ``f_r``, a gain that *rises* towards ``f_r`` (peak ``~ 1 / (2 zeta)`` at
@@ -55,8 +78,11 @@ class MechanicalResonance(Effect):
     name = "mechanical_resonance"
     where = "output"
     acts_on = "measured strain (mechanics)"
-    params_doc = "`tau_r_s` (0), `zeta` (0.005-0.5, log)"
-    form = "`1/(1 + 2 zeta tau_r s + (tau_r s)^2)`, `f_r = 1/(2 pi tau_r)`, lightly damped"
+    params_doc = "`tau_r_s` (0), `zeta` (0.005-0.5, log), `internal` (0-1)"
+    form = (
+        "`(1 + 2 q zeta tau_r s)/(1 + 2 zeta tau_r s + (tau_r s)^2)`, `f_r = 1/(2 pi tau_r)`, "
+        "lightly damped, `q` the stack's own share of the damping"
+    )
     physics = "stack + load + sensor mount resonance (second-order, lightly damped)"
     signature = "ringing at f_r after edges (PRBS, triangle corners), gain rising towards f_r"
     confusable = ("sensor_lowpass", "time_delay")
@@ -68,11 +94,27 @@ class MechanicalResonance(Effect):
         # f_r from 32 Hz up: below that a resonance is not a stack's
         Param("tau_r_s", "s", 0.0, 0.0, 5e-3, 1e-4, sign=+1, starts=(3e-5, 3e-4, 1e-3)),
         Param("zeta", "", 0.1, 0.005, 0.5, 0.1, log=True, starts=(0.02, 0.3)),
+        # both ends are physical (damped from outside only, or by the stack only)
+        Param("internal", "", 0.0, 0.0, 1.0, 0.5, check_bounds=False),
     )
 
-    def _filter(self, ctx, tau, zeta):
+    def probes(self, contexts):
+        """Resonances an octave apart from :data:`PROBE_LOWEST_HZ` up to below
+        :data:`PROBE_NYQUIST_SHARE` of the lowest Nyquist frequency of ``contexts`` (at most
+        :data:`PROBE_COUNT`, the highest kept), lightly damped (``zeta`` 0.05), half the
+        damping the stack's own. One probe at the start's 1.6 kHz is above the Nyquist
+        frequency of a 2 kHz record: its direction there is a gain the base absorbs, and a
+        resonance the record shows (hundreds of Hz) would rank last, never refitted."""
+        rate = min((c.rate_hz for c in contexts), default=10_000.0)
+        top = PROBE_NYQUIST_SHARE * rate / 2.0
+        freqs = [PROBE_LOWEST_HZ * 2.0**k for k in range(16) if PROBE_LOWEST_HZ * 2.0**k < top]
+        freqs = freqs[-PROBE_COUNT:] or [PROBE_LOWEST_HZ]
+        return [{"tau_r_s": 1.0 / (2.0 * np.pi * f), "zeta": 0.05, "internal": 0.5} for f in freqs]
+
+    def _filter(self, ctx, tau, zeta, q):
         return ctx.cached(
-            ("resonance", tau, zeta, ctx.rate_hz), lambda: resonance_filter(tau, zeta, ctx.rate_hz)
+            ("resonance", tau, zeta, q, ctx.rate_hz),
+            lambda: resonance_filter(tau, zeta, ctx.rate_hz, q),
         )
 
     def apply(self, x, ctx, p):
@@ -81,7 +123,7 @@ class MechanicalResonance(Effect):
         tau = p["tau_r_s"]
         if tau <= 0:
             return x
-        b, a = self._filter(ctx, tau, p["zeta"])
+        b, a = self._filter(ctx, tau, p["zeta"], p.get("internal", 0.0))
         zi = signal.lfilter_zi(b, a)  # at rest at the first sample
         if x.ndim == 2:
             return signal.lfilter(b, a, x, axis=0, zi=zi[:, None] * x[0][None, :])[0]
@@ -95,6 +137,7 @@ class MechanicalResonance(Effect):
         return {
             "f_r_hz": 1.0 / (2 * np.pi * tau) if tau > 0 else float("inf"),
             "zeta": p["zeta"],
+            "internal": float(p.get("internal", 0.0)),
             "tau_r_s": tau,
         }
 
@@ -103,6 +146,8 @@ class MechanicalResonance(Effect):
         if tau <= 0:
             return "no resonance"
         f = 1.0 / (2 * np.pi * tau)
-        return plus_minus("f_r", f, None if s is None else f * s / tau, "Hz") + plus_minus(
-            ", damping", p["zeta"], sd.get("zeta"), ""
+        return (
+            plus_minus("f_r", f, None if s is None else f * s / tau, "Hz")
+            + plus_minus(", damping", p["zeta"], sd.get("zeta"), "")
+            + plus_minus(", the stack's own share", p.get("internal", 0.0), sd.get("internal"), "")
         )

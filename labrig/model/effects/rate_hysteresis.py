@@ -46,6 +46,10 @@ def rate_hysteresis_state(
     return h
 
 
+#: a fitted ``tau_h`` at or above this share of its upper bound is "no relaxation seen"
+NO_RELAXATION_SHARE = 0.5
+
+
 class RateHysteresis(Effect):
     """Rate-dependent hysteresis beside the operator: ``S = H[V*] + h``,
 
@@ -99,12 +103,38 @@ class RateHysteresis(Effect):
             check_bounds=False,
             starts=(0.003, 0.2),
         ),
-        Param("tau_h_s", "s", 3e-3, 5e-5, 1.0, 3e-3, log=True, starts=(3e-4, 3e-2)),
+        # the upper end is a physical limit, not a failure: a relaxation slower than the
+        # records (no relaxation seen) leaves the rate-independent Bouc-Wen element (caveats)
+        Param(
+            "tau_h_s",
+            "s",
+            3e-3,
+            5e-5,
+            1.0,
+            3e-3,
+            log=True,
+            check_bounds=False,
+            starts=(3e-4, 3e-2),
+        ),
     )
 
     def probes(self, contexts):
         return [
             {"A_ue_per_V": -0.3, "beta_per_V": 0.02, "tau_h_s": tau} for tau in (3e-4, 3e-3, 3e-2)
+        ]
+
+    def caveats(self, p, span_s):
+        """A relaxation time beyond the longest sequence (or at its bound): no relaxation is
+        seen, and the term is the rate-independent Bouc-Wen element there."""
+        tau = p.get("tau_h_s")
+        hi = self.params[2].hi
+        if tau is None or (tau < span_s and tau < NO_RELAXATION_SHARE * hi):
+            return []
+        return [
+            f"tau_h = {tau:.3g} s is at the slow end of its range (bound {hi:g} s; the longest "
+            f"sequence {span_s:.3g} s): no relaxation is resolved, so the term acts as a "
+            "rate-independent hysteresis (a Bouc-Wen loop beside the operator's) rather than a "
+            "rate-dependent one"
         ]
 
     def apply(self, x, ctx, p):

@@ -149,7 +149,12 @@ REGISTRY: tuple[Registration, ...] = (
     # structural candidates of the base model (docs/diagnose.md, "Structural candidates"): each
     # costs a refit and its folds, so they are tried only when asked
     Registration(
-        "amplifier_bandwidth", "AmplifierBandwidth", "voltage", candidate=False, also=True
+        "amplifier_bandwidth",
+        "AmplifierBandwidth",
+        "voltage",
+        candidate=False,
+        also=True,
+        context=("v_ref",),
     ),
     Registration(
         "mechanical_resonance", "MechanicalResonance", "output", candidate=False, also=True
@@ -160,6 +165,7 @@ REGISTRY: tuple[Registration, ...] = (
         "voltage",
         candidate=False,
         also=True,
+        context=("v_ref",),
     ),
     Registration("rate_hysteresis", "RateHysteresis", "operator", candidate=False, also=True),
     Registration("sensor_drift", "SensorDrift", "output", candidate=False, also=True),
