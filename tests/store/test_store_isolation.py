@@ -116,9 +116,13 @@ def _children(pid: int) -> list[int]:
 
 
 @pytest.mark.skipif(not EXE.exists() or not Path("/proc").is_dir(), reason="needs /proc")
-def test_ctrl_c_stops_a_command_reading_a_looping_file(hanging: list[Path]):
+def test_ctrl_c_stops_a_command_reading_a_looping_file(hanging: list[Path], tmp_path: Path):
+    # 80 MB of padding after the file's end: the read's CPU allowance grows with the size
+    # (+4 s), so on a loaded machine the Ctrl-C, not the limit, ends the read
+    padded = tmp_path / hanging[0].name
+    padded.write_bytes(hanging[0].read_bytes() + bytes(80 * 2**20))
     proc = subprocess.Popen(
-        [str(EXE), "info", str(hanging[0])], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        [str(EXE), "info", str(padded)], stdout=subprocess.PIPE, stderr=subprocess.PIPE
     )
     try:
         child: list[int] = []
@@ -127,7 +131,7 @@ def test_ctrl_c_stops_a_command_reading_a_looping_file(hanging: list[Path]):
             time.sleep(0.05)
             child = _children(proc.pid)
         assert child, "the reading child never started"
-        # at once: the read's CPU limit (1 s of its CPU) must not come first on a loaded machine
+        time.sleep(0.2)  # inside the looping read
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=5)  # bounded; no wall-clock assert a load breaks
         # 130 is the Ctrl-C: the read's own CPU limit would have ended it with exit 2
