@@ -38,7 +38,7 @@ import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-import numpy as np
+from bench_commands import yardstick_s
 
 #: what the child process of ``phases`` runs: prints one JSON line of (step, CPU s) pairs
 PHASES = r"""
@@ -78,17 +78,6 @@ print(json.dumps(out))
 """
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def yardstick_s(repeats: int = 5) -> float:
-    """CPU seconds of ``np.sort`` of 1e6 uniform floats (median of ``repeats``)."""
-    x = np.random.default_rng(0).random(1_000_000)
-    out = []
-    for _ in range(repeats):
-        t = time.process_time()
-        np.sort(x)
-        out.append(time.process_time() - t)
-    return statistics.median(out)
 
 
 def header() -> str:

@@ -26,26 +26,14 @@ import os
 import platform
 import resource
 import shutil
-import statistics
 import subprocess
 import sys
-import time
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-
-def yardstick_s(repeats: int = 5) -> float:
-    """CPU seconds of ``np.sort`` of 1e6 uniform floats (median of ``repeats``)."""
-    x = np.random.default_rng(0).random(1_000_000)
-    out = []
-    for _ in range(repeats):
-        t = time.process_time()
-        np.sort(x)
-        out.append(time.process_time() - t)
-    return statistics.median(out)
+from bench_commands import yardstick_s
 
 
 def run_json(labrig: str, path: Path, extra: list[str]) -> tuple[float, Any]:
