@@ -116,13 +116,14 @@ def _children(pid: int) -> list[int]:
 
 
 @pytest.mark.skipif(not EXE.exists() or not Path("/proc").is_dir(), reason="needs /proc")
-def test_ctrl_c_stops_a_command_reading_a_looping_file(hanging: list[Path], tmp_path: Path):
-    # 80 MB of padding after the file's end: the read's CPU allowance grows with the size
-    # (+4 s), so on a loaded machine the Ctrl-C, not the limit, ends the read
-    padded = tmp_path / hanging[0].name
-    padded.write_bytes(hanging[0].read_bytes() + bytes(80 * 2**20))
+# slow tier: with other test workers on the same cores, the read's per-object CPU limit (1 s)
+# sometimes ends the read before the Ctrl-C is handled (exit 2, also bounded and clean); run
+# alone it is exit 130 every time. The default tier's twins: a looping reader stopped by its
+# CPU time (below) and Ctrl-C during a run (tests/runner/test_runner_signals.py)
+@pytest.mark.slow
+def test_ctrl_c_stops_a_command_reading_a_looping_file(hanging: list[Path]):
     proc = subprocess.Popen(
-        [str(EXE), "info", str(padded)], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        [str(EXE), "info", str(hanging[0])], stdout=subprocess.PIPE, stderr=subprocess.PIPE
     )
     try:
         child: list[int] = []
