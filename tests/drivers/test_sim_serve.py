@@ -68,7 +68,14 @@ def gcs_url(lines: list[str]) -> str:
 
 @pytest.mark.parametrize(
     "stop",
-    [signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT],
+    # the default tier stops it by Ctrl-C and SIGTERM; the other two signals take the same
+    # path (one handler) and run in the slow tier
+    [
+        signal.SIGINT,
+        signal.SIGTERM,
+        pytest.param(signal.SIGHUP, marks=pytest.mark.slow),
+        pytest.param(signal.SIGQUIT, marks=pytest.mark.slow),
+    ],
     ids=["ctrl-c", "sigterm", "sighup", "sigquit"],
 )
 def test_serve_prints_addresses_and_answers_until_stopped(stop):
@@ -131,8 +138,17 @@ def busy_port():
     s.close()
 
 
-@pytest.mark.parametrize("kind", ["gcs_port", "modbus_tcp_port"])
-@pytest.mark.parametrize("command", ["sim-serve", "run"])
+@pytest.mark.parametrize(
+    ("command", "kind"),
+    # each command and each port in the default tier; the other two pairs in the slow tier
+    [
+        ("sim-serve", "modbus_tcp_port"),
+        ("run", "gcs_port"),
+        pytest.param("sim-serve", "gcs_port", marks=pytest.mark.slow),
+        pytest.param("run", "modbus_tcp_port", marks=pytest.mark.slow),
+    ],
+    ids=["sim-serve-modbus_tcp_port", "run-gcs_port", "sim-serve-gcs_port", "run-modbus_tcp_port"],
+)
 def test_a_fixed_port_in_use_is_exit_2_naming_the_field(tmp_path, busy_port, kind, command):
     data = yaml.safe_load(DEFAULT_RIG_YAML)
     data["simulator"] = {kind: busy_port}

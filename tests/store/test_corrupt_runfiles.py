@@ -46,7 +46,7 @@ N_FLIPPED = 55
 #: every command on every case must end within this (s)
 LIMIT_S = 10.0
 #: the default suite runs every FAST_STRIDE-th case
-FAST_STRIDE = 7
+FAST_STRIDE = 14
 COMMANDS = ["info", "export", "fit", "report", "diagnose"]
 E = "sine_80V_2Hz"  # the entry the structured edits change
 
