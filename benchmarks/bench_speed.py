@@ -116,7 +116,7 @@ def phases(path: Path, repeats: int) -> None:
         print(f"| **whole process** | **{total:.2f}** |\n")
 
 
-#: the library effects copied under new names for ``library`` (the duplicates variant)
+#: the library effects copied under new names for ``library`` (the copies variant)
 COPIED = ("offset_drift", "sensor_lowpass", "quadratic_term", "time_delay")
 
 
