@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import re
-import time
 from pathlib import Path
 
 import pytest
@@ -170,20 +169,41 @@ def test_export_out_dir_and_its_older_name(runs: tuple[Path, Path], tmp_path: Pa
     assert invoke("export", runs[0], "--csv", tmp_path / "csv", "--overwrite").exit_code == 0
 
 
-def test_model_figures_refuse_to_overwrite_before_drawing(tmp_path: Path) -> None:
+def test_model_figures_refuse_to_overwrite_before_drawing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Existing figures are refused before any figure is drawn (the drawing functions are
+    replaced by ones that record their calls; the real drawing: tests/report/
+    test_model_figures.py), and ``--overwrite`` replaces them without a partial file left."""
+    from labrig.report import model_figures
+
+    drawn: list[str] = []
+
+    def fake(name: str):
+        def draw(path: Path) -> None:
+            drawn.append(name)
+            Path(path).write_bytes(b"new " + name.encode())
+
+        return draw
+
+    monkeypatch.setattr(
+        model_figures, "FIGURES", [(name, fake(name)) for name, _ in model_figures.FIGURES]
+    )
     out = tmp_path / "figs"
-    res = invoke("model", "figures", "--out", out, "--json")
-    assert res.exit_code == 0, res.output
-    files = [Path(f) for f in json.loads(res.stdout)["files"]]
-    assert len(files) == 4 and all(f.parent == out and f.is_file() for f in files)
-    before = {f: f.stat().st_mtime_ns for f in files}
-    t0 = time.perf_counter()
+    out.mkdir()
+    files = [out / name for name, _ in model_figures.FIGURES]
+    for f in files:
+        f.write_bytes(b"old")
     again = invoke("model", "figures", "--out", out)
     assert again.exit_code == 2, again.output
-    assert time.perf_counter() - t0 < 1.0  # refused before any figure was drawn
+    assert drawn == []  # refused before any figure was drawn
     assert "exist already; pass --overwrite" in " ".join(again.stderr.split())
-    assert {f: f.stat().st_mtime_ns for f in files} == before
-    assert invoke("model", "figures", "--out", out, "--overwrite").exit_code == 0
+    assert all(f.read_bytes() == b"old" for f in files)
+    res = invoke("model", "figures", "--out", out, "--overwrite", "--json")
+    assert res.exit_code == 0, res.output
+    assert [Path(f) for f in json.loads(res.stdout)["files"]] == files
+    assert len(drawn) == len(files) == 4
+    assert all(f.read_bytes().startswith(b"new ") for f in files)
     assert not [p for p in out.iterdir() if p.name.endswith(".partial")]
 
 
