@@ -432,7 +432,9 @@ def _bank_block(a, cw, feed, ca, ccw, w, wc, u, n, up, y):  # fmt: skip
         for t in range(1, nb):
             us[t] = u[k + t - 1]
         if nb == 8:
-            s0, s1, s2, s3, s4, s5, s6, s7 = _sweep8(a, cw, w, us)
+            s0, s1, s2, s3, s4, s5, s6, s7 = _sweep8s(
+                a, cw, w, us[0], us[1], us[2], us[3], us[4], us[5], us[6], us[7]
+            )
             acc[0], acc[1], acc[2], acc[3] = s0, s1, s2, s3
             acc[4], acc[5], acc[6], acc[7] = s4, s5, s6, s7
         else:
@@ -460,36 +462,10 @@ def _bank_block(a, cw, feed, ca, ccw, w, wc, u, n, up, y):  # fmt: skip
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
-def _sweep8(a, cw, w, us):  # fmt: skip
-    """Eight samples of inputs ``us`` through the real modes, output sums (see bank_run)."""
-    u0, u1, u2, u3, u4, u5, u6, u7 = us[0], us[1], us[2], us[3], us[4], us[5], us[6], us[7]
-    s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = 0.0
-    for i in range(a.shape[0]):
-        ai = a[i]
-        ci = cw[i]
-        w0 = ai * w[i] + u0
-        w1 = ai * w0 + u1
-        w2 = ai * w1 + u2
-        w3 = ai * w2 + u3
-        w4 = ai * w3 + u4
-        w5 = ai * w4 + u5
-        w6 = ai * w5 + u6
-        w7 = ai * w6 + u7
-        w[i] = w7
-        s0 += ci * w0
-        s1 += ci * w1
-        s2 += ci * w2
-        s3 += ci * w3
-        s4 += ci * w4
-        s5 += ci * w5
-        s6 += ci * w6
-        s7 += ci * w7
-    return s0, s1, s2, s3, s4, s5, s6, s7
-
-
-@njit(cache=True, fastmath={"reassoc", "contract"})
 def _sweep8s(a, cw, w, u0, u1, u2, u3, u4, u5, u6, u7):  # fmt: skip
-    """:func:`_sweep8` with the eight inputs as scalars (they stay in registers)."""
+    """Eight samples of inputs ``u0..u7`` through the real modes ``a`` (states ``w``, updated),
+    the output sums ``sum cw w`` after each (see bank_run); scalars, so they stay in
+    registers."""
     s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = 0.0
     for i in range(a.shape[0]):
         ai = a[i]
