@@ -7,10 +7,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import yaml
+from labrig.drivers.sim.bench import BenchConfig, VirtualBench
 from typer.testing import CliRunner
 
 from labrig.cli import app
+from labrig.rig.limits import RigLimits
 
 #: the repository and its test data
 ROOT = Path(__file__).resolve().parents[1]
@@ -156,3 +159,44 @@ def stop_writer(p: subprocess.Popen) -> None:
         p.stdin.write("stop\n")
         p.stdin.flush()
     assert p.wait(timeout=30) == 0
+
+
+# -- a linear bench: the hybrid plant with its hysteresis off, so what is measured is an effect ---
+
+ALPHA0 = 11.5  # ue/V, the hybrid plant's linear block
+LINEAR_TRUTH = {
+    "preset": "hybrid",
+    "hybrid": {
+        "alpha0_ue_per_V": ALPHA0,
+        "gamma_ue_per_V": 0.0,
+        "bw_A_ue_per_V": 0.0,
+        "use_eq11": False,
+    },
+}
+BIPOLAR = RigLimits(v_min_V=-150.0, v_max_V=150.0, capacitance_F=1e-6, large_signal_factor=1.5)
+
+
+def linear_bench(effects: list[dict], rate_hz: float = 1000.0) -> VirtualBench:
+    """The simulated bench with the truth ``S = ALPHA0 u``, no noise or quantisation, and
+    ``effects``."""
+    cfg = BenchConfig.model_validate(
+        {
+            "truth": LINEAR_TRUTH,
+            "amplifier": {
+                "gain_V_per_V": 20.0,
+                "out_min_V": -160.0,
+                "out_max_V": 160.0,
+                "current_limit": False,
+                "monitor_noise_V": 0.0,
+            },
+            "gauge": {"noise_ue": 0.0, "bridge_offset_ue": 0.0},
+            "daq": {"ai_bits": None, "ao_bits": None},
+            "effects": effects,
+        }
+    )
+    return VirtualBench(cfg, BIPOLAR, seed=0, rate_hz=rate_hz)
+
+
+def strain(bench: VirtualBench, v_actuator: np.ndarray) -> np.ndarray:
+    out = bench.step(v_actuator / bench.config.amplifier.gain_V_per_V)
+    return out["gauge"] / bench.sensitivity_V_per_ue()
