@@ -222,23 +222,41 @@ def test_mechanical_resonance_is_stable_at_its_bounds():
 # -- negative_field_asymmetry --------------------------------------------------------------------
 
 
-def test_negative_field_asymmetry_is_the_integral_of_a_d33_falling_as_the_field_squared():
+@pytest.mark.parametrize("a", [0.3, 2.5, -0.4])
+def test_negative_field_asymmetry_is_the_integral_of_a_d33_levelling_off(a):
     """A bipolar triangle of peak ``P = V_ref``: each sample against the integral of
-    ``d33(w)/d33_0 = 1 - a (w/V_ref)^2`` (w < 0; 1 for w >= 0) from 0 to V by scipy's quad
-    (1e-9 V), the positive half untouched; the strain per volt at ``-V_ref`` is ``1 - a/3``."""
-    P, a = 150.0, 0.3
+    ``d33(w)/d33_0 = 1 - sign(a) tanh^2(sqrt|a| w/V_ref)`` (w < 0; 1 for w >= 0) from 0 to V
+    by scipy's quad (1e-9 V), the positive half untouched; at ``-V_ref`` the map's secant loss
+    is the reported one."""
+    P = 150.0
     eff = library(v_ref=P)["negative_field_asymmetry"]
     t = np.arange(2000) / FS
     tri = P * (2 / np.pi) * np.arcsin(np.sin(2 * np.pi * 5.0 * t))  # the analytic triangle
     got = eff.apply(tri, _ctx(tri), {"a": a})
 
     def d33(w):
-        return 1.0 - a * (w / P) ** 2 if w < 0 else 1.0
+        return 1.0 - np.sign(a) * np.tanh(np.sqrt(abs(a)) * w / P) ** 2 if w < 0 else 1.0
 
     ref = np.array([integrate.quad(d33, 0.0, v)[0] for v in tri[::7]])
     np.testing.assert_allclose(got[::7], ref, rtol=0, atol=1e-9)
     np.testing.assert_array_equal(got[tri >= 0], tri[tri >= 0])
-    assert np.min(got) == pytest.approx(-(1 - a / 3) * P, rel=1e-3)  # the triangle's sampled peak
+    at_peak = integrate.quad(d33, 0.0, -P)[0]
+    loss = eff.physical({"a": a})["secant_gain_loss_at_v_ref"]
+    assert loss == pytest.approx(1.0 - at_peak / -P, rel=1e-9)
+
+
+def test_negative_field_asymmetry_is_a_falling_as_the_field_squared_at_low_field():
+    """``a`` is the loss's lowest order: for small ``a`` the map is the one-sided cubic ``V - a
+    V^3 / (3 V_ref^2)`` to within ``O(a^2)`` (the next order, ``2 a^2 V^5 / (15 V_ref^4)``:
+    under 0.7 mV at ``a = 0.005`` over +-100 V; a loss of the wrong order, e.g. linear in
+    ``|V|``, differs by volts), of either sign."""
+    eff = library(v_ref=100.0)["negative_field_asymmetry"]
+    v = np.linspace(-100.0, 100.0, 401)
+    for a in (0.005, -0.005):
+        cubic = v - a / (3.0 * 100.0**2) * np.minimum(v, 0.0) ** 3
+        next_order = 2 * a * a * 100.0 / 15
+        np.testing.assert_allclose(eff.apply(v, _ctx(v), {"a": a}), cubic, rtol=0, atol=next_order)
+        assert np.max(np.abs(eff.apply(v, _ctx(v), {"a": a}) - cubic)) > 0.5 * next_order
 
 
 def test_negative_field_asymmetry_is_smooth_at_zero_field():
@@ -248,21 +266,33 @@ def test_negative_field_asymmetry_is_smooth_at_zero_field():
     eff = library(v_ref=100.0)["negative_field_asymmetry"]
     h = 1e-2
     v = np.array([-2 * h, -h, 0.0, h, 2 * h])
-    u = eff.apply(v, _ctx(v), {"a": 0.9})
-    slopes = np.diff(u) / h
-    np.testing.assert_allclose(slopes, 1.0, rtol=0, atol=1e-6)
+    for a in (0.9, 4.0, -0.5):
+        u = eff.apply(v, _ctx(v), {"a": a})
+        slopes = np.diff(u) / h
+        np.testing.assert_allclose(slopes, 1.0, rtol=0, atol=1e-6)
 
 
-def test_negative_field_asymmetry_bounds_keep_the_map_monotone():
-    """At the upper bound (a = 0.9) the smallest ``d33`` (at ``-V_ref``) is 0.1 > 0: the map
-    stays monotone over the run's range; with ``a`` just above 1 it would not; -0.5 (a stronger
-    negative response) is the lower bound."""
+def test_negative_field_asymmetry_bounds_keep_d33_between_0_and_twice():
+    """The map is monotone for any ``a`` (``d33`` levels off at 0 instead of turning negative,
+    as the earlier polynomial ``1 - a (V/V_ref)^2`` did beyond ``V_ref / sqrt(a)``): checked
+    at the bounds and far beyond the upper one, over three times ``V_ref``. The upper bound
+    (4) leaves ``d33`` at ``-V_ref`` at ``sech^2(2)``, 7 % (the slope of the map there, by
+    differences); the lower (-0.5) a negative side at most 1.37 times stiffer there."""
     eff = library(v_ref=100.0)["negative_field_asymmetry"]
     (q,) = eff.params
-    assert (q.lo, q.hi) == (-0.5, 0.9)
-    v = np.linspace(-100, 100, 2001)
-    assert np.all(np.diff(eff.apply(v, _ctx(v), {"a": q.hi})) > 0)
-    assert not np.all(np.diff(eff.apply(v, _ctx(v), {"a": 1.05})) > 0)
+    assert (q.lo, q.hi) == (-0.5, 4.0)
+    v = np.linspace(-300, 100, 4001)
+    for a in (q.lo, q.hi):
+        assert np.all(np.diff(eff.apply(v, _ctx(v), {"a": a})) > 0)
+    # far beyond: d33 down to rounding (the map flat to double precision), never turning back
+    assert np.all(np.diff(eff.apply(v, _ctx(v), {"a": 50.0})) >= 0)
+    h = 1e-4
+    w = np.array([-100.0 - h, -100.0 + h])
+    slope_hi = float(np.diff(eff.apply(w, _ctx(w), {"a": q.hi}))[0]) / (2 * h)
+    assert slope_hi == pytest.approx(1.0 / np.cosh(2.0) ** 2, rel=1e-6)
+    assert 0.06 < slope_hi < 0.08
+    slope_lo = float(np.diff(eff.apply(w, _ctx(w), {"a": q.lo}))[0]) / (2 * h)
+    assert slope_lo == pytest.approx(1.0 + np.tanh(np.sqrt(0.5)) ** 2, rel=1e-6)
 
 
 # -- rate_hysteresis -----------------------------------------------------------------------------
