@@ -1,36 +1,57 @@
 """The ``sensor_drift`` effect: a slow drift of the strain sensor over a simulated sequence,
-a few cosine terms (:class:`SensorDrift`, its basis :func:`drift_basis`).
+a cubic in time from the zero it starts at (:class:`SensorDrift`, its basis
+:func:`drift_basis`).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numpy.polynomial import legendre
 from numpy.typing import NDArray
 
 from labrig.model.effects.base import Context, Effect, Param
 
 __all__ = ["TERMS", "SensorDrift", "drift_basis"]
 
-#: the number of cosine terms: a drift slower than a third of the sequence's duration
+#: the drift's degree in time (its number of terms): a drift slower than a third of the
+#: sequence's duration
 TERMS = 3
 
 
 def drift_basis(n: int, terms: int = TERMS) -> NDArray[np.float64]:
-    """``n x terms`` columns ``cos(pi k (i + 1/2) / n)``, ``k = 1..terms``, over the samples
-    ``i`` of a sequence (the DCT-II basis without its constant: orthogonal, each of mean 0 and
-    RMS ``1/sqrt 2``); column ``k`` has ``k`` half-periods over the sequence."""
-    i = np.arange(n) + 0.5
-    k = np.arange(1, terms + 1)
-    return np.cos(np.pi * np.outer(i, k) / max(n, 1))
+    """``n x terms`` columns ``P_k(x_i) - P_k(x_0)``, ``k = 1..terms``, over the samples ``i``
+    of a sequence, ``x_i = 2 (i + 1/2) / n - 1`` (mid-sample times mapped to [-1, 1]) and
+    ``P_k`` the Legendre polynomial of degree ``k`` (:func:`numpy.polynomial.legendre.legval`):
+    a polynomial drift of degree ``terms`` in time, 0 on the first sample (the drift measured
+    from the zero the sequence starts at), free in value and slope elsewhere. Legendre rather
+    than plain powers of ``t``: the columns are nearly orthogonal (condition number 4.4 for
+    three terms, 56 for ``t, t^2, t^3``)."""
+    m = max(n, 1)
+    x = 2.0 * (np.arange(n) + 0.5) / m - 1.0
+    x0 = 1.0 / m - 1.0
+    cols = []
+    for k in range(1, terms + 1):
+        c = np.zeros(k + 1)
+        c[k] = 1.0
+        cols.append(legendre.legval(x, c) - legendre.legval(x0, c))
+    return np.column_stack(cols) if cols else np.zeros((n, 0))
 
 
 class SensorDrift(Effect):
-    """A slow drift of the strain sensor over the whole simulated sequence:
-    ``S -> S + sum_k c_k cos(pi k (t + dt/2) / T)``, ``k = 1..3``, ``T`` the sequence's
-    duration (:func:`drift_basis`), ``c_k`` in ue.
+    """A slow drift of the strain sensor over the whole simulated sequence, from the zero it
+    starts at: ``S -> S + sum_k c_k (P_k(x) - P_k(x_0))``, ``k = 1..3``, ``x = 2 t / T - 1``
+    (``t`` mid-sample, ``T`` the sequence's duration), ``P_k`` the Legendre polynomials
+    (:func:`drift_basis`), ``c_k`` in ue: a cubic in time, 0 on the first sample.
 
     Physics: the gauge bridge's zero wanders as it warms up and as its adhesive relaxes, slowly
-    and independently of the voltage, over the whole run (minutes), not entry by entry.
+    and independently of the voltage, over the whole run (minutes), not entry by entry. The
+    conditioner is balanced before the run, so the drift starts at 0 and moves one way: a
+    warm-up ``D (1 - exp(-t / tau))`` has a mean of 0.3-0.6 ``D`` over a sequence of 0.8 to 2
+    ``tau``, and is steepest at the start. The earlier form (three cosines ``cos(pi k t / T)``
+    of zero mean) could hold neither: fitted to the bench's ``gauge_warmup`` (60 ue, tau 30 s)
+    over a 24 s sequence, it left 18.7 of the warm-up's 21 ue RMS; cosines shifted to start at 0
+    still left 1.1 ue (each has zero slope at the start); this cubic leaves 0.004 ue (0.02 %),
+    0.4 % for tau 10 s, 2 % for tau 5 s.
 
     Why global, not a nuisance: ``offset_drift`` already is the per-entry form (an offset and a
     slope per entry, eliminated by least squares, 2 parameters per entry); a per-entry linear
@@ -40,8 +61,9 @@ class SensorDrift(Effect):
     within long entries that a per-entry line cannot follow. On a chained run (``chain=True``)
     the sequence is the campaign; with records simulated apart each record is its own sequence
     and the three terms are one drift shape shared by every record (a drift that restarts with
-    each capture, e.g. a sensor re-zeroed at each start). Its terms have zero mean over the
-    sequence: a constant offset is the per-entry offset's. Acts additively on the measured
+    each capture, e.g. a sensor re-zeroed at each start). A constant zero error (a bridge that
+    was never balanced) is not a drift: it is the per-entry offset's (``--offset``), with which
+    these terms stay identifiable (they are not constant). Acts additively on the measured
     output (so its tangent along the strain is the identity, not the effect itself).
 
     Signature: a smooth trend across entries that is independent of the voltage, present in
@@ -54,7 +76,10 @@ class SensorDrift(Effect):
     where = "output"
     acts_on = "measured strain (additive, whole sequence)"
     params_doc = "`c1_ue`, `c2_ue`, `c3_ue` (0)"
-    form = "`S + sum_k c_k cos(pi k t/T)`, `k = 1..3`, `T` the sequence's duration"
+    form = (
+        "`S + sum_k c_k (P_k(2t/T - 1) - P_k(-1))`, `P_k` Legendre, `k = 1..3`: a cubic in `t` "
+        "from 0"
+    )
     physics = "slow drift of the strain sensor's zero over the whole run"
     signature = "smooth trend across entries, independent of V, continuing through rests"
     confusable = ("offset_drift", "thermal_drift", "creep")
