@@ -12,7 +12,9 @@ each held-out entry):
   explains most of what is left is named instead of being left to empirical terms;
 - it is better (by more than :data:`FOLD_TOL`, 2 %) in at least two folds and in at least twice
   as many folds as it is worse;
-- none of its physical parameters ends on a bound or on the wrong side of its null value.
+- none of its physical parameters ends on a bound or on the wrong side of its null value, and
+  the effect finds nothing meaningless in its fit (:meth:`Effect.refusals`, e.g. a sensor
+  low-pass whose damping ends at its resonant end).
 
 Points that do not reject the candidate but make it doubtful (an unexpected sign, a poorly
 determined parameter, the effect's own caveats) are kept as "suspicious" for the verdict.
@@ -117,6 +119,7 @@ def accept(
         scale = abs(v) if q.log else abs(v - q.null)
         if q.check_bounds and s is not None and s > 0.5 * scale:
             suspicious.append(f"{q.name} is poorly determined ({v:.3g} +- {s:.2g})")
+    reasons += eff.refusals(p, sd)
     suspicious += eff.caveats(p, span_s)
     return Acceptance(not reasons, gain, wins, losses, reasons, suspicious)
 

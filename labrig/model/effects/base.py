@@ -162,6 +162,14 @@ class Effect:
         simulated sequence, s) although they passed: plain sentences; none by default."""
         return []
 
+    def refusals(self, p: Mapping[str, float], sd: Mapping[str, float | None]) -> list[str]:
+        """What makes fitted parameters ``p`` (1-sigma ``sd``) meaningless for this effect,
+        beyond a parameter on a bound or of the wrong sign (which the acceptance rule checks for
+        every effect): plain sentences, each a reason to refuse the candidate; none by default.
+        An effect whose fit can drift into describing another mechanism (a filter's damping
+        pushed to its resonant end) says so here."""
+        return []
+
     def physical(self, p: Mapping[str, float]) -> dict[str, float]:
         """Reported parameters (derived units, e.g. a cutoff in Hz instead of a time constant)."""
         return {k: float(v) for k, v in p.items()}

@@ -19,6 +19,14 @@ class SensorLowpass(Effect):
     with frequency, the same percentage at 50 and 100 V. Null: ``tau = 0``. Confusable with a
     delay (below the cutoff a Butterworth section *is* a delay of ``sqrt 2 tau`` to first order),
     a load resonance and the model's own ``G_d``.
+
+    Refused (:meth:`refusals`) when the damping ends at its lower end (0.2, a peak of 2.55x,
+    +8 dB, at the cutoff): a conditioner's filter is not built with such a peak, and a fit that
+    wants less damping still is a mechanical resonance (``mechanical_resonance``) borrowing the
+    low-pass's form; its cutoff then means nothing (on a real bipolar record such a fit gave
+    54 +- 388 Hz). The upper end (5) is the first-order limit and is not a refusal. A cutoff
+    known to no better than half its value is reported as poorly determined, like any other
+    parameter.
     """
 
     name = "sensor_lowpass"
@@ -35,6 +43,23 @@ class SensorLowpass(Effect):
         Param("tau_s", "s", 0.0, 0.0, 0.02, 5e-4, sign=+1, starts=(1e-4, 3e-4, 1e-3, 3e-3, 1e-2)),
         Param("zeta", "", 0.7, 0.2, 5.0, 0.7, check_bounds=False),
     )
+
+    #: a damping within this of its lower bound is "at" it (the fit's own bound test: 1e-6 of
+    #: the range; a damping of 0.2005 is already resolved from the bound)
+    AT_LOWER_DAMPING = 1e-4
+
+    def refusals(self, p, sd):
+        lo = self.params[1].lo
+        zeta = p.get("zeta")
+        if p.get("tau_s", 0.0) <= 0 or zeta is None or zeta > lo + self.AT_LOWER_DAMPING:
+            return []
+        fc = 1.0 / (2 * np.pi * p["tau_s"])
+        return [
+            f"damping = {zeta:.3g} ends at its resonant end ({lo:g}, a peak of "
+            f"{1 / (2 * lo * np.sqrt(1 - lo * lo)):.3g}x at the cutoff): a conditioner's filter "
+            f"has no such peak, so the fit (fc {fc:.3g} Hz) is a resonance, not a low-pass "
+            "(try --also mechanical_resonance)"
+        ]
 
     def apply(self, x, ctx, p):
         from scipy import signal  # lazy: a second of import CPU
