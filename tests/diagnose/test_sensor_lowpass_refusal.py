@@ -129,3 +129,19 @@ def test_the_low_pass_fitted_to_a_resonance_ends_at_its_resonant_end(planted, p,
         assert got["zeta"] == pytest.approx(LO, abs=LP.AT_LOWER_DAMPING)
     else:
         assert got["zeta"] == pytest.approx(0.71, abs=0.05)
+
+
+def test_an_over_damped_fit_is_described_by_its_real_poles():
+    """Damping 3.23 and fc 59 Hz (the low-pass fitted to the real SmartHysteresis record): the
+    section ``1 / (1 + 2 zeta tau s + (tau s)^2)`` is two first-order lags, whose corners are the
+    roots of its denominator (numpy.roots, 1e-9): the slow one (9.4 Hz) is what the fit means,
+    not the poorly determined fc; a Butterworth section (0.71) has no real poles."""
+    tau, zeta = 1 / (2 * np.pi * 59.0), 3.23
+    slow, fast = LP.real_corners_hz({"tau_s": tau, "zeta": zeta})
+    roots = np.sort(np.abs(np.roots([tau * tau, 2 * zeta * tau, 1.0]))) / (2 * np.pi)
+    np.testing.assert_allclose([slow, fast], roots, rtol=1e-9)
+    assert 9.0 < slow < 9.5
+    text = LP.describe({"tau_s": tau, "zeta": zeta}, {"tau_s": 8 * tau})
+    assert "two real poles" in text and f"{slow:.3g}" in text
+    assert LP.real_corners_hz({"tau_s": tau, "zeta": 0.71}) is None
+    assert "real poles" not in LP.describe({"tau_s": tau, "zeta": 0.71}, {})

@@ -23,10 +23,13 @@ class SensorLowpass(Effect):
     Refused (:meth:`refusals`) when the damping ends at its lower end (0.2, a peak of 2.55x,
     +8 dB, at the cutoff): a conditioner's filter is not built with such a peak, and a fit that
     wants less damping still is a mechanical resonance (``mechanical_resonance``) borrowing the
-    low-pass's form; its cutoff then means nothing (on a real bipolar record such a fit gave
-    54 +- 388 Hz). The upper end (5) is the first-order limit and is not a refusal. A cutoff
-    known to no better than half its value is reported as poorly determined, like any other
-    parameter.
+    low-pass's form, and its cutoff then means nothing (the structural study's resonant stack
+    was taken that way while ``mechanical_resonance`` could not be ranked). The upper end (5) is
+    the first-order limit and is not a refusal. An over-damped fit (``zeta > 1``) is two real
+    poles, and ``fc`` alone then trades against ``zeta`` (poorly determined, which is reported as
+    for any parameter known to no better than half its value): :meth:`describe` adds the two
+    corners (on the real SmartHysteresis record, fc 59 Hz +- 860 % and damping 3.2 are a
+    9.4 Hz first-order lag, :meth:`real_corners_hz`).
     """
 
     name = "sensor_lowpass"
@@ -91,6 +94,27 @@ class SensorLowpass(Effect):
         if tau <= 0:
             return "no low-pass"
         fc = 1.0 / (2 * np.pi * tau)
-        return plus_minus("fc", fc, None if s is None else fc * s / tau, "Hz") + plus_minus(
+        text = plus_minus("fc", fc, None if s is None else fc * s / tau, "Hz") + plus_minus(
             ", damping", p["zeta"], sd.get("zeta"), ""
+        )
+        poles = self.real_corners_hz(p)
+        if poles is None:
+            return text
+        slow, fast = poles
+        return (
+            f"{text}: over-damped, two real poles at {slow:.3g} and {fast:.3g} Hz (a first-order "
+            f"lag of corner {slow:.3g} Hz below {fast:.3g} Hz; fc and the damping trade against "
+            "each other along it)"
+        )
+
+    def real_corners_hz(self, p) -> tuple[float, float] | None:
+        """For a damping of 1 or more, the section's two real poles as corners (Hz), slow first:
+        ``1 / (2 pi tau (zeta +- sqrt(zeta^2 - 1)))``; ``None`` below 1 (complex poles)."""
+        tau, zeta = p["tau_s"], p["zeta"]
+        if tau <= 0 or zeta < 1.0:
+            return None
+        r = np.sqrt(zeta * zeta - 1.0)
+        return (
+            float(1.0 / (2 * np.pi * tau * (zeta + r))),
+            float(1.0 / (2 * np.pi * tau * (zeta - r))),
         )
