@@ -429,6 +429,25 @@ def test_sensor_drift_adds_a_cubic_from_the_start_and_passes_the_strain_through(
     np.testing.assert_array_equal(eff.tangent(x, dx, _ctx(x), c), dx)
 
 
+def test_sensor_drift_moves_the_span_with_the_zero():
+    """With ``g`` the strain is scaled by ``1 + g z / 100 ue`` along the zero's own drift ``z``
+    (the same effect with ``g = 0``, minus the strain): against that product written out
+    (1e-9 ue); its tangent along the strain is that factor (differences of ``apply`` along a
+    random direction, exact as the effect is affine in the strain)."""
+    eff = library()["sensor_drift"]
+    n = 3000
+    x = 9.0 * _bipolar(n)
+    c = {"c1_ue": 30.0, "c2_ue": -4.0, "c3_ue": 1.0}
+    z = eff.apply(np.zeros(n), _ctx(x), {**c, "span_per_100ue": 0.0})
+    got = eff.apply(x, _ctx(x), {**c, "span_per_100ue": 0.02})
+    np.testing.assert_allclose(got, x * (1 + 0.02 * z / 100.0) + z, rtol=0, atol=1e-9)
+    assert np.max(np.abs(got - x - z)) > 0.05  # the span's share is there (ue)
+    dx = np.random.default_rng(1).normal(size=n)
+    p = {**c, "span_per_100ue": 0.02}
+    ref = eff.apply(x + dx, _ctx(x), p) - eff.apply(x, _ctx(x), p)
+    np.testing.assert_allclose(eff.tangent(x, dx, _ctx(x), p), ref, rtol=0, atol=1e-9)
+
+
 def test_sensor_drift_holds_a_warm_up_from_a_balanced_zero():
     """A warm-up ``D (1 - exp(-t / tau))`` (D 60 ue, tau 30 s over a 24 s sequence, the
     structural study's): the three terms fitted by least squares leave under 0.1 % of its RMS
@@ -503,7 +522,7 @@ JAC_AT = {
     "mechanical_resonance": {"tau_r_s": 1 / (2 * np.pi * 300.0), "zeta": 0.1, "internal": 0.5},
     "negative_field_asymmetry": {"a": 0.2},
     "rate_hysteresis": {"A_ue_per_V": -1.0, "beta_per_V": 0.03, "tau_h_s": 3e-3},
-    "sensor_drift": {"c1_ue": 10.0, "c2_ue": -5.0, "c3_ue": 2.0},
+    "sensor_drift": {"c1_ue": 10.0, "c2_ue": -5.0, "c3_ue": 2.0, "span_per_100ue": 0.05},
 }
 
 

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.polynomial import legendre
 from numpy.typing import NDArray
 
-from labrig.model.effects.base import Context, Effect, Param
+from labrig.model.effects.base import Context, Effect, Param, plus_minus
 
 __all__ = ["TERMS", "SensorDrift", "drift_basis"]
 
@@ -39,9 +39,11 @@ def drift_basis(n: int, terms: int = TERMS) -> NDArray[np.float64]:
 
 class SensorDrift(Effect):
     """A slow drift of the strain sensor over the whole simulated sequence, from the zero it
-    starts at: ``S -> S + sum_k c_k (P_k(x) - P_k(x_0))``, ``k = 1..3``, ``x = 2 t / T - 1``
-    (``t`` mid-sample, ``T`` the sequence's duration), ``P_k`` the Legendre polynomials
-    (:func:`drift_basis`), ``c_k`` in ue: a cubic in time, 0 on the first sample.
+    starts at, in its zero and with it its span: ``S -> S (1 + g z(t) / 100 ue) + z(t)``,
+    ``z(t) = sum_k c_k (P_k(x) - P_k(x_0))``, ``k = 1..3``, ``x = 2 t / T - 1`` (``t``
+    mid-sample, ``T`` the sequence's duration), ``P_k`` the Legendre polynomials
+    (:func:`drift_basis`), ``c_k`` in ue: a cubic in time, 0 on the first sample; ``g`` the
+    span's relative change per 100 ue of zero drift.
 
     Physics: the gauge bridge's zero wanders as it warms up and as its adhesive relaxes, slowly
     and independently of the voltage, over the whole run (minutes), not entry by entry. The
@@ -53,6 +55,15 @@ class SensorDrift(Effect):
     still left 1.1 ue (each has zero slope at the start); this cubic leaves 0.004 ue (0.02 %),
     0.4 % for tau 10 s, 2 % for tau 5 s.
 
+    Why the span: the zero and the sensitivity of a bridge and its conditioner move with the same
+    temperature (the gauge factor, the bridge's completion resistors, the conditioner's gain), so
+    a warm-up changes the span along the zero's time course; the span's share is the strain
+    times it, which no additive term holds and which differs between entries at different mean
+    strains. One coefficient ties it to the zero (both follow one temperature); ``g = 0`` is a
+    zero drift alone. On the bench's warm-up (zero 60 ue, span 1 %, so 1.7 % per 100 ue) the
+    fitted ``g`` is 1.56 +- 0.04 %, and without it a per-entry offset and slope
+    (``offset_drift``, refitted on each held-out entry) held the warm-up better than this drift.
+
     Why global, not a nuisance: ``offset_drift`` already is the per-entry form (an offset and a
     slope per entry, eliminated by least squares, 2 parameters per entry); a per-entry linear
     trend carrying a large share of the residual (23 % on a four-waveform record) is found by
@@ -63,22 +74,24 @@ class SensorDrift(Effect):
     and the three terms are one drift shape shared by every record (a drift that restarts with
     each capture, e.g. a sensor re-zeroed at each start). A constant zero error (a bridge that
     was never balanced) is not a drift: it is the per-entry offset's (``--offset``), with which
-    these terms stay identifiable (they are not constant). Acts additively on the measured
-    output (so its tangent along the strain is the identity, not the effect itself).
+    these terms stay identifiable (they are not constant). Acts on the measured output: its
+    tangent along the strain is the span factor ``1 + g z / 100 ue`` (the identity when ``g =
+    0``), not the effect itself.
 
     Signature: a smooth trend across entries that is independent of the voltage, present in
-    rests and at 0 V, continuing through the rests between entries. Null: every ``c_k = 0``.
+    rests and at 0 V, continuing through the rests between entries. Null: every ``c_k = 0`` (then
+    ``g`` acts on nothing) and ``g = 0``.
     Confusable with ``offset_drift`` (the per-entry form), ``thermal_drift`` (which scales with
     the strain) and ``creep`` (which follows the voltage's changes).
     """
 
     name = "sensor_drift"
     where = "output"
-    acts_on = "measured strain (additive, whole sequence)"
-    params_doc = "`c1_ue`, `c2_ue`, `c3_ue` (0)"
+    acts_on = "measured strain (zero and span, whole sequence)"
+    params_doc = "`c1_ue`, `c2_ue`, `c3_ue` (0), `span_per_100ue` (0)"
     form = (
-        "`S + sum_k c_k (P_k(2t/T - 1) - P_k(-1))`, `P_k` Legendre, `k = 1..3`: a cubic in `t` "
-        "from 0"
+        "`S (1 + g z/100 ue) + z`, `z = sum_k c_k (P_k(2t/T - 1) - P_k(-1))`, `P_k` Legendre, "
+        "`k = 1..3`: a cubic in `t` from 0, the span following the zero"
     )
     physics = "slow drift of the strain sensor's zero over the whole run"
     signature = "smooth trend across entries, independent of V, continuing through rests"
@@ -87,9 +100,13 @@ class SensorDrift(Effect):
         "record the sensor at 0 V before, between and after the entries: a sensor drift moves "
         "there too; thermal drift and creep do not move at 0 V"
     )
-    params = tuple(
-        Param(f"c{k}_ue", "ue", 0.0, -500.0, 500.0, 1.0 if k == 1 else 0.0)
-        for k in range(1, TERMS + 1)
+    params = (
+        *(
+            Param(f"c{k}_ue", "ue", 0.0, -500.0, 500.0, 1.0 if k == 1 else 0.0)
+            for k in range(1, TERMS + 1)
+        ),
+        # the span's relative change per 100 ue of zero drift: 20 % is a broken bridge
+        Param("span_per_100ue", "", 0.0, -0.2, 0.2, 0.0),
     )
 
     def basis(self, ctx: Context, n: int) -> NDArray:
@@ -97,26 +114,48 @@ class SensorDrift(Effect):
         return ctx.cached(("drift_basis", n), lambda: drift_basis(n))
 
     def _coeffs(self, p) -> NDArray:
-        return np.array([p[q.name] for q in self.params], dtype=float)
+        return np.array([p[f"c{k}_ue"] for k in range(1, TERMS + 1)], dtype=float)
+
+    def zero(self, ctx: Context, n: int, p) -> NDArray:
+        """The zero's drift ``z`` (ue) over a sequence of ``n`` samples."""
+        return self.basis(ctx, n) @ self._coeffs(p)
+
+    def _span(self, ctx: Context, n: int, p) -> NDArray | float:
+        g = p.get("span_per_100ue", 0.0)
+        return 1.0 + (g / 100.0) * self.zero(ctx, n, p) if g else 1.0
 
     def apply(self, x, ctx, p):
         c = self._coeffs(p)
         if not np.any(c):
             return x
-        return x + self.basis(ctx, x.shape[0]) @ c
+        z = self.zero(ctx, x.shape[0], p)
+        return x * (1.0 + (p.get("span_per_100ue", 0.0) / 100.0) * z) + z
 
     def tangent(self, x, dx, ctx, p):
-        return dx  # additive: the strain's changes pass unchanged
+        return dx * self._span(ctx, x.shape[0], p)  # the strain's changes through the span
 
     def tangent_columns(self, x, dX, ctx, p):
-        return dX
+        span = self._span(ctx, x.shape[0], p)
+        return dX * (span[:, None] if isinstance(span, np.ndarray) else span)
 
     def parameter_derivatives(self, x, ctx, p):
         B = self.basis(ctx, x.shape[0])
-        return {q.name: B[:, j] for j, q in enumerate(self.params)}
+        g = p.get("span_per_100ue", 0.0) / 100.0
+        out = {f"c{k}_ue": B[:, k - 1] * (1.0 + g * x) for k in range(1, TERMS + 1)}
+        out["span_per_100ue"] = x * (B @ self._coeffs(p)) / 100.0
+        return out
 
     def describe(self, p, sd):
         c = self._coeffs(p)
         peak = float(np.max(np.abs(drift_basis(256) @ c)))
         terms = ", ".join(f"{v:.3g}" for v in c)
-        return f"sensor drift up to {peak:.3g} ue over the sequence (cosine terms {terms} ue)"
+        g = p.get("span_per_100ue", 0.0)
+        return (
+            f"sensor drift up to {peak:.3g} ue over the sequence (Legendre terms {terms} ue), "
+            + plus_minus(
+                "span",
+                100 * g,
+                None if sd.get("span_per_100ue") is None else 100 * sd["span_per_100ue"],
+                "% per 100 ue of zero drift",
+            )
+        )
