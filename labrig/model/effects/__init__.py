@@ -9,7 +9,8 @@ places:
 - ``"output"``: on the modelled strain of a whole simulated sequence (operator gain and creep:
   ``thermal_drift``, ``creep``; the measuring chain: ``sensor_lowpass``, ``time_delay``); every
   output effect is *linear* in the strain it receives, or affine: ``sensor_drift`` adds a term
-  that does not depend on the strain, and says so with its tangent (the identity);
+  that does not depend on the strain and scales the strain by its span factor, and says so with
+  its tangent (that factor);
 - ``"operator"``: an additive strain term computed from the operator's input ``V*`` (hysteresis
   the paper's operator cannot hold: ``remanence``); fitted like the output effects, and the
   compensation controller inverts it with the operator;
