@@ -216,7 +216,7 @@ def fit_part(source: Snapshot | Path, opt: TaskOptions, out: TaskResult) -> None
         )
 
 
-def _base_fit(snap: Snapshot) -> FitResult | None:
+def task_base_fit(snap: Snapshot) -> FitResult | None:
     """The fit :func:`fit_part` made of this snapshot, for the diagnosis to use as its base
     fit (it checks that the fit is the one it would make:
     :func:`~labrig.analysis.diagnose.procedure.base_fit_reusable`): our model, every entry
@@ -245,7 +245,7 @@ def diagnose_part(source: Snapshot | Path, opt: TaskOptions, out: TaskResult) ->
         mains_hz=opt.mains_hz,
         say=notes.append,
         snapshot=snap.run,
-        base_fit=_base_fit(snap),
+        base_fit=task_base_fit(snap),
     )
     d, doc = result.diagnosis, result.document
     out.documents.update(result.documents())
