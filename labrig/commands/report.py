@@ -408,13 +408,14 @@ def render_page(setup: Setup, data: ReportData) -> str:
     """The figures and the HTML page of ``data``."""
     from labrig.report.control_section import control_context
     from labrig.report.html import render
-    from labrig.report.plots import entry_figure, frequency_figure
+    from labrig.report.plots import EntryFigures, frequency_figure
 
     models = data.models
     unit = strain_unit(setup.scored_records)
     noise = data.noise_floor.noise_ue if data.noise_floor else None
     dyn = models["dynamic"].predictions or {}
     pngs = {}
+    entry_figure = EntryFigures()  # one figure, emptied from entry to entry
     for e in data.entries:
         if e.name not in dyn:
             continue
