@@ -55,7 +55,7 @@ def set_title(ax: Axes, text: str, **kwargs: Any) -> bool:
     automatic placement lifts the title over. Call it once the axes' data are plotted (the
     offset depends on the y limits). ``True`` when the title is fixed."""
     fmt = ax.yaxis.get_major_formatter()
-    fmt.set_locs(ax.yaxis.get_majorticklocs())
+    fmt.set_locs([float(x) for x in ax.yaxis.get_majorticklocs()])
     fixed = not fmt.get_offset()
     ax.set_title(text, y=1.0 if fixed else None, **kwargs)
     return fixed
