@@ -205,18 +205,25 @@ def capture_records(
 
 
 def write_captures(
-    out_dir: Path | str, seed: int = 1, *, truth: str = "stack", overwrite: bool = False
+    out_dir: Path | str,
+    seed: int = 1,
+    *,
+    truth: str = "stack",
+    overwrite: bool = False,
+    names: Sequence[str] | None = None,
 ) -> list[Path]:
-    """Write the four captures as ``OUT_DIR/NAME.csv`` (header ``time_s,voltage_V,strain_ue``;
-    ``%.6g`` s, ``%.5f`` V, ``%.4f`` ue) and return their paths. An existing file is replaced
-    only with ``overwrite`` (each written beside, then renamed)."""
+    """Write the captures (:func:`capture_records`: the four, or ``names`` of them) as
+    ``OUT_DIR/NAME.csv`` (header ``time_s,voltage_V,strain_ue``; ``%.6g`` s, ``%.5f`` V,
+    ``%.4f`` ue) and return their paths. An existing file is replaced only with ``overwrite``
+    (each written beside, then renamed; checked for all before any is simulated)."""
     from labrig.core.outputs import check_writable, write_text_output
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    paths = [out / f"{name}.csv" for name in CAPTURES]
+    chosen = list(names or CAPTURES)
+    paths = [out / f"{name}.csv" for name in chosen]
     check_writable(paths, inputs=[], overwrite=overwrite)
-    for path, r in zip(paths, capture_records(seed, truth=truth), strict=True):
+    for path, r in zip(paths, capture_records(seed, truth=truth, names=chosen), strict=True):
         rows = np.column_stack([r.time_s, r.voltage_V, r.strain_ue])
         lines = ["time_s,voltage_V,strain_ue"]
         lines += [f"{t:.6g},{v:.5f},{s:.4f}" for t, v, s in rows.tolist()]
