@@ -519,7 +519,9 @@ def validate_leave_one_out(
             f"got {len(paths)}",
             "--leave-one-out",
         )
-    check_files(paths[:1], paths[1:])
+    for k, p in enumerate(paths):
+        if any(same_file(p, q) for q in paths[:k]):
+            raise _issue(p, "given twice to --leave-one-out (every file is one record)", "FILES")
     folds = []
     for k, held in enumerate(paths):
         train = [p for j, p in enumerate(paths) if j != k]
