@@ -101,6 +101,6 @@ def test_written_csv_imports_as_the_capture(tmp_path: Path):
 
 def test_never_replaces_a_file_without_overwrite(tmp_path: Path):
     (tmp_path / "prbs.csv").write_text("keep\n")
-    with pytest.raises(InputFileError, match="prbs.csv"):
+    with pytest.raises(InputFileError, match=r"prbs\.csv"):
         write_captures(tmp_path, names=["prbs"])
     assert (tmp_path / "prbs.csv").read_text() == "keep\n"
