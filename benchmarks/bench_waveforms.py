@@ -3,8 +3,8 @@ never saw.
 
 Run from the repository root (markdown on stdout, the commands' JSON kept in ``--work``):
 
-    .venv/bin/python benchmarks/bench_waveforms.py --work /tmp/waveforms            # seed 1
-    .venv/bin/python benchmarks/bench_waveforms.py --work /tmp/w2 --seed 2 --also   # + structural
+    nice -n 10 .venv/bin/python benchmarks/bench_waveforms.py --work /tmp/waveforms   # seed 1
+    nice -n 10 .venv/bin/python benchmarks/bench_waveforms.py --work /tmp/w2 --also  # + structural
 
 What it does (:mod:`labrig.studies.waveforms` holds the captures and their truth):
 
@@ -63,12 +63,11 @@ def yardstick() -> float:
 
 
 def run(args: list[str], out: Path | None = None) -> tuple[float, str]:
-    """Run a command (nice 10), its stdout to ``out``; CPU s of the child and its stderr."""
+    """Run a command (at this process's niceness), its stdout to ``out``; CPU s of the child
+    and its stderr."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     with open(out, "w") if out else open(os.devnull, "w") as f:
-        p = subprocess.run(
-            ["nice", "-n", "10", *args], stdout=f, stderr=subprocess.PIPE, text=True, cwd=ROOT
-        )
+        p = subprocess.run(args, stdout=f, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     if p.returncode != 0:
