@@ -74,6 +74,7 @@ __all__ = [
     "Diagnosis",
     "base_fit_reusable",
     "diagnose",
+    "drives_against_poling",
     "slow_mode_identifiable",
     "split_entries",
 ]
@@ -145,6 +146,21 @@ def slow_mode_identifiable(records: Sequence[Record]) -> bool:
         if f is None or f <= SLOW_MODE_MAX_HZ or not is_periodic(r.voltage_V, r.rate_hz, f):
             return True
     return False
+
+
+#: a drive goes against the poling when some record reaches below minus this share of the
+#: largest |V| of the records (V): there ``negative_field_asymmetry`` is not identically null
+AGAINST_POLING_SHARE = 0.2
+
+
+def drives_against_poling(records: Sequence[Record]) -> bool:
+    """Whether some record's voltage goes below ``-AGAINST_POLING_SHARE`` times the largest
+    ``|V|`` of ``records``: a bipolar or negatively biased drive, where a poled ceramic's
+    ``d33`` falling against its poling (``negative_field_asymmetry``) can be seen. On a
+    unipolar drive the effect is identically null."""
+    top = max((float(np.max(np.abs(r.voltage_V))) for r in records if r.voltage_V.size), default=0)
+    low = min((float(np.min(r.voltage_V)) for r in records if r.voltage_V.size), default=0.0)
+    return top > 0 and low < -AGAINST_POLING_SHARE * top
 
 
 def diagnose(
@@ -291,6 +307,15 @@ def candidate_names(
         else:
             names.remove("viscoelastic_creep")
             messages.append(f"{why}: viscoelastic_creep not tried")
+    if "negative_field_asymmetry" in names and not drives_against_poling(records):
+        # identically null on such drives: left out without a word unless asked for
+        if "negative_field_asymmetry" in always:
+            messages.append(
+                f"no drive below -{AGAINST_POLING_SHARE:g} x the largest |V| (against the "
+                "poling): negative_field_asymmetry tried as asked (--also), its effect is null"
+            )
+        else:
+            names.remove("negative_field_asymmetry")
     if not mains_given and "mains_pickup" in names and not mains_seen:
         names.remove("mains_pickup")
         messages.append(
