@@ -6,6 +6,7 @@ Run from the repository root (about 3 minutes on a loaded 2-core machine):
     .venv/bin/python benchmarks/bench_baselines.py --before REV    # against another commit
     .venv/bin/python benchmarks/bench_baselines.py --quick         # this tree only, 1 repeat
     .venv/bin/python benchmarks/bench_baselines.py --report-phases RUN.h5  # report, step by step
+                                                         # (--repeats N: N + 1 processes)
 
 Prints a report in markdown (stdout); the figures of record are copied into the "Baselines"
 section of benchmarks/RESULTS.md by hand. What is measured, and how:
@@ -191,12 +192,12 @@ def agreement(a: dict, b: dict) -> dict:
     return out
 
 
-def report_phases(run: str) -> None:
+def report_phases(run: str) -> list[tuple[str, float]]:
     """``--report-phases RUN``: the CPU seconds of each step of ``labrig report RUN --out ...``
     in this process (``time.process_time``; the file is read in a child process, not counted),
-    as :func:`labrig.commands.report.build_run_report` runs them: imports, our model's fit with
-    leave-one-entry-out, each peer with its own, the metrics, the figures and the page; with the
-    yardstick of the same process."""
+    as :func:`labrig.commands.report.build_run_report` runs them (with one BLAS thread, as it
+    sets): imports, our model's fit with leave-one-entry-out, each peer with its own, the
+    metrics, the figures and the page."""
     t0 = time.process_time()
     steps: list[tuple[str, float]] = []
 
@@ -206,39 +207,59 @@ def report_phases(run: str) -> None:
         steps.append((name, t - t0))
         t0 = t
 
-    import numpy as np
-
     from labrig.commands.fit import fit_dynamic
     from labrig.commands.prepare import prepare
     from labrig.commands.report import fit_report_models, metrics_table, render_page, report_data
+    from labrig.core.blas import single_thread_blas
 
     lap("import numpy, labrig's report command (scipy.optimize, h5py, numba)")
     setup = prepare(Path(run), None, None, None)
     lap("read the run file (its child's CPU not counted)")
-    ours = fit_dynamic(setup, "global", True, None)
-    lap("our model: fit with leave-one-entry-out")
+    with single_thread_blas():
+        ours = fit_dynamic(setup, "global", True, None)
+        lap("our model: fit with leave-one-entry-out")
 
-    def progress(stage: str, done: int, total: int) -> None:
-        if stage in KINDS and done == total:  # a peer fitted, with its held-out folds
-            lap(f"{LABEL[stage]} with leave-one-entry-out (first in the process: its imports)")
+        def progress(stage: str, done: int, total: int) -> None:
+            if stage in KINDS and done == total:  # a peer fitted, with its held-out folds
+                lap(f"{LABEL[stage]} with leave-one-entry-out (first in the process: its imports)")
 
-    fitted = fit_report_models(setup, None, None, "global", True, progress, ours)
-    data = report_data(setup, fitted, True, False)
-    metrics_table(setup, data)
-    lap("the metrics (report --json)")
-    render_page(setup, data)
-    lap("the figures and the page (matplotlib imported here)")
-    x = np.random.default_rng(0).random(1_000_000)
-    ys = []
-    for _ in range(5):
-        t = time.process_time()
-        np.sort(x)
-        ys.append(time.process_time() - t)
-    print(f"{run}: load {os.getloadavg()[0]:.1f}, yardstick {1e3 * min(ys):.1f} ms\n")
-    print("| step | CPU s |\n|---|---|")
-    for name, dt in steps:
-        print(f"| {name} | {dt:.2f} |")
-    print(f"| **in all** | **{sum(dt for _, dt in steps):.2f}** |")
+        fitted = fit_report_models(setup, None, None, "global", True, progress, ours)
+        data = report_data(setup, fitted, True, False)
+        metrics_table(setup, data)
+        lap("the metrics (report --json)")
+        render_page(setup, data)
+        lap("the figures and the page (matplotlib imported here)")
+    return steps
+
+
+def report_phases_table(run: str, repeats: int) -> None:
+    """The steps of :func:`report_phases` in ``repeats`` fresh processes: median and range of
+    each, with the yardstick (``numpy.sort`` of 1e6 floats, CPU, best of 5 in this process)
+    and the load average before and after."""
+    import numpy as np
+
+    def yardstick() -> float:
+        x = np.random.default_rng(0).random(1_000_000)
+        ys = []
+        for _ in range(5):
+            t = time.process_time()
+            np.sort(x)
+            ys.append(time.process_time() - t)
+        return min(ys)
+
+    load0, y0 = os.getloadavg()[0], yardstick()
+    runs = [run_child(["--phases-child", run]) for _ in range(repeats)]
+    load1, y1 = os.getloadavg()[0], yardstick()
+    when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    print(f"{when}, {run}: load {load0:.1f} -> {load1:.1f}, yardstick {1e3 * y0:.1f} / "
+          f"{1e3 * y1:.1f} ms; {repeats} processes\n")  # fmt: skip
+    print("| step | CPU s, median (range) |\n|---|---|")
+    names = [n for n, _ in runs[0]]
+    for i, name in enumerate(names):
+        xs = sorted(r[i][1] for r in runs)
+        print(f"| {name} | {xs[len(xs) // 2]:.2f} ({xs[0]:.2f}-{xs[-1]:.2f}) |")
+    tot = sorted(sum(dt for _, dt in r) for r in runs)
+    print(f"| **in all** | **{tot[len(tot) // 2]:.2f}** ({tot[0]:.2f}-{tot[-1]:.2f}) |")
 
 
 def main() -> int:
@@ -247,11 +268,15 @@ def main() -> int:
     ap.add_argument("--repeats", type=int, default=2, help="fits after the first, per peer")
     ap.add_argument("--quick", action="store_true", help="this tree only, one repeat, no CLI")
     ap.add_argument("--report-phases", metavar="RUN", help="the steps of labrig report RUN")
+    ap.add_argument("--phases-child", metavar="RUN", help=argparse.SUPPRESS)
     ap.add_argument("--child", nargs=3, metavar=("SRC", "RUN", "REPEATS"), help=argparse.SUPPRESS)
     ap.add_argument("--numba-child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.report_phases:
-        report_phases(args.report_phases)
+        report_phases_table(args.report_phases, 1 if args.quick else args.repeats + 1)
+        return 0
+    if args.phases_child:
+        print(json.dumps(report_phases(args.phases_child)))
         return 0
     if args.child:
         print(json.dumps(child(args.child[0], args.child[1], int(args.child[2]))))

@@ -4,6 +4,7 @@ Run from the repository root (a few minutes on a loaded 2-core machine)::
 
     .venv/bin/python benchmarks/bench_speed.py phases RUN.h5        # fit and diagnose, by step
     .venv/bin/python benchmarks/bench_speed.py library RUN.h5       # 4 more candidates
+    .venv/bin/python benchmarks/bench_speed.py fleet-task RUN.h5    # batch diagnose's base fit
 
 ``phases``: one fresh process each for ``fit`` and for ``diagnose`` (one worker), CPU seconds
 (``getrusage`` of the process and its children: the store reads a run file in a child process)
@@ -20,6 +21,13 @@ ranking's). The variants interleaved, ``--repeats`` times each (default 2); CPU 
 (``time.process_time``), the ratio to the library as it is, the candidates ranked and refitted,
 the effects added and the held-out NRMSE, and a yardstick (``numpy.sort`` of 1e6 floats) timed
 in the same process.
+
+``fleet-task``: what a ``batch diagnose`` task saves by giving its fit to the diagnosis
+(``diagnose(base_fit=...)``): one fresh process per variant, interleaved ``--repeats`` times
+each, both reading the file once and running the task's ``fit_part`` (``labrig fit`` with
+leave-one-entry-out), then the diagnosis with the fit (``reuse``) or fitting its own base as
+before (``refit``); CPU seconds (``getrusage``, children included) of the fit, of the diagnosis
+and of both, medians and ranges, and whether the two ``diagnosis.json`` documents are equal.
 
 Prints markdown on stdout (copied into ``benchmarks/RESULTS.md``).
 """
@@ -75,6 +83,25 @@ else:
     diagnose_run_file(path, progress=say, workers=1, snapshot=run)
     out.append((last[0] + " ... to the end", cpu()))
 print(json.dumps(out))
+"""
+
+#: what the child process of ``fleet-task`` runs: one JSON line (fit CPU s, diagnosis CPU s, doc)
+FLEET_TASK = r"""
+import json, resource, sys
+from pathlib import Path
+def cpu():
+    a = resource.getrusage(resource.RUSAGE_SELF); b = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
+from labrig.commands.diagnose import diagnose_run_file
+from labrig.fleet.tasks import TaskOptions, TaskResult, fit_part, read_snapshot, task_base_fit
+path, reuse = Path(sys.argv[1]), sys.argv[2] == "reuse"
+snap = read_snapshot(path)
+t = cpu()
+fit_part(snap, TaskOptions(), TaskResult("diagnose", str(path), "bench", False))
+t_fit = cpu() - t
+t = cpu()
+res = diagnose_run_file(path, snapshot=snap.run, base_fit=task_base_fit(snap) if reuse else None)
+print(json.dumps([t_fit, cpu() - t, res.document]))
 """
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -203,13 +230,43 @@ def library(path: Path, repeats: int) -> None:
         )
 
 
+def fleet_task(path: Path, repeats: int) -> None:
+    """``fleet-task`` (module docstring)."""
+    print(header() + "\n")
+    got: dict[str, list] = {"refit": [], "reuse": []}
+    for _ in range(repeats):
+        for variant in got:
+            res = subprocess.run(
+                [sys.executable, "-c", FLEET_TASK, str(path), variant],
+                capture_output=True,
+                text=True,
+                check=True,
+                cwd=ROOT,
+            )
+            got[variant].append(json.loads(res.stdout.strip().splitlines()[-1]))
+    same = all(r[2] == got["refit"][0][2] for rs in got.values() for r in rs)
+    print(f"`batch diagnose` task of {path.name}: `fit_part`, then the diagnosis, CPU s "
+          f"(median and range of {repeats} fresh processes each, interleaved):\n")  # fmt: skip
+    print("| diagnosis | fit (with leave-one-out) | the diagnosis | both |")
+    print("|---|---|---|---|")
+    for variant, label in (("refit", "fits its own base"), ("reuse", "takes the task's fit")):
+        rows = got[variant]
+        cells = []
+        for vals in ([r[0] for r in rows], [r[1] for r in rows], [r[0] + r[1] for r in rows]):
+            cells.append(f"{statistics.median(vals):.2f} ({min(vals):.2f}-{max(vals):.2f})")
+        print(f"| {label} | " + " | ".join(cells) + " |")
+    print(f"\n`diagnosis.json` of every process equal: {same}; load average now "
+          f"{os.getloadavg()[0]:.2f}")  # fmt: skip
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("phases", "library"))
+    ap.add_argument("what", choices=("phases", "library", "fleet-task"))
     ap.add_argument("run", type=Path)
     ap.add_argument("--repeats", type=int, default=2)
     a = ap.parse_args()
-    (phases if a.what == "phases" else library)(a.run.resolve(), a.repeats)
+    run = {"phases": phases, "library": library, "fleet-task": fleet_task}[a.what]
+    run(a.run.resolve(), a.repeats)
     return 0
 
 

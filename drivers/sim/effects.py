@@ -69,7 +69,6 @@ from labrig.drivers.sim.structural import (
 )
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, model_validator
-from scipy import signal
 
 
 class _Effect(BaseModel):
@@ -223,6 +222,8 @@ class ButterLowpass:
     Nyquist), run with ``lfilter`` state. ``cutoff_hz <= 0`` means off (identity)."""
 
     def __init__(self, cutoff_hz: float, order: int, rate_hz: float):
+        from scipy import signal
+
         self.cutoff_hz, self.order = float(cutoff_hz), int(order)
         self.on = self.cutoff_hz > 0
         if self.on:
@@ -233,6 +234,8 @@ class ButterLowpass:
             self.zi: NDArray | None = None
 
     def process(self, x: NDArray) -> NDArray:
+        from scipy import signal
+
         if not self.on or x.size == 0:
             return x
         if self.zi is None:  # start in steady state with the first value
@@ -258,6 +261,8 @@ class Thermal:
 
     def process(self, v: NDArray, i: NDArray) -> NDArray:
         """Temperature (degC) at each sample, for output voltage ``v`` and current ``i``."""
+        from scipy import signal
+
         c = self.cfg
         v_lp, _zf = signal.lfilter([1 - self.a_lp], [1, -self.a_lp], v, zi=[self.a_lp * self.v_lp])
         self.v_lp = float(v_lp[-1])
@@ -291,6 +296,8 @@ class Creep:
         self.a = np.exp(-1.0 / (rate_hz * self.tau))
 
     def process(self, s: NDArray) -> NDArray:
+        from scipy import signal
+
         if s.size == 0:
             return s
         total = np.zeros_like(s)
@@ -361,6 +368,8 @@ class Retardation:
         self.x = np.zeros(len(modes))
 
     def process(self, v: NDArray) -> NDArray:
+        from scipy import signal
+
         if v.size == 0:
             return v
         u = np.array(v, dtype=float)

@@ -29,7 +29,6 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field
-from scipy import signal
 
 from labrig.model.bouc_wen import bouc_wen_stream
 from labrig.model.hysteresis import HysteresisState, QuasiStaticHysteresis
@@ -58,6 +57,8 @@ HYBRID_DEFAULT = HybridParams()
 
 def eq11_discrete(rate_hz: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Eq. 11 discretised for ``rate_hz`` with the first-order hold: ``(b, a)`` for lfilter."""
+    from scipy import signal
+
     b, a, _ = signal.cont2discrete((EQ11_NUM, EQ11_DEN), 1.0 / rate_hz, method="foh")
     b = np.atleast_1d(np.squeeze(b))
     return b / a[0], np.asarray(a, dtype=float) / a[0]
@@ -93,6 +94,8 @@ class HybridPlant:
         return lin - h
 
     def process(self, v_block: ArrayLike) -> NDArray[np.float64]:
+        from scipy import signal
+
         v = np.asarray(v_block, dtype=float)
         if v.size == 0:
             return np.zeros(0)

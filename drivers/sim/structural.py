@@ -48,7 +48,6 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, model_validator
-from scipy import signal
 
 __all__ = [
     "STRUCTURAL_BENCH_EFFECTS",
@@ -226,6 +225,8 @@ class Resonance:
     between samples (first-order hold), run with ``lfilter`` state; starts at rest."""
 
     def __init__(self, cfg: StackResonance, rate_hz: float):
+        from scipy import signal
+
         w = 2.0 * math.pi * cfg.resonance_hz
         two_zw = 2.0 * cfg.damping_ratio * w
         b, a = [two_zw, w * w], [1.0, two_zw, w * w]
@@ -235,6 +236,8 @@ class Resonance:
         self.zi = np.zeros(max(len(self.a), len(self.b)) - 1)
 
     def process(self, s: NDArray) -> NDArray:
+        from scipy import signal
+
         if s.size == 0:
             return s
         y, self.zi = signal.lfilter(self.b, self.a, s, zi=self.zi)

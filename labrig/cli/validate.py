@@ -30,13 +30,21 @@ from labrig.cli.common import (
 @friendly
 def validate(
     train: list[Path] = typer.Argument(
-        ..., help="Run files (HDF5) to identify every model on (the training records)."
-    ),
-    on: list[Path] = typer.Option(
         ...,
+        help="Run files (HDF5) to identify every model on (the training records); with "
+        "--leave-one-out, every record, each predicted in turn from the others.",
+    ),
+    on: list[Path] | None = typer.Option(
+        None,
         "--on",
         metavar="TEST",
         help="Run file to predict and score (repeatable; never one of the training files).",
+    ),
+    leave_one_out: bool = flag(
+        False,
+        "--leave-one-out",
+        help="Each of the files in turn predicted by every model identified on the others "
+        "(at least 3 files; not with --on, --out, --effects-from).",
     ),
     out: Path | None = out_file_option("the HTML page (every prediction of every test record)"),
     as_json: bool = json_option("the scores"),
@@ -66,6 +74,11 @@ def validate(
     from labrig.commands.validate import validate_runs
 
     ui = RichUI()
+    if leave_one_out:
+        _leave_one_out(train, on, out, effects_from, diagnose, method, warmup_s, offset, as_json)
+        return
+    if not on:
+        raise typer.BadParameter("give the test files (--on TEST) or --leave-one-out")
     v = validate_runs(
         train,
         on,
@@ -86,6 +99,68 @@ def validate(
         typer.echo(json_text(v.to_json()))
     else:
         print_scores(v.to_json())
+
+
+def _leave_one_out(
+    files: list[Path],
+    on: list[Path] | None,
+    out: Path | None,
+    effects_from: Path | None,
+    diagnose: bool,
+    method: Method,
+    warmup_s: float | None,
+    offset: bool | None,
+    as_json: bool,
+) -> None:
+    """``--leave-one-out``: one validation per held-out file, the mean per model."""
+    from labrig.commands.progress import RichUI
+    from labrig.commands.validate import validate_leave_one_out
+
+    for given, name in ((on, "--on"), (out, "--out"), (effects_from, "--effects-from")):
+        if given:
+            raise typer.BadParameter(f"--leave-one-out takes no {name}: every file is tested")
+    ui = RichUI()
+    loo = validate_leave_one_out(
+        files,
+        run_diagnosis=diagnose,
+        method=method.value,
+        warmup_s=warmup_s,
+        offset=offset,
+        ui=ui,
+    )
+    for v in loo.folds:
+        for n in (n for n in v.notes if not n.startswith("training: ")):
+            ui.err.print(f"[yellow]note ({escape(v.test[0].name)}):[/] {escape(n)}")
+    doc = loo.to_json()
+    if as_json:
+        typer.echo(json_text(doc))
+    else:
+        print_leave_one_out(doc)
+
+
+def print_leave_one_out(doc: dict) -> None:
+    """Whole-record NRMSE (%) per model and held-out file, their mean, and the noise floor."""
+    from pathlib import PurePath
+
+    from rich.console import Console
+    from rich.table import Table
+
+    from labrig.commands.validate import fmt_pct
+
+    files = list(doc["leave_one_out"])
+    t = Table(title="NRMSE (%) of each record predicted by models identified on the others")
+    t.add_column("model")
+    for f in files:
+        t.add_column(escape(PurePath(f).stem), justify="right")
+    t.add_column("mean (second half)", justify="right")
+    for m in doc["models"].values():
+        t.add_row(
+            escape(m["label"]),
+            *(fmt_pct(m["per_file"].get(f)) for f in files),
+            f"{fmt_pct(m['whole_nrmse_pct'])} ({fmt_pct(m['second_half_nrmse_pct'])})",
+        )
+    t.add_row("noise floor", *("" for _ in files), fmt_pct(doc["noise_floor_pct"]))
+    Console().print(t)
 
 
 def print_scores(doc: dict) -> None:

@@ -15,7 +15,7 @@ import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from labrig.analysis import diagnose as diagnosis
 from labrig.analysis.diagnose import Diagnosis
@@ -25,6 +25,9 @@ from labrig.core.jsonsafe import json_safe
 from labrig.core.outputs import staged_outputs
 from labrig.model.effects import EFFECT_NAMES, STRUCTURAL_EFFECT_NAMES
 from labrig.store import RunFile
+
+if TYPE_CHECKING:
+    from labrig.analysis.fit import FitResult
 
 __all__ = ["OUTPUT_NAMES", "RunDiagnosis", "diagnose_run_file"]
 
@@ -102,6 +105,7 @@ def diagnose_run_file(
     progress: Say | None = None,
     workers: int = 1,
     snapshot: RunFile | None = None,
+    base_fit: FitResult | None = None,
 ) -> RunDiagnosis:
     """Diagnose the run file ``path`` (module docstring).
 
@@ -113,7 +117,10 @@ def diagnose_run_file(
     entry cut into parts, parameters not used); ``progress``: the diagnosis' steps;
     ``workers``: processes for its folds and candidates (the result does not depend on it);
     ``snapshot``: the file as already read (one snapshot for the fit and the diagnosis of
-    ``batch``)."""
+    ``batch``); ``base_fit``: our model already fitted to the same snapshot (``labrig fit``'s
+    result), used as the diagnosis' base fit when it was made as the diagnosis would make it
+    (:func:`~labrig.analysis.diagnose.procedure.base_fit_reusable`), so ``batch diagnose``
+    fits the base once per run; the diagnosis is the same either way."""
     path = Path(path)
     also = tuple(dict.fromkeys(also))
 
@@ -129,6 +136,7 @@ def diagnose_run_file(
             always=also,
             progress=progress,
             workers=workers,
+            base_fit=base_fit,
         )
         return RunDiagnosis(path, setup.records, also, d)
 

@@ -35,6 +35,7 @@ from labrig.commands.fit import (
     fit_dynamic,
 )
 from labrig.commands.prepare import AnalysisError, Setup, prepare
+from labrig.core.blas import single_thread_blas
 from labrig.core.jsonsafe import json_safe
 from labrig.core.outputs import same_file
 from labrig.core.version import __version__
@@ -407,13 +408,14 @@ def render_page(setup: Setup, data: ReportData) -> str:
     """The figures and the HTML page of ``data``."""
     from labrig.report.control_section import control_context
     from labrig.report.html import render
-    from labrig.report.plots import entry_figure, frequency_figure
+    from labrig.report.plots import EntryFigures, frequency_figure
 
     models = data.models
     unit = strain_unit(setup.scored_records)
     noise = data.noise_floor.noise_ue if data.noise_floor else None
     dyn = models["dynamic"].predictions or {}
     pngs = {}
+    entry_figure = EntryFigures()  # one figure, emptied from entry to entry
     for e in data.entries:
         if e.name not in dyn:
             continue
@@ -464,12 +466,16 @@ def build_run_report(
         raise ValueError("report takes a fit of our model (not a baseline or effects fit)")
     setup = fit.setup if fit is not None else prepare(path, entries, warmup_s, offset)
     ui.announce(setup)
-    with ui.fitting() as progress:
-        ours = fit.result if fit is not None else None
-        fitted = fit_report_models(setup, doc, params_file, method, heldout, progress, ours)
-    data = report_data(setup, fitted, heldout, doc is not None)
-    html = ""
-    if page:
-        with ui.busy("drawing the figures"):
-            html = render_page(setup, data)
-    return BuiltReport(setup, html, metrics_table(setup, data), fitted.caveat)
+    # one BLAS thread throughout (the fits already set it inside): the metrics, the noise floor
+    # and the figures' arrays are small, and OpenBLAS's idle threads cost CPU on a busy machine
+    with single_thread_blas():
+        with ui.fitting() as progress:
+            ours = fit.result if fit is not None else None
+            fitted = fit_report_models(setup, doc, params_file, method, heldout, progress, ours)
+        data = report_data(setup, fitted, heldout, doc is not None)
+        html = ""
+        if page:
+            with ui.busy("drawing the figures"):
+                html = render_page(setup, data)
+        metrics = metrics_table(setup, data)
+    return BuiltReport(setup, html, metrics, fitted.caveat)

@@ -30,6 +30,11 @@ of every command).
 Several training files are fitted together when each entry is simulated on its own (imported
 data); a recorded run is one chain and is the only training (or test) file of its side. A file
 given both as training and as test data, or twice, is refused (exit code 2).
+
+**Leave one record out** (:func:`validate_leave_one_out`, ``--leave-one-out FILE...``): of N
+files, each in turn is the test file and the other N - 1 are the training files; every model
+is identified anew in each fold, so each record is predicted by models that never saw it. The
+summary per model is the mean over the folds (every file weighs the same).
 """
 
 from __future__ import annotations
@@ -66,10 +71,12 @@ from labrig.model.effects import Effect
 __all__ = [
     "MODEL_LABELS",
     "SCORING",
+    "LeaveOneOut",
     "ValidatedModel",
     "Validation",
     "accepted_effects",
     "score_entry",
+    "validate_leave_one_out",
     "validate_runs",
 ]
 
@@ -448,6 +455,88 @@ def validate_runs(
     if target is not None:
         write_text_output(target, v.page, overwrite=overwrite, being_written=being_written)
     return v
+
+
+@dataclass
+class LeaveOneOut:
+    """``labrig validate --leave-one-out FILE...``: one :class:`Validation` per held-out file
+    (``folds[k]`` predicts ``files[k]`` from the others); :meth:`to_json` is ``--json``."""
+
+    files: list[Path]
+    folds: list[Validation]
+
+    def mean(self, key: str, which: str) -> float | None:
+        """Model ``key``'s ``whole_nrmse_pct`` or ``second_half_nrmse_pct``, the mean over the
+        folds (None when a fold has no score for it)."""
+        vals = [v.models[key].mean(which) if key in v.models else None for v in self.folds]
+        ok = [x for x in vals if x is not None]
+        return float(np.mean(ok)) if ok and len(ok) == len(vals) else None
+
+    def to_json(self) -> dict[str, Any]:
+        keys = list(dict.fromkeys(k for v in self.folds for k in v.models))
+        floors = [v.noise_floor_pct for v in self.folds if v.noise_floor_pct is not None]
+        summary = {
+            k: {
+                "label": MODEL_LABELS.get(k, k),
+                "whole_nrmse_pct": self.mean(k, "whole_nrmse_pct"),
+                "second_half_nrmse_pct": self.mean(k, "second_half_nrmse_pct"),
+                "per_file": {
+                    str(v.test[0]): v.models[k].mean("whole_nrmse_pct") if k in v.models else None
+                    for v in self.folds
+                },
+            }
+            for k in keys
+        }
+        return json_safe(
+            {
+                "leave_one_out": [str(p) for p in self.files],
+                "scoring": SCORING,
+                "noise_floor_pct": float(np.mean(floors)) if floors else None,
+                "models": summary,
+                "folds": [v.to_json() for v in self.folds],
+            }
+        )
+
+
+def validate_leave_one_out(
+    files: Sequence[Path | str],
+    *,
+    run_diagnosis: bool = False,
+    method: str = "global",
+    warmup_s: float | None = None,
+    offset: bool | None = None,
+    ui: CommandUI | None = None,
+) -> LeaveOneOut:
+    """Leave one record out (module docstring): for each of ``files`` (at least 3, none
+    twice), :func:`validate_runs` with it as the test file and the others as training files;
+    the options are :func:`validate_runs`' (``run_diagnosis``: diagnose each fold's training
+    records)."""
+    paths = [Path(p) for p in files]
+    if len(paths) < 3:
+        raise _issue(
+            paths[0] if paths else "FILES",
+            f"--leave-one-out needs at least 3 files (each predicted from at least 2 others), "
+            f"got {len(paths)}",
+            "--leave-one-out",
+        )
+    for k, p in enumerate(paths):
+        if any(same_file(p, q) for q in paths[:k]):
+            raise _issue(p, "given twice to --leave-one-out (every file is one record)", "FILES")
+    folds = []
+    for k, held in enumerate(paths):
+        train = [p for j, p in enumerate(paths) if j != k]
+        folds.append(
+            validate_runs(
+                train,
+                [held],
+                run_diagnosis=run_diagnosis,
+                method=method,
+                warmup_s=warmup_s,
+                offset=offset,
+                ui=ui,
+            )
+        )
+    return LeaveOneOut(paths, folds)
 
 
 def page_context(v: Validation) -> dict[str, Any]:

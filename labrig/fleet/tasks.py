@@ -38,6 +38,7 @@ from labrig.core.errors import LabrigError
 from labrig.core.version import __version__
 
 if TYPE_CHECKING:
+    from labrig.analysis.fit import FitResult
     from labrig.commands.fit import FitOutcome
     from labrig.store import RunFile
 
@@ -215,6 +216,21 @@ def fit_part(source: Snapshot | Path, opt: TaskOptions, out: TaskResult) -> None
         )
 
 
+def task_base_fit(snap: Snapshot) -> FitResult | None:
+    """The fit :func:`fit_part` made of this snapshot, for the diagnosis to use as its base
+    fit (it checks that the fit is the one it would make:
+    :func:`~labrig.analysis.diagnose.procedure.base_fit_reusable`): our model, every entry
+    scored, nothing but scored entries simulated. ``None`` otherwise (the diagnosis fits)."""
+    from labrig.analysis.fit import FitResult
+
+    if snap.fit is None or not isinstance(snap.fit.result, FitResult):
+        return None
+    setup = snap.fit.setup
+    if [r.name for r in setup.records] != list(setup.scored):
+        return None  # history entries in the chain: not the diagnosis' records
+    return snap.fit.result
+
+
 def diagnose_part(source: Snapshot | Path, opt: TaskOptions, out: TaskResult) -> None:
     """``labrig diagnose RUN --json --out D``: ``diagnosis.json`` and ``diagnosis.html``, the
     effects added, the verdict and its class."""
@@ -229,6 +245,7 @@ def diagnose_part(source: Snapshot | Path, opt: TaskOptions, out: TaskResult) ->
         mains_hz=opt.mains_hz,
         say=notes.append,
         snapshot=snap.run,
+        base_fit=task_base_fit(snap),
     )
     d, doc = result.diagnosis, result.document
     out.documents.update(result.documents())

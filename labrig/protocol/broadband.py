@@ -26,7 +26,6 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import max_len_seq
 
 from labrig.protocol import waveforms as wf
 from labrig.protocol.concrete import num_tag
@@ -60,6 +59,8 @@ def prbs_bits(order: int, seed: int, n_chips: int) -> NDArray[np.int8]:
     """``n_chips`` bits of the maximal-length LFSR of ``order`` bits started at the state whose
     bits (least significant first) are those of ``seed`` (``1 <= seed < 2**order``); period
     ``2**order - 1``. ``scipy.signal.max_len_seq`` with its default taps."""
+    from scipy.signal import max_len_seq
+
     state = np.array([(seed >> i) & 1 for i in range(order)], dtype=np.int8)
     seq, _ = max_len_seq(order, state=state, length=n_chips)
     return seq.astype(np.int8)

@@ -377,3 +377,71 @@ def test_report_out_never_replaces_a_training_file_the_params_name(files, tmp_pa
 
     assert named_training_files(other) == [tmp_path / "elsewhere.h5"]
     assert named_training_files(tmp_path / "missing.json") == []
+
+
+@pytest.mark.slow
+def test_leave_one_out_predicts_each_file_from_the_others(files, tmp_path: Path) -> None:
+    """``--leave-one-out A B C``: fold k is ``validate`` of the other two on file k (the same
+    scores as that call), the summary the mean over the folds; the table names every file."""
+    train, test = files
+    d = tmp_path / "third"
+    d.mkdir()
+    third = import_cut(REAL / FILES[1], d, "valid2", rows=800)
+    loo = labrig.commands.validate.validate_leave_one_out([train, test, third])
+    assert [v.test for v in loo.folds] == [[train], [test], [third]]
+    assert [v.train for v in loo.folds] == [[test, third], [train, third], [train, test]]
+    alone = labrig.validate([train, test], on=third)
+    for key, m in alone.models.items():
+        assert loo.folds[2].models[key].mean("whole_nrmse_pct") == m.mean("whole_nrmse_pct")
+    doc = loo.to_json()
+    for key in ("dynamic", "prandtl_ishlinskii", "bouc_wen", "sindy"):
+        per = [v.models[key].mean("second_half_nrmse_pct") for v in loo.folds]
+        assert doc["models"][key]["second_half_nrmse_pct"] == pytest.approx(sum(per) / 3)
+        assert list(doc["models"][key]["per_file"]) == [str(train), str(test), str(third)]
+    res = invoke("validate", "--leave-one-out", train, test, third)
+    assert res.exit_code == 0, res.output
+    assert all(p.stem in res.output for p in (train, test, third))
+
+
+def test_leave_one_out_folds(monkeypatch, tmp_path: Path) -> None:
+    """The fast tier's check of ``--leave-one-out`` (the slow test above runs the fits): fold
+    k trains on every file but k and tests on k, with the options passed on; the summary is
+    the mean over the folds of each fold's mean."""
+    from types import SimpleNamespace
+
+    import labrig.commands.validate as cv
+
+    calls = []
+
+    def fake(train, on, **kw):
+        calls.append((list(train), list(on), kw))
+        k = len(calls)
+        m = cv.ValidatedModel("dynamic", "ours")
+        m.scores = [cv.EntryScore(str(on[0]), "e", float(k), 10.0 * k)]
+        return SimpleNamespace(
+            test=list(on), models={"dynamic": m}, noise_floor_pct=0.1 * k, to_json=lambda: {}
+        )
+
+    monkeypatch.setattr(cv, "validate_runs", fake)
+    paths = [tmp_path / f"{c}.h5" for c in "abcd"]
+    loo = cv.validate_leave_one_out(paths, run_diagnosis=True, method="staged")
+    assert [c[1] for c in calls] == [[p] for p in paths]
+    assert [c[0] for c in calls] == [[q for q in paths if q != p] for p in paths]
+    assert all(c[2]["run_diagnosis"] and c[2]["method"] == "staged" for c in calls)
+    doc = loo.to_json()
+    assert doc["models"]["dynamic"]["whole_nrmse_pct"] == pytest.approx(2.5)
+    assert doc["models"]["dynamic"]["second_half_nrmse_pct"] == pytest.approx(25.0)
+    assert doc["models"]["dynamic"]["per_file"] == {str(p): k + 1.0 for k, p in enumerate(paths)}
+    assert doc["noise_floor_pct"] == pytest.approx(0.25)
+
+
+def test_leave_one_out_bad_usage(files) -> None:
+    train, test = files
+    res = invoke("validate", "--leave-one-out", train, test)
+    assert res.exit_code == 2 and "at least 3 files" in res.output, res.output
+    res = invoke("validate", "--leave-one-out", train, test, train)
+    assert res.exit_code == 2 and "twice" in res.output, res.output
+    res = invoke("validate", "--leave-one-out", train, test, "--on", test)
+    assert res.exit_code == 64 and "--on" in res.output, res.output
+    res = invoke("validate", train)
+    assert res.exit_code == 64 and "--leave-one-out" in res.output, res.output

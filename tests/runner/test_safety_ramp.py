@@ -18,6 +18,7 @@ samples between 90 % and 10 % of the start has a slope within 10 % of the limit 
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from pathlib import Path
@@ -27,6 +28,7 @@ import pytest
 import yaml
 
 from labrig.core.errors import DeviceError
+from labrig.rig.ramp import RAMP_STEP_S
 from labrig.runner import execute as runner
 from labrig.runner.rigfile import DEFAULT_RIG_YAML, open_rig
 
@@ -121,9 +123,11 @@ def test_ramp_through_the_daq_stays_within_the_current_limit(tmp_path, capacitan
         m = check_descent(trace.since(t_call), 80.0, rate)
     assert rec.path == "daq" and rec.start_source == "amplifier read-back"
     assert rec.rate_V_per_s == pytest.approx(rate, rel=1e-12)
-    # not needlessly slow either: within 3x the limit's time plus 0.25 s (a loaded machine can
-    # stall the process for tens of ms; a ramp paced by its writes, 20 ms each, took seconds)
-    assert m["duration_s"] <= 3 * 80.0 / rate + 0.25, m
+    # not needlessly slow either: no more writes than the plan's steps of RAMP_STEP_S at the
+    # rate (a ramp in smaller steps, or one restarting its line, writes more). How long those
+    # writes take on the wall clock depends on the machine's load: benchmarks, not this test.
+    planned = math.ceil(80.0 / (rate * RAMP_STEP_S))
+    assert len(rec.volts) <= planned + 2, (len(rec.volts), planned, m)  # + the first and last
 
 
 def test_ramp_through_the_amplifier_setpoint_when_the_daq_fails(tmp_path, monkeypatch):

@@ -69,7 +69,15 @@ from labrig.core.blas import single_thread_blas
 from labrig.model import ModelParams
 from labrig.model.effects import CREEP_EFFECTS, EFFECT_NAMES, Effect, library
 
-__all__ = ["MAX_NFEV", "Diagnosis", "diagnose", "slow_mode_identifiable", "split_entries"]
+__all__ = [
+    "MAX_NFEV",
+    "Diagnosis",
+    "base_fit_reusable",
+    "diagnose",
+    "drives_against_poling",
+    "slow_mode_identifiable",
+    "split_entries",
+]
 
 Progress = Callable[[str], Any]
 
@@ -140,6 +148,21 @@ def slow_mode_identifiable(records: Sequence[Record]) -> bool:
     return False
 
 
+#: a drive goes against the poling when some record reaches below minus this share of the
+#: largest |V| of the records (V): there ``negative_field_asymmetry`` is not identically null
+AGAINST_POLING_SHARE = 0.2
+
+
+def drives_against_poling(records: Sequence[Record]) -> bool:
+    """Whether some record's voltage goes below ``-AGAINST_POLING_SHARE`` times the largest
+    ``|V|`` of ``records``: a bipolar or negatively biased drive, where a poled ceramic's
+    ``d33`` falling against its poling (``negative_field_asymmetry``) can be seen. On a
+    unipolar drive the effect is identically null."""
+    top = max((float(np.max(np.abs(r.voltage_V))) for r in records if r.voltage_V.size), default=0)
+    low = min((float(np.min(r.voltage_V)) for r in records if r.voltage_V.size), default=0.0)
+    return top > 0 and low < -AGAINST_POLING_SHARE * top
+
+
 def diagnose(
     records: list[Record],
     params: ModelParams | None = None,
@@ -155,6 +178,7 @@ def diagnose(
     always: Sequence[str] = (),
     progress: Progress | None = None,
     workers: int = 1,
+    base_fit: FitResult | None = None,
 ) -> Diagnosis:
     """Diagnose what the dynamic model misses in ``records`` (module docstring).
 
@@ -169,6 +193,12 @@ def diagnose(
       ``viscoelastic_creep`` is otherwise left out without a long, slow entry.
     - ``workers``: processes for the held-out folds and the candidates of a round
       (:func:`~labrig.analysis.parallel.map_tasks`); the result does not depend on it.
+    - ``base_fit``: a finished :func:`~labrig.analysis.fit.fit_model` of these very records
+      (``labrig fit`` of the same run, with or without its held-out folds), used as step 1's
+      fit instead of fitting again when it was made as the diagnosis would make it
+      (:func:`base_fit_reusable`; otherwise the base is fitted as usual). The diagnosis is
+      then the same, number for number: the held-out folds of ``fit_model`` come after its
+      parameters and do not change them.
 
     The whole procedure runs with one BLAS thread (:func:`~labrig.core.blas.single_thread_blas`,
     as the fits always did): its products are small or memory-bound, and on a shared machine
@@ -190,8 +220,13 @@ def diagnose(
         workers=max(1, int(workers)),
     )
     say = progress or (lambda _msg: None)
+    reuse = (
+        base_fit
+        if base_fit is not None and base_fit_reusable(base_fit, records, settings)
+        else None
+    )
     with single_thread_blas():
-        d = _procedure(records, settings, effects, max_effects, mains_hz, always, say)
+        d = _procedure(records, settings, effects, max_effects, mains_hz, always, say, reuse)
     d.elapsed_s = time.perf_counter() - t0
     return d
 
@@ -204,10 +239,11 @@ def _procedure(
     mains_hz: float | None,
     always: Sequence[str],
     say: Progress,
+    base_fit: FitResult | None = None,
 ) -> Diagnosis:
     """The steps of :func:`diagnose` (its arguments)."""
     messages: list[str] = []
-    setup, before = fit_base(records, settings, effects, mains_hz, always, say, messages)
+    setup, before = fit_base(records, settings, effects, mains_hz, always, say, messages, base_fit)
     current, rounds, added = before, [], []
     for rnd in range(max_effects):
         cands, best, nxt = next_round(setup, settings, current, rnd, say)
@@ -228,6 +264,25 @@ def _procedure(
 
 
 # -- 1. the base model -----------------------------------------------------------------------
+
+
+def base_fit_reusable(fr: FitResult, records: Sequence[Record], settings: Settings) -> bool:
+    """Whether ``fr`` is the base fit :func:`fit_base` would make of ``records``: the global
+    method on every record scored, with the same chaining, warm-up, offset and operator family,
+    and no start parameters asked for (``settings.initial``, an extra start of the fit).
+    ``fr`` must be of these records' data (the caller's promise: the same run file as read
+    once, as ``batch diagnose`` does)."""
+    p = fr.params
+    return (
+        settings.initial is None
+        and fr.method == "global"
+        and list(fr.entries) == [r.name for r in records]
+        and bool(fr.chain) == settings.chain
+        and float(fr.warmup_s) == float(settings.warmup_s)
+        and (fr.offsets_ue is not None) == settings.offset
+        and p.shape == settings.shape
+        and p.memory == settings.memory
+    )
 
 
 def candidate_names(
@@ -252,6 +307,15 @@ def candidate_names(
         else:
             names.remove("viscoelastic_creep")
             messages.append(f"{why}: viscoelastic_creep not tried")
+    if "negative_field_asymmetry" in names and not drives_against_poling(records):
+        # identically null on such drives: left out without a word unless asked for
+        if "negative_field_asymmetry" in always:
+            messages.append(
+                f"no drive below -{AGAINST_POLING_SHARE:g} x the largest |V| (against the "
+                "poling): negative_field_asymmetry tried as asked (--also), its effect is null"
+            )
+        else:
+            names.remove("negative_field_asymmetry")
     if not mains_given and "mains_pickup" in names and not mains_seen:
         names.remove("mains_pickup")
         messages.append(
@@ -269,10 +333,12 @@ def fit_base(
     always: Sequence[str],
     say: Progress,
     messages: list[str],
+    base_fit: FitResult | None = None,
 ) -> tuple[Setup, Model]:
-    """Fit the base model, configure the library, cross-validate the base."""
+    """Fit the base model (or take ``base_fit``, already checked with
+    :func:`base_fit_reusable`), configure the library, cross-validate the base."""
     say("fitting the base model")
-    fr = fit_model(list(records), **settings.fit_kwargs())
+    fr = base_fit if base_fit is not None else fit_model(list(records), **settings.fit_kwargs())
     messages += fr.messages
     base0 = numeric(fr.params)
     sequences = build_sequences(records, settings.chain)

@@ -159,11 +159,13 @@ REGISTRY: tuple[Registration, ...] = (
     Registration(
         "mechanical_resonance", "MechanicalResonance", "output", candidate=False, also=True
     ),
+    # a default candidate where the drive goes against the poling (a poled ceramic's d33 falls
+    # there; labrig.analysis.diagnose.procedure.drives_against_poling), identically null
+    # elsewhere; --also keeps accepting it
     Registration(
         "negative_field_asymmetry",
         "NegativeFieldAsymmetry",
         "voltage",
-        candidate=False,
         also=True,
         context=("v_ref",),
     ),
