@@ -24,7 +24,7 @@ from labrig.core.version import __version__
 from labrig.fleet.cache import write_atomic
 from labrig.fleet.outliers import QUANTITIES, Z_LIMIT, present_quantities
 from labrig.fleet.schedule import ScheduleInfo
-from labrig.report.plots import png, style_axes
+from labrig.report.plots import grid_margins, png, style_axes
 from labrig.report.templating import render
 
 RIG_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:cyan")
@@ -57,9 +57,13 @@ def distributions_figure(rows: list[dict[str, Any]], quantities: list[str]) -> b
         return None
     ncol = 4
     nrow = math.ceil(len(quantities) / ncol)
-    fig = Figure(figsize=(12, 2.6 * nrow))
+    height = 2.6 * nrow
+    # fixed margins, not tight_layout: its extra draw of every panel was half the page's cost
+    margins = grid_margins(12.0, height, nrow, ncol, left_in=0.55, wgap_in=0.6, hgap_in=0.7)
+    grid = Figure(figsize=(12, height)).add_gridspec(nrow, ncol, **margins)
+    fig = grid.figure
     for k, q in enumerate(quantities):
-        ax = fig.add_subplot(nrow, ncol, k + 1)
+        ax = fig.add_subplot(grid[k // ncol, k % ncol])
         x = _values(rows, q)
         ok = np.isfinite(x)
         ax.hist(x[ok], bins=min(30, max(5, int(ok.sum() ** 0.5) * 2)), color="0.6")
@@ -70,7 +74,6 @@ def distributions_figure(rows: list[dict[str, Any]], quantities: list[str]) -> b
         if SCALE.get(q) == "log" and ok.any() and np.all(x[ok] > 0):
             ax.set_xscale("log")
         style_axes(ax)
-    fig.tight_layout()
     return png(fig)
 
 
@@ -81,7 +84,8 @@ def control_chart(rows: list[dict[str, Any]], q: str) -> bytes:
     when = [_when(str(r.get("start_time") or "")) for r in rows]
     idx = [i for i in range(len(rows)) if np.isfinite(x[i]) and when[i] is not None]
     fig = Figure(figsize=(11, 2.8))
-    ax = fig.add_subplot(1, 1, 1)
+    margins = grid_margins(11.0, 2.8, 1, 1, left_in=0.9, bottom_in=0.8, top_in=0.15)
+    ax = fig.add_subplot(fig.add_gridspec(1, 1, **margins)[0, 0])
     rigs = sorted({str(rows[i].get("rig") or "") for i in idx})
     for c, rig in enumerate(rigs):
         sel = [i for i in idx if str(rows[i].get("rig") or "") == rig]
@@ -114,8 +118,8 @@ def control_chart(rows: list[dict[str, Any]], q: str) -> bytes:
     ax.set_ylabel(q, fontsize=8)
     ax.legend(fontsize=7, loc="upper right", title="rig", title_fontsize=7)
     style_axes(ax)
-    fig.autofmt_xdate()
-    fig.tight_layout()
+    for label in ax.get_xticklabels():  # what Figure.autofmt_xdate does, without moving the axes
+        label.set(rotation=30, horizontalalignment="right")
     return png(fig)
 
 
