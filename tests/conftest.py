@@ -13,7 +13,9 @@ from helpers import TINY, run_protocol
 
 #: test files that take the longest (CPU seconds measured on the suite, cold caches for mypy),
 #: handed out first: with ``--dist loadfile`` a file runs on one worker, and a long file started
-#: last keeps the other workers idle at the end of the run
+#: last keeps the other workers idle at the end of the run (``--no-loadscope-reorder`` in
+#: pyproject.toml keeps this order; pytest-xdist would otherwise hand out files by their number
+#: of tests, the type check's two tests last)
 LONGEST_FIRST = (
     "tests/test_types.py",
     "tests/fleet/test_fleet.py",

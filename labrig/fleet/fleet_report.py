@@ -60,8 +60,8 @@ def distributions_figure(rows: list[dict[str, Any]], quantities: list[str]) -> b
     height = 2.6 * nrow
     # fixed margins, not tight_layout: its extra draw of every panel was half the page's cost
     margins = grid_margins(12.0, height, nrow, ncol, left_in=0.55, wgap_in=0.6, hgap_in=0.7)
-    grid = Figure(figsize=(12, height)).add_gridspec(nrow, ncol, **margins)
-    fig = grid.figure
+    fig = Figure(figsize=(12, height))
+    grid = fig.add_gridspec(nrow, ncol, **margins)
     for k, q in enumerate(quantities):
         ax = fig.add_subplot(grid[k // ncol, k % ncol])
         x = _values(rows, q)
