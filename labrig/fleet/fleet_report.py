@@ -51,6 +51,13 @@ def _values(rows: list[dict[str, Any]], q: str) -> np.ndarray:
     return np.array([float(r[q]) if isinstance(r.get(q), int | float) else np.nan for r in rows])
 
 
+def spans_a_decade(x: np.ndarray) -> bool:
+    """True when the positive values ``x`` span a factor of 10 or more: a log axis then; on a
+    narrower range matplotlib labels every minor tick of the log axis and they overlap, so the
+    axis stays linear (and so does one value, a fleet of one)."""
+    return bool(x.size) and bool(np.all(x > 0)) and float(x.max()) >= 10.0 * float(x.min())
+
+
 def distributions_figure(rows: list[dict[str, Any]], quantities: list[str]) -> bytes | None:
     """A histogram per quantity; flagged runs drawn as red ticks under it."""
     if not quantities:
@@ -71,7 +78,7 @@ def distributions_figure(rows: list[dict[str, Any]], quantities: list[str]) -> b
         bad = x[np.array(out, dtype=bool) & ok]
         ax.plot(bad, np.zeros_like(bad), "|", color="tab:red", markersize=14, mew=2)
         ax.set_title(q, fontsize=9)
-        if SCALE.get(q) == "log" and ok.any() and np.all(x[ok] > 0):
+        if SCALE.get(q) == "log" and spans_a_decade(x[ok]):
             ax.set_xscale("log")
         style_axes(ax)
     return png(fig)
@@ -113,7 +120,7 @@ def control_chart(rows: list[dict[str, Any]], q: str) -> bytes:
             name = rows[i].get("actuator") or Path(str(rows[i]["run_file"])).stem
             ax.annotate(str(name), (when[i], x[i]), fontsize=7, color="tab:red",
                         xytext=(3, 3), textcoords="offset points")  # fmt: skip
-    if log and len({float(x[i]) for i in idx}) > 1:  # one value (a small fleet): linear axis
+    if log and spans_a_decade(x[idx]):
         ax.set_yscale("log")
     ax.set_ylabel(q, fontsize=8)
     ax.legend(fontsize=7, loc="upper right", title="rig", title_fontsize=7)
