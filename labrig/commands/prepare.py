@@ -205,7 +205,9 @@ def training_setup(
         raise _issue(
             chained.path,
             "a recorded run is simulated as one chain of its entries and cannot be fitted "
-            "together with other files: give it as the only training file",
+            "together with other files: give it as the only training file (--leave-one-out "
+            "takes imported records, one per file; `labrig diagnose RUN` leaves one entry of a "
+            "recorded run out at a time)",
             "TRAIN",
         )
     counts: dict[str, int] = {}

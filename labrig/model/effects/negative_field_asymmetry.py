@@ -121,4 +121,5 @@ class NegativeFieldAsymmetry(Effect):
         s = sd.get("a")
         loss = float(np.sign(a) * np.tanh(np.sqrt(abs(a))) ** 2)
         text = plus_minus("a", a, s, "")
-        return f"{text}: d33 {100 * loss:.3g} % lower at -{self.v_ref:.3g} V"
+        way = "lower" if loss >= 0 else "higher"
+        return f"{text}: d33 {100 * abs(loss):.3g} % {way} at -{self.v_ref:.3g} V"
