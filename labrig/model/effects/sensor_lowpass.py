@@ -20,17 +20,16 @@ class SensorLowpass(Effect):
     delay (below the cutoff a Butterworth section *is* a delay of ``sqrt 2 tau`` to first order),
     a load resonance and the model's own ``G_d``.
 
-    Refused (:meth:`refusals`) when the damping ends at its lower end (0.2, a peak of 2.55x,
-    +8 dB, at the cutoff): a conditioner's filter is not built with such a peak, and a fit that
-    wants less damping still is a mechanical resonance (``mechanical_resonance``) borrowing the
-    low-pass's form, and its cutoff then means nothing (the structural study's resonant stack
-    was taken that way while ``mechanical_resonance`` could not be ranked). The upper end (5) is
-    the first-order limit and is not a refusal. An over-damped fit (``zeta > 1``) is two real
-    poles, and ``fc`` alone then trades against ``zeta`` (poorly determined, which is reported as
-    for any parameter known to no better than half its value): :meth:`describe` adds the two
-    corners (on the real SmartHysteresis record, fc 59 Hz +- 860 % and damping 3.2 are a
-    9.4 Hz first-order lag, :meth:`real_corners_hz`).
-    """
+    Refused (:meth:`refusals`) when the damping ends at its lower end (0.2, a peak of 2.55x, +8
+    dB, at 0.96 times the cutoff): a conditioner's filter is not built with such a peak, and a
+    fit that wants less damping still is a mechanical resonance (``mechanical_resonance``)
+    borrowing the low-pass's form, and its cutoff then means nothing (the structural study's
+    resonant stack was taken that way while ``mechanical_resonance`` could not be ranked). The
+    upper end (5) is the first-order limit and is not a refusal. An over-damped fit (``zeta >
+    1``) is two real poles, and ``fc`` alone then trades against ``zeta`` (poorly determined,
+    which is reported as for any parameter known to no better than half its value):
+    :meth:`describe` adds the two corners (on the real SmartHysteresis record, fc 59 Hz +- 860 %
+    and damping 3.2 are a 9.4 Hz first-order lag, :meth:`real_corners_hz`). """
 
     name = "sensor_lowpass"
     where = "output"
@@ -59,7 +58,7 @@ class SensorLowpass(Effect):
         fc = 1.0 / (2 * np.pi * p["tau_s"])
         return [
             f"damping = {zeta:.3g} ends at its resonant end ({lo:g}, a peak of "
-            f"{1 / (2 * lo * np.sqrt(1 - lo * lo)):.3g}x at the cutoff): a conditioner's filter "
+            f"{1 / (2 * lo * np.sqrt(1 - lo * lo)):.3g}x near the cutoff): a conditioner's filter "
             f"has no such peak, so the fit (fc {fc:.3g} Hz) is a resonance, not a low-pass "
             "(try --also mechanical_resonance)"
         ]
