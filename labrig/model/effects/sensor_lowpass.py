@@ -29,7 +29,8 @@ class SensorLowpass(Effect):
     1``) is two real poles, and ``fc`` alone then trades against ``zeta`` (poorly determined,
     which is reported as for any parameter known to no better than half its value):
     :meth:`describe` adds the two corners (on the real SmartHysteresis record, fc 59 Hz +- 860 %
-    and damping 3.2 are a 9.4 Hz first-order lag, :meth:`real_corners_hz`). """
+    and damping 3.2 are a 9.4 Hz first-order lag, :meth:`real_corners_hz`).
+    """
 
     name = "sensor_lowpass"
     where = "output"
