@@ -75,7 +75,7 @@ daq:
 amplifier:
   driver: pi_e503
   url: sim                   # pyserial URL of the GCS link; sim = the simulated amplifier
-  timeout_s: 0.5
+  timeout_s: 1.0              # simulators share the CPU: a loaded machine delays answers
   axis: A
   channel: "1"
   gain_V_per_V: 10.0         # calibration: actuator volts per DAQ AO volt
@@ -87,7 +87,7 @@ conditioner:
   transport: tcp             # tcp (address host:port) or rtu (serial port or pyserial URL)
   address: sim
   unit: 1
-  timeout_s: 0.5
+  timeout_s: 1.0              # simulators share the CPU: a loaded machine delays answers
   excitation_V: 2.0
   gain: 1
   filter_hz: 0               # conditioner low-pass, 0 = off
