@@ -51,6 +51,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from yardstick import yardstick_s
+
 ROOT = Path(__file__).resolve().parents[1]
 REAL = ROOT / "tests" / "data" / "real" / "yan9a-micromanipulator" / "Model_Vi_Do.dat"
 KINDS = ("prandtl_ishlinskii", "bouc_wen", "sindy")
@@ -65,24 +67,14 @@ DEFAULT_BEFORE = "6fe3c46"
 def child(src: str, run: str, repeats: int) -> dict:
     """Fit every peer on ``run`` with the labrig found in ``src``; CPU seconds and results."""
     sys.path.insert(0, src)
-    import numpy as np
 
     from labrig.analysis.baselines import fit_baseline
     from labrig.commands.prepare import prepare
 
     assert Path(sys.modules["labrig"].__file__).is_relative_to(src), "wrong labrig imported"
 
-    def yardstick() -> float:
-        x = np.random.default_rng(0).random(1_000_000)
-        best = np.inf
-        for _ in range(5):
-            t0 = time.process_time()
-            np.sort(x)
-            best = min(best, time.process_time() - t0)
-        return best
-
     s = prepare(Path(run))
-    out: dict = {"yardstick_s": yardstick(), "kinds": {}}
+    out: dict = {"yardstick_s": yardstick_s(), "kinds": {}}
     for kind in KINDS:
         times, res = [], None
         for _ in range(1 + repeats):
@@ -106,7 +98,7 @@ def child(src: str, run: str, repeats: int) -> dict:
             "heldout_per_entry": res.heldout_per_entry,
             "params": res.params,
         }
-    out["yardstick_end_s"] = yardstick()
+    out["yardstick_end_s"] = yardstick_s()
     return out
 
 
@@ -236,20 +228,10 @@ def report_phases_table(run: str, repeats: int) -> None:
     """The steps of :func:`report_phases` in ``repeats`` fresh processes: median and range of
     each, with the yardstick (``numpy.sort`` of 1e6 floats, CPU, best of 5 in this process)
     and the load average before and after."""
-    import numpy as np
 
-    def yardstick() -> float:
-        x = np.random.default_rng(0).random(1_000_000)
-        ys = []
-        for _ in range(5):
-            t = time.process_time()
-            np.sort(x)
-            ys.append(time.process_time() - t)
-        return min(ys)
-
-    load0, y0 = os.getloadavg()[0], yardstick()
+    load0, y0 = os.getloadavg()[0], yardstick_s()
     runs = [run_child(["--phases-child", run]) for _ in range(repeats)]
-    load1, y1 = os.getloadavg()[0], yardstick()
+    load1, y1 = os.getloadavg()[0], yardstick_s()
     when = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     print(f"{when}, {run}: load {load0:.1f} -> {load1:.1f}, yardstick {1e3 * y0:.1f} / "
           f"{1e3 * y1:.1f} ms; {repeats} processes\n")  # fmt: skip

@@ -51,6 +51,7 @@ from typing import Any
 
 import h5py
 import numpy as np
+from yardstick import yardstick_s
 
 from labrig.catalogue.read import file_record_here, read_metadata_here
 from labrig.store import RunWriter
@@ -167,17 +168,6 @@ def measure(folder: Path) -> dict[str, Any]:
     out["changed"] = timed([str(folder), *where(*EXAMPLE_QUERY)])
     out["load_after"] = os.getloadavg()
     return out
-
-
-def yardstick_s() -> float:
-    """CPU seconds of ``numpy.sort`` of 1e6 random floats, median of 9."""
-    a = np.random.default_rng(0).random(1_000_000)
-    times = []
-    for _ in range(9):
-        t0 = time.process_time()
-        np.sort(a)
-        times.append(time.process_time() - t0)
-    return statistics.median(times)
 
 
 def cpu_per_call(fn: Any, repeats: int) -> float:
@@ -334,7 +324,7 @@ def main() -> None:
         t0 = time.perf_counter()
         source = paper_file(base)
         paper: dict[str, Any] = {"size": source.stat().st_size, "m": m_paper}
-        paper["yardstick_s"] = yardstick_s()
+        paper["yardstick_s"] = yardstick_s(9, statistics.median)
         paper["per_file"] = per_file(source)
         paper["folder"] = paper_folder(base / "paper", source, m_paper)
         if args.before is not None:
@@ -351,7 +341,7 @@ def main() -> None:
         print(f"wrote {n} files in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
         m = measure(folder)
         index = folder / ".labrig-index.sqlite"
-        paper["yardstick_after_s"] = yardstick_s()
+        paper["yardstick_after_s"] = yardstick_s(9, statistics.median)
         print(report(n, size, m, index.stat().st_size, paper))
         print(
             f"\nyardstick again at the end: {paper['yardstick_after_s'] * 1e3:.1f} ms CPU",

@@ -33,11 +33,11 @@ import shutil
 import statistics
 import subprocess
 import sys
-import time
 from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
+import yardstick
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = ROOT / "tests" / "data" / "real" / "yan9a-micromanipulator" / "Model_Vi_Do.dat"
@@ -45,13 +45,7 @@ REAL = ROOT / "tests" / "data" / "real" / "yan9a-micromanipulator" / "Model_Vi_D
 
 def yardstick_s(repeats: int = 5) -> float:
     """CPU seconds of ``np.sort`` of 1e6 uniform floats (median of ``repeats``)."""
-    x = np.random.default_rng(0).random(1_000_000)
-    out = []
-    for _ in range(repeats):
-        t = time.process_time()
-        np.sort(x)
-        out.append(time.process_time() - t)
-    return statistics.median(out)
+    return yardstick.yardstick_s(repeats, statistics.median)
 
 
 def cpu_of(cmd: list[str], cwd: Path, timeout: float = 1800) -> tuple[float, str]:

@@ -44,6 +44,7 @@ import time
 from pathlib import Path
 
 from rich.console import Console
+from yardstick import yardstick_s
 
 from labrig.fleet.batch import run_batch
 from labrig.fleet.schedule import Where
@@ -219,19 +220,6 @@ def detect(n: int, out: Path, workers: int) -> None:
     print(f"load average after: {load()}")
 
 
-def yardstick_ms() -> float:
-    """CPU milliseconds of ``numpy.sort`` of 1e6 uniform floats (best of 5)."""
-    import numpy as np
-
-    x = np.random.default_rng(0).random(1_000_000)
-    best = float("inf")
-    for _ in range(5):
-        t = time.process_time()
-        np.sort(x)
-        best = min(best, time.process_time() - t)
-    return 1e3 * best
-
-
 def task_parts(command: str, files: list[Path]) -> list[dict]:
     """CPU seconds of each part of one batch task per run file, in this process (a first task
     made the imports; each part's time includes the children it reaped)."""
@@ -297,7 +285,7 @@ def task_costs(command: str, files: list[Path]) -> None:
     import labrig
 
     print(f"labrig {labrig.__file__}; load average before: {load()}; "
-          f"yardstick {yardstick_ms():.1f} ms")  # fmt: skip
+          f"yardstick {1e3 * yardstick_s():.1f} ms")  # fmt: skip
     rows = task_parts(command, files)
     for r in rows:
         print(json.dumps(r))
@@ -312,7 +300,7 @@ def task_costs(command: str, files: list[Path]) -> None:
         ):
             cpu = batch_cpu(command, files, flags, Path(d) / label.replace(" ", "_"))
             print(f"batch {command} {label}: {cpu:.1f} s CPU in all, {cpu / n:.2f} s per task")
-    print(f"load average after: {load()}; yardstick {yardstick_ms():.1f} ms")
+    print(f"load average after: {load()}; yardstick {1e3 * yardstick_s():.1f} ms")
 
 
 def main() -> None:

@@ -42,7 +42,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import numpy as np  # noqa: E402
+from yardstick import yardstick_s  # noqa: E402
 
 from labrig.analysis.diagnose import diagnose  # noqa: E402
 from labrig.model.effects import EFFECT_NAMES  # noqa: E402
@@ -55,17 +55,6 @@ from labrig.studies.structural import (  # noqa: E402
 
 #: the held-out goal: at most this many times the noise floor after diagnose
 GOAL_FLOOR_RATIO = 1.2
-
-
-def yardstick() -> float:
-    """CPU seconds of ``numpy.sort`` of 1e6 floats, best of 5."""
-    x = np.random.default_rng(0).random(1_000_000)
-    best = float("inf")
-    for _ in range(5):
-        t0 = time.process_time()
-        np.sort(x)
-        best = min(best, time.process_time() - t0)
-    return best
 
 
 def run_diagnose(records, also: tuple[str, ...], max_effects: int) -> dict:
@@ -244,7 +233,7 @@ def main(argv: list[str] | None = None) -> None:
     )
     a = ap.parse_args(argv)
     seeds = [int(s) for s in a.seeds.split(",") if s]
-    y0 = yardstick()
+    y0 = yardstick_s()
     print("# Structural study\n")
     print(
         f"{datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {platform.node()}, "
@@ -257,7 +246,7 @@ def main(argv: list[str] | None = None) -> None:
         effects(seeds, a.max_effects, a.log, a.report_only, cases)
     if a.nulls:
         nulls(a.nulls, a.max_effects, a.log, a.report_only)
-    y1 = yardstick()
+    y1 = yardstick_s()
     print(f"\nyardstick at the end {y1 * 1e3:.1f} ms CPU; load average {os.getloadavg()[0]:.2f}")
 
 

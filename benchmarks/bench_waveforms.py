@@ -32,11 +32,10 @@ import platform
 import resource
 import subprocess
 import sys
-import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-import numpy as np
+from yardstick import yardstick_s
 
 ROOT = Path(__file__).resolve().parents[1]
 LABRIG = [sys.executable, "-m", "labrig"]
@@ -49,17 +48,6 @@ STRUCTURAL = (
     "rate_hysteresis",
     "sensor_drift",
 )
-
-
-def yardstick() -> float:
-    """``numpy.sort`` of 1e6 floats, best of 5 (CPU s)."""
-    x = np.random.default_rng(0).random(1_000_000)
-    best = np.inf
-    for _ in range(5):
-        t0 = time.process_time()
-        np.sort(x)
-        best = min(best, time.process_time() - t0)
-    return best
 
 
 def run(args: list[str], out: Path | None = None) -> tuple[float, str]:
@@ -89,7 +77,7 @@ def main() -> None:
     a = ap.parse_args()
     w = a.work
     w.mkdir(parents=True, exist_ok=True)
-    y0 = yardstick()
+    y0 = yardstick_s()
     print(f"# four-waveform stand-in, seed {a.seed}, truth {a.truth}")
     print(
         f"\n{platform.processor() or platform.machine()}, {os.cpu_count()} cores, Python "
@@ -176,7 +164,7 @@ def main() -> None:
             print(f"- added {e['effect']}: {json.dumps(p)[:300]}")
         print(f"\n{d['verdict']}")
 
-    y1 = yardstick()
+    y1 = yardstick_s()
     ys = min(y0, y1)
     print("\n## CPU per command\n")
     print(f"yardstick {y0 * 1e3:.1f} ms at the start, {y1 * 1e3:.1f} ms at the end\n")
