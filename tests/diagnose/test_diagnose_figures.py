@@ -9,12 +9,10 @@ from labrig.analysis.records import Record
 from labrig.report.diagnose_html import residual_figure
 
 
-def test_every_residual_panel_has_axis_labels() -> None:
-    recs = [
-        Record.from_arrays(f"e{k}", 100.0, np.linspace(0, 10, 300), np.sin(np.arange(300) / 9))
-        for k in range(3)
-    ]
-    d = Diagnosis(
+def scaled_predictions(recs: list[Record], before: float, after: float) -> Diagnosis:
+    """A diagnosis whose predictions before and after are the records' strain times ``before``
+    and ``after`` (what the residual figure draws; nothing else filled in)."""
+    return Diagnosis(
         before={},
         after={},
         effects_added=[],
@@ -23,10 +21,17 @@ def test_every_residual_panel_has_axis_labels() -> None:
         classification="unexplained",
         evidence_before=None,  # type: ignore[arg-type]
         evidence_after=None,  # type: ignore[arg-type]
-        predictions_before={r.name: 0.9 * r.strain_ue for r in recs},
-        predictions_after={r.name: r.strain_ue for r in recs},
+        predictions_before={r.name: before * r.strain_ue for r in recs},
+        predictions_after={r.name: after * r.strain_ue for r in recs},
     )
-    fig = residual_figure(d, recs)
+
+
+def test_every_residual_panel_has_axis_labels() -> None:
+    recs = [
+        Record.from_arrays(f"e{k}", 100.0, np.linspace(0, 10, 300), np.sin(np.arange(300) / 9))
+        for k in range(3)
+    ]
+    fig = residual_figure(scaled_predictions(recs, 0.9, 1.0), recs)
     panels = [ax for ax in fig.axes if ax.lines]
     assert len(panels) == 3
     for ax in panels:
@@ -50,19 +55,7 @@ def test_residual_panels_fit_the_figure_without_overlapping() -> None:
             )
             for k in range(n)
         ]
-        d = Diagnosis(
-            before={},
-            after={},
-            effects_added=[],
-            candidates=[],
-            verdict="",
-            classification="unexplained",
-            evidence_before=None,  # type: ignore[arg-type]
-            evidence_after=None,  # type: ignore[arg-type]
-            predictions_before={r.name: 0.5 * r.strain_ue for r in recs},
-            predictions_after={r.name: 0.9 * r.strain_ue for r in recs},
-        )
-        fig = residual_figure(d, recs)
+        fig = residual_figure(scaled_predictions(recs, 0.5, 0.9), recs)
         renderer = FigureCanvasAgg(fig).get_renderer()
         boxes = [ax.get_tightbbox(renderer) for ax in fig.axes]
         page = fig.bbox
