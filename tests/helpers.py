@@ -200,3 +200,33 @@ def linear_bench(effects: list[dict], rate_hz: float = 1000.0) -> VirtualBench:
 def strain(bench: VirtualBench, v_actuator: np.ndarray) -> np.ndarray:
     out = bench.step(v_actuator / bench.config.amplifier.gain_V_per_V)
     return out["gauge"] / bench.sensitivity_V_per_ue()
+
+
+def planted_records(
+    drives: list[tuple[str, np.ndarray]],
+    fs: float,
+    effect: str,
+    params: dict[str, float],
+    rng: np.random.Generator,
+    offset: bool = False,
+) -> list:
+    """Chained records (0.05 s rests) of the paper's model with the library's ``effect`` at
+    ``params``, one per named drive (V) at ``fs`` Hz, plus 0.5 ue of noise drawn from ``rng``
+    record after record."""
+    from labrig.analysis.extended import ExtendedProblem
+    from labrig.analysis.records import Record
+    from labrig.model import PAPER_TABLE1
+    from labrig.model.effects import library
+
+    meta = {"rest_after_s": 0.05}
+    recs = [
+        Record(n, fs, np.arange(v.size) / fs, v, np.arange(v.size, dtype=float), {}, "zoh", meta)
+        for n, v in drives
+    ]
+    prob = ExtendedProblem(recs, [library()[effect]], chain=True, offset=offset)
+    pred = prob.predictions(PAPER_TABLE1.model_dump(), {effect: params}, nuisance=False)
+    noisy = [pred[r.name] + rng.normal(0, 0.5, r.n) for r in recs]
+    return [
+        Record(r.name, fs, r.time_s, r.voltage_V, s, {}, "zoh", dict(meta))
+        for r, s in zip(recs, noisy, strict=True)
+    ]

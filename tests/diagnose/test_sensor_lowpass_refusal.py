@@ -20,6 +20,8 @@ from labrig.analysis.records import Record
 from labrig.model import PAPER_TABLE1
 from labrig.model.effects import library
 
+from helpers import planted_records
+
 LP = library()["sensor_lowpass"]
 LO = LP.params[1].lo
 TAU = 1 / (2 * np.pi * 250.0)
@@ -87,27 +89,7 @@ def _records(name: str, p: dict[str, float]) -> list[Record]:
         "triangle": 50 * (1 + (2 / np.pi) * np.arcsin(np.sin(2 * np.pi * 25 * t))),
         "sine": 50 * (1 - np.cos(2 * np.pi * 10 * t)),
     }
-    meta = {"rest_after_s": 0.05}
-    recs = [
-        Record(k, FS, np.arange(v.size) / FS, v, np.arange(v.size, dtype=float), {}, "zoh", meta)
-        for k, v in drives.items()
-    ]
-    pred = ExtendedProblem(recs, [library()[name]], chain=True).predictions(
-        TRUTH, {name: p}, nuisance=False
-    )
-    return [
-        Record(
-            r.name,
-            FS,
-            r.time_s,
-            r.voltage_V,
-            pred[r.name] + rng.normal(0, 0.5, r.n),
-            {},
-            "zoh",
-            dict(meta),
-        )
-        for r in recs
-    ]
+    return planted_records(list(drives.items()), FS, name, p, rng)
 
 
 @pytest.mark.parametrize(

@@ -26,6 +26,8 @@ from labrig.model import PAPER_TABLE1
 from labrig.model.effects import EFFECT_NAMES, library
 from labrig.studies.campaign import bench_campaign
 
+from helpers import planted_records
+
 NEW = (
     "amplifier_bandwidth",
     "mechanical_resonance",
@@ -86,26 +88,7 @@ def planted(name: str, seed: int = 1) -> list[Record]:
     parameters (the library's form), 0.5 ue of noise."""
     p, kind, fs = CASES[name]
     rng = np.random.default_rng(seed)
-    meta = {"rest_after_s": 0.05}
-    recs = [
-        Record(n, fs, np.arange(v.size) / fs, v, np.arange(v.size, dtype=float), {}, "zoh", meta)
-        for n, v in _drives(kind, fs)
-    ]
-    prob = ExtendedProblem(recs, [library()[name]], chain=True, offset=True)
-    pred = prob.predictions(TRUTH, {name: p}, nuisance=False)
-    return [
-        Record(
-            r.name,
-            fs,
-            r.time_s,
-            r.voltage_V,
-            pred[r.name] + rng.normal(0, 0.5, r.n),
-            {},
-            "zoh",
-            dict(meta),
-        )
-        for r in recs
-    ]
+    return planted_records(_drives(kind, fs), fs, name, p, rng, offset=True)
 
 
 #: relative (or, for parameters planted at 0-ish scales, absolute) tolerance of the recovery
