@@ -75,7 +75,9 @@ def validate(
 
     ui = RichUI()
     if leave_one_out:
-        _leave_one_out(train, on, out, effects_from, diagnose, method, warmup_s, offset, as_json)
+        _leave_one_out(
+            train, on, out, effects_from, overwrite, diagnose, method, warmup_s, offset, as_json
+        )
         return
     if not on:
         raise typer.BadParameter("give the test files (--on TEST) or --leave-one-out")
@@ -106,6 +108,7 @@ def _leave_one_out(
     on: list[Path] | None,
     out: Path | None,
     effects_from: Path | None,
+    overwrite: bool,
     diagnose: bool,
     method: Method,
     warmup_s: float | None,
@@ -116,9 +119,16 @@ def _leave_one_out(
     from labrig.commands.progress import RichUI
     from labrig.commands.validate import validate_leave_one_out
 
-    for given, name in ((on, "--on"), (out, "--out"), (effects_from, "--effects-from")):
+    for given, name in (
+        (on, "--on"),
+        (out, "--out"),
+        (effects_from, "--effects-from"),
+        (overwrite, "--overwrite"),
+    ):
         if given:
-            raise typer.BadParameter(f"--leave-one-out takes no {name}: every file is tested")
+            raise typer.BadParameter(
+                f"--leave-one-out takes no {name}: every file is tested and nothing is written"
+            )
     ui = RichUI()
     loo = validate_leave_one_out(
         files,
@@ -148,10 +158,12 @@ def print_leave_one_out(doc: dict) -> None:
     from labrig.commands.validate import fmt_pct
 
     files = list(doc["leave_one_out"])
+    stems = [PurePath(f).stem for f in files]
+    heads = stems if len(set(stems)) == len(stems) else files  # two x.h5 in different folders
     t = Table(title="NRMSE (%) of each record predicted by models identified on the others")
     t.add_column("model")
-    for f in files:
-        t.add_column(escape(PurePath(f).stem), justify="right")
+    for h in heads:
+        t.add_column(escape(h), justify="right")
     t.add_column("mean (second half)", justify="right")
     for m in doc["models"].values():
         t.add_row(

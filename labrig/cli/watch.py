@@ -23,14 +23,11 @@ def watch(
     prediction, the progress and the amplifier (docs/live.md)."""
     import time
 
-    from labrig.core.errors import InputFileError, InputIssue
     from labrig.core.interrupts import Interrupted, interrupt_once
     from labrig.live import load_params, port_error
     from labrig.live.server import LiveServer
     from labrig.store import read_run
 
-    if not run_file.is_file():
-        raise InputFileError([InputIssue(str(run_file), None, "", "run file not found")])
     read_run(run_file, load_data=False)  # a labrig run file, sound (exit 2 otherwise)
     model = load_params(params)
     try:

@@ -49,6 +49,16 @@ RETRY_PAUSE_S = 0.15
 _last: tuple[tuple, bool, RunFile, dict] | None = None
 
 
+def _not_a_file(p: Path) -> str:
+    """Why ``p`` cannot be read as a run file, for the exit-2 message."""
+    if p.is_dir():
+        return (
+            "is a folder, not a run file: give one .h5 run file (`labrig runs FOLDER` lists the"
+            " runs in a folder)"
+        )
+    return "run file not found" if not p.exists() else "not a regular file: give one .h5 run file"
+
+
 def read_run(path: Path | str, load_data: bool = True) -> RunFile:
     """Read a run file: metadata, and every entry's arrays (in run order).
 
@@ -60,7 +70,7 @@ def read_run(path: Path | str, load_data: bool = True) -> RunFile:
     global _last
     p = Path(path)
     if not p.is_file():
-        raise InputFileError([InputIssue(str(path), None, "", "run file not found")])
+        raise InputFileError([InputIssue(str(path), None, "", _not_a_file(p))])
     for attempt in range(RETRIES_WHILE_WRITTEN + 1):
         st = p.stat()
         key = (str(p.resolve()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)

@@ -161,6 +161,9 @@ def test_fit_staged(small_run: Path) -> None:
         (["fit", "{run}", "--effect", "creep", "--effect", "creep"], "given twice"),
         (["fit", "{run}", "--model", "bouc_wen", "--effect", "creep"], "applies to the dynamic"),
         (["report", "{missing}", "--out", "{dir}/r.html"], "run file not found"),
+        (["fit", "{dir}"], "is a folder, not a run file"),
+        (["diagnose", "{dir}"], "`labrig runs FOLDER` lists the runs"),
+        (["watch", "{dir}"], "is a folder, not a run file"),
         (["report", "{run}", "--out", "{dir}/r.html", "--params", "{text}"], "not a JSON"),
     ],
 )

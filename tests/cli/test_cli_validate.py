@@ -443,5 +443,26 @@ def test_leave_one_out_bad_usage(files) -> None:
     assert res.exit_code == 2 and "twice" in res.output, res.output
     res = invoke("validate", "--leave-one-out", train, test, "--on", test)
     assert res.exit_code == 64 and "--on" in res.output, res.output
+    res = invoke("validate", "--leave-one-out", train, test, test, "--overwrite")
+    assert res.exit_code == 64 and "takes no --overwrite" in res.output, res.output
     res = invoke("validate", train)
     assert res.exit_code == 64 and "--leave-one-out" in res.output, res.output
+
+
+def test_leave_one_out_table_names_files_apart(capsys) -> None:
+    """Two files of one name in different folders: the table's columns are their paths, not
+    their names twice; distinct names stay short."""
+    from labrig.cli.validate import print_leave_one_out
+
+    def doc(files: list[str]) -> dict:
+        per = {f: 0.5 + k for k, f in enumerate(files)}
+        model = {"label": "ours", "per_file": per, "whole_nrmse_pct": 1.0}
+        model["second_half_nrmse_pct"] = 1.1
+        return {"leave_one_out": files, "models": {"dynamic": model}, "noise_floor_pct": 0.1}
+
+    print_leave_one_out(doc(["a/run.h5", "b/run.h5", "c/other.h5"]))
+    out = capsys.readouterr().out
+    assert "a/run.h5" in out and "b/run.h5" in out and "c/other.h5" in out
+    print_leave_one_out(doc(["a/run.h5", "b/third.h5", "c/other.h5"]))
+    out = capsys.readouterr().out
+    assert "run" in out and "third" in out and "a/run.h5" not in out
