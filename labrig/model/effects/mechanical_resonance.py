@@ -4,12 +4,15 @@ on the measured strain (:class:`MechanicalResonance`, its filter :func:`resonanc
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from numpy.typing import NDArray
 
 from labrig.model.effects.base import Effect, Param, plus_minus
 
 __all__ = [
+    "MIMIC_PEAK",
     "RESOLVED_NYQUIST_SHARE",
     "MechanicalResonance",
     "aliased_hz",
@@ -77,6 +80,9 @@ PROBE_COUNT = 6
 #: their samples (the first-order-hold section there rings at an alias, :func:`aliased_hz`):
 #: refused (:meth:`MechanicalResonance.refusals`)
 RESOLVED_NYQUIST_SHARE = PROBE_NYQUIST_SHARE
+#: the base's ``G_d`` counts as a resonance (:meth:`MechanicalResonance.mimicked`) when its gain
+#: peaks at least this high (a second-order section's peak at damping 0.3)
+MIMIC_PEAK = 1.0 / (2.0 * 0.3 * np.sqrt(1.0 - 0.09))
 
 
 class MechanicalResonance(Effect):
@@ -139,6 +145,28 @@ class MechanicalResonance(Effect):
     #: records' rate, for :meth:`refusals` and :meth:`describe` (a library instance is
     #: configured for one set of records)
     rate_hz: float | None = None
+    #: the resonance the base's ``G_d`` was by itself when the effect was last ranked against
+    #: it (:meth:`note_base`; ``None``: no peak, or not ranked)
+    base_resonance: tuple[float, float] | None = None
+
+    def note_base(self, base: Mapping[str, float]) -> None:
+        """Remember the resonance the base's ``G_d`` is by itself (:func:`relaxor_resonance`
+        of ``lam_d`` and ``tau_d_s``), for :meth:`describe`; the ranking calls it."""
+        lam, tau = base.get("lam_d"), base.get("tau_d_s")
+        self.base_resonance = None if lam is None or tau is None else relaxor_resonance(lam, tau)
+
+    def mimicked(self) -> str | None:
+        """What to say when the base's ``G_d`` rang by itself (a peak at least
+        :data:`MIMIC_PEAK` high) in the base this effect was tried against, else ``None``."""
+        if self.base_resonance is None:
+            return None
+        f, zeta = self.base_resonance
+        if 1.0 / (2.0 * zeta * np.sqrt(1.0 - zeta * zeta)) < MIMIC_PEAK:
+            return None
+        return (
+            f"the base it was tried against rang by itself (G_d a {f:.4g} Hz resonance, "
+            f"damping {zeta:.2g}): a mechanical resonance near it is not told apart from G_d"
+        )
 
     def resolved_hz(self) -> float | None:
         """The highest resonance the records' samples resolve (Hz):
@@ -217,10 +245,10 @@ class MechanicalResonance(Effect):
         if tau <= 0:
             return "no resonance"
         f = 1.0 / (2 * np.pi * tau)
-        why = self.unresolved(p)
+        notes = [n for n in (self.unresolved(p), self.mimicked()) if n is not None]
         return (
             plus_minus("f_r", f, None if s is None else f * s / tau, "Hz")
             + plus_minus(", damping", p["zeta"], sd.get("zeta"), "")
             + plus_minus(", the stack's own share", p.get("internal", 0.0), sd.get("internal"), "")
-            + ("" if why is None else f"; {why}")
+            + "".join(f"; {n}" for n in notes)
         )
