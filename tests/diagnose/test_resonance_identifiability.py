@@ -178,18 +178,18 @@ def test_no_resonance_gains_too_little_to_be_cross_validated():
 
 def test_the_description_says_when_the_base_rings_by_itself():
     """Shown a base whose G_d is the stand-in's (order 1.886, 0.13 ms: 1.21 kHz, damping
-    0.09), the description says a resonance there is not told apart from G_d; shown the
+    0.09), the description says a resonance there and G_d can stand in for each other; shown the
     three-capture fold's (order 1.13) it says nothing. The threshold (a peak of a section at
     damping 0.3) just inside and outside: the order whose |G_d| peak (dense grid) is that
     high, +-0.01."""
     eff = MechanicalResonance()
     eff.note_base({"lam_d": 1.886, "tau_d_s": 1.3e-4})
     text = eff.describe(_p(1239.0), {})
-    assert "G_d a 1214 Hz resonance" in text and "not told apart" in text
+    assert "G_d a 1214 Hz resonance" in text and "stand in for each other" in text
     eff.note_base({"lam_d": 1.13, "tau_d_s": 1.4e-4})
     assert "G_d" not in eff.describe(_p(1239.0), {})
     z03 = _second_order_peak(0.3)
     lam_edge = optimize.brentq(lambda lam: _numeric_peak(lam, 1e-4)[1] - z03, 1.05, 1.9)
     for lam, says in ((lam_edge + 0.01, True), (lam_edge - 0.01, False)):
         eff.note_base({"lam_d": lam, "tau_d_s": 1e-4})
-        assert ("not told apart" in eff.describe(_p(1239.0), {})) is says, lam
+        assert ("stand in for each other" in eff.describe(_p(1239.0), {})) is says, lam

@@ -165,7 +165,8 @@ class MechanicalResonance(Effect):
             return None
         return (
             f"the base it was tried against rang by itself (G_d a {f:.4g} Hz resonance, "
-            f"damping {zeta:.2g}): a mechanical resonance near it is not told apart from G_d"
+            f"damping {zeta:.2g}): near that frequency a mechanical resonance and G_d can stand "
+            "in for each other"
         )
 
     def resolved_hz(self) -> float | None:
