@@ -15,7 +15,13 @@ What it does (:mod:`labrig.studies.waveforms` holds the captures and their truth
 4. ``labrig diagnose all.h5 --json`` (with ``--also``: also with the structural candidates and
    ``--max-effects 3``, as the command's hint proposes);
 5. ``labrig fit`` of each capture alone and of the four, for the operator's parameters and
-   their correlation (does it collapse?).
+   their correlation (does it collapse?), and the resonance the fitted ``G_d`` is by itself
+   (:func:`labrig.model.effects.mechanical_resonance.relaxor_resonance`);
+6. with ``--resonance``: the PRBS predicted from the other three with effects given to
+   ``labrig validate --effects-from`` (``negative_field_asymmetry`` alone, with
+   ``mechanical_resonance``, with ``amplifier_bandwidth`` and ``mechanical_resonance``): the
+   held-out NRMSE, the fitted resonance and where in frequency the held-out residual's energy
+   lies (shares below 5, 50, 150 Hz ... of the residual's spectrum).
 
 Measured: NRMSE (%) of each held-out capture for every model, the noise floor, what diagnose
 accepts, the fitted ``gamma``, ``vc`` and their correlation, and the CPU seconds of every
@@ -26,6 +32,7 @@ of 1e6 floats, best of 5) timed at the start and the end and the load average.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import platform
@@ -35,7 +42,10 @@ import sys
 from datetime import UTC, datetime
 from pathlib import Path
 
+import numpy as np
 from yardstick import yardstick_s
+
+from labrig.model.effects.mechanical_resonance import relaxor_resonance
 
 ROOT = Path(__file__).resolve().parents[1]
 LABRIG = [sys.executable, "-m", "labrig"]
@@ -67,6 +77,62 @@ def load() -> str:
     return " ".join(f"{x:.1f}" for x in os.getloadavg())
 
 
+#: the bands (Hz) of the held-out residual's spectrum in the ``--resonance`` section
+BANDS = (0.0, 5.0, 50.0, 150.0, 400.0, 900.0, 1600.0, 5001.0)
+#: the effects given to ``validate --effects-from`` in the ``--resonance`` section
+FORCED = (
+    ("negative_field_asymmetry",),
+    ("negative_field_asymmetry", "mechanical_resonance"),
+    ("negative_field_asymmetry", "amplifier_bandwidth", "mechanical_resonance"),
+)
+
+
+def band_shares(measured: np.ndarray, predicted: np.ndarray, rate_hz: float) -> list[float]:
+    """Share of the residual's energy (mean removed) in each of :data:`BANDS` (Hz)."""
+    r = measured - predicted
+    spec = np.abs(np.fft.rfft(r - r.mean())) ** 2
+    f = np.fft.rfftfreq(r.size, 1.0 / rate_hz)
+    total = float(np.sum(spec[1:]))
+    return [float(np.sum(spec[(f >= a) & (f < b)])) / total for a, b in itertools.pairwise(BANDS)]
+
+
+def resonance_section(w: Path, h5s: list[Path]) -> list[tuple[str, float, str]]:
+    """The PRBS predicted from the other three captures with :data:`FORCED` effects
+    (``labrig.commands.validate.validate_runs`` with ``effects_from``, in this process):
+    markdown rows on stdout, the CPU row of each."""
+    import time
+
+    from labrig.commands.validate import validate_runs
+
+    train, test = h5s[:-1], h5s[-1]
+    print("\n## The PRBS predicted from the other three with effects given (--effects-from)\n")
+    heads = " | ".join(f"{a:g}-{b:g} Hz" for a, b in itertools.pairwise(BANDS))
+    print(f"| effects | PRBS NRMSE % | fitted resonance | residual energy: {heads} | CPU s |")
+    print("|---|---|---|" + "---|" * (len(BANDS) - 1) + "---|")
+    rows = []
+    for fx in FORCED:
+        doc = w / f"forced_{'_'.join(fx)}.json"
+        doc.write_text(json.dumps({"effects_added": [{"effect": e, "params": {}} for e in fx]}))
+        t0 = time.process_time()
+        v = validate_runs(train, [test], effects_from=doc)
+        cpu = time.process_time() - t0
+        m = v.models["dynamic+effects"]
+        rec = v.tests[0].scored_records[0]
+        i0 = round(max(v.tests[0].warmup_s, 0.0) * rec.rate_hz)
+        pred = m.predictions[(str(test), rec.name)]
+        shares = band_shares(rec.strain_ue[i0:], pred[i0:], rec.rate_hz)
+        res = [e["description"] for e in m.params.get("effects", []) if e["effect"] == fx[-1]]
+        print(
+            f"| {' + '.join(fx)} | {m.mean('whole_nrmse_pct'):.3g} | "
+            f"{res[0] if res and fx[-1] == 'mechanical_resonance' else '-'} | "
+            + " | ".join(f"{100 * x:.1f} %" for x in shares)
+            + f" | {cpu:.1f} |",
+            flush=True,
+        )
+        rows.append((f"validate prbs --effects-from ({' + '.join(fx)})", cpu, load()))
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--work", type=Path, required=True)
@@ -74,6 +140,10 @@ def main() -> None:
     ap.add_argument("--truth", default="stack")
     ap.add_argument("--also", action="store_true", help="also diagnose with --also (slow)")
     ap.add_argument("--no-validate", action="store_true", help="skip the leave-one-out")
+    ap.add_argument(
+        "--resonance", action="store_true", help="also the PRBS with effects given (slow)"
+    )
+    ap.add_argument("--no-diagnose", action="store_true", help="skip diagnose all.h5")
     a = ap.parse_args()
     w = a.work
     w.mkdir(parents=True, exist_ok=True)
@@ -113,16 +183,20 @@ def main() -> None:
         fits[name] = (json.loads(out.read_text()), cpu)
     print("## Our model fitted on each capture alone and on the four\n")
     print(
-        "| fitted on | gamma (ue/V) | vc (V) | corr(gamma, vc) | unidentifiable | NRMSE % | CPU s |"
+        "| fitted on | gamma (ue/V) | vc (V) | corr(gamma, vc) | unidentifiable | NRMSE % "
+        "| G_d (order, tau) and its own resonance | CPU s |"
     )
-    print("|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|")
     for name, (d, cpu) in fits.items():
         p, u, c = d["params"], d["uncertainty"], d["correlation"]
         unid = ", ".join(d.get("identifiability", {}).get("unidentifiable", {})) or "none"
+        gd = relaxor_resonance(p["lam_d"], p["tau_d_s"])
+        ring = "none" if gd is None else f"{gd[0]:.4g} Hz, zeta {gd[1]:.3f}"
         print(
             f"| {name} | {p['gamma_ue_per_V']:.3g} +- {u['gamma_ue_per_V'] or 0:.2g} | "
             f"{p['vc_V']:.4g} +- {u['vc_V'] or 0:.2g} | "
-            f"{c['gamma_ue_per_V']['vc_V']:+.3f} | {unid} | {d['nrmse_pct']:.3g} | {cpu:.1f} |"
+            f"{c['gamma_ue_per_V']['vc_V']:+.3f} | {unid} | {d['nrmse_pct']:.3g} | "
+            f"{p['lam_d']:.3g}, {1e3 * p['tau_d_s']:.3g} ms: {ring} | {cpu:.1f} |"
         )
 
     if not a.no_validate:
@@ -149,7 +223,10 @@ def main() -> None:
             label = fold["models"].get("dynamic+effects", {}).get("label", "")
             print(f"- {name} held out: {', '.join(eff) if eff else 'nothing'} ({label})")
 
-    variants = [("labrig diagnose all.h5", [])]
+    if a.resonance:
+        rows += resonance_section(w, h5s)
+
+    variants = [] if a.no_diagnose else [("labrig diagnose all.h5", [])]
     if a.also:
         also = [x for n in STRUCTURAL for x in ("--also", n)] + ["--max-effects", "3"]
         variants.append(("labrig diagnose all.h5 --also (6 structural) --max-effects 3", also))

@@ -7,6 +7,10 @@ per-entry regressors for nuisance effects). It is projected off the current mode
 the projected direction explains (with the physical sign, by non-negative least squares where
 the effect has one) ranks the candidates. This is a Lagrange-multiplier test used for ordering,
 not a p-value: the decision is made on held-out data (:mod:`.acceptance`).
+
+An effect with a ``note_base(base)`` method (``mechanical_resonance``: whether the base's
+``G_d`` is itself a resonance) is shown the base parameters it is ranked against, for its
+description; its ranking is not changed by it.
 """
 
 from __future__ import annotations
@@ -73,6 +77,9 @@ def rank(
         out = []
         for eff in candidates:
             probe_best: dict[str, float] = eff.init
+            note_base = getattr(eff, "note_base", None)
+            if callable(note_base):  # an effect the base can mimic reads the base it meets
+                note_base(cur.base)
             if eff.where == "nuisance":
                 D = nuisance_directions(cur_prob, eff)
                 D = D - B @ (B.T @ D)

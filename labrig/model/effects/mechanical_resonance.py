@@ -4,12 +4,21 @@ on the measured strain (:class:`MechanicalResonance`, its filter :func:`resonanc
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 from numpy.typing import NDArray
 
 from labrig.model.effects.base import Effect, Param, plus_minus
 
-__all__ = ["MechanicalResonance", "resonance_filter"]
+__all__ = [
+    "MIMIC_PEAK",
+    "RESOLVED_NYQUIST_SHARE",
+    "MechanicalResonance",
+    "aliased_hz",
+    "relaxor_resonance",
+    "resonance_filter",
+]
 
 
 def resonance_filter(
@@ -32,6 +41,34 @@ def resonance_filter(
     return b / a[0], a / a[0]
 
 
+def aliased_hz(f_hz: float, rate_hz: float) -> float:
+    """The frequency (Hz) at which samples taken at ``rate_hz`` show a ringing at ``f_hz``:
+    ``|f - k rate|`` for the nearest integer ``k`` (a pole pair at ``f_r`` maps to
+    ``z = exp(s / rate)``, whose angle is only known modulo ``2 pi``)."""
+    return float(abs(f_hz - rate_hz * round(f_hz / rate_hz)))
+
+
+def relaxor_resonance(lam: float, tau_s: float) -> tuple[float, float] | None:
+    """The resonance the base's relaxor ``G(s) = 1 / (1 + (tau s)^lam)`` is by itself: the
+    frequency of its gain's peak (Hz) and the damping ratio of a second-order section with
+    the same peak height (``|G|_max = 1 / (2 zeta sqrt(1 - zeta^2))``), or ``None`` when its
+    gain does not rise above 1 (``lam <= 1``: a fractional low-pass).
+
+    ``|1 + (j w tau)^lam|^2 = 1 + 2 u cos(lam pi / 2) + u^2`` with ``u = (w tau)^lam`` is
+    smallest at ``u = -cos(lam pi / 2)``: ``w tau = u^(1/lam)``, ``|G|_max = 1 / sin(lam pi / 2)``.
+    With ``lam`` near 2 (``G_d`` at its order bound) it rings like a lightly damped stack at
+    ``f = 1 / (2 pi tau)``: a mechanical resonance there cannot be told apart from it by its
+    gain alone."""
+    c = float(np.cos(lam * np.pi / 2.0))
+    if c >= 0.0 or tau_s <= 0.0:
+        return None
+    f = (-c) ** (1.0 / lam) / (2.0 * np.pi * tau_s)
+    peak = 1.0 / float(np.sin(lam * np.pi / 2.0))
+    # 2 zeta sqrt(1 - zeta^2) = 1 / peak  ->  zeta^2 = (1 - sqrt(1 - 1/peak^2)) / 2
+    zeta = float(np.sqrt((1.0 - np.sqrt(max(0.0, 1.0 - 1.0 / peak**2))) / 2.0))
+    return float(f), zeta
+
+
 #: the ranking's probes (:meth:`MechanicalResonance.probes`): resonances an octave apart from
 #: this frequency (Hz; ``tau_r``'s upper bound, 5 ms, is 32 Hz) ...
 PROBE_LOWEST_HZ = 50.0
@@ -39,6 +76,13 @@ PROBE_LOWEST_HZ = 50.0
 PROBE_NYQUIST_SHARE = 0.9
 #: ... at most this many (the highest kept)
 PROBE_COUNT = 6
+#: a fitted resonance above this share of the records' Nyquist frequency is not resolved by
+#: their samples (the first-order-hold section there rings at an alias, :func:`aliased_hz`):
+#: refused (:meth:`MechanicalResonance.refusals`)
+RESOLVED_NYQUIST_SHARE = PROBE_NYQUIST_SHARE
+#: the base's ``G_d`` counts as a resonance (:meth:`MechanicalResonance.mimicked`) when its gain
+#: peaks at least this high (a second-order section's peak at damping 0.3)
+MIMIC_PEAK = 1.0 / (2.0 * 0.3 * np.sqrt(1.0 - 0.09))
 
 
 class MechanicalResonance(Effect):
@@ -97,6 +141,39 @@ class MechanicalResonance(Effect):
         # both ends are physical (damped from outside only, or by the stack only)
         Param("internal", "", 0.0, 0.0, 1.0, 0.5, check_bounds=False),
     )
+    #: the lowest sample rate (Hz) the effect has been applied at (``None`` before): the
+    #: records' rate, for :meth:`refusals` and :meth:`describe` (a library instance is
+    #: configured for one set of records)
+    rate_hz: float | None = None
+    #: the resonance the base's ``G_d`` was by itself when the effect was last ranked against
+    #: it (:meth:`note_base`; ``None``: no peak, or not ranked)
+    base_resonance: tuple[float, float] | None = None
+
+    def note_base(self, base: Mapping[str, float]) -> None:
+        """Remember the resonance the base's ``G_d`` is by itself (:func:`relaxor_resonance`
+        of ``lam_d`` and ``tau_d_s``), for :meth:`describe`; the ranking calls it."""
+        lam, tau = base.get("lam_d"), base.get("tau_d_s")
+        self.base_resonance = None if lam is None or tau is None else relaxor_resonance(lam, tau)
+
+    def mimicked(self) -> str | None:
+        """What to say when the base's ``G_d`` rang by itself (a peak at least
+        :data:`MIMIC_PEAK` high) in the base this effect was tried against, else ``None``."""
+        if self.base_resonance is None:
+            return None
+        f, zeta = self.base_resonance
+        if 1.0 / (2.0 * zeta * np.sqrt(1.0 - zeta * zeta)) < MIMIC_PEAK:
+            return None
+        return (
+            f"the base it was tried against rang by itself (G_d a {f:.4g} Hz resonance, "
+            f"damping {zeta:.2g}): near that frequency a mechanical resonance and G_d can stand "
+            "in for each other"
+        )
+
+    def resolved_hz(self) -> float | None:
+        """The highest resonance the records' samples resolve (Hz):
+        :data:`RESOLVED_NYQUIST_SHARE` of the Nyquist frequency of the lowest rate the effect
+        has been applied at (``None`` before it has been applied)."""
+        return None if self.rate_hz is None else RESOLVED_NYQUIST_SHARE * self.rate_hz / 2.0
 
     def probes(self, contexts):
         """Resonances an octave apart from :data:`PROBE_LOWEST_HZ` up to below
@@ -121,6 +198,8 @@ class MechanicalResonance(Effect):
         from scipy import signal  # lazy: a second of import CPU
 
         tau = p["tau_r_s"]
+        if self.rate_hz is None or ctx.rate_hz < self.rate_hz:
+            self.rate_hz = float(ctx.rate_hz)
         if tau <= 0:
             return x
         b, a = self._filter(ctx, tau, p["zeta"], p.get("internal", 0.0))
@@ -141,13 +220,36 @@ class MechanicalResonance(Effect):
             "tau_r_s": tau,
         }
 
+    def unresolved(self, p) -> str | None:
+        """Why the resonance ``p`` is beyond what the records' samples resolve (``f_r`` above
+        :meth:`resolved_hz`), or ``None``."""
+        top, tau = self.resolved_hz(), p["tau_r_s"]
+        if top is None or tau <= 0:
+            return None
+        f = 1.0 / (2 * np.pi * tau)
+        if f <= top:
+            return None
+        assert self.rate_hz is not None
+        return (
+            f"f_r = {f:.4g} Hz is above {100 * RESOLVED_NYQUIST_SHARE:.0f} % of the records' "
+            f"Nyquist frequency ({self.rate_hz / 2:.4g} Hz): their samples show it at its alias, "
+            f"{aliased_hz(f, self.rate_hz):.4g} Hz; not a resonance they resolve"
+        )
+
+    def refusals(self, p, sd):
+        """A resonance above what the records' samples resolve (:meth:`unresolved`)."""
+        why = self.unresolved(p)
+        return [] if why is None else [why]
+
     def describe(self, p, sd):
         tau, s = p["tau_r_s"], sd.get("tau_r_s")
         if tau <= 0:
             return "no resonance"
         f = 1.0 / (2 * np.pi * tau)
+        notes = [n for n in (self.unresolved(p), self.mimicked()) if n is not None]
         return (
             plus_minus("f_r", f, None if s is None else f * s / tau, "Hz")
             + plus_minus(", damping", p["zeta"], sd.get("zeta"), "")
             + plus_minus(", the stack's own share", p.get("internal", 0.0), sd.get("internal"), "")
+            + "".join(f"; {n}" for n in notes)
         )
