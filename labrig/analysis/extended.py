@@ -61,13 +61,14 @@ def effect_context(records: Sequence[Record], mains_hz: float | None = None) -> 
     :func:`labrig.model.effects.library`): whether every record has a temperature channel and
     the amplifier's measured voltage, the mains frequency (given, else the line the strain shows
     at 50 or 60 Hz, :func:`~labrig.analysis.spectra.detect_mains_hz`, else
-    :data:`DEFAULT_MAINS_HZ`) and the full-scale voltage (the largest ``|V|``, the reference of
-    ``quadratic_term``)."""
+    :data:`DEFAULT_MAINS_HZ`), the full-scale voltage (the largest ``|V|``, the reference of
+    ``quadratic_term``) and the lowest sample rate (what ``mechanical_resonance`` can resolve)."""
     return {
         "temperature": all("temperature" in r.aux for r in records),
         "amplifier_voltage": all("amplifier_voltage" in r.aux for r in records),
         "mains_hz": float(mains_hz or detect_mains_hz(records) or DEFAULT_MAINS_HZ),
         "v_ref": max(float(np.max(np.abs(r.voltage_V))) for r in records),
+        "rate_hz": min(float(r.rate_hz) for r in records),
     }
 
 

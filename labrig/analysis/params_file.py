@@ -34,6 +34,9 @@ MAX_PARAMS_BYTES = 10_000_000
 
 #: the types of ``effects_context`` (how the effects were configured when they were fitted)
 CONTEXT_TYPES: dict[str, type] = RunContext.types()
+#: ``effects_context`` fields added after files were first written: a file may lack them (the
+#: effects then take :class:`RunContext`'s default)
+CONTEXT_ADDED_LATER: frozenset[str] = frozenset({"rate_hz"})
 
 
 def file_issue(path: Path, message: str, field: str = "") -> InputFileError:
@@ -166,9 +169,10 @@ def _is_context(context: Any) -> bool:
     """``effects_context`` as ``labrig fit`` writes it (an int is a float here)."""
     return (
         isinstance(context, dict)
-        and set(context) == set(CONTEXT_TYPES)
+        and set(CONTEXT_TYPES) - CONTEXT_ADDED_LATER <= set(context) <= set(CONTEXT_TYPES)
         and all(
             isinstance(context[k], t) or (t is float and isinstance(context[k], int))
             for k, t in CONTEXT_TYPES.items()
+            if k in context
         )
     )

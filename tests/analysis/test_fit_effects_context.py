@@ -83,7 +83,13 @@ def test_report_with_a_fit_effect_file_predicts_with_the_effect(tmp_path: Path):
     res = invoke("fit", run, "--effect", "viscoelastic_creep", "--no-heldout", "--out", params)
     assert res.exit_code == 0, res.stderr
     doc = json.loads(params.read_text())
-    assert set(doc["effects_context"]) == {"temperature", "amplifier_voltage", "mains_hz", "v_ref"}
+    assert set(doc["effects_context"]) == {
+        "temperature",
+        "amplifier_voltage",
+        "mains_hz",
+        "v_ref",
+        "rate_hz",
+    }
 
     setup = prepare(run, None, None, None)
     cm = load_control_model(params)
@@ -132,3 +138,29 @@ def test_a_fit_file_without_its_effects_context_is_read_and_configured_from_the_
     path.write_text(json.dumps({**doc, "effects": [{"effect": "gremlins", "params": {}}]}))
     with pytest.raises(InputFileError, match="gremlins"):
         read_params(path)
+
+
+def test_an_effects_context_written_before_rate_hz_is_read(tmp_path):
+    """A context without ``rate_hz`` (files written before the field existed) is accepted and
+    leaves mechanical_resonance without a sampling limit; a context missing an original field,
+    or holding an unknown one, is refused with the field named."""
+    from labrig.core.errors import InputFileError
+
+    old_context = {"temperature": False, "amplifier_voltage": False, "mains_hz": 50.0}
+    old_context["v_ref"] = 100.0
+    p = {"tau_r_s": 1.0 / (2 * np.pi * 7351.0), "zeta": 0.05, "internal": 0.5}
+    doc = {
+        "params": PAPER_TABLE1.model_dump(),
+        "effects": [{"effect": "mechanical_resonance", "params": p}],
+        "effects_context": old_context,
+    }
+    path = tmp_path / "old.json"
+    (eff,), values = fitted_effects(doc, path)
+    assert eff.refusals(values["mechanical_resonance"], {}) == []  # no rate: no limit
+    (eff,), _ = fitted_effects(
+        {**doc, "effects_context": {**old_context, "rate_hz": 10_000.0}}, path
+    )
+    assert "alias" in eff.refusals(values["mechanical_resonance"], {})[0]  # 7.35 kHz at 10 kHz
+    for bad in ({k: v for k, v in old_context.items() if k != "v_ref"}, {**old_context, "x": 1.0}):
+        with pytest.raises(InputFileError, match="effects_context"):
+            fitted_effects({**doc, "effects_context": bad}, path)

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from scipy import optimize, signal
 
-from labrig.analysis.extended import ExtendedProblem
+from labrig.analysis.extended import ExtendedProblem, effect_context
+from labrig.analysis.records import Record
 from labrig.model import PAPER_TABLE1
 from labrig.model.effects import library
-from labrig.model.effects.base import Context
 from labrig.model.effects.mechanical_resonance import (
     RESOLVED_NYQUIST_SHARE,
     MechanicalResonance,
@@ -91,11 +91,13 @@ def test_a_relaxor_of_order_up_to_one_is_no_resonance():
 
 
 def _applied(rates: list[float]) -> MechanicalResonance:
-    eff = MechanicalResonance()
-    for rate in rates:
-        ctx = Context(rate_hz=rate, v=np.zeros(64), entries={})
-        eff.apply(np.linspace(0.0, 1.0, 64), ctx, {"tau_r_s": 1e-4, "zeta": 0.1})
-    return eff
+    """The effect as diagnose configures it for records at ``rates`` (the library's context
+    from the records: their lowest rate)."""
+    recs = [
+        Record(f"r{k}", rate, np.arange(64) / rate, np.linspace(0.0, 50.0, 64), np.zeros(64))
+        for k, rate in enumerate(rates)
+    ]
+    return library(**effect_context(recs, mains_hz=50.0))["mechanical_resonance"]
 
 
 def _p(f_hz: float) -> dict[str, float]:
@@ -115,7 +117,8 @@ def test_a_fit_beyond_what_the_samples_resolve_is_refused():
     assert "alias" not in eff.describe(_p(1200.0), {})
     slow = _applied([RATE, 2000.0])
     assert slow.refusals(_p(1200.0), {}) != []  # above 900 Hz at 2 kHz
-    assert MechanicalResonance().refusals(_p(7351.0), {}) == []  # never applied: no rate
+    assert MechanicalResonance().refusals(_p(7351.0), {}) == []  # no rate known: no limit
+    assert library()["mechanical_resonance"].refusals(_p(7351.0), {}) == []
 
 
 def _edges() -> list[tuple[str, np.ndarray]]:

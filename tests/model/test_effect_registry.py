@@ -198,6 +198,7 @@ def test_the_package_and_its_users_read_the_registry():
         "amplifier_voltage": bool,
         "mains_hz": float,
         "v_ref": float,
+        "rate_hz": float,
     } == CONTEXT_TYPES
     # every registered class is importable from the package, as it was before the registry
     for r in REGISTRY:

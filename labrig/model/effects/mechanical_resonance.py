@@ -141,13 +141,14 @@ class MechanicalResonance(Effect):
         # both ends are physical (damped from outside only, or by the stack only)
         Param("internal", "", 0.0, 0.0, 1.0, 0.5, check_bounds=False),
     )
-    #: the lowest sample rate (Hz) the effect has been applied at (``None`` before): the
-    #: records' rate, for :meth:`refusals` and :meth:`describe` (a library instance is
-    #: configured for one set of records)
-    rate_hz: float | None = None
     #: the resonance the base's ``G_d`` was by itself when the effect was last ranked against
     #: it (:meth:`note_base`; ``None``: no peak, or not ranked)
     base_resonance: tuple[float, float] | None = None
+
+    def __init__(self, rate_hz: float = 0.0):
+        #: the records' lowest sample rate (Hz; the library's ``rate_hz`` context), for
+        #: :meth:`refusals` and :meth:`describe`; ``None`` when not known
+        self.rate_hz: float | None = float(rate_hz) if rate_hz and rate_hz > 0 else None
 
     def note_base(self, base: Mapping[str, float]) -> None:
         """Remember the resonance the base's ``G_d`` is by itself (:func:`relaxor_resonance`
@@ -171,8 +172,8 @@ class MechanicalResonance(Effect):
 
     def resolved_hz(self) -> float | None:
         """The highest resonance the records' samples resolve (Hz):
-        :data:`RESOLVED_NYQUIST_SHARE` of the Nyquist frequency of the lowest rate the effect
-        has been applied at (``None`` before it has been applied)."""
+        :data:`RESOLVED_NYQUIST_SHARE` of the Nyquist frequency of the records' lowest rate
+        (``None`` when the effect was configured without it)."""
         return None if self.rate_hz is None else RESOLVED_NYQUIST_SHARE * self.rate_hz / 2.0
 
     def probes(self, contexts):
@@ -198,8 +199,6 @@ class MechanicalResonance(Effect):
         from scipy import signal  # lazy: a second of import CPU
 
         tau = p["tau_r_s"]
-        if self.rate_hz is None or ctx.rate_hz < self.rate_hz:
-            self.rate_hz = float(ctx.rate_hz)
         if tau <= 0:
             return x
         b, a = self._filter(ctx, tau, p["zeta"], p.get("internal", 0.0))

@@ -61,13 +61,16 @@ class RunContext:
     - ``temperature``: every record has a temperature channel (degC);
     - ``amplifier_voltage``: every record has the amplifier's measured output voltage (V);
     - ``mains_hz``: the mains frequency (Hz);
-    - ``v_ref``: the full-scale voltage, the largest ``|V|`` of the run (V).
+    - ``v_ref``: the full-scale voltage, the largest ``|V|`` of the run (V);
+    - ``rate_hz``: the lowest sample rate of the records (Hz; 0: not known, as in a parameter
+      file written before it was recorded).
     """
 
     temperature: bool = False
     amplifier_voltage: bool = False
     mains_hz: float = 50.0
     v_ref: float = 100.0
+    rate_hz: float = 0.0
 
     @classmethod
     def types(cls) -> dict[str, type]:
@@ -157,7 +160,12 @@ REGISTRY: tuple[Registration, ...] = (
         context=("v_ref",),
     ),
     Registration(
-        "mechanical_resonance", "MechanicalResonance", "output", candidate=False, also=True
+        "mechanical_resonance",
+        "MechanicalResonance",
+        "output",
+        candidate=False,
+        also=True,
+        context=("rate_hz",),
     ),
     # a default candidate where the drive goes against the poling (a poled ceramic's d33 falls
     # there; labrig.analysis.diagnose.procedure.drives_against_poling), identically null
@@ -205,7 +213,7 @@ def registration(name: str) -> Registration:
 def library(**context: bool | float) -> dict[str, Effect]:
     """Every registered effect by name, in registry order, configured for what a run recorded:
     ``context`` holds :class:`RunContext` fields by keyword (``temperature``,
-    ``amplifier_voltage``, ``mains_hz``, ``v_ref``; the others at their defaults; an unknown
+    ``amplifier_voltage``, ``mains_hz``, ``v_ref``, ``rate_hz``; the others at their defaults; an unknown
     keyword is a ``TypeError``)."""
     ctx = RunContext(**context)  # type: ignore[arg-type]
     return {r.name: r.configured(ctx) for r in REGISTRY}
