@@ -5,6 +5,7 @@ Run from the repository root (a few minutes on a loaded 2-core machine)::
     .venv/bin/python benchmarks/bench_speed.py phases RUN.h5        # fit and diagnose, by step
     .venv/bin/python benchmarks/bench_speed.py library RUN.h5       # 4 more candidates
     .venv/bin/python benchmarks/bench_speed.py fleet-task RUN.h5    # batch diagnose's base fit
+    .venv/bin/python benchmarks/bench_speed.py documents RUN.h5 --reference OTHER/.venv/bin/python
 
 ``phases``: one fresh process each for ``fit`` and for ``diagnose`` (one worker), CPU seconds
 (``getrusage`` of the process and its children: the store reads a run file in a child process)
@@ -28,6 +29,14 @@ each, both reading the file once and running the task's ``fit_part`` (``labrig f
 leave-one-entry-out), then the diagnosis with the fit (``reuse``) or fitting its own base as
 before (``refit``); CPU seconds (``getrusage``, children included) of the fit, of the diagnosis
 and of both, medians and ranges, and whether the two ``diagnosis.json`` documents are equal.
+
+``documents``: what a ``batch diagnose`` task's documents cost (``diagnosis.json`` and
+``diagnosis.html`` with its figures), in a worker that has made some before: one fresh process
+per installation (this checkout's interpreter, and ``--reference PYTHON``, another
+installation's, interleaved ``--repeats`` times), each reading the file, running the task's fit
+and diagnosis once, then making the documents six times; CPU seconds of the first (matplotlib's
+import, the first figure) and the median of the other five, and whether ``diagnosis.json`` is
+the same and every figure the same pixel for pixel across the installations.
 
 Prints markdown on stdout (copied into ``benchmarks/RESULTS.md``).
 """
@@ -102,6 +111,30 @@ t_fit = cpu() - t
 t = cpu()
 res = diagnose_run_file(path, snapshot=snap.run, base_fit=task_base_fit(snap) if reuse else None)
 print(json.dumps([t_fit, cpu() - t, res.document]))
+"""
+
+#: what the child process of ``documents`` runs: one JSON line (first, median of the next five
+#: CPU s, diagnosis.json, SHA-256 of each figure's pixels)
+DOCUMENTS = r"""
+import base64, hashlib, io, json, re, statistics, sys, time
+from pathlib import Path
+import numpy as np
+from PIL import Image
+from labrig.commands.diagnose import diagnose_run_file
+from labrig.fleet.tasks import TaskOptions, TaskResult, fit_part, read_snapshot, task_base_fit
+path = Path(sys.argv[1])
+snap = read_snapshot(path)
+fit_part(snap, TaskOptions(), TaskResult("diagnose", str(path), "bench", False))
+res = diagnose_run_file(path, snapshot=snap.run, base_fit=task_base_fit(snap))
+times = []
+for _ in range(6):
+    t = time.process_time()
+    docs = res.documents()
+    times.append(time.process_time() - t)
+pngs = re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", docs["diagnosis.html"])
+pixels = [hashlib.sha256(np.asarray(Image.open(io.BytesIO(base64.b64decode(b)))).tobytes())
+          .hexdigest() for b in pngs]
+print(json.dumps([times[0], statistics.median(times[1:]), docs["diagnosis.json"], pixels]))
 """
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -259,12 +292,48 @@ def fleet_task(path: Path, repeats: int) -> None:
           f"{os.getloadavg()[0]:.2f}")  # fmt: skip
 
 
+def documents(path: Path, repeats: int, reference: str | None) -> None:
+    """``documents`` (module docstring)."""
+    print(header() + "\n")
+    pythons = {"this checkout": sys.executable}
+    if reference:
+        pythons = {"reference": reference, **pythons}
+    got: dict[str, list] = {k: [] for k in pythons}
+    for _ in range(repeats):
+        for label, python in pythons.items():
+            res = subprocess.run(
+                [python, "-c", DOCUMENTS, str(path)],
+                capture_output=True,
+                text=True,
+                check=True,
+                cwd=ROOT,
+            )
+            got[label].append(json.loads(res.stdout.strip().splitlines()[-1]))
+    first = next(iter(got.values()))[0]
+    same = all(r[2] == first[2] and r[3] == first[3] for rs in got.values() for r in rs)
+    print(f"`diagnosis.json` + `diagnosis.html` of {path.name}, CPU s (median and range of "
+          f"{repeats} fresh processes each, interleaved):\n")  # fmt: skip
+    print("| installation | first in the process | later (median of 5) |")
+    print("|---|---|---|")
+    for label, rows in got.items():
+        cells = []
+        for vals in ([r[0] for r in rows], [r[1] for r in rows]):
+            cells.append(f"{statistics.median(vals):.2f} ({min(vals):.2f}-{max(vals):.2f})")
+        print(f"| {label} | " + " | ".join(cells) + " |")
+    print(f"\n`diagnosis.json` and every figure's pixels the same in every process: {same}; "
+          f"load average now {os.getloadavg()[0]:.2f}")  # fmt: skip
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("phases", "library", "fleet-task"))
+    ap.add_argument("what", choices=("phases", "library", "fleet-task", "documents"))
     ap.add_argument("run", type=Path)
     ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--reference", help="documents: another installation's Python")
     a = ap.parse_args()
+    if a.what == "documents":
+        documents(a.run.resolve(), a.repeats, a.reference)
+        return 0
     run = {"phases": phases, "library": library, "fleet-task": fleet_task}[a.what]
     run(a.run.resolve(), a.repeats)
     return 0
