@@ -95,10 +95,12 @@ def _empty(axes: list[Axes]) -> None:
 class ResidualFigures:
     """:func:`residual_figure`'s PNG for one diagnosis after another (a ``batch diagnose``
     worker's tasks): the figure of the last panel count, with its axes and the tick objects
-    matplotlib makes for them (about 40 % of the figure's cost), is kept and emptied between
-    diagnoses, so each is drawn as on a new figure, pixel for pixel (the tests compare the
-    two). A diagnosis whose titles need matplotlib's automatic placement
-    (:func:`~labrig.report.plots.set_title`) is drawn on a new figure, not kept."""
+    matplotlib makes for them, is kept and emptied between diagnoses (a quarter to a third less
+    CPU per page: benchmarks/RESULTS.md, fourth round), so each is drawn as on a new figure,
+    pixel for pixel (the tests compare the two). A diagnosis whose titles need matplotlib's
+    automatic placement (:func:`~labrig.report.plots.set_title`) is drawn on a new figure, not
+    kept. The figure holds the last diagnosis' residuals (about 1.4 MB for the paper's
+    campaign) until the next one."""
 
     def __init__(self) -> None:
         self._held: tuple[int, Figure, list[Axes]] | None = None
