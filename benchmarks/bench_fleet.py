@@ -28,6 +28,14 @@ command and every process it started: the LocalCluster's scheduler, nannies and 
 per task. Run it with another installation's Python (its ``labrig`` is then the one measured)
 for the figures before a change.
 
+``compare DIR_A DIR_B``: are two ``batch diagnose`` (or ``fit``) output folders of the same run
+files the same (another installation's batch, or a batch on Dask against ``--serial``)? The
+tables (``fleet.parquet``, ``fleet_entries.parquet``, or their CSV) row by row, every column
+equal but the task's time and worker (``elapsed_s``, ``diag_elapsed_s``, ``worker``); each
+run's ``fit.json`` and ``diagnosis.json`` byte for byte; ``diagnosis.html`` with its figures
+replaced by their index and the diagnosis' time masked character for character, and each
+embedded figure decoded and compared pixel for pixel. Exit status 1 on any difference.
+
 Every section prints the load average before and after.
 """
 
@@ -303,6 +311,81 @@ def task_costs(command: str, files: list[Path]) -> None:
     print(f"load average after: {load()}; yardstick {1e3 * yardstick_s():.1f} ms")
 
 
+#: columns of the batch tables that change from one run of the same batch to the next
+VOLATILE_COLUMNS = ("elapsed_s", "diag_elapsed_s", "worker")
+
+
+def _table(folder: Path, stem: str):
+    import pandas as pd
+
+    pq = folder / f"{stem}.parquet"
+    return pd.read_parquet(pq) if pq.exists() else pd.read_csv(folder / f"{stem}.csv")
+
+
+def _page(path: Path) -> tuple[str, list]:
+    """A diagnosis page's text (figures replaced by their index, its time masked) and the
+    figures' pixels."""
+    import base64
+    import io
+    import re
+
+    import numpy as np
+    from PIL import Image
+
+    html = path.read_text()
+    pngs = re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", html)
+    text = html
+    for k, b in enumerate(pngs):
+        text = text.replace(b, f"<figure {k}>", 1)
+    text = re.sub(r"Diagnosis took [0-9.]+ s", "Diagnosis took T s", text)
+    pixels = [np.asarray(Image.open(io.BytesIO(base64.b64decode(b)))) for b in pngs]
+    return text, pixels
+
+
+def compare_outputs(a: Path, b: Path) -> int:
+    """``compare`` (module docstring): the differences printed; 0 when there are none."""
+    import numpy as np
+
+    diffs: list[str] = []
+    for stem in ("fleet", "fleet_entries"):
+        ta, tb = _table(a, stem), _table(b, stem)
+        cols = [c for c in ta.columns if c not in VOLATILE_COLUMNS]
+        if list(ta.columns) != list(tb.columns) or len(ta) != len(tb):
+            diffs.append(f"{stem}: columns or row counts differ")
+            continue
+        for c in cols:
+            x, y = ta[c].tolist(), tb[c].tolist()
+            for i, (u, v) in enumerate(zip(x, y, strict=True)):
+                same = u == v or (u != u and v != v)  # NaN == NaN here
+                if not same:
+                    diffs.append(f"{stem}[{i}].{c}: {u!r} != {v!r}")
+    runs_a = sorted(p.name for p in (a / "runs").iterdir())
+    runs_b = sorted(p.name for p in (b / "runs").iterdir())
+    if runs_a != runs_b:
+        diffs.append(f"runs differ: {runs_a} != {runs_b}")
+    pages = 0
+    for key in sorted(set(runs_a) & set(runs_b)):
+        for name in ("fit.json", "diagnosis.json"):
+            fa, fb = a / "runs" / key / name, b / "runs" / key / name
+            if fa.exists() != fb.exists() or (fa.exists() and fa.read_bytes() != fb.read_bytes()):
+                diffs.append(f"runs/{key}/{name} differs")
+        ha, hb = a / "runs" / key / "diagnosis.html", b / "runs" / key / "diagnosis.html"
+        if ha.exists() and hb.exists():
+            (xa, pa), (xb, pb) = _page(ha), _page(hb)
+            pages += 1
+            if xa != xb:
+                diffs.append(f"runs/{key}/diagnosis.html: text differs")
+            if len(pa) != len(pb) or any(
+                u.shape != v.shape or not np.array_equal(u, v) for u, v in zip(pa, pb, strict=False)
+            ):
+                diffs.append(f"runs/{key}/diagnosis.html: figures differ")
+    for d in diffs:
+        print(d)
+    print(f"{len(runs_a)} runs, {pages} diagnosis pages compared: "
+          f"{'identical' if not diffs else f'{len(diffs)} differences'}")  # fmt: skip
+    return 1 if diffs else 0
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="what", required=True)
@@ -315,7 +398,11 @@ def main() -> None:
     de.add_argument("--n", type=int, default=200)
     de.add_argument("--out", type=Path, required=True)
     de.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    co = sub.add_parser("compare")
+    co.add_argument("dirs", type=Path, nargs=2)
     a = ap.parse_args()
+    if a.what == "compare":
+        sys.exit(compare_outputs(*a.dirs))
     if a.what == "scaling":
         scaling(a.n)
     elif a.what == "tasks":

@@ -5,6 +5,7 @@ Run from the repository root (a few minutes on a loaded 2-core machine)::
     .venv/bin/python benchmarks/bench_speed.py phases RUN.h5        # fit and diagnose, by step
     .venv/bin/python benchmarks/bench_speed.py library RUN.h5       # 4 more candidates
     .venv/bin/python benchmarks/bench_speed.py fleet-task RUN.h5    # batch diagnose's base fit
+    .venv/bin/python benchmarks/bench_speed.py documents A.h5 B.h5 --reference PYTHON  # pages
 
 ``phases``: one fresh process each for ``fit`` and for ``diagnose`` (one worker), CPU seconds
 (``getrusage`` of the process and its children: the store reads a run file in a child process)
@@ -28,6 +29,15 @@ each, both reading the file once and running the task's ``fit_part`` (``labrig f
 leave-one-entry-out), then the diagnosis with the fit (``reuse``) or fitting its own base as
 before (``refit``); CPU seconds (``getrusage``, children included) of the fit, of the diagnosis
 and of both, medians and ranges, and whether the two ``diagnosis.json`` documents are equal.
+
+``documents``: what a ``batch diagnose`` task's documents cost (``diagnosis.json`` and
+``diagnosis.html`` with its figures) in a worker that has made some before: one fresh process
+per installation (this checkout's interpreter, and ``--reference PYTHON``, another
+installation's, interleaved ``--repeats`` times), each diagnosing the run files given (the
+task's fit, then the diagnosis), then making their documents three times over, one run after
+the other, with a task's large temporaries allocated and freed between pages; CPU seconds of
+the first (matplotlib's import, the first figure) and the median of the others, and whether
+every ``diagnosis.json`` and every figure's pixels are the same across the installations.
 
 Prints markdown on stdout (copied into ``benchmarks/RESULTS.md``).
 """
@@ -102,6 +112,36 @@ t_fit = cpu() - t
 t = cpu()
 res = diagnose_run_file(path, snapshot=snap.run, base_fit=task_base_fit(snap) if reuse else None)
 print(json.dumps([t_fit, cpu() - t, res.document]))
+"""
+
+#: what the child process of ``documents`` runs: one JSON line (CPU s of the first documents,
+#: of each later one, the diagnosis.json documents, SHA-256 of each figure's pixels)
+DOCUMENTS = r"""
+import base64, hashlib, io, json, re, sys, time
+from pathlib import Path
+import numpy as np
+from PIL import Image
+from labrig.commands.diagnose import diagnose_run_file
+from labrig.fleet.tasks import TaskOptions, TaskResult, fit_part, read_snapshot, task_base_fit
+results = []
+for p in sys.argv[1:]:
+    path = Path(p)
+    snap = read_snapshot(path)
+    fit_part(snap, TaskOptions(), TaskResult("diagnose", str(path), "bench", False))
+    results.append(diagnose_run_file(path, snapshot=snap.run, base_fit=task_base_fit(snap)))
+times, out = [], {}
+for rnd in range(3):
+    for res in results:
+        junk = [np.ones((87_500, 8)) for _ in range(20)]  # a task's temporaries between pages
+        del junk
+        t = time.process_time()
+        docs = res.documents()
+        times.append(time.process_time() - t)
+        pngs = re.findall(r"data:image/png;base64,([A-Za-z0-9+/=]+)", docs["diagnosis.html"])
+        pixels = [hashlib.sha256(np.asarray(Image.open(io.BytesIO(base64.b64decode(b))))
+                  .tobytes()).hexdigest() for b in pngs]
+        out[res.path.name] = [docs["diagnosis.json"], pixels]
+print(json.dumps([times[0], times[1:], out]))
 """
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -259,14 +299,51 @@ def fleet_task(path: Path, repeats: int) -> None:
           f"{os.getloadavg()[0]:.2f}")  # fmt: skip
 
 
+def documents(paths: list[Path], repeats: int, reference: str | None) -> None:
+    """``documents`` (module docstring)."""
+    print(header() + "\n")
+    pythons = {"this checkout": sys.executable}
+    if reference:
+        pythons = {"reference": reference, **pythons}
+    got: dict[str, list] = {k: [] for k in pythons}
+    for _ in range(repeats):
+        for label, python in pythons.items():
+            res = subprocess.run(
+                [python, "-c", DOCUMENTS, *map(str, paths)],
+                capture_output=True,
+                text=True,
+                check=True,
+                cwd=ROOT,
+            )
+            got[label].append(json.loads(res.stdout.strip().splitlines()[-1]))
+    first = next(iter(got.values()))[0]
+    same = all(r[2] == first[2] for rs in got.values() for r in rs)
+    names = ", ".join(p.name for p in paths)
+    print(f"`diagnosis.json` + `diagnosis.html` of {names}, three times over, CPU s "
+          f"({repeats} fresh processes each, interleaved):\n")  # fmt: skip
+    print("| installation | first in the process (range) | later: median (range) |")
+    print("|---|---|---|")
+    for label, rows in got.items():
+        firsts = [r[0] for r in rows]
+        later = [t for r in rows for t in r[1]]
+        cells = [f"{statistics.median(v):.2f} ({min(v):.2f}-{max(v):.2f})" for v in (firsts, later)]
+        print(f"| {label} | " + " | ".join(cells) + " |")
+    print(f"\nevery `diagnosis.json` and every figure's pixels the same in every process: {same}; "
+          f"load average now {os.getloadavg()[0]:.2f}")  # fmt: skip
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("phases", "library", "fleet-task"))
-    ap.add_argument("run", type=Path)
+    ap.add_argument("what", choices=("phases", "library", "fleet-task", "documents"))
+    ap.add_argument("run", type=Path, nargs="+", help="run file(s); documents: several")
     ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--reference", help="documents: another installation's Python")
     a = ap.parse_args()
+    if a.what == "documents":
+        documents([r.resolve() for r in a.run], a.repeats, a.reference)
+        return 0
     run = {"phases": phases, "library": library, "fleet-task": fleet_task}[a.what]
-    run(a.run.resolve(), a.repeats)
+    run(a.run[0].resolve(), a.repeats)
     return 0
 
 

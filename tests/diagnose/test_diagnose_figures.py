@@ -65,3 +65,44 @@ def test_residual_panels_fit_the_figure_without_overlapping() -> None:
         for i, a in enumerate(boxes):
             for b in boxes[i + 1 :]:
                 assert not a.overlaps(b), (n, a, b)
+
+
+def _pixels(png_bytes: bytes) -> np.ndarray:
+    import io
+
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(png_bytes)))
+
+
+def test_reused_residual_figure_draws_the_pixels_of_a_new_one() -> None:
+    """``ResidualFigures`` (one figure emptied between diagnoses) against a new figure each
+    time, pixel for pixel: diagnoses of other scales, lengths and names on the same layout
+    (tick counts and labels change), a panel whose y axis needs an offset (its title placed
+    by matplotlib: a new figure), then another panel count."""
+    from labrig.report.diagnose_html import ResidualFigures
+    from labrig.report.plots import png
+
+    def records(n: int, scale: float, shift: float, m: int, tag: str) -> list[Record]:
+        t = np.linspace(0, m / 100.0, m)
+        return [
+            Record.from_arrays(
+                f"{tag}{k}", 100.0, t, shift + scale * np.sin(np.arange(m) / (7 + k))
+            )
+            for k in range(n)
+        ]
+
+    cases = [
+        (records(2, 1.0, 0.0, 300, "a"), 0.9, 1.0),
+        (records(2, 250.0, 0.0, 500, "entry_"), 0.5, 0.95),  # other ticks, labels, names
+        (records(2, 2.0, 1e4, 300, "c"), 0.0, 0.0),  # residual 1e4 + small: y offset
+        (records(2, 0.01, 0.0, 120, "d"), 0.6, 0.9),
+        (records(3, 40.0, 0.0, 200, "e"), 0.7, 0.9),  # another layout
+    ]
+    figures = ResidualFigures()
+    for recs, before, after in cases:
+        d = scaled_predictions(recs, before, after)
+        reused = _pixels(figures(d, recs))
+        fresh = _pixels(png(residual_figure(d, recs)))
+        assert reused.shape == fresh.shape
+        assert np.array_equal(reused, fresh), recs[0].name
