@@ -42,7 +42,7 @@ from labrig.analysis.diagnose.verdict import AT_FLOOR, headline
 from labrig.analysis.extended import FitOutcome
 from labrig.analysis.metrics import nrmse_pct, second_half_nrmse_pct
 from labrig.analysis.simulate import Scored, scored_sequences
-from labrig.analysis.sindy import LIBRARY, SindyBaseline, SindyCache, fit_sindy
+from labrig.analysis.sindy import LIBRARY, SindyBaseline, SindyCache, fit_sindy, free_run
 from labrig.core.blas import single_thread_blas
 from labrig.model.effects import Effect
 from labrig.model.effects.empirical import EMPIRICAL_NOTE
@@ -65,7 +65,18 @@ class DiagnosisLike(Protocol):
     messages: list[str]
 
 
-__all__ = ["NAME", "SparseOdeEffect", "SparseOdeTrial", "adopt", "sparse_ode_trial"]
+__all__ = [
+    "IDLE_FRACTION",
+    "NAME",
+    "REFINE_NFEV",
+    "SparseOdeEffect",
+    "SparseOdeTrial",
+    "adopt",
+    "driven_items",
+    "identify",
+    "refine",
+    "sparse_ode_trial",
+]
 
 #: the candidate's name in ``candidates`` and ``effects_added``
 NAME = "sparse_ode"
@@ -151,6 +162,95 @@ def _items(scored: Sequence[Scored], leave_out: str | None = None) -> list[tuple
     return [(s.seq, [g for g in s.segments if g.name != leave_out]) for s in scored]
 
 
+#: a segment whose voltage spans less than this fraction of the widest segment's is idle: it
+#: stays in its chained run (history) and is scored, but is not used to identify the ODE
+IDLE_FRACTION = 0.01
+#: the output-error refinement's budget of free runs (``scipy.optimize.least_squares``'s
+#: ``max_nfev``; its finite-difference Jacobian's runs not counted)
+REFINE_NFEV = 40
+
+
+def driven_items(items: Sequence[tuple[Any, list]]) -> list[tuple[Any, list]]:
+    """``items`` without their idle segments (voltage span below :data:`IDLE_FRACTION` of the
+    widest segment's): a stretch at rest carries the ODE's equilibrium only, and its noise's
+    derivative would weigh as much as a driven segment's in the regression. All of them when
+    every segment is idle."""
+
+    def span(seq: Any, g: Any) -> float:
+        return float(np.ptp(seq.voltage_V[g.lo : g.hi])) if g.hi > g.lo else 0.0
+
+    widest = max((span(seq, g) for seq, segs in items for g in segs), default=0.0)
+    out = [
+        (seq, [g for g in segs if span(seq, g) >= IDLE_FRACTION * widest]) for seq, segs in items
+    ]
+    out = [(seq, segs) for seq, segs in out if segs]
+    return out if out and widest > 0 else [(seq, list(segs)) for seq, segs in items]
+
+
+def refine(items: Sequence[tuple[Any, list]], model: SindyBaseline, offset: bool) -> SindyBaseline:
+    """``model``'s coefficients refined on its support by **output error**: the free run's
+    residual on the scored segments of ``items``, each segment's divided by ``span_e sqrt(n_e)``
+    (so the cost is the sum of the segments' squared NRMSE) and, with ``offset``, less its
+    mean, minimised by ``scipy.optimize.least_squares`` (trust region, finite-difference
+    Jacobian, at most :data:`REFINE_NFEV` runs) in the coefficients' ratios to ``model``'s.
+
+    The regression that found ``model`` fits a derivative estimated from noisy samples
+    (smoothed over a window whose length in seconds depends on the sample rate); the free run
+    does not differentiate the data, so the refined coefficients do not depend on how the
+    derivative was estimated, only the support does. The refined model is kept when its cost
+    is lower than ``model``'s, else ``model``."""
+    from scipy.optimize import least_squares
+
+    xi0 = np.asarray(model.coefficients, dtype=float)
+    sup = np.flatnonzero(xi0)
+    if sup.size == 0:
+        return model
+    runs = []
+    for seq, segs in items:
+        end = max(g.hi for g in segs)
+        cuts = [
+            (g.lo, g.hi, g.measured_ue, 1.0 / (float(np.ptp(g.measured_ue)) * np.sqrt(g.hi - g.lo)))
+            for g in segs
+            if np.ptp(g.measured_ue) > 0
+        ]
+        runs.append((seq.voltage_V[:end], seq.rest_V, seq.rate_hz, cuts))
+
+    def residual(z: NDArray) -> NDArray:
+        xi = xi0.copy()
+        xi[sup] = z * xi0[sup]
+        out = []
+        for v, rest, rate, cuts in runs:
+            y = free_run(xi, v, rate, rest, model.limit_ue)
+            for lo, hi, m, w in cuts:
+                r = m - y[lo:hi]
+                out.append(w * (r - r.mean() if offset else r))
+        return np.concatenate(out) if out else np.zeros(1)
+
+    z0 = np.ones(sup.size)
+    r0 = residual(z0)
+    cost0 = float(r0 @ r0) if np.all(np.isfinite(r0)) else math.inf
+    with np.errstate(over="ignore", invalid="ignore"):
+        sol = least_squares(residual, z0, method="trf", diff_step=1e-6, max_nfev=REFINE_NFEV)
+    if not (np.all(np.isfinite(sol.fun)) and 2.0 * sol.cost < cost0):
+        return model
+    xi = xi0.copy()
+    xi[sup] = sol.x * xi0[sup]
+    return SindyBaseline(
+        tuple(float(x) for x in xi), model.rate_hz, model.threshold, model.limit_ue
+    )
+
+
+def identify(
+    items: Sequence[tuple[Any, list]], offset: bool, cache: SindyCache | None = None
+) -> SindyBaseline:
+    """The sparse ODE of the scored segments of ``items``: its support and starting
+    coefficients by :func:`~labrig.analysis.sindy.fit_sindy` (STLSQ on a smoothed derivative,
+    the sparsest support within 5 % of the best training free run) on the driven segments
+    (:func:`driven_items`), then the coefficients refined by output error (:func:`refine`)."""
+    driven = driven_items(items)
+    return refine(driven, fit_sindy(driven, offset, cache=cache), offset)
+
+
 def _entry(
     scored: Sequence[Scored], model: SindyBaseline, name: str
 ) -> tuple[Any, Any, NDArray, NDArray]:
@@ -205,14 +305,14 @@ def sparse_ode_trial(
     cache = SindyCache()
     columns = current.problem.nuisance_columns
     with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
-        model = fit_sindy(_items(scored), settings.offset, cache=cache)
+        model = identify(_items(scored), settings.offset, cache)
         per_entry, preds = {}, {}
         for n in names:
             per_entry[n], preds[n] = _scores(scored, model, n, columns, held=False)
         say(f"round {rnd + 1}: cross-validating the sparse ODE")
         held = {}
         for n in names:
-            fold = fit_sindy(_items(scored, leave_out=n), settings.offset, cache=cache)
+            fold = identify(_items(scored, leave_out=n), settings.offset, cache)
             held[n] = _scores(scored, fold, n, columns, held=True)[0]
     eff = SparseOdeEffect(model)
     fo = FitOutcome({}, {NAME: {}}, {}, {}, per_entry, math.nan)
