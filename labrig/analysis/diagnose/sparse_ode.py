@@ -40,9 +40,23 @@ from labrig.analysis.diagnose.evidence import Evidence, collect_evidence
 from labrig.analysis.diagnose.state import Model, Settings, Setup
 from labrig.analysis.diagnose.verdict import AT_FLOOR, headline
 from labrig.analysis.extended import FitOutcome
-from labrig.analysis.metrics import nrmse_pct, second_half_nrmse_pct
+from labrig.analysis.metrics import drive_frequency_hz, nrmse_pct, second_half_nrmse_pct
+from labrig.analysis.records import Record
 from labrig.analysis.simulate import Scored, scored_sequences
-from labrig.analysis.sindy import LIBRARY, SindyBaseline, SindyCache, fit_sindy, free_run
+from labrig.analysis.sindy import (
+    LIBRARY,
+    THRESHOLDS,
+    TOLERANCE,
+    SindyBaseline,
+    SindyCache,
+    equilibrium,
+    fit_sindy,
+    free_run,
+    library_matrix,
+    smoothed_derivative,
+    smoothing_window,
+    stlsq,
+)
 from labrig.core.blas import single_thread_blas
 from labrig.model.effects import Effect
 from labrig.model.effects.empirical import EMPIRICAL_NOTE
@@ -69,13 +83,18 @@ __all__ = [
     "IDLE_FRACTION",
     "NAME",
     "REFINE_NFEV",
+    "SAMPLES_PER_PERIOD",
     "SparseOdeEffect",
     "SparseOdeTrial",
     "adopt",
+    "decimation",
     "driven_items",
     "identify",
+    "path",
     "refine",
+    "settles",
     "sparse_ode_trial",
+    "working_records",
 ]
 
 #: the candidate's name in ``candidates`` and ``effects_added``
@@ -165,9 +184,58 @@ def _items(scored: Sequence[Scored], leave_out: str | None = None) -> list[tuple
 #: a segment whose voltage spans less than this fraction of the widest segment's is idle: it
 #: stays in its chained run (history) and is scored, but is not used to identify the ODE
 IDLE_FRACTION = 0.01
+#: the identification works on the records resampled to at least this many samples per drive
+#: period (an integer decimation, band-limited: :func:`working_records`)
+SAMPLES_PER_PERIOD = 250
 #: the output-error refinement's budget of free runs (``scipy.optimize.least_squares``'s
 #: ``max_nfev``; its finite-difference Jacobian's runs not counted)
 REFINE_NFEV = 40
+
+
+def decimation(records: Sequence[Record]) -> int:
+    """The integer factor ``q`` by which the records' sample rate exceeds what the drive needs:
+    the largest that keeps :data:`SAMPLES_PER_PERIOD` samples per period of every record's
+    drive (:func:`~labrig.analysis.metrics.drive_frequency_hz`); 1 when a record has no drive
+    frequency or the rate is already at most that."""
+    q = math.inf
+    for r in records:
+        f = drive_frequency_hz(r)
+        if not f:
+            return 1
+        q = min(q, math.floor(r.rate_hz / (SAMPLES_PER_PERIOD * f)))
+    return max(int(q), 1) if math.isfinite(q) else 1
+
+
+def working_records(records: Sequence[Record], q: int) -> list[Record]:
+    """The records resampled to ``1/q`` of their rate for the identification: strain and
+    voltage through the same anti-aliasing low-pass (``scipy.signal.resample_poly``, zero
+    phase, a Kaiser-windowed FIR with its cutoff at the new Nyquist frequency; each record's
+    ends extended by a fitted line), every ``q``-th time stamp; the auxiliary channels every
+    ``q``-th sample. White noise of RMS ``sigma`` comes out at about ``sigma / sqrt q``."""
+    if q <= 1:
+        return list(records)
+    from scipy.signal import resample_poly
+
+    def down(x: NDArray) -> NDArray:
+        return np.asarray(resample_poly(x, 1, q, padtype="line"), dtype=float)
+
+    out = []
+    for r in records:
+        meta = dict(r.meta)
+        meta.setdefault("rest_V", r.rest_V)
+        out.append(
+            Record(
+                r.name,
+                r.rate_hz / q,
+                r.time_s[::q],
+                down(r.voltage_V),
+                down(r.strain_ue),
+                {n: x[::q] for n, x in r.aux.items()},
+                r.hold,
+                meta,
+            )
+        )
+    return out
 
 
 def driven_items(items: Sequence[tuple[Any, list]]) -> list[tuple[Any, list]]:
@@ -187,24 +255,9 @@ def driven_items(items: Sequence[tuple[Any, list]]) -> list[tuple[Any, list]]:
     return out if out and widest > 0 else [(seq, list(segs)) for seq, segs in items]
 
 
-def refine(items: Sequence[tuple[Any, list]], model: SindyBaseline, offset: bool) -> SindyBaseline:
-    """``model``'s coefficients refined on its support by **output error**: the free run's
-    residual on the scored segments of ``items``, each segment's divided by ``span_e sqrt(n_e)``
-    (so the cost is the sum of the segments' squared NRMSE) and, with ``offset``, less its
-    mean, minimised by ``scipy.optimize.least_squares`` (trust region, finite-difference
-    Jacobian, at most :data:`REFINE_NFEV` runs) in the coefficients' ratios to ``model``'s.
-
-    The regression that found ``model`` fits a derivative estimated from noisy samples
-    (smoothed over a window whose length in seconds depends on the sample rate); the free run
-    does not differentiate the data, so the refined coefficients do not depend on how the
-    derivative was estimated, only the support does. The refined model is kept when its cost
-    is lower than ``model``'s, else ``model``."""
-    from scipy.optimize import least_squares
-
-    xi0 = np.asarray(model.coefficients, dtype=float)
-    sup = np.flatnonzero(xi0)
-    if sup.size == 0:
-        return model
+def _runs(items: Sequence[tuple[Any, list]]) -> list[tuple[NDArray, float, float, list]]:
+    """Per sequence: its voltage up to its last scored sample, rest voltage, rate and the
+    scored segments as ``(lo, hi, measured, 1 / (span sqrt(n)))``."""
     runs = []
     for seq, segs in items:
         end = max(g.hi for g in segs)
@@ -214,6 +267,29 @@ def refine(items: Sequence[tuple[Any, list]], model: SindyBaseline, offset: bool
             if np.ptp(g.measured_ue) > 0
         ]
         runs.append((seq.voltage_V[:end], seq.rest_V, seq.rate_hz, cuts))
+    return runs
+
+
+def refine(
+    items: Sequence[tuple[Any, list]], model: SindyBaseline, offset: bool
+) -> tuple[SindyBaseline, float]:
+    """``model``'s coefficients refined on its support by **output error**, and the refined
+    model's training score: the RMS over segments of their NRMSE (%).
+
+    The free run's residual on the scored segments of ``items``, each segment's divided by
+    ``span_e sqrt(n_e)`` (so the cost is the sum of the segments' squared NRMSE) and, with
+    ``offset``, less its mean, is minimised by ``scipy.optimize.least_squares`` (trust region,
+    finite-difference Jacobian, at most :data:`REFINE_NFEV` runs) in the coefficients' ratios to
+    ``model``'s. The regression that found ``model`` fits a derivative estimated from noisy
+    samples; the free run does not differentiate the data, so the refined coefficients do not
+    depend on how the derivative was estimated. ``model`` itself when refining does not lower
+    the cost; ``inf`` for a free run that diverges."""
+    from scipy.optimize import least_squares
+
+    xi0 = np.asarray(model.coefficients, dtype=float)
+    sup = np.flatnonzero(xi0)
+    runs = _runs(items)
+    count = sum(len(c) for *_, c in runs) or 1
 
     def residual(z: NDArray) -> NDArray:
         xi = xi0.copy()
@@ -226,29 +302,128 @@ def refine(items: Sequence[tuple[Any, list]], model: SindyBaseline, offset: bool
                 out.append(w * (r - r.mean() if offset else r))
         return np.concatenate(out) if out else np.zeros(1)
 
-    z0 = np.ones(sup.size)
-    r0 = residual(z0)
-    cost0 = float(r0 @ r0) if np.all(np.isfinite(r0)) else math.inf
+    def score(r: NDArray) -> float:
+        return 100.0 * math.sqrt(float(r @ r) / count) if np.all(np.isfinite(r)) else math.inf
+
     with np.errstate(over="ignore", invalid="ignore"):
-        sol = least_squares(residual, z0, method="trf", diff_step=1e-6, max_nfev=REFINE_NFEV)
-    if not (np.all(np.isfinite(sol.fun)) and 2.0 * sol.cost < cost0):
-        return model
+        s0 = score(residual(np.ones(sup.size)))
+        if sup.size == 0 or not math.isfinite(s0):
+            return model, s0
+        sol = least_squares(
+            residual, np.ones(sup.size), method="trf", diff_step=1e-6, max_nfev=REFINE_NFEV
+        )
+        s1 = score(sol.fun)
+    if not s1 < s0:
+        return model, s0
     xi = xi0.copy()
     xi[sup] = sol.x * xi0[sup]
     return SindyBaseline(
         tuple(float(x) for x in xi), model.rate_hz, model.threshold, model.limit_ue
-    )
+    ), s1
+
+
+def path(
+    items: Sequence[tuple[Any, list]], start: SindyBaseline, offset: bool
+) -> list[SindyBaseline]:
+    """The STLSQ threshold path (:func:`~labrig.analysis.sindy.stlsq` over
+    :data:`~labrig.analysis.sindy.THRESHOLDS`, one model per distinct support) of the
+    regression ``dS/dt = Theta xi`` on the scored segments of ``items``, as
+    :func:`~labrig.analysis.sindy.fit_sindy` sets it up (derivative by
+    :func:`~labrig.analysis.sindy.smoothed_derivative` over a window of 1/8 of the drive period,
+    half a window trimmed at each end, each segment's rows weighted alike, columns and target
+    at unit RMS), with each segment's strain zero (``offset``) where ``start``'s free run puts
+    it (the mean of measured less predicted)."""
+    xs, ys = [], []
+    for seq, segs in items:
+        y0 = start.predict(seq.voltage_V, seq.rest_V, seq.rate_hz)
+        dv = np.gradient(seq.voltage_V) * seq.rate_hz
+        recs = {r.name: r for r in seq.records}
+        for g in segs:
+            w = smoothing_window(seq.rate_hz, drive_frequency_hz(recs[g.name]))
+            m = g.measured_ue
+            if m.size < 3 * w:
+                continue
+            o = float(np.mean(m - y0[g.lo : g.hi])) if offset else 0.0
+            sl = slice(w // 2, m.size - w // 2)
+            tg = smoothed_derivative(m - o, seq.rate_hz, w)[sl]
+            rms = float(np.sqrt(np.mean(tg * tg)))
+            if not rms > 0:
+                continue
+            wt = 1.0 / (rms * np.sqrt(tg.size))
+            th = library_matrix((m - o)[sl], seq.voltage_V[g.lo : g.hi][sl], dv[g.lo : g.hi][sl])
+            xs.append(th * wt)
+            ys.append(tg * wt)
+    if not xs:
+        return []
+    x, y = np.vstack(xs), np.concatenate(ys)
+    cs = np.sqrt(np.mean(x * x, axis=0))
+    cs[cs == 0] = 1.0
+    yn = float(np.sqrt(np.mean(y * y))) or 1.0
+    out, seen = [], set()
+    for lam, coef in stlsq(x / cs, y / yn, THRESHOLDS):
+        xi = coef * yn / cs
+        key = tuple(np.flatnonzero(xi))
+        if key and key not in seen and np.all(np.isfinite(xi)):
+            seen.add(key)
+            out.append(
+                SindyBaseline(tuple(float(c) for c in xi), start.rate_hz, lam, start.limit_ue)
+            )
+    return out
+
+
+def settles(model: SindyBaseline, v_lo: float, v_hi: float) -> bool:
+    """Whether ``model`` brings the strain to rest at every voltage held in ``[v_lo, v_hi]``
+    (nine voltages checked): with ``V' = 0`` the equation reads ``dS/dt = a(V) + b S + c S|S|``
+    (``a`` of the terms ``1`` and ``V``, ``b`` of ``S``, ``c`` of ``S|S|``) and must have a
+    stable rest strain (``a + b S + c S|S| = 0`` with ``b + 2 c |S| < 0``), or be 0 for every
+    strain (a hold changes nothing). An ODE without one runs away (or drifts without end)
+    after any step to a held voltage, which an actuator at rest does not."""
+    xi = dict(zip((t.name for t in LIBRARY), model.coefficients, strict=True))
+    b, c = xi["S"], xi["S|S|"]
+    for v in np.linspace(v_lo, v_hi, 9):
+        a = xi["1"] + xi["V"] * v
+        if a == 0.0 and b == 0.0 and c == 0.0:
+            continue
+        s = equilibrium(model.coefficients, float(v))
+        if not (
+            b + 2.0 * c * abs(s) < 0 and abs(a + b * s + c * s * abs(s)) <= 1e-9 * (abs(a) + 1)
+        ):
+            return False
+    return True
 
 
 def identify(
     items: Sequence[tuple[Any, list]], offset: bool, cache: SindyCache | None = None
 ) -> SindyBaseline:
-    """The sparse ODE of the scored segments of ``items``: its support and starting
-    coefficients by :func:`~labrig.analysis.sindy.fit_sindy` (STLSQ on a smoothed derivative,
-    the sparsest support within 5 % of the best training free run) on the driven segments
-    (:func:`driven_items`), then the coefficients refined by output error (:func:`refine`)."""
+    """The sparse ODE of the scored segments of ``items`` (their driven segments,
+    :func:`driven_items`). Candidates: :func:`~labrig.analysis.sindy.fit_sindy`'s model and
+    every support of the threshold path (:func:`path`) with the segments' zeros from that
+    model's free run, then once more from the best candidate's; each refined by output error
+    (:func:`refine`). Of those that settle at a held voltage (:func:`settles`, over the
+    training voltages; all when none does), the sparsest whose refined training score is within
+    :data:`~labrig.analysis.sindy.TOLERANCE` (5 %) of the best."""
     driven = driven_items(items)
-    return refine(driven, fit_sindy(driven, offset, cache=cache), offset)
+    volts = np.concatenate([seq.voltage_V[g.lo : g.hi] for seq, segs in driven for g in segs])
+    v_lo, v_hi = float(np.min(volts)), float(np.max(volts))
+    start = fit_sindy(driven, offset, cache=cache)
+    cands: dict[tuple[int, ...], tuple[SindyBaseline, float, bool]] = {}
+
+    def add(models: Sequence[SindyBaseline]) -> tuple[SindyBaseline, float]:
+        for m in models:
+            key = tuple(int(k) for k in np.flatnonzero(m.coefficients))
+            refined, score = refine(driven, m, offset)
+            if key not in cands or score < cands[key][1]:
+                cands[key] = (refined, score, settles(refined, v_lo, v_hi))
+        pool = [c for c in cands.values() if c[2]] or list(cands.values())
+        best = min(pool, key=lambda c: c[1])
+        ok = [c for c in pool if c[1] <= (1.0 + TOLERANCE) * best[1]]
+        pick = min(ok, key=lambda c: (len(c[0].support), c[1]))
+        return pick[0], pick[1]
+
+    first, score = add([start, *path(driven, start, offset)])
+    if not math.isfinite(score):
+        return start
+    return add(path(driven, first, offset))[0]
 
 
 def _entry(
@@ -301,18 +476,21 @@ def sparse_ode_trial(
     or differ in sample rate."""
     say(f"round {rnd + 1}: sparse ODE of the strain (Duhem library, STLSQ)")
     names = list(current.heldout)
-    scored = scored_sequences(list(setup.records), names, settings.warmup_s, settings.chain)
+    records = list(setup.records)
+    scored = scored_sequences(records, names, settings.warmup_s, settings.chain)
+    q = decimation(records)
+    work = scored_sequences(working_records(records, q), names, settings.warmup_s, settings.chain)
     cache = SindyCache()
     columns = current.problem.nuisance_columns
     with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
-        model = identify(_items(scored), settings.offset, cache)
+        model = identify(_items(work), settings.offset, cache)
         per_entry, preds = {}, {}
         for n in names:
             per_entry[n], preds[n] = _scores(scored, model, n, columns, held=False)
         say(f"round {rnd + 1}: cross-validating the sparse ODE")
         held = {}
         for n in names:
-            fold = identify(_items(scored, leave_out=n), settings.offset, cache)
+            fold = identify(_items(work, leave_out=n), settings.offset, cache)
             held[n] = _scores(scored, fold, n, columns, held=True)[0]
     eff = SparseOdeEffect(model)
     fo = FitOutcome({}, {NAME: {}}, {}, {}, per_entry, math.nan)
