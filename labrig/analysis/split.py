@@ -43,7 +43,7 @@ def split_entries(records: Sequence[Record], parts: int = 4) -> list[Record]:
     for r in records:
         lead = idle_lead(r, parts)
         idle = {"idle_lead_s": lead / r.rate_hz} if lead else {}
-        rest = {"rest_V": float(np.mean(r.voltage_V[:lead]))} if lead else {}
+        rest = {"rest_V": float(r.voltage_V[0])} if lead else {}
         if lead:
             r = Record(
                 r.name,

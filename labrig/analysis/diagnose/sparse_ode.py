@@ -89,6 +89,7 @@ __all__ = [
     "adopt",
     "decimation",
     "driven_items",
+    "entry_score",
     "identify",
     "path",
     "refine",
@@ -443,7 +444,7 @@ def _entry(
     raise KeyError(name)
 
 
-def _scores(
+def entry_score(
     scored: Sequence[Scored],
     model: SindyBaseline,
     name: str,
@@ -486,12 +487,12 @@ def sparse_ode_trial(
         model = identify(_items(work), settings.offset, cache)
         per_entry, preds = {}, {}
         for n in names:
-            per_entry[n], preds[n] = _scores(scored, model, n, columns, held=False)
+            per_entry[n], preds[n] = entry_score(scored, model, n, columns, held=False)
         say(f"round {rnd + 1}: cross-validating the sparse ODE")
         held = {}
         for n in names:
             fold = identify(_items(work, leave_out=n), settings.offset, cache)
-            held[n] = _scores(scored, fold, n, columns, held=True)[0]
+            held[n] = entry_score(scored, fold, n, columns, held=True)[0]
     eff = SparseOdeEffect(model)
     fo = FitOutcome({}, {NAME: {}}, {}, {}, per_entry, math.nan)
     a = accept(
@@ -519,7 +520,8 @@ def sparse_ode_trial(
     what = _what(current)
     verb = "predicts" if math.isfinite(c.heldout_nrmse_pct) else "diverges on"
     c.evidence = (
-        f"a sparse ODE of Duhem form identified by STLSQ, {equation_text(model)}, {verb} "
+        f"a sparse ODE of Duhem form identified by STLSQ and refined by output error, "
+        f"{equation_text(model)}, {verb} "
         f"held-out entries at {c.heldout_nrmse_pct:.3g} % against {current.heldout_pct:.3g} % "
         f"for {what} (better in {a.wins}, worse in {a.losses} of {len(names)} folds)"
         + ("; refused: " + "; ".join(c.reasons) if c.reasons else "")
