@@ -253,10 +253,9 @@ def smart() -> None:
             "smart", 1000.0 / step, rows[::step, 2], rows[::step, 1], hold="linear"
         )
         rec.meta["kind"] = "import"
-        label = f"real, 2 periods at {1000 / step:.0f} Hz" + (
-            " (every {step}th row)" if step > 1 else ""
-        )
-        print(_smart_row(label.replace("{step}", str(step)), split_entries([rec], 4)), flush=True)
+        nth = {2: "2nd", 4: "4th", 5: "5th"}.get(step)
+        label = f"real, 2 periods at {1000 / step:.0f} Hz" + (f" (every {nth} row)" if nth else "")
+        print(_smart_row(label, split_entries([rec], 4)), flush=True)
     for rate in (5000.0, 10000.0, 1000.0):
         recs = _standin(rate)
         truth = f"{_truth_heldout(recs):.3g}"
