@@ -82,6 +82,7 @@ class DiagnosisLike(Protocol):
 __all__ = [
     "IDLE_FRACTION",
     "NAME",
+    "PASSES",
     "REFINE_NFEV",
     "SAMPLES_PER_PERIOD",
     "SparseOdeEffect",
@@ -188,6 +189,10 @@ IDLE_FRACTION = 0.01
 #: the identification works on the records resampled to at least this many samples per drive
 #: period (an integer decimation, band-limited: :func:`working_records`)
 SAMPLES_PER_PERIOD = 250
+#: at most this many passes of the threshold path (the first from ``fit_sindy``'s zeros, each
+#: further one from the best-scoring and the picked candidates' zeros, while the best training
+#: score still falls by 1 %)
+PASSES = 4
 #: the output-error refinement's budget of free runs (``scipy.optimize.least_squares``'s
 #: ``max_nfev``; its finite-difference Jacobian's runs not counted)
 REFINE_NFEV = 40
@@ -421,10 +426,16 @@ def identify(
         pick = min(ok, key=lambda c: (len(c[0].support), c[1]))
         return pick[0], pick[1]
 
-    first, score = add([start, *path(driven, start, offset)])
+    pick, score = add([start, *path(driven, start, offset)])
     if not math.isfinite(score):
         return start
-    return add(path(driven, first, offset))[0]
+    for _ in range(PASSES - 1):
+        best = min(cands.values(), key=lambda c: c[1])[0]
+        before = min(c[1] for c in cands.values())
+        pick, score = add([*path(driven, best, offset), *path(driven, pick, offset)])
+        if not min(c[1] for c in cands.values()) < (1.0 - 0.01) * before:
+            break
+    return pick
 
 
 def _entry(
