@@ -155,8 +155,8 @@ def test_real_record_whole_kept_segment_is_not_called_unexplained():
     held-out NRMSE is at most half the base's, the verdict is not "unexplained" and the ODE is
     the last thing added; and it meets the issue's figure (a six-term ODE identified on the
     first half of the whole file predicted the second at 0.216 %). Measured 2026-11-27: base
-    1.53 %, sensor_lowpass 0.70 %, sparse ODE 0.212 % (0.225 % before the working rate and the
-    output-error refinement; floor 0.151 %), 32 s of CPU, 166 s wall on the shared machine."""
+    1.53 %, sensor_lowpass 0.70 %, sparse ODE 0.199 % (0.225 % before the working rate and the
+    output-error refinement; floor 0.151 %), 29 s of CPU, 128 s wall on the shared machine."""
     d = diagnose(smart_records(1), offset=True)
     ode = next(c for c in d.candidates if c["effect"] == NAME)
     assert ode["heldout_nrmse_pct"] <= 0.5 * d.before["heldout_nrmse_pct"]
