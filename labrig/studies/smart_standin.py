@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -140,7 +141,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = ap.parse_args(argv)
     if not 0 < a.rate_hz <= 1e6:
         ap.error(f"--rate-hz must be in (0, 1e6] Hz, got {a.rate_hz}")
-    path = write_standin(a.out, a.seed, rate_hz=a.rate_hz, overwrite=a.overwrite)
+    from labrig.core.errors import LabrigError
+
+    try:
+        path = write_standin(a.out, a.seed, rate_hz=a.rate_hz, overwrite=a.overwrite)
+    except LabrigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     print(path)
     print("\n".join(_commands(path)))
     return 0
