@@ -11,8 +11,9 @@ displacement computed by a model identified on the two kept periods, plus white 
 
 - The model (:data:`TRUTH_XI`, over the library of :mod:`labrig.analysis.sindy`): the
   six-term sparse ODE of Duhem form that ``labrig diagnose`` identifies on the kept 2 periods at
-  1 kHz (2026-11-27, :func:`labrig.analysis.diagnose.sparse_ode.identify`, coefficients rounded
-  to four significant digits)
+  1 kHz (2026-11-27, :func:`labrig.analysis.diagnose.sparse_ode.identify` in its first form,
+  coefficients rounded to four significant digits; today's ``diagnose`` adopts the same terms
+  with coefficients within 0.3 % of these)
 
       dS/dt = -0.2088 S + 0.07620 V + 0.1302 V' - 6.968e-4 V' S + 9.024e-5 V' V
               + 1.196e-3 |V'| S

@@ -133,9 +133,9 @@ def test_an_ode_gaining_just_under_the_rule_is_refused_and_the_verdict_says_why(
 def test_real_record_short_segment_the_ode_twice_better_passes_the_rule():
     """SmartHysteresis (bipolar +-150 V, 1 Hz), 2 periods at 100 Hz: the base's held-out NRMSE is
     more than twice the sparse ODE's; then the ODE must pass the acceptance rule (so diagnose
-    cannot call the record "unexplained"). Measured 2026-11-27: base 1.20 %, ODE 0.193 % (0.53 %
-    before the working rate and the output-error refinement). About 5 s of CPU (the base fit
-    1.1 s, the ODE's five identifications 3.6 s) and more under load: slow tier; the two tests
+    cannot call the record "unexplained"). Measured 2026-11-27: base 1.20 %, ODE 0.158 % (0.53 %
+    before the working rate and the output-error refinement). About 5.6 s of CPU (the base fit
+    1.1 s, the ODE's five identifications 4.5 s) and more under load: slow tier; the two tests
     above are its fast equivalents (the same decision on a synthetic trial)."""
     s = Settings(chain=True, offset=True, warmup_s=0.0, top_k=4, min_gain=MIN_GAIN)
     recs = smart_records(10)
