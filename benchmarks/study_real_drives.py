@@ -2,7 +2,7 @@
 (issue "close the loop on measured data from other labs").
 
 Writes a markdown report on stdout (``python benchmarks/study_real_drives.py [table|nulls|effects|
-timing|all]``); the figures are copied into docs/diagnose.md and the README.
+timing|smart|all]``); the figures are copied into docs/diagnose.md and the README.
 
 - ``table``: held-out NRMSE per dataset: ours before and after diagnose's effects (diagnose's
   scoring: each left-out entry's second half, in % of its span), Prandtl-Ishlinskii, Bouc-Wen and
@@ -14,6 +14,12 @@ timing|all]``); the figures are copied into docs/diagnose.md and the README.
 - ``effects``: each bench effect on its drives, seeds 1-3: the first effect named, the held-out
   ratio, the fitted size against the bench's.
 - ``timing``: diagnose on the real 14 155-sample record and on a 50 000-sample simulated record.
+- ``smart``: the sparse ODE's rate robustness: ``diagnose`` of the real SmartHysteresis record
+  (2 periods kept at 1 kHz) at 1 kHz and decimated (every 2nd, 4th, 5th row: 500, 250,
+  200 Hz), and of the simulated whole-file stand-in (:mod:`labrig.studies.smart_standin`: 10 s,
+  7.36 s idle then 2.64 periods, seed 1) at 5 kHz, 10 kHz and 1 kHz, with the stand-in truth's
+  own held-out score (the noise floor's reference); CPU seconds of each diagnosis
+  (``time.process_time``) and their ratio to the yardstick (``numpy.sort`` of 1e6 floats).
 """
 
 from __future__ import annotations
@@ -181,6 +187,83 @@ def timing() -> None:
     print(f"- simulated single record, {n} samples: {time.perf_counter() - t0:.0f} s")
 
 
+def _smart_row(label: str, records: list[Record], truth: str = "-") -> str:
+    t0 = time.process_time()
+    d = diagnose(records, offset=True)
+    cpu = time.process_time() - t0
+    ode = next((c for c in d.candidates if c["effect"] == "sparse_ode"), None)
+    held = (
+        "-"
+        if ode is None or ode["heldout_nrmse_pct"] is None
+        else f"{ode['heldout_nrmse_pct']:.3g}"
+    )
+    adopted = bool(d.effects_added) and d.effects_added[-1]["effect"] == "sparse_ode"
+    added = ", ".join(e["effect"] for e in d.effects_added) or "none"
+    return (
+        f"| {label} | {records[0].n * len(records)} | {d.before['heldout_nrmse_pct']:.3g} | "
+        f"{held} ({'adopted' if adopted else 'not adopted'}) | {d.after['heldout_nrmse_pct']:.3g}"
+        f" ({added}) | {d.evidence_before.floor_pct:.3g} | {truth} | {cpu:.1f} s | "
+        f"{cpu / YARD[0]:.0f} |"
+    )
+
+
+#: the yardstick's CPU seconds in this run (set by :func:`smart`)
+YARD = [float("nan")]
+
+
+def _standin(rate_hz: float) -> list[Record]:
+    from labrig.studies.smart_standin import standin_rows
+
+    rows = standin_rows(1, rate_hz)
+    rec = Record.from_arrays("standin", rate_hz, rows[:, 2], rows[:, 1], hold="linear")
+    rec.meta["kind"] = "import"
+    return split_entries([rec], 4)
+
+
+def _truth_heldout(records: list[Record]) -> float:
+    """The stand-in truth's own held-out NRMSE (%) by the sparse-ODE scoring (offset fitted on
+    the first half of each part, scored on the second): the noise floor's reference."""
+    from labrig.analysis.diagnose.sparse_ode import entry_score
+    from labrig.analysis.simulate import scored_sequences
+    from labrig.analysis.sindy import SindyBaseline
+    from labrig.studies.smart_standin import TRUTH_XI
+
+    scored = scored_sequences(records, [r.name for r in records], 0.0, True)
+    model = SindyBaseline(TRUTH_XI, records[0].rate_hz, 0.0)
+    ones = lambda t, _rate: np.ones((t.size, 1))  # noqa: E731
+    return float(np.mean([entry_score(scored, model, r.name, ones, True)[0] for r in records]))
+
+
+def smart() -> None:
+    from yardstick import yardstick_s
+
+    YARD[0] = yardstick_s()
+    print("\n## The sparse ODE across sample rates (SmartHysteresis)\n")
+    print(f"yardstick (numpy.sort of 1e6 floats, best of 5): {YARD[0] * 1e3:.1f} ms CPU\n")
+    print(
+        "| record | samples | base held-out | sparse ODE held-out | final (added) | floor | "
+        "truth's held-out | CPU | CPU / yardstick |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    rows = np.loadtxt(
+        SMART / "hysteresis_v_150_1hz_2cycles_1khz.csv", delimiter=",", usecols=(1, 2, 3)
+    )
+    for step in (1, 2, 4, 5):
+        rec = Record.from_arrays(
+            "smart", 1000.0 / step, rows[::step, 2], rows[::step, 1], hold="linear"
+        )
+        rec.meta["kind"] = "import"
+        nth = {2: "2nd", 4: "4th", 5: "5th"}.get(step)
+        label = f"real, 2 periods at {1000 / step:.0f} Hz" + (f" (every {nth} row)" if nth else "")
+        print(_smart_row(label, split_entries([rec], 4)), flush=True)
+    for rate in (5000.0, 10000.0, 1000.0):
+        recs = _standin(rate)
+        truth = f"{_truth_heldout(recs):.3g}"
+        print(
+            _smart_row(f"SIMULATED stand-in, whole file at {rate:.0f} Hz", recs, truth), flush=True
+        )
+
+
 def main() -> None:
     what = sys.argv[1] if len(sys.argv) > 1 else "all"
     load = os.getloadavg()
@@ -189,7 +272,8 @@ def main() -> None:
         f"Python {platform.python_version()}; {datetime.now(UTC):%Y-%m-%d %H:%M} UTC; "
         f"load average at start {load[0]:.1f}\n"
     )
-    for name, fn in (("table", table), ("nulls", nulls), ("effects", effects), ("timing", timing)):
+    jobs = (("table", table), ("nulls", nulls), ("effects", effects), ("timing", timing))
+    for name, fn in (*jobs, ("smart", smart)):
         if what in (name, "all"):
             fn()
     print(f"\nload average at end {os.getloadavg()[0]:.1f}")

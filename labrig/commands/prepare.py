@@ -400,6 +400,12 @@ def prepare_diagnosis(
     start = start_params(params_file, say) if params_file is not None else None
     if len(records) == 1 and records[0].duration_s > 0:
         records = split_entries(records, DIAGNOSE_SPLIT)
+        idle = records[0].meta.get("idle_lead_s")
+        if idle:
+            say(
+                f"one entry: its first {idle:.3g} s held at {records[0].rest_V:.3g} V (no drive) "
+                "left out: the parts start from rest where the voltage first moves"
+            )
         say(f"one entry: cut into {len(records)} consecutive parts for leave-one-entry-out")
     chained = all("rest_after_s" in r.meta for r in records)
     check_records(path, records, [r.name for r in records], alone=not chained)

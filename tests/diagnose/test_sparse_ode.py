@@ -133,9 +133,10 @@ def test_an_ode_gaining_just_under_the_rule_is_refused_and_the_verdict_says_why(
 def test_real_record_short_segment_the_ode_twice_better_passes_the_rule():
     """SmartHysteresis (bipolar +-150 V, 1 Hz), 2 periods at 100 Hz: the base's held-out NRMSE is
     more than twice the sparse ODE's; then the ODE must pass the acceptance rule (so diagnose
-    cannot call the record "unexplained"). Measured 2026-11-27: base 1.20 %, ODE 0.53 %. About
-    6 s of CPU (the base fit 2.5 s, the ODE's five identifications 3.5 s): slow tier; the two
-    tests above are its fast equivalents (the same decision on a synthetic trial)."""
+    cannot call the record "unexplained"). Measured 2026-11-27: base 1.20 %, ODE 0.158 % (0.53 %
+    before the working rate and the output-error refinement). About 5.6 s of CPU (the base fit
+    1.1 s, the ODE's five identifications 4.5 s) and more under load: slow tier; the two tests
+    above are its fast equivalents (the same decision on a synthetic trial)."""
     s = Settings(chain=True, offset=True, warmup_s=0.0, top_k=4, min_gain=MIN_GAIN)
     recs = smart_records(10)
     setup, base = fit_base(recs, s, ["offset_drift"], None, (), lambda _m: None, [])
@@ -152,11 +153,14 @@ def test_real_record_short_segment_the_ode_twice_better_passes_the_rule():
 def test_real_record_whole_kept_segment_is_not_called_unexplained():
     """The whole kept record (2 periods at 1 kHz) through diagnose: where the sparse ODE's
     held-out NRMSE is at most half the base's, the verdict is not "unexplained" and the ODE is
-    the last thing added. Measured 2026-11-27: base 1.53 %, sensor_lowpass 0.70 %, sparse ODE
-    0.225 % (floor 0.151 %), 200 s wall on the shared machine."""
+    the last thing added; and it meets the issue's figure (a six-term ODE identified on the
+    first half of the whole file predicted the second at 0.216 %). Measured 2026-11-27: base
+    1.53 %, sensor_lowpass 0.70 %, sparse ODE 0.199 % (0.225 % before the working rate and the
+    output-error refinement; floor 0.151 %), 29 s of CPU, 128 s wall on the shared machine."""
     d = diagnose(smart_records(1), offset=True)
     ode = next(c for c in d.candidates if c["effect"] == NAME)
     assert ode["heldout_nrmse_pct"] <= 0.5 * d.before["heldout_nrmse_pct"]
+    assert ode["heldout_nrmse_pct"] <= 0.216, ode["evidence"]
     assert d.classification != "unexplained", d.verdict
     assert d.effects_added[-1]["effect"] == NAME
     assert "EMPIRICAL" in d.verdict and "dS/dt =" in d.verdict

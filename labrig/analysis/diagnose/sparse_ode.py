@@ -40,9 +40,23 @@ from labrig.analysis.diagnose.evidence import Evidence, collect_evidence
 from labrig.analysis.diagnose.state import Model, Settings, Setup
 from labrig.analysis.diagnose.verdict import AT_FLOOR, headline
 from labrig.analysis.extended import FitOutcome
-from labrig.analysis.metrics import nrmse_pct, second_half_nrmse_pct
+from labrig.analysis.metrics import drive_frequency_hz, nrmse_pct, second_half_nrmse_pct
+from labrig.analysis.records import Record
 from labrig.analysis.simulate import Scored, scored_sequences
-from labrig.analysis.sindy import LIBRARY, SindyBaseline, SindyCache, fit_sindy
+from labrig.analysis.sindy import (
+    LIBRARY,
+    THRESHOLDS,
+    TOLERANCE,
+    SindyBaseline,
+    SindyCache,
+    equilibrium,
+    fit_sindy,
+    free_run,
+    library_matrix,
+    smoothed_derivative,
+    smoothing_window,
+    stlsq,
+)
 from labrig.core.blas import single_thread_blas
 from labrig.model.effects import Effect
 from labrig.model.effects.empirical import EMPIRICAL_NOTE
@@ -65,7 +79,25 @@ class DiagnosisLike(Protocol):
     messages: list[str]
 
 
-__all__ = ["NAME", "SparseOdeEffect", "SparseOdeTrial", "adopt", "sparse_ode_trial"]
+__all__ = [
+    "IDLE_FRACTION",
+    "NAME",
+    "PASSES",
+    "REFINE_NFEV",
+    "SAMPLES_PER_PERIOD",
+    "SparseOdeEffect",
+    "SparseOdeTrial",
+    "adopt",
+    "decimation",
+    "driven_items",
+    "entry_score",
+    "identify",
+    "path",
+    "refine",
+    "settles",
+    "sparse_ode_trial",
+    "working_records",
+]
 
 #: the candidate's name in ``candidates`` and ``effects_added``
 NAME = "sparse_ode"
@@ -151,6 +183,261 @@ def _items(scored: Sequence[Scored], leave_out: str | None = None) -> list[tuple
     return [(s.seq, [g for g in s.segments if g.name != leave_out]) for s in scored]
 
 
+#: a segment whose voltage spans less than this fraction of the widest segment's is idle: it
+#: stays in its chained run (history) and is scored, but is not used to identify the ODE
+IDLE_FRACTION = 0.01
+#: the identification works on the records resampled to at least this many samples per drive
+#: period (an integer decimation, band-limited: :func:`working_records`)
+SAMPLES_PER_PERIOD = 250
+#: at most this many passes of the threshold path (the first from ``fit_sindy``'s zeros, each
+#: further one from the best-scoring and the picked candidates' zeros, while the best training
+#: score still falls by 1 %)
+PASSES = 4
+#: the output-error refinement's budget of free runs (``scipy.optimize.least_squares``'s
+#: ``max_nfev``; its finite-difference Jacobian's runs not counted)
+REFINE_NFEV = 40
+
+
+def decimation(records: Sequence[Record]) -> int:
+    """The integer factor ``q`` by which the records' sample rate exceeds what the drive needs:
+    the largest that keeps :data:`SAMPLES_PER_PERIOD` samples per period of every record's
+    drive (:func:`~labrig.analysis.metrics.drive_frequency_hz`); 1 when a record has no drive
+    frequency or the rate is already at most that."""
+    q = math.inf
+    for r in records:
+        f = drive_frequency_hz(r)
+        if not f:
+            return 1
+        q = min(q, math.floor(r.rate_hz / (SAMPLES_PER_PERIOD * f)))
+    return max(int(q), 1) if math.isfinite(q) else 1
+
+
+def working_records(records: Sequence[Record], q: int) -> list[Record]:
+    """The records resampled to ``1/q`` of their rate for the identification: strain and
+    voltage through the same anti-aliasing low-pass (``scipy.signal.resample_poly``, zero
+    phase, a Kaiser-windowed FIR with its cutoff at the new Nyquist frequency; each record's
+    ends extended by a fitted line), every ``q``-th time stamp; the auxiliary channels every
+    ``q``-th sample. White noise of RMS ``sigma`` comes out at about ``sigma / sqrt q``."""
+    if q <= 1:
+        return list(records)
+    from scipy.signal import resample_poly
+
+    def down(x: NDArray) -> NDArray:
+        return np.asarray(resample_poly(x, 1, q, padtype="line"), dtype=float)
+
+    out = []
+    for r in records:
+        meta = dict(r.meta)
+        meta.setdefault("rest_V", r.rest_V)
+        out.append(
+            Record(
+                r.name,
+                r.rate_hz / q,
+                r.time_s[::q],
+                down(r.voltage_V),
+                down(r.strain_ue),
+                {n: x[::q] for n, x in r.aux.items()},
+                r.hold,
+                meta,
+            )
+        )
+    return out
+
+
+def driven_items(items: Sequence[tuple[Any, list]]) -> list[tuple[Any, list]]:
+    """``items`` without their idle segments (voltage span below :data:`IDLE_FRACTION` of the
+    widest segment's): a stretch at rest carries the ODE's equilibrium only, and its noise's
+    derivative would weigh as much as a driven segment's in the regression. All of them when
+    every segment is idle."""
+
+    def span(seq: Any, g: Any) -> float:
+        return float(np.ptp(seq.voltage_V[g.lo : g.hi])) if g.hi > g.lo else 0.0
+
+    widest = max((span(seq, g) for seq, segs in items for g in segs), default=0.0)
+    out = [
+        (seq, [g for g in segs if span(seq, g) >= IDLE_FRACTION * widest]) for seq, segs in items
+    ]
+    out = [(seq, segs) for seq, segs in out if segs]
+    return out if out and widest > 0 else [(seq, list(segs)) for seq, segs in items]
+
+
+def _runs(items: Sequence[tuple[Any, list]]) -> list[tuple[NDArray, float, float, list]]:
+    """Per sequence: its voltage up to its last scored sample, rest voltage, rate and the
+    scored segments as ``(lo, hi, measured, 1 / (span sqrt(n)))``."""
+    runs = []
+    for seq, segs in items:
+        end = max(g.hi for g in segs)
+        cuts = [
+            (g.lo, g.hi, g.measured_ue, 1.0 / (float(np.ptp(g.measured_ue)) * np.sqrt(g.hi - g.lo)))
+            for g in segs
+            if np.ptp(g.measured_ue) > 0
+        ]
+        runs.append((seq.voltage_V[:end], seq.rest_V, seq.rate_hz, cuts))
+    return runs
+
+
+def refine(
+    items: Sequence[tuple[Any, list]], model: SindyBaseline, offset: bool
+) -> tuple[SindyBaseline, float]:
+    """``model``'s coefficients refined on its support by **output error**, and the refined
+    model's training score: the RMS over segments of their NRMSE (%).
+
+    The free run's residual on the scored segments of ``items``, each segment's divided by
+    ``span_e sqrt(n_e)`` (so the cost is the sum of the segments' squared NRMSE) and, with
+    ``offset``, less its mean, is minimised by ``scipy.optimize.least_squares`` (trust region,
+    finite-difference Jacobian, at most :data:`REFINE_NFEV` runs) in the coefficients' ratios to
+    ``model``'s. The regression that found ``model`` fits a derivative estimated from noisy
+    samples; the free run does not differentiate the data, so the refined coefficients do not
+    depend on how the derivative was estimated. ``model`` itself when refining does not lower
+    the cost; ``inf`` for a free run that diverges."""
+    from scipy.optimize import least_squares
+
+    xi0 = np.asarray(model.coefficients, dtype=float)
+    sup = np.flatnonzero(xi0)
+    runs = _runs(items)
+    count = sum(len(c) for *_, c in runs) or 1
+
+    def residual(z: NDArray) -> NDArray:
+        xi = xi0.copy()
+        xi[sup] = z * xi0[sup]
+        out = []
+        for v, rest, rate, cuts in runs:
+            y = free_run(xi, v, rate, rest, model.limit_ue)
+            for lo, hi, m, w in cuts:
+                r = m - y[lo:hi]
+                out.append(w * (r - r.mean() if offset else r))
+        return np.concatenate(out) if out else np.zeros(1)
+
+    def score(r: NDArray) -> float:
+        return 100.0 * math.sqrt(float(r @ r) / count) if np.all(np.isfinite(r)) else math.inf
+
+    with np.errstate(over="ignore", invalid="ignore"):
+        s0 = score(residual(np.ones(sup.size)))
+        if sup.size == 0 or not math.isfinite(s0):
+            return model, s0
+        sol = least_squares(
+            residual, np.ones(sup.size), method="trf", diff_step=1e-6, max_nfev=REFINE_NFEV
+        )
+        s1 = score(sol.fun)
+    if not s1 < s0:
+        return model, s0
+    xi = xi0.copy()
+    xi[sup] = sol.x * xi0[sup]
+    return SindyBaseline(
+        tuple(float(x) for x in xi), model.rate_hz, model.threshold, model.limit_ue
+    ), s1
+
+
+def path(
+    items: Sequence[tuple[Any, list]], start: SindyBaseline, offset: bool
+) -> list[SindyBaseline]:
+    """The STLSQ threshold path (:func:`~labrig.analysis.sindy.stlsq` over
+    :data:`~labrig.analysis.sindy.THRESHOLDS`, one model per distinct support) of the
+    regression ``dS/dt = Theta xi`` on the scored segments of ``items``, as
+    :func:`~labrig.analysis.sindy.fit_sindy` sets it up (derivative by
+    :func:`~labrig.analysis.sindy.smoothed_derivative` over a window of 1/8 of the drive period,
+    half a window trimmed at each end, each segment's rows weighted alike, columns and target
+    at unit RMS), with each segment's strain zero (``offset``) where ``start``'s free run puts
+    it (the mean of measured less predicted)."""
+    xs, ys = [], []
+    for seq, segs in items:
+        y0 = start.predict(seq.voltage_V, seq.rest_V, seq.rate_hz)
+        dv = np.gradient(seq.voltage_V) * seq.rate_hz
+        recs = {r.name: r for r in seq.records}
+        for g in segs:
+            w = smoothing_window(seq.rate_hz, drive_frequency_hz(recs[g.name]))
+            m = g.measured_ue
+            if m.size < 3 * w:
+                continue
+            o = float(np.mean(m - y0[g.lo : g.hi])) if offset else 0.0
+            sl = slice(w // 2, m.size - w // 2)
+            tg = smoothed_derivative(m - o, seq.rate_hz, w)[sl]
+            rms = float(np.sqrt(np.mean(tg * tg)))
+            if not rms > 0:
+                continue
+            wt = 1.0 / (rms * np.sqrt(tg.size))
+            th = library_matrix((m - o)[sl], seq.voltage_V[g.lo : g.hi][sl], dv[g.lo : g.hi][sl])
+            xs.append(th * wt)
+            ys.append(tg * wt)
+    if not xs:
+        return []
+    x, y = np.vstack(xs), np.concatenate(ys)
+    cs = np.sqrt(np.mean(x * x, axis=0))
+    cs[cs == 0] = 1.0
+    yn = float(np.sqrt(np.mean(y * y))) or 1.0
+    out, seen = [], set()
+    for lam, coef in stlsq(x / cs, y / yn, THRESHOLDS):
+        xi = coef * yn / cs
+        key = tuple(np.flatnonzero(xi))
+        if key and key not in seen and np.all(np.isfinite(xi)):
+            seen.add(key)
+            out.append(
+                SindyBaseline(tuple(float(c) for c in xi), start.rate_hz, lam, start.limit_ue)
+            )
+    return out
+
+
+def settles(model: SindyBaseline, v_lo: float, v_hi: float) -> bool:
+    """Whether ``model`` brings the strain to rest at every voltage held in ``[v_lo, v_hi]``
+    (nine voltages checked): with ``V' = 0`` the equation reads ``dS/dt = a(V) + b S + c S|S|``
+    (``a`` of the terms ``1`` and ``V``, ``b`` of ``S``, ``c`` of ``S|S|``) and must have a
+    stable rest strain (``a + b S + c S|S| = 0`` with ``b + 2 c |S| < 0``), or be 0 for every
+    strain (a hold changes nothing). An ODE without one runs away (or drifts without end)
+    after any step to a held voltage, which an actuator at rest does not."""
+    xi = dict(zip((t.name for t in LIBRARY), model.coefficients, strict=True))
+    b, c = xi["S"], xi["S|S|"]
+    for v in np.linspace(v_lo, v_hi, 9):
+        a = xi["1"] + xi["V"] * v
+        if a == 0.0 and b == 0.0 and c == 0.0:
+            continue
+        s = equilibrium(model.coefficients, float(v))
+        if not (
+            b + 2.0 * c * abs(s) < 0 and abs(a + b * s + c * s * abs(s)) <= 1e-9 * (abs(a) + 1)
+        ):
+            return False
+    return True
+
+
+def identify(
+    items: Sequence[tuple[Any, list]], offset: bool, cache: SindyCache | None = None
+) -> SindyBaseline:
+    """The sparse ODE of the scored segments of ``items`` (their driven segments,
+    :func:`driven_items`). Candidates: :func:`~labrig.analysis.sindy.fit_sindy`'s model and
+    every support of the threshold path (:func:`path`) with the segments' zeros from that
+    model's free run, then once more from the best candidate's; each refined by output error
+    (:func:`refine`). Of those that settle at a held voltage (:func:`settles`, over the
+    training voltages; all when none does), the sparsest whose refined training score is within
+    :data:`~labrig.analysis.sindy.TOLERANCE` (5 %) of the best."""
+    driven = driven_items(items)
+    volts = np.concatenate([seq.voltage_V[g.lo : g.hi] for seq, segs in driven for g in segs])
+    v_lo, v_hi = float(np.min(volts)), float(np.max(volts))
+    start = fit_sindy(driven, offset, cache=cache)
+    cands: dict[tuple[int, ...], tuple[SindyBaseline, float, bool]] = {}
+
+    def add(models: Sequence[SindyBaseline]) -> tuple[SindyBaseline, float]:
+        for m in models:
+            key = tuple(int(k) for k in np.flatnonzero(m.coefficients))
+            refined, score = refine(driven, m, offset)
+            if key not in cands or score < cands[key][1]:
+                cands[key] = (refined, score, settles(refined, v_lo, v_hi))
+        pool = [c for c in cands.values() if c[2]] or list(cands.values())
+        best = min(pool, key=lambda c: c[1])
+        ok = [c for c in pool if c[1] <= (1.0 + TOLERANCE) * best[1]]
+        pick = min(ok, key=lambda c: (len(c[0].support), c[1]))
+        return pick[0], pick[1]
+
+    pick, score = add([start, *path(driven, start, offset)])
+    if not math.isfinite(score):
+        return start
+    for _ in range(PASSES - 1):
+        best = min(cands.values(), key=lambda c: c[1])[0]
+        before = min(c[1] for c in cands.values())
+        pick, score = add([*path(driven, best, offset), *path(driven, pick, offset)])
+        if not min(c[1] for c in cands.values()) < (1.0 - 0.01) * before:
+            break
+    return pick
+
+
 def _entry(
     scored: Sequence[Scored], model: SindyBaseline, name: str
 ) -> tuple[Any, Any, NDArray, NDArray]:
@@ -168,7 +455,7 @@ def _entry(
     raise KeyError(name)
 
 
-def _scores(
+def entry_score(
     scored: Sequence[Scored],
     model: SindyBaseline,
     name: str,
@@ -201,19 +488,22 @@ def sparse_ode_trial(
     or differ in sample rate."""
     say(f"round {rnd + 1}: sparse ODE of the strain (Duhem library, STLSQ)")
     names = list(current.heldout)
-    scored = scored_sequences(list(setup.records), names, settings.warmup_s, settings.chain)
+    records = list(setup.records)
+    scored = scored_sequences(records, names, settings.warmup_s, settings.chain)
+    q = decimation(records)
+    work = scored_sequences(working_records(records, q), names, settings.warmup_s, settings.chain)
     cache = SindyCache()
     columns = current.problem.nuisance_columns
     with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
-        model = fit_sindy(_items(scored), settings.offset, cache=cache)
+        model = identify(_items(work), settings.offset, cache)
         per_entry, preds = {}, {}
         for n in names:
-            per_entry[n], preds[n] = _scores(scored, model, n, columns, held=False)
+            per_entry[n], preds[n] = entry_score(scored, model, n, columns, held=False)
         say(f"round {rnd + 1}: cross-validating the sparse ODE")
         held = {}
         for n in names:
-            fold = fit_sindy(_items(scored, leave_out=n), settings.offset, cache=cache)
-            held[n] = _scores(scored, fold, n, columns, held=True)[0]
+            fold = identify(_items(work, leave_out=n), settings.offset, cache)
+            held[n] = entry_score(scored, fold, n, columns, held=True)[0]
     eff = SparseOdeEffect(model)
     fo = FitOutcome({}, {NAME: {}}, {}, {}, per_entry, math.nan)
     a = accept(
@@ -241,7 +531,8 @@ def sparse_ode_trial(
     what = _what(current)
     verb = "predicts" if math.isfinite(c.heldout_nrmse_pct) else "diverges on"
     c.evidence = (
-        f"a sparse ODE of Duhem form identified by STLSQ, {equation_text(model)}, {verb} "
+        f"a sparse ODE of Duhem form identified by STLSQ and refined by output error, "
+        f"{equation_text(model)}, {verb} "
         f"held-out entries at {c.heldout_nrmse_pct:.3g} % against {current.heldout_pct:.3g} % "
         f"for {what} (better in {a.wins}, worse in {a.losses} of {len(names)} folds)"
         + ("; refused: " + "; ".join(c.reasons) if c.reasons else "")
