@@ -213,7 +213,7 @@ def registration(name: str) -> Registration:
 def library(**context: bool | float) -> dict[str, Effect]:
     """Every registered effect by name, in registry order, configured for what a run recorded:
     ``context`` holds :class:`RunContext` fields by keyword (``temperature``,
-    ``amplifier_voltage``, ``mains_hz``, ``v_ref``, ``rate_hz``; the others at their defaults; an unknown
-    keyword is a ``TypeError``)."""
+    ``amplifier_voltage``, ``mains_hz``, ``v_ref``, ``rate_hz``; the others at their defaults;
+    an unknown keyword is a ``TypeError``)."""
     ctx = RunContext(**context)  # type: ignore[arg-type]
     return {r.name: r.configured(ctx) for r in REGISTRY}
