@@ -398,6 +398,33 @@ def settles(model: SindyBaseline, v_lo: float, v_hi: float) -> bool:
     return True
 
 
+def growth_rate(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> float:
+    """How fast a disturbance of ``model``'s strain grows (1/s, > 0) or decays (< 0) under the
+    drive of ``items`` (their driven segments): the mean over the driven samples of
+    ``df/dS = b(V') + 2 c |S|`` along the free run (``b`` of the terms ``S``, ``V' S``,
+    ``|V'| S``; ``c`` of ``S|S|``). For one state variable this is the free run's Lyapunov
+    exponent: two runs a little apart separate as ``exp(mean(df/dS) t)``. An ODE that settles at
+    every held voltage (:func:`settles`) may still grow under a sustained drive (a Bouc-Wen-like
+    ``|V'| S`` with a positive coefficient outweighing the lag): its prediction then wanders off
+    from period to period, which the per-entry offsets of a short record do not show."""
+    xi = np.asarray(model.coefficients, dtype=float)
+    c = sum(float(x) for x, t in zip(xi, LIBRARY, strict=True) if t.kind == "c")
+    total, count = 0.0, 0
+    for seq, segs in driven_items(items):
+        end = max(g.hi for g in segs)
+        v = seq.voltage_V[:end]
+        y = model.predict(v, seq.rest_V, seq.rate_hz)
+        d = np.diff(np.concatenate(([float(seq.rest_V)], v))) * seq.rate_hz  # the free run's V'
+        dfds = sum(
+            (float(x) * t.factor(v, d) for x, t in zip(xi, LIBRARY, strict=True) if t.kind == "b"),
+            np.zeros(v.size),
+        ) + 2.0 * c * np.abs(y)
+        for g in segs:
+            total += float(np.sum(dfds[g.lo : g.hi]))
+            count += g.hi - g.lo
+    return total / count if count else 0.0
+
+
 def identify(
     items: Sequence[tuple[Any, list]], offset: bool, cache: SindyCache | None = None
 ) -> SindyBaseline:
@@ -407,7 +434,9 @@ def identify(
     model's free run, then once more from the best candidate's; each refined by output error
     (:func:`refine`). Of those that settle at a held voltage (:func:`settles`, over the
     training voltages; all when none does), the sparsest whose refined training score is within
-    :data:`~labrig.analysis.sindy.TOLERANCE` (5 %) of the best."""
+    :data:`~labrig.analysis.sindy.TOLERANCE` (5 %) of the best. (Whether it grows under the
+    drive is judged after, by :func:`sparse_ode_trial`: such an ODE is refused, not replaced by a
+    worse one.)"""
     driven = driven_items(items)
     volts = np.concatenate([seq.voltage_V[g.lo : g.hi] for seq, segs in driven for g in segs])
     v_lo, v_hi = float(np.min(volts)), float(np.max(volts))
@@ -528,6 +557,15 @@ def sparse_ode_trial(
             else "its free run diverges on held-out data",
             *[r for r in a.reasons if "numerical precision" not in r],
         ]
+    grow = growth_rate(model, _items(work))
+    if (
+        grow > 0.0
+    ):  # whatever its score: a model that runs away under its own drive explains nothing
+        c.accepted = False
+        c.reasons.append(
+            f"its free run grows under the records' own drive (a disturbance grows as "
+            f"exp({grow:.2g} t), t in s; the per-entry offsets hide the drift on short entries)"
+        )
     what = _what(current)
     verb = "predicts" if math.isfinite(c.heldout_nrmse_pct) else "diverges on"
     c.evidence = (
