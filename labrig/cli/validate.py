@@ -44,7 +44,7 @@ def validate(
         False,
         "--leave-one-out",
         help="Each of the files in turn predicted by every model identified on the others "
-        "(at least 3 files; not with --on, --out, --effects-from).",
+        "(at least 3 files; not with --on, --out, --overwrite, --effects-from).",
     ),
     out: Path | None = out_file_option("the HTML page (every prediction of every test record)"),
     as_json: bool = json_option("the scores"),
@@ -126,9 +126,10 @@ def _leave_one_out(
         (overwrite, "--overwrite"),
     ):
         if given:
-            raise typer.BadParameter(
-                f"--leave-one-out takes no {name}: every file is tested and nothing is written"
+            why = (
+                "nothing is written" if name in ("--out", "--overwrite") else "every file is tested"
             )
+            raise typer.BadParameter(f"--leave-one-out takes no {name}: {why}")
     ui = RichUI()
     loo = validate_leave_one_out(
         files,

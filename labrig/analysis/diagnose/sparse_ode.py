@@ -8,9 +8,11 @@ not contain. The empirical step then also identifies a **sparse ODE of Duhem for
 
 over the library of :mod:`labrig.analysis.sindy` (``1``, ``S``, ``V``, ``V'``, ``|V'|``,
 ``V' S``, ``V' V``, ``|V'| S``, ``|V'| V``, ``S|S|``: the six terms of a Duhem / Bouc-Wen model,
-``1, S, V, V', |V'|, |V'| S``, are among them), identified with pysindy's STLSQ by
-:func:`~labrig.analysis.sindy.fit_sindy` (sparsest support within 5 % of the best training free
-run), and simulated forward from rest (free run, never fed the measured strain).
+``1, S, V, V', |V'|, |V'| S``, are among them), identified with pysindy's STLSQ from
+:func:`~labrig.analysis.sindy.fit_sindy`'s start on a band-limited resampling of the records,
+every support of the threshold path refined by output error (:func:`identify`), and simulated
+forward from rest (free run, never fed the measured strain). One that grows under the records'
+own drive (:func:`growth_rate`) is refused whatever its score.
 
 It is scored **exactly as the model's candidates are** (:meth:`labrig.analysis.extended.
 ExtendedProblem.score_second_half`): leave-one-entry-out, the ODE identified without the held-out
@@ -431,7 +433,8 @@ def identify(
     """The sparse ODE of the scored segments of ``items`` (their driven segments,
     :func:`driven_items`). Candidates: :func:`~labrig.analysis.sindy.fit_sindy`'s model and
     every support of the threshold path (:func:`path`) with the segments' zeros from that
-    model's free run, then once more from the best candidate's; each refined by output error
+    model's free run, then up to ``PASSES - 1`` more paths from the best-scoring and the picked
+    candidates' zeros while the best training score falls by 1 %; each refined by output error
     (:func:`refine`). Of those that settle at a held voltage (:func:`settles`, over the
     training voltages; all when none does), the sparsest whose refined training score is within
     :data:`~labrig.analysis.sindy.TOLERANCE` (5 %) of the best. (Whether it grows under the

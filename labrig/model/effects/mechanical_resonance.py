@@ -229,10 +229,14 @@ class MechanicalResonance(Effect):
         if f <= top:
             return None
         assert self.rate_hz is not None
+        seen = (
+            f"their samples show it at its alias, {aliased_hz(f, self.rate_hz):.4g} Hz"
+            if f > self.rate_hz / 2
+            else "too few samples per period to resolve it"
+        )
         return (
             f"f_r = {f:.4g} Hz is above {100 * RESOLVED_NYQUIST_SHARE:.0f} % of the records' "
-            f"Nyquist frequency ({self.rate_hz / 2:.4g} Hz): their samples show it at its alias, "
-            f"{aliased_hz(f, self.rate_hz):.4g} Hz; not a resonance they resolve"
+            f"Nyquist frequency ({self.rate_hz / 2:.4g} Hz): {seen}; not a resonance they resolve"
         )
 
     def refusals(self, p, sd):
