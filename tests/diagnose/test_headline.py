@@ -53,6 +53,8 @@ def test_the_ratio_is_the_held_out_figure_over_the_floor():
     assert float(re.search(NUMBER + r"x the noise", line).group(1)) == pytest.approx(
         1.01 / 0.284, abs=0.05
     )
+    insample = float(re.search(r"in-sample " + NUMBER + "x", line).group(1))
+    assert insample == pytest.approx(0.965 / 0.284, abs=0.05)  # the class's ratio, beside it
     line = headline("unexplained", evidence(1.18, 0.44), evidence(1.18, 0.44),
                     score(1.46), score(1.46), [])  # fmt: skip
     assert float(re.search(NUMBER + r"x the noise", line).group(1)) == pytest.approx(

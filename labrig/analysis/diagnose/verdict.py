@@ -296,18 +296,21 @@ def headline(
     cls: str, ev_before: Evidence, ev_after: Evidence, before: dict, after: dict, added: list[str]
 ) -> str:
     """The verdict in one line, before its paragraph: the class, what was added, the held-out
-    NRMSE before and after (%) and how many times the noise floor (%) that held-out figure is
-    (the held-out NRMSE over the floor; the evidence's own ratio is the in-sample one)."""
+    NRMSE before and after (%) and how many times the noise floor (%) that held-out figure is,
+    with the in-sample ratio beside it (the one the verdict's class is decided on:
+    :data:`AT_FLOOR`)."""
     hb, ha = before["heldout_nrmse_pct"], after["heldout_nrmse_pct"]
     words = HEADLINE_WORDS[cls]
     if not added:
         return (
             f"{words}: nothing added; held-out NRMSE {hb:.3g} % is "
-            f"{_times(hb, ev_before.floor_pct)}x the noise floor ({ev_before.floor_pct:.3g} %)."
+            f"{_times(hb, ev_before.floor_pct)}x the noise floor ({ev_before.floor_pct:.3g} %; "
+            f"in-sample {ev_before.ratio:.2g}x)."
         )
     return (
         f"{words}: added {' then '.join(added)}; held-out NRMSE {hb:.3g} % -> {ha:.3g} %, "
-        f"{_times(ha, ev_after.floor_pct)}x the noise floor ({ev_after.floor_pct:.3g} %)."
+        f"{_times(ha, ev_after.floor_pct)}x the noise floor ({ev_after.floor_pct:.3g} %; "
+        f"in-sample {ev_after.ratio:.2g}x)."
     )
 
 
