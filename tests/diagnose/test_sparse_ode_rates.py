@@ -121,6 +121,13 @@ def test_decimation_keeps_250_samples_per_period_and_working_records_average_the
     assert np.max(np.abs(b.strain_ue - 150.0 * np.sin(2 * math.pi * a.time_s))[inner]) < 0.15
     slow = [Record.from_arrays("c", 200.0, v[::25], v[::25], hold="linear")]
     assert decimation(slow) == 1 and working_records(slow, 1)[0] is slow[0]
+    # an idle part (0 V held) does not count; a driven one with no drive frequency (a PRBS-like
+    # step train, content above any one frequency) keeps the rate
+    idle = Record.from_arrays("idle", rate, np.zeros(2000), noise[:2000], hold="linear")
+    assert decimation([*recs, idle]) == 20
+    steps = np.repeat(rng.choice([-150.0, 150.0], 40), 250)
+    prbs = Record.from_arrays("prbs", rate, steps, steps, hold="linear")
+    assert decimation([*recs, prbs]) == 1
 
 
 def test_refinement_recovers_the_truth_from_coefficients_30_percent_off():

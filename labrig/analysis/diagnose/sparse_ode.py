@@ -203,10 +203,15 @@ REFINE_NFEV = 40
 def decimation(records: Sequence[Record]) -> int:
     """The integer factor ``q`` by which the records' sample rate exceeds what the drive needs:
     the largest that keeps :data:`SAMPLES_PER_PERIOD` samples per period of every record's
-    drive (:func:`~labrig.analysis.metrics.drive_frequency_hz`); 1 when a record has no drive
-    frequency or the rate is already at most that."""
+    drive (:func:`~labrig.analysis.metrics.drive_frequency_hz`); 1 when a driven record has no
+    drive frequency (a PRBS, a step: its content is not bounded by one) or the rate is already at
+    most that. An idle record (voltage span below :data:`IDLE_FRACTION` of the widest) has no
+    drive to keep and does not count."""
+    widest = max((float(np.ptp(r.voltage_V)) for r in records if r.n), default=0.0)
     q = math.inf
     for r in records:
+        if r.n == 0 or float(np.ptp(r.voltage_V)) < IDLE_FRACTION * widest:
+            continue
         f = drive_frequency_hz(r)
         if not f:
             return 1
