@@ -406,6 +406,12 @@ def prepare_diagnosis(
                 f"one entry: its first {idle:.3g} s held at {records[0].rest_V:.3g} V (no drive) "
                 "left out: the parts start from rest where the voltage first moves"
             )
+        hold = records[-1].meta.get("idle_trail_s")
+        if hold:
+            say(
+                f"one entry: its last {hold:.3g} s held at {records[-1].voltage_V[-1]:.3g} V kept "
+                "as the last part's tail: the parts are cut over the driven stretch"
+            )
         say(f"one entry: cut into {len(records)} consecutive parts for leave-one-entry-out")
     chained = all("rest_after_s" in r.meta for r in records)
     check_records(path, records, [r.name for r in records], alone=not chained)

@@ -1,0 +1,46 @@
+"""A single record cut into parts for leave-one-entry-out (:func:`labrig.analysis.split.
+split_entries`) when it ends with a long hold: the parts are cut over the driven stretch and the
+hold stays as the last part's tail, so no part is a hold alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from labrig.analysis.records import Record
+from labrig.analysis.split import idle_trail, split_entries
+
+RATE = 200.0
+
+
+def driven_then_held(drive_s: float, hold_s: float) -> Record:
+    """A bipolar 1 Hz sine for ``drive_s`` seconds, then 0 V held for ``hold_s`` seconds (the
+    strain relaxing towards 0 meanwhile)."""
+    t = np.arange(round((drive_s + hold_s) * RATE)) / RATE
+    v = np.where(t < drive_s, 150.0 * np.sin(2 * np.pi * t), 0.0)
+    s = 0.1 * v + np.where(t < drive_s, 0.0, np.exp(-(t - drive_s)))
+    return Record.from_arrays("run", RATE, v, s, hold="linear")
+
+
+def test_a_long_hold_at_the_end_is_the_last_parts_tail() -> None:
+    """4 s of drive then 8 s held (the review's case: two of four parts were holds alone,
+    scored in percent of their noise). Every part now has a drive; the samples are all kept,
+    in order; the last part ends with the whole hold."""
+    rec = driven_then_held(4.0, 8.0)
+    parts = split_entries([rec], 4)
+    spans = [float(np.ptp(p.voltage_V)) for p in parts]
+    assert min(spans) > 0.5 * max(spans), spans
+    assert np.array_equal(np.concatenate([p.voltage_V for p in parts]), rec.voltage_V)
+    assert np.array_equal(np.concatenate([p.strain_ue for p in parts]), rec.strain_ue)
+    assert parts[-1].meta["idle_trail_s"] == pytest.approx(8.0, abs=2 / RATE)
+    assert np.all(parts[-1].voltage_V[-round(8.0 * RATE) :] == 0.0)
+
+
+def test_the_hold_counts_from_half_a_part() -> None:
+    """A hold counts when it is longer than half of one of the parts (``n / 8`` for 4 parts):
+    with 800 driven samples the edge is a hold of 800 / 7 = 114.3 samples; 115 counts (the parts
+    cut over the drive), 114 does not (equal parts, as before)."""
+    for h, counts in ((115, True), (114, False)):
+        rec = driven_then_held(4.0, h / RATE)
+        assert idle_trail(rec, 4) == (h if counts else 0), (h, rec.n)
+        assert ("idle_trail_s" in split_entries([rec], 4)[-1].meta) is counts
