@@ -144,8 +144,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--rate-hz", type=float, default=RATE_HZ)
     ap.add_argument("--overwrite", action="store_true")
     a = ap.parse_args(argv)
-    if not 0 < a.rate_hz <= 1e6:
-        ap.error(f"--rate-hz must be in (0, 1e6] Hz, got {a.rate_hz}")
+    if not 10.0 <= a.rate_hz <= 1e6:  # below 10 Hz the 1 Hz drive is not sampled
+        ap.error(f"--rate-hz must be in [10, 1e6] Hz (the drive is 1 Hz), got {a.rate_hz}")
     from labrig.core.errors import LabrigError
 
     try:

@@ -55,3 +55,16 @@ def test_written_as_the_authors_csv_and_never_overwritten(tmp_path, capsys):
     assert "exists" in capsys.readouterr().err and path.read_text() == before
     assert main([str(path), "--rate-hz", "200", "--seed", "2", "--overwrite"]) == 0
     assert path.read_text() != before
+
+
+@pytest.mark.parametrize(("rate", "ok"), [("9.99", False), ("10", True), ("0.05", False)])
+def test_a_rate_that_cannot_sample_the_drive_is_refused(tmp_path, rate: str, ok: bool):
+    """Below 10 Hz the 1 Hz drive is not sampled (0.05 Hz wrote an empty file and exited 0):
+    exit 2 naming the option, nothing written; 10 Hz is accepted."""
+    out = tmp_path / "s.csv"
+    if ok:
+        assert main([str(out), "--rate-hz", rate]) == 0 and out.stat().st_size > 0
+        return
+    with pytest.raises(SystemExit) as e:
+        main([str(out), "--rate-hz", rate])
+    assert e.value.code == 2 and not out.exists()
