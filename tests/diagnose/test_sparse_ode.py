@@ -130,20 +130,23 @@ def test_an_ode_gaining_just_under_the_rule_is_refused_and_the_verdict_says_why(
 
 @pytest.mark.slow
 @pytest.mark.timeout(300)
-def test_real_record_short_segment_the_ode_twice_better_passes_the_rule():
+def test_real_record_short_segment_the_ode_twice_better_is_refused_only_for_its_growth():
     """SmartHysteresis (bipolar +-150 V, 1 Hz), 2 periods at 100 Hz: the base's held-out NRMSE is
-    more than twice the sparse ODE's; then the ODE must pass the acceptance rule (so diagnose
-    cannot call the record "unexplained"). Measured 2026-11-27: base 1.20 %, ODE 0.158 % (0.53 %
+    more than twice the sparse ODE's, and the ODE passes the acceptance rule on its scores; it is
+    refused because its free run grows under the record's own drive (its growth rate, positive,
+    is the reason given), not for its score. Measured 2026-11-27: base 1.20 %, ODE 0.158 % (0.53 %
     before the working rate and the output-error refinement). About 5.6 s of CPU (the base fit
     1.1 s, the ODE's five identifications 4.5 s) and more under load: slow tier; the two tests
-    above are its fast equivalents (the same decision on a synthetic trial)."""
+    above are its fast equivalents (the same decision on a synthetic trial) and
+    test_sparse_ode_growth.py the growth rate's."""
     s = Settings(chain=True, offset=True, warmup_s=0.0, top_k=4, min_gain=MIN_GAIN)
     recs = smart_records(10)
     setup, base = fit_base(recs, s, ["offset_drift"], None, (), lambda _m: None, [])
     trial = sparse_ode_trial(setup, s, base, 0, lambda _m: None)
     assert base.heldout_pct is not None
     assert trial.heldout_pct <= 0.5 * base.heldout_pct, (trial.heldout_pct, base.heldout_pct)
-    assert trial.acceptance.accepted, trial.candidate.evidence
+    assert trial.acceptance.accepted, trial.candidate.evidence  # the rule on its scores
+    assert not trial.candidate.accepted and "grows under" in trial.candidate.evidence
     kept = [t.name for x, t in zip(trial.model.coefficients, LIBRARY, strict=True) if x != 0]
     assert {"V'", "S"} <= set(kept) and len(kept) <= 8, kept
 
@@ -151,16 +154,16 @@ def test_real_record_short_segment_the_ode_twice_better_passes_the_rule():
 @pytest.mark.slow
 @pytest.mark.timeout(900)
 def test_real_record_whole_kept_segment_is_not_called_unexplained():
-    """The whole kept record (2 periods at 1 kHz) through diagnose: where the sparse ODE's
-    held-out NRMSE is at most half the base's, the verdict is not "unexplained" and the ODE is
-    the last thing added; and it meets the issue's figure (a six-term ODE identified on the
-    first half of the whole file predicted the second at 0.216 %). Measured 2026-11-27: base
-    1.53 %, sensor_lowpass 0.70 %, sparse ODE 0.199 % (0.225 % before the working rate and the
-    output-error refinement; floor 0.151 %), 29 s of CPU, 128 s wall on the shared machine."""
+    """The whole kept record (2 periods at 1 kHz) through diagnose: the sparse ODE predicts the
+    held-out parts at less than half the base's error (0.199 %, under the 0.216 % a six-term ODE
+    reached on the whole file) but grows under the record's own drive, so it is refused and the
+    verdict says why, with its equation; the record is not called "unexplained" (a named effect
+    explains part of it). Measured 2026-11-27: base 1.53 %, sensor_lowpass 0.70 %, sparse ODE
+    0.199 % refused (growth +0.53 /s; floor 0.151 %), 25-29 s of CPU."""
     d = diagnose(smart_records(1), offset=True)
     ode = next(c for c in d.candidates if c["effect"] == NAME)
     assert ode["heldout_nrmse_pct"] <= 0.5 * d.before["heldout_nrmse_pct"]
     assert ode["heldout_nrmse_pct"] <= 0.216, ode["evidence"]
     assert d.classification != "unexplained", d.verdict
-    assert d.effects_added[-1]["effect"] == NAME
-    assert "EMPIRICAL" in d.verdict and "dS/dt =" in d.verdict
+    assert all(e["effect"] != NAME for e in d.effects_added)
+    assert "grows under" in d.verdict and "dS/dt =" in d.verdict
