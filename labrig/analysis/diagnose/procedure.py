@@ -231,6 +231,24 @@ def diagnose(
     return d
 
 
+def _holds_set_aside(records: Sequence[Record]) -> list[str]:
+    """What cutting a single record into parts did with its long holds
+    (:func:`~labrig.analysis.split.split_entries`' ``idle_lead_s`` and ``idle_trail_s``), for
+    the diagnosis' messages (shown on diagnosis.html), not only the command's progress."""
+    out = []
+    if records and (lead := records[0].meta.get("idle_lead_s")):
+        out.append(
+            f"{records[0].meta.get('split_of', records[0].name)}: its first {lead:.3g} s (a hold "
+            "before the drive) left out; the parts start from rest where the voltage first moves"
+        )
+    if records and (hold := records[-1].meta.get("idle_trail_s")):
+        out.append(
+            f"{records[-1].meta.get('split_of', records[-1].name)}: its last {hold:.3g} s (a hold "
+            "after the drive) kept as the last part's tail; the parts are cut over the drive"
+        )
+    return out
+
+
 def _procedure(
     records: list[Record],
     settings: Settings,
@@ -242,7 +260,7 @@ def _procedure(
     base_fit: FitResult | None = None,
 ) -> Diagnosis:
     """The steps of :func:`diagnose` (its arguments)."""
-    messages: list[str] = []
+    messages: list[str] = list(_holds_set_aside(records))
     setup, before = fit_base(records, settings, effects, mains_hz, always, say, messages, base_fit)
     current, rounds, added = before, [], []
     for rnd in range(max_effects):
