@@ -50,12 +50,12 @@ def test_the_diagnosis_keeps_what_was_done_with_the_holds() -> None:
     """The diagnosis' messages (on diagnosis.html, not only on stderr) say what
     cutting the record did with a hold before and after the drive; a record without holds
     gets no such message."""
-    from labrig.analysis.diagnose.procedure import _holds_set_aside
+    from labrig.analysis.diagnose.procedure import holds_set_aside
 
     t = np.arange(round(16.0 * RATE)) / RATE
     v = np.where((t >= 4.0) & (t < 8.0), 150.0 * np.sin(2 * np.pi * (t - 4.0)), 0.0)
     rec = Record.from_arrays("both", RATE, v, 0.1 * v, hold="linear")
-    first, last = _holds_set_aside(split_entries([rec], 4))
+    first, last = holds_set_aside(split_entries([rec], 4))
     assert "first 4 s" in first and "left out" in first
     assert "last 8 s" in last and "tail" in last
-    assert _holds_set_aside(split_entries([driven_then_held(4.0, 0.0)], 4)) == []
+    assert holds_set_aside(split_entries([driven_then_held(4.0, 0.0)], 4)) == []

@@ -75,6 +75,7 @@ __all__ = [
     "base_fit_reusable",
     "diagnose",
     "drives_against_poling",
+    "holds_set_aside",
     "slow_mode_identifiable",
     "split_entries",
 ]
@@ -231,7 +232,7 @@ def diagnose(
     return d
 
 
-def _holds_set_aside(records: Sequence[Record]) -> list[str]:
+def holds_set_aside(records: Sequence[Record]) -> list[str]:
     """What cutting a single record into parts did with its long holds
     (:func:`~labrig.analysis.split.split_entries`' ``idle_lead_s`` and ``idle_trail_s``), for
     the diagnosis' messages (shown on diagnosis.html), not only the command's progress."""
@@ -260,7 +261,7 @@ def _procedure(
     base_fit: FitResult | None = None,
 ) -> Diagnosis:
     """The steps of :func:`diagnose` (its arguments)."""
-    messages: list[str] = list(_holds_set_aside(records))
+    messages: list[str] = list(holds_set_aside(records))
     setup, before = fit_base(records, settings, effects, mains_hz, always, say, messages, base_fit)
     current, rounds, added = before, [], []
     for rnd in range(max_effects):
