@@ -104,6 +104,7 @@ __all__ = [
     "smoothed_derivative",
     "smoothing_window",
     "stlsq",
+    "threshold_path",
 ]
 
 Factor = Callable[[NDArray, NDArray], NDArray]
@@ -544,6 +545,26 @@ def _regress(
             seen.add(key)
             out.append((float(lam), xi))
     return out
+
+
+def threshold_path(
+    items: Items, start: SindyBaseline, offset: bool, cache: SindyCache
+) -> list[SindyBaseline]:
+    """One model per distinct nonzero, finite support of the STLSQ threshold path over
+    :data:`THRESHOLDS` of the regression :func:`fit_sindy` sets up on ``items`` (the same
+    blocks, weights and normalisation, :func:`_regress`), with each segment's strain zero
+    (``offset``) where ``start``'s free run puts it (the mean of measured less predicted);
+    empty when no segment is long enough to differentiate."""
+    try:
+        blocks = _blocks(items, cache)
+    except ValueError:
+        return []
+    offsets = _Scorer(items, offset)(start)[1] if offset else {}
+    return [
+        SindyBaseline(tuple(float(c) for c in xi), start.rate_hz, lam, start.limit_ue)
+        for lam, xi in _regress(blocks, offsets, THRESHOLDS, cache)
+        if np.any(xi) and np.all(np.isfinite(xi))
+    ]
 
 
 class _Scorer:

@@ -47,17 +47,13 @@ from labrig.analysis.records import Record
 from labrig.analysis.simulate import Scored, scored_sequences
 from labrig.analysis.sindy import (
     LIBRARY,
-    THRESHOLDS,
     TOLERANCE,
     SindyBaseline,
     SindyCache,
     equilibrium,
     fit_sindy,
     free_run,
-    library_matrix,
-    smoothed_derivative,
-    smoothing_window,
-    stlsq,
+    threshold_path,
 )
 from labrig.core.blas import single_thread_blas
 from labrig.model.effects import Effect
@@ -336,52 +332,13 @@ def refine(
 
 
 def path(
-    items: Sequence[tuple[Any, list]], start: SindyBaseline, offset: bool
+    items: Sequence[tuple[Any, list]], start: SindyBaseline, offset: bool, cache: SindyCache
 ) -> list[SindyBaseline]:
-    """The STLSQ threshold path (:func:`~labrig.analysis.sindy.stlsq` over
-    :data:`~labrig.analysis.sindy.THRESHOLDS`, one model per distinct support) of the
-    regression ``dS/dt = Theta xi`` on the scored segments of ``items``, as
-    :func:`~labrig.analysis.sindy.fit_sindy` sets it up (derivative by
-    :func:`~labrig.analysis.sindy.smoothed_derivative` over a window of 1/8 of the drive period,
-    half a window trimmed at each end, each segment's rows weighted alike, columns and target
-    at unit RMS), with each segment's strain zero (``offset``) where ``start``'s free run puts
-    it (the mean of measured less predicted)."""
-    xs, ys = [], []
-    for seq, segs in items:
-        y0 = start.predict(seq.voltage_V, seq.rest_V, seq.rate_hz)
-        dv = np.gradient(seq.voltage_V) * seq.rate_hz
-        recs = {r.name: r for r in seq.records}
-        for g in segs:
-            w = smoothing_window(seq.rate_hz, drive_frequency_hz(recs[g.name]))
-            m = g.measured_ue
-            if m.size < 3 * w:
-                continue
-            o = float(np.mean(m - y0[g.lo : g.hi])) if offset else 0.0
-            sl = slice(w // 2, m.size - w // 2)
-            tg = smoothed_derivative(m - o, seq.rate_hz, w)[sl]
-            rms = float(np.sqrt(np.mean(tg * tg)))
-            if not rms > 0:
-                continue
-            wt = 1.0 / (rms * np.sqrt(tg.size))
-            th = library_matrix((m - o)[sl], seq.voltage_V[g.lo : g.hi][sl], dv[g.lo : g.hi][sl])
-            xs.append(th * wt)
-            ys.append(tg * wt)
-    if not xs:
-        return []
-    x, y = np.vstack(xs), np.concatenate(ys)
-    cs = np.sqrt(np.mean(x * x, axis=0))
-    cs[cs == 0] = 1.0
-    yn = float(np.sqrt(np.mean(y * y))) or 1.0
-    out, seen = [], set()
-    for lam, coef in stlsq(x / cs, y / yn, THRESHOLDS):
-        xi = coef * yn / cs
-        key = tuple(np.flatnonzero(xi))
-        if key and key not in seen and np.all(np.isfinite(xi)):
-            seen.add(key)
-            out.append(
-                SindyBaseline(tuple(float(c) for c in xi), start.rate_hz, lam, start.limit_ue)
-            )
-    return out
+    """The STLSQ threshold path of the regression ``dS/dt = Theta xi`` on the scored segments
+    of ``items`` as :func:`~labrig.analysis.sindy.fit_sindy` sets it up, with each segment's
+    strain zero (``offset``) where ``start``'s free run puts it
+    (:func:`~labrig.analysis.sindy.threshold_path`; ``cache`` keeps each segment's rows)."""
+    return threshold_path(items, start, offset, cache)
 
 
 def settles(model: SindyBaseline, v_lo: float, v_hi: float) -> bool:
@@ -448,6 +405,7 @@ def identify(
     driven = driven_items(items)
     volts = np.concatenate([seq.voltage_V[g.lo : g.hi] for seq, segs in driven for g in segs])
     v_lo, v_hi = float(np.min(volts)), float(np.max(volts))
+    cache = SindyCache() if cache is None else cache
     start = fit_sindy(driven, offset, cache=cache)
     cands: dict[tuple[int, ...], tuple[SindyBaseline, float, bool]] = {}
 
@@ -463,13 +421,13 @@ def identify(
         pick = min(ok, key=lambda c: (len(c[0].support), c[1]))
         return pick[0], pick[1]
 
-    pick, score = add([start, *path(driven, start, offset)])
+    pick, score = add([start, *path(driven, start, offset, cache)])
     if not math.isfinite(score):
         return start
     for _ in range(PASSES - 1):
         best = min(cands.values(), key=lambda c: c[1])[0]
         before = min(c[1] for c in cands.values())
-        pick, score = add([*path(driven, best, offset), *path(driven, pick, offset)])
+        pick, score = add([*path(driven, best, offset, cache), *path(driven, pick, offset, cache)])
         if not min(c[1] for c in cands.values()) < (1.0 - 0.01) * before:
             break
     return pick
