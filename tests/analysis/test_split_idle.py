@@ -59,3 +59,18 @@ def test_the_diagnosis_keeps_what_was_done_with_the_holds() -> None:
     assert "first 4 s" in first and "left out" in first
     assert "last 8 s" in last and "tail" in last
     assert holds_set_aside(split_entries([driven_then_held(4.0, 0.0)], 4)) == []
+
+
+def test_diagnosis_json_says_what_was_done_with_the_holds() -> None:
+    """``diagnosis.json`` (``Diagnosis.to_json()``) carries the same sentences under
+    ``messages``: a user reading only the JSON learns that the first 4 s were left out and the
+    last 8 s kept as a tail (no candidates are tried, to keep the test short)."""
+    from labrig.analysis.diagnose.procedure import diagnose
+
+    t = np.arange(round(16.0 * RATE)) / RATE
+    v = np.where((t >= 4.0) & (t < 8.0), 150.0 * np.sin(2 * np.pi * (t - 4.0)), 0.0)
+    rec = Record.from_arrays("both", RATE, v, 0.1 * v, hold="linear")
+    doc = diagnose(split_entries([rec], 4), effects=[], max_effects=0).to_json()
+    said = " ".join(doc["messages"])
+    assert "first 4 s" in said and "left out" in said
+    assert "last 8 s" in said and "tail" in said

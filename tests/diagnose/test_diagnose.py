@@ -31,7 +31,7 @@ from labrig.studies.campaign import (
 #: kernel, instantaneous loss power vs a measured temperature)
 CASES = {k: v for k, v in STUDY_CASES.items() if k not in ("none", "cubic_term")}
 
-KEYS = {"before", "after", "effects_added", "candidates", "headline", "verdict"}
+KEYS = {"before", "after", "effects_added", "candidates", "headline", "verdict", "messages"}
 
 
 def _check_contract(doc: dict) -> None:
@@ -47,6 +47,7 @@ def _check_contract(doc: dict) -> None:
         assert isinstance(c["round"], int) and c["round"] >= 1
     assert isinstance(doc["verdict"], str) and len(doc["verdict"]) > 40
     assert doc["headline"] and "\n" not in doc["headline"]
+    assert all(isinstance(m, str) and m for m in doc["messages"])
     json.dumps(doc)
 
 

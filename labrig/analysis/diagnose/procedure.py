@@ -117,6 +117,7 @@ class Diagnosis:
             "candidates": self.candidates,
             "headline": self.headline,
             "verdict": self.verdict,
+            "messages": list(self.messages),
         }
 
 
