@@ -5,42 +5,62 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
 from labrig.analysis.metrics import drive_frequency_hz
 from labrig.analysis.records import Record
 
-__all__ = ["IDLE_TOL", "idle_lead", "idle_trail", "split_entries"]
+__all__ = [
+    "IDLE_NOISE_SIGMAS",
+    "IDLE_TOL",
+    "IDLE_TOL_MAX",
+    "idle_lead",
+    "idle_trail",
+    "split_entries",
+]
 
-#: a voltage within this fraction of the record's voltage span of its first sample is idle
+#: a voltage within this fraction of the record's voltage span of the held level is idle
 IDLE_TOL = 0.01
+#: ... or within this many standard deviations of the voltage channel's own noise, when that is
+#: larger (a measured voltage, not a command) ...
+IDLE_NOISE_SIGMAS = 5.0
+#: ... but never a band wider than this fraction of the span (a small drive is a drive)
+IDLE_TOL_MAX = 0.05
+
+
+def _held(v: NDArray, need: int) -> tuple[int, float]:
+    """How many samples at the start of ``v`` stay at one held level. The level is the mean of
+    the first ``need`` samples (a single first sample may be a noise extreme); the band around it
+    is :data:`IDLE_TOL` of the span of ``v`` or :data:`IDLE_NOISE_SIGMAS` times the noise of
+    those samples (1.4826 MAD of their first differences over sqrt 2: the white noise's standard
+    deviation, blind to a slow drift), whichever is larger, at most :data:`IDLE_TOL_MAX` of the
+    span. Returns the number of held samples (0 unless more than ``need``) and the level (V)."""
+    span = float(np.ptp(v)) if v.size else 0.0
+    if not span > 0 or v.size <= need or need < 1:
+        return 0, float(v[0]) if v.size else 0.0
+    head = v[: need + 1]
+    level = float(np.mean(head))
+    sigma = 1.4826 * float(np.median(np.abs(np.diff(head)))) / np.sqrt(2.0) if need > 1 else 0.0
+    tol = min(max(IDLE_TOL * span, IDLE_NOISE_SIGMAS * sigma), IDLE_TOL_MAX * span)
+    moved = np.flatnonzero(np.abs(v - level) > tol)
+    held = int(moved[0]) if moved.size else 0
+    return (held if held > need else 0), level
 
 
 def idle_lead(record: Record, parts: int = 4) -> int:
-    """Samples at the start of ``record`` held idle: the voltage within :data:`IDLE_TOL` of its
-    span of the first sample, counted only when that stretch is longer than half of one of
+    """Samples at the start of ``record`` held idle (:func:`_held`: the voltage within a
+    band around one held level), counted only when that stretch is longer than half of one of
     ``parts`` equal parts (else 0). Such a stretch holds the actuator at rest: no drive, the
     strain at its equilibrium plus the sensor's noise; as a part of its own (or most of one) it
     would be scored in percent of its noise's span."""
-    v = record.voltage_V
-    span = float(np.ptp(v)) if v.size else 0.0
-    if not span > 0:
-        return 0
-    moved = np.flatnonzero(np.abs(v - v[0]) > IDLE_TOL * span)
-    lead = int(moved[0]) if moved.size else 0
-    return lead if lead > record.n / (2 * parts) else 0
+    return _held(record.voltage_V, record.n // (2 * parts))[0]
 
 
 def idle_trail(record: Record, parts: int = 4) -> int:
-    """Samples at the end of ``record`` held at its last sample's voltage (within
-    :data:`IDLE_TOL` of its span), counted only when that stretch is longer than half of one of
-    ``parts`` equal parts (else 0): :func:`idle_lead` read from the end."""
-    v = record.voltage_V
-    span = float(np.ptp(v)) if v.size else 0.0
-    if not span > 0:
-        return 0
-    moved = np.flatnonzero(np.abs(v - v[-1]) > IDLE_TOL * span)
-    trail = int(v.size - 1 - moved[-1]) if moved.size else 0
-    return trail if trail > record.n / (2 * parts) else 0
+    """Samples at the end of ``record`` held at one level, counted only when that stretch is
+    longer than half of one of ``parts`` equal parts (else 0): :func:`idle_lead` read from the
+    end."""
+    return _held(record.voltage_V[::-1], record.n // (2 * parts))[0]
 
 
 def split_entries(records: Sequence[Record], parts: int = 4) -> list[Record]:
@@ -48,18 +68,18 @@ def split_entries(records: Sequence[Record], parts: int = 4) -> list[Record]:
     the record is periodic), chained with no rest: leave-one-entry-out then has folds. The
     pieces simulated back to back reproduce the original record exactly.
 
-    A long idle start (:func:`idle_lead`: more than half a part at the first sample's voltage)
+    A long idle start (:func:`idle_lead`: more than half a part at one held voltage)
     is left out: the first part begins where the voltage first moves, from rest at the held
-    voltage (``meta["rest_V"]``), and every part's ``meta["idle_lead_s"]`` says how many
-    seconds were left out. A long idle end (:func:`idle_trail`) is kept, as the last part's
+    level (``meta["rest_V"]``), and every part's ``meta["idle_lead_s"]`` says how many seconds
+    were left out. A long idle end (:func:`idle_trail`) is kept, as the last part's
     tail: the parts are cut over the driven stretch, so none is a hold alone (scored in percent
     of its noise's span), and the strain's relaxation during the hold stays in the record
     (``meta["idle_trail_s"]``)."""
     out: list[Record] = []
     for r in records:
-        lead = idle_lead(r, parts)
+        lead, level = _held(r.voltage_V, r.n // (2 * parts))
         idle = {"idle_lead_s": lead / r.rate_hz} if lead else {}
-        rest = {"rest_V": float(r.voltage_V[0])} if lead else {}
+        rest = {"rest_V": level} if lead else {}
         if lead:
             r = Record(
                 r.name,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from labrig.analysis.records import Record
-from labrig.analysis.split import idle_trail, split_entries
+from labrig.analysis.split import idle_lead, idle_trail, split_entries
 
 RATE = 200.0
 
@@ -74,3 +74,53 @@ def test_diagnosis_json_says_what_was_done_with_the_holds() -> None:
     said = " ".join(doc["messages"])
     assert "first 4 s" in said and "left out" in said
     assert "last 8 s" in said and "tail" in said
+
+
+def idle_then_sine(idle_v: np.ndarray, drive_s: float = 4.0) -> Record:
+    """``idle_v`` (the idle stretch's voltage samples), then a bipolar 1 Hz 150 V sine."""
+    t = np.arange(round(drive_s * RATE)) / RATE
+    v = np.concatenate([idle_v, 150.0 * np.sin(2 * np.pi * t)])
+    return Record.from_arrays("run", RATE, v, 0.1 * v, hold="linear")
+
+
+def test_a_noisy_measured_idle_is_found_whatever_its_first_sample() -> None:
+    """A measured voltage: 4 s idle at 0 V with 0.4 % of the span of white noise (1.2 V RMS),
+    its first sample at +3 sigma. The idle stretch is found (to a few samples: where the sine
+    leaves the noise band), not cut at the first sample that strays 1 % of the span from it."""
+    rng = np.random.default_rng(5)
+    idle = rng.normal(0.0, 1.2, round(4.0 * RATE))
+    idle[0] = 3.6
+    lead = idle_lead(idle_then_sine(idle))
+    assert round(4.0 * RATE) <= lead <= round(4.0 * RATE) + 8, lead
+
+
+def test_a_record_that_starts_driven_has_no_idle_start() -> None:
+    """A sine from the first sample, and a pseudo-random binary drive (its differences are
+    mostly 0: the noise estimate is 0 and the band 1 % of the span): no idle start."""
+    t = np.arange(round(8.0 * RATE)) / RATE
+    sine = Record.from_arrays("sine", RATE, 150 * np.sin(2 * np.pi * t), t, hold="linear")
+    bits = np.repeat(np.random.default_rng(2).integers(0, 2, 160), 10) * 100.0
+    prbs = Record.from_arrays("prbs", RATE, bits, bits, hold="zoh")
+    assert idle_lead(sine) == 0 and idle_lead(prbs) == 0
+
+
+@pytest.mark.parametrize(("step_pct", "idle"), [(0.9, True), (1.1, False)])
+def test_the_band_is_one_percent_of_the_span_for_a_clean_voltage(step_pct, idle) -> None:
+    """Exact voltages (no noise): 2 s at 0 V then 2 s at ``step_pct`` % of the span, then the
+    sine. 0.9 % stays in the band (4 s idle, and the sine's first sample at 0 V), 1.1 % leaves
+    it (2 s idle)."""
+    n = round(2.0 * RATE)
+    v = np.concatenate([np.zeros(n), np.full(n, step_pct / 100 * 300.0)])
+    lead = idle_lead(idle_then_sine(v))
+    assert (2 * n <= lead <= 2 * n + 1) if idle else lead == n, lead
+
+
+@pytest.mark.parametrize(("a_pct", "idle"), [(4.9, True), (5.1, False)])
+def test_the_noise_band_is_capped_at_five_percent_of_the_span(a_pct, idle) -> None:
+    """An idle stretch flipping between +-a every sample reads as noise of 2.1 a (its band
+    10.5 a), but the band is at most 5 % of the span: a = 4.9 % of the span is idle, 5.1 % is a
+    drive."""
+    n = round(4.0 * RATE)
+    a = a_pct / 100 * 300.0
+    v = a * np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    assert (idle_lead(idle_then_sine(v)) > 0) is idle
