@@ -42,7 +42,8 @@ def png(fig: Figure) -> bytes:
     from PIL import Image
 
     fig.set_dpi(DPI)
-    canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
+    # (exactly an Agg canvas: an interactive backend's subclass would draw on screen too)
+    canvas = fig.canvas if type(fig.canvas) is FigureCanvasAgg else FigureCanvasAgg(fig)
     canvas.draw()
     rgba = np.asarray(canvas.buffer_rgba())
     pixels = rgba[..., :3] if bool(np.all(rgba[..., 3] == 255)) else rgba
