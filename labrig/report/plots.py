@@ -34,16 +34,11 @@ AMPLITUDE_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:br
 def png(fig: Figure) -> bytes:
     """The figure as PNG bytes: drawn once at :data:`DPI` on an Agg canvas, its pixels encoded
     by Pillow (the pixels ``fig.savefig(format="png", dpi=DPI)`` writes; RGB when every pixel
-    is opaque, as on the report's white figures: a quarter less to compress and to embed).
-
-    A figure drawn again (:class:`EntryFigures`) keeps its Agg canvas, hence its renderer,
-    with which matplotlib caches the size of every text it lays out (tick labels, axis
-    labels, legends): the next entries' texts are measured once, not once per figure."""
+    is opaque, as on the report's white figures: a quarter less to compress and to embed)."""
     from PIL import Image
 
     fig.set_dpi(DPI)
-    # (exactly an Agg canvas: an interactive backend's subclass would draw on screen too)
-    canvas = fig.canvas if type(fig.canvas) is FigureCanvasAgg else FigureCanvasAgg(fig)
+    canvas = FigureCanvasAgg(fig)
     canvas.draw()
     rgba = np.asarray(canvas.buffer_rgba())
     pixels = rgba[..., :3] if bool(np.all(rgba[..., 3] == 255)) else rgba
@@ -145,10 +140,6 @@ class EntryFigures:
         ax_l = fig.add_subplot(gs[:, 0])
         ax_s = fig.add_subplot(gs[0, 1])
         axes = (ax_l, ax_s, fig.add_subplot(gs[1, 1], sharex=ax_s))
-        # the axes' settings, kept while the figure is emptied for the next entry: made once
-        for ax in axes:
-            style_axes(ax)
-        ax_s.tick_params(labelbottom=False)
         self._fig, self._axes = fig, axes
         return fig, axes
 
@@ -194,9 +185,8 @@ def _draw_entry(
     strain_unit: str,
     others: dict[str, NDArray[np.float64]] | None,
 ) -> bool:
-    """:func:`entry_figure` drawn on empty ``axes`` (loop, strain, residual; styled by
-    :meth:`EntryFigures._new`); ``False`` when a title is left to matplotlib's automatic
-    placement (:func:`set_title`)."""
+    """:func:`entry_figure` drawn on empty ``axes`` (loop, strain, residual); ``False`` when
+    a title is left to matplotlib's automatic placement (:func:`set_title`)."""
     r = entry.record
     t, v, s = r.time_s - r.time_s[0], r.voltage_V, r.strain_ue
     p = np.asarray(predicted, dtype=float)
@@ -214,6 +204,7 @@ def _draw_entry(
     ax_s.plot(t, p, color=OURS, lw=0.8, label="model")
     ax_s.set_ylabel(f"strain ({strain_unit})", fontsize=9)
     fixed &= set_title(ax_s, "strain and residual in time", fontsize=9)
+    ax_s.tick_params(labelbottom=False)
     res = s - p
     ax_r.plot(t[i0:], res[i0:], color=OURS, lw=0.5, alpha=0.6)
     ax_r.axhline(0.0, color="0.4", lw=0.6)
@@ -247,6 +238,8 @@ def _draw_entry(
             fontsize=7,
             color="0.35",
         )
+    for ax in (ax_l, ax_s, ax_r):
+        style_axes(ax)
     k = _final_hold(v, r.rate_hz)
     if k is not None and k > i0:
         fixed &= _hold_inset(ax_s, t[k:], s[k:], p[k:], others, k, strain_unit)

@@ -105,10 +105,10 @@ def line_figure(ys: list[float], label: str) -> Figure:
 
 
 def test_png_of_a_figure_drawn_again_is_a_new_figures_pixels() -> None:
-    """``png`` keeps a figure's Agg canvas (and the text sizes its renderer caches) from one
-    draw to the next: the second drawing, after the line, the limits and the texts changed,
-    has the pixels of a new figure drawn once with the new content, as ``savefig`` writes
-    them, and differs from the first."""
+    """``png`` of a figure drawn before (as :class:`~labrig.report.plots.EntryFigures` draws
+    its figure entry after entry): after the line, the limits and the texts changed, the
+    pixels of a new figure drawn once with the new content, as ``savefig`` writes them, and
+    not those of the first drawing."""
     fig = line_figure([0.0, 1.0, 0.5], "first label")
     first = pixels(plots.png(fig))
     ax = fig.axes[0]
