@@ -13,9 +13,11 @@ from __future__ import annotations
 
 from typing import Any
 
+from matplotlib.figure import Figure
+
 from labrig.analysis.records import Record
 from labrig.control.metrics import control_metrics, is_control_entry
-from labrig.report.plots import agg_figure, png, style_axes
+from labrig.report.plots import png, style_axes
 
 __all__ = ["COLORS", "control_context", "control_metrics", "is_control_entry"]
 
@@ -28,7 +30,7 @@ def _pair_key(r: Record) -> tuple:
 
 
 def _figure(group: list[Record]) -> bytes:
-    fig = agg_figure(figsize=(11, 3.6))  # tight_layout and png measure texts once
+    fig = Figure(figsize=(11, 3.6))
     ax_l, ax_t, ax_v = fig.subplots(1, 3, gridspec_kw={"width_ratios": [1, 1.3, 1.3]})
     for r in sorted(group, key=lambda r: r.meta["control"]):
         i0 = int(r.meta.get("command_start_index", 0))

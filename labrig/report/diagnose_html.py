@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 
 from labrig.analysis.diagnose import Diagnosis
 from labrig.analysis.records import Record
-from labrig.report.plots import agg_figure, grid_margins, png, set_title
+from labrig.report.plots import grid_margins, png, set_title
 from labrig.report.templating import render
 
 __all__ = [
@@ -136,7 +136,7 @@ def _candidates_figure(d: Diagnosis) -> bytes | None:
     rows = [(n, v) for n, v in rows if v is not None]
     if not rows:
         return None
-    fig = agg_figure(figsize=(7, 0.45 * len(rows) + 1.2))  # tight_layout and png share it
+    fig = Figure(figsize=(7, 0.45 * len(rows) + 1.2))
     ax = fig.add_subplot(1, 1, 1)
     names = ["base model", *[n for n, _ in rows]]
     vals = [d.before["heldout_nrmse_pct"], *[v for _, v in rows]]

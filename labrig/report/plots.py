@@ -31,29 +31,14 @@ STYLES = {"dynamic": "-", "prandtl_ishlinskii": "--", "bouc_wen": ":"}
 AMPLITUDE_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:cyan")
 
 
-def agg_figure(**kwargs: Any) -> Figure:
-    """``Figure(**kwargs)`` with its Agg canvas attached at :data:`DPI`, for a figure laid out
-    by ``tight_layout`` before :func:`png` draws it: the layout pass then measures its texts
-    (tick labels, axis labels, legends) on the renderer the drawing uses, which keeps their
-    sizes, instead of on a renderer of its own made by a throw-away print of the figure (the
-    pixels are the same: ``tests/report/test_report_figures.py``)."""
-    fig = Figure(**kwargs)
-    fig.set_dpi(DPI)
-    FigureCanvasAgg(fig)
-    return fig
-
-
 def png(fig: Figure) -> bytes:
     """The figure as PNG bytes: drawn once at :data:`DPI` on an Agg canvas, its pixels encoded
     by Pillow (the pixels ``fig.savefig(format="png", dpi=DPI)`` writes; RGB when every pixel
-    is opaque, as on the report's white figures: a quarter less to compress and to embed).
-    The figure's Agg canvas is used when it has one (:func:`agg_figure`, a figure drawn
-    before), else a new one."""
+    is opaque, as on the report's white figures: a quarter less to compress and to embed)."""
     from PIL import Image
 
     fig.set_dpi(DPI)
-    # exactly an Agg canvas: an interactive backend's subclass would also draw on screen
-    canvas = fig.canvas if type(fig.canvas) is FigureCanvasAgg else FigureCanvasAgg(fig)
+    canvas = FigureCanvasAgg(fig)
     canvas.draw()
     rgba = np.asarray(canvas.buffer_rgba())
     pixels = rgba[..., :3] if bool(np.all(rgba[..., 3] == 255)) else rgba

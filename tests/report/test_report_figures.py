@@ -126,35 +126,6 @@ def test_png_of_a_figure_drawn_again_is_a_new_figures_pixels() -> None:
     assert not np.array_equal(again, first)
 
 
-def three_panels(fig: Figure, layout: bool) -> Figure:
-    """Three panels with long labels, large tick labels and legends (control_section's look),
-    laid out by ``tight_layout`` when ``layout``."""
-    for k, ax in enumerate(fig.subplots(1, 3, gridspec_kw={"width_ratios": [1, 1.3, 1.3]})):
-        x = np.linspace(0.0, 10.0 ** (k + 1), 400)
-        ax.plot(x, np.sin(x / x[-1] * 9) * 10.0**k, lw=0.8, label=f"series {k}")
-        ax.set(xlabel=f"a long x label, panel {k}", ylabel="a long y label (units)", title=str(k))
-        plots.style_axes(ax)
-        ax.legend(fontsize=7)
-    if layout:
-        fig.tight_layout()
-    return fig
-
-
-def test_agg_figure_laid_out_is_a_figure_laid_out_pixel_for_pixel() -> None:
-    """``agg_figure``: ``tight_layout`` measures the texts on the renderer ``png`` then draws
-    with; the pixels are those of a plain ``Figure`` laid out on a renderer of its own (and
-    of ``savefig``), and the layout did move the panels (without it the pixels differ)."""
-    ours = pixels(plots.png(three_panels(plots.agg_figure(figsize=(11, 3.6)), True)))
-    plain = three_panels(Figure(figsize=(11, 3.6)), True)
-    buf = io.BytesIO()
-    plain.savefig(buf, format="png", dpi=plots.DPI)
-    assert np.array_equal(ours, pixels(plots.png(plain)))
-    assert np.array_equal(ours, pixels(buf.getvalue()))
-    assert not np.array_equal(
-        ours, pixels(plots.png(three_panels(Figure(figsize=(11, 3.6)), False)))
-    )
-
-
 def titled(lo: float, hi: float, title: str, how: str) -> tuple[bytes, Figure]:
     """A line from ``lo`` to ``hi`` titled with ``set_title`` (``how="ours"``), matplotlib's
     ``Axes.set_title`` (``"auto"``) or a title fixed at the top (``"top"``)."""
