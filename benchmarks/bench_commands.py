@@ -19,6 +19,16 @@ the README says. Commands: ``labrig --help``, ``fit --json``, ``report --json`` 
 ``diagnose --json`` and ``runs``. The JSON documents of both implementations are compared: the
 largest relative difference of every NRMSE, the effects added and the verdict's class.
 
+``--floor`` measures instead what a command cannot go below in a fresh process: the CPU of a
+bare interpreter, then of importing what ``labrig fit`` must use (numpy, scipy.optimize, h5py,
+numba, the command line's typer, rich and pydantic), numba's start at the first call of a cached
+kernel, the run file's checked read (:func:`labrig.store.read_run`, in a child process as every
+command reads it), and for ``labrig report`` with every peer the further libraries it must
+import (scipy.signal for SINDy's derivative, pysindy with scikit-learn and pandas, matplotlib's
+figure and Agg canvas, Pillow, jinja2). Each row is its own fresh process, ``--repeats`` times,
+interleaved; the rows are cumulative (each process does what the rows above did, then its own
+step) and the table gives each step's increment (median) and the cumulative median.
+
 Prints markdown on stdout (copied into ``benchmarks/RESULTS.md``).
 """
 
@@ -115,16 +125,91 @@ def compare(a: str, b: str) -> str:
     return "; ".join(parts)
 
 
+#: ``--floor``'s steps: (label, the statements a fresh process runs after the previous
+#: steps'); ``RUN`` is replaced by the run file's path
+FLOOR_STEPS: tuple[tuple[str, str], ...] = (
+    ("interpreter start (`python -c pass`)", "pass"),
+    ("import numpy, scipy.optimize", "import numpy, scipy.optimize"),
+    ("import h5py", "import h5py"),
+    ("import the command line's libraries", "import typer, rich.progress, pydantic"),
+    ("import numba", "import numba"),
+    (
+        "numba's start: the first call of a cached kernel (the operator's)",
+        "from labrig.model.accel import kernels; import numpy as np; "
+        "kernels().operator_pass(np.zeros(4), np.zeros(1), np.zeros(1), 0.0, 0.0, 2, 0, 1.0, "
+        "1.0, 1.0, False, np.empty((4, 0)))",
+    ),
+    (
+        "read the run file (checked, in a child process)",
+        "from labrig.store import read_run; read_run(RUN)",
+    ),
+    ("`labrig fit`'s floor", ""),
+    ("import scipy.signal (SINDy's Savitzky-Golay derivative)", "import scipy.signal"),
+    ("import pysindy (scikit-learn, pandas)", "import pysindy"),
+    (
+        "import matplotlib's figure and Agg canvas, Pillow, jinja2",
+        "import matplotlib.figure, matplotlib.backends.backend_agg, PIL.Image, jinja2",
+    ),
+    ("`labrig report`'s floor (every peer, the page)", ""),
+)  # fmt: skip
+
+
+def floor(run: Path, repeats: int) -> list[tuple[str, float | None, float]]:
+    """``--floor``: (label, the step's increment, the cumulative CPU seconds) of each of
+    :data:`FLOOR_STEPS` (a total row: increment ``None``), medians of ``repeats`` fresh
+    processes per step, interleaved."""
+    steps = [(label, code.replace("RUN", repr(str(run)))) for label, code in FLOOR_STEPS]
+    cumul: dict[int, list[float]] = {i: [] for i, (_, c) in enumerate(steps) if c}
+    for _ in range(repeats):
+        done: list[str] = []
+        for i, (_, code) in enumerate(steps):
+            if not code:
+                continue
+            done.append(code)
+            cpu, _ = cpu_of([sys.executable, "-c", "; ".join(done)], ROOT)
+            cumul[i].append(cpu)
+    rows: list[tuple[str, float | None, float]] = []
+    prev = 0.0
+    last = 0.0
+    for i, (label, code) in enumerate(steps):
+        if not code:
+            rows.append((label, None, last))
+            continue
+        med = statistics.median(cumul[i])
+        rows.append((label, med - prev, med))
+        prev = last = med
+    return rows
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--previous", help="the previous implementation's labrig executable")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--work", default="/tmp/labrig-bench-commands")
     ap.add_argument("--only", default="", help="comma-separated commands (help,fit,report,...)")
+    ap.add_argument("--floor", action="store_true", help="the floor of fit and report (above)")
     args = ap.parse_args()
     this = shutil.which("labrig", path=str(Path(sys.executable).parent)) or "labrig"
     work = Path(args.work)
     data = make_data(this, work)
+    if args.floor:
+        load0, y0 = os.getloadavg(), yardstick_s()
+        rows = floor(data["paper campaign (seed 1)"], args.repeats)
+        load1, y1 = os.getloadavg(), yardstick_s()
+        cpu = platform.processor() or platform.machine()
+        print(
+            f"Floor, {datetime.now(UTC):%Y-%m-%d %H:%M} UTC, {cpu}, {os.cpu_count()} cores; "
+            f"load {load0[0]:.2f} -> {load1[0]:.2f}; yardstick {1e3 * y0:.1f} / "
+            f"{1e3 * y1:.1f} ms CPU; medians of {args.repeats} fresh processes per step\n"
+        )
+        print("| step | CPU s (this step) | CPU s (cumulative) |")
+        print("|---|---|---|")
+        for label, inc, cum in rows:
+            if inc is None:
+                print(f"| **{label}** | | **{cum:.2f}** |")
+            else:
+                print(f"| {label} | {inc:.2f} | {cum:.2f} |")
+        return 0
     load0 = os.getloadavg()
     y0 = yardstick_s()
     commands = {

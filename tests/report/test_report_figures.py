@@ -95,6 +95,37 @@ def test_png_is_savefig_pixels() -> None:
     assert np.array_equal(pixels(ours), pixels(buf.getvalue()))
 
 
+def line_figure(ys: list[float], label: str) -> Figure:
+    fig = Figure(figsize=(4.0, 3.0))
+    ax = fig.add_subplot()
+    ax.plot(range(len(ys)), ys, color="tab:red", lw=1.3)
+    ax.set_xlabel(label)
+    ax.set_title(label)
+    return fig
+
+
+def test_png_of_a_figure_drawn_again_is_a_new_figures_pixels() -> None:
+    """``png`` of a figure drawn before (as :class:`~labrig.report.plots.EntryFigures` draws
+    its figure entry after entry): after the line, the limits and the texts changed, the
+    pixels of a new figure drawn once with the new content, as ``savefig`` writes them, and
+    not those of the first drawing."""
+    fig = line_figure([0.0, 1.0, 0.5], "first label")
+    first = pixels(plots.png(fig))
+    ax = fig.axes[0]
+    ax.lines[0].set_data(range(4), [3.0, -2.0, 250.0, 1.0])
+    ax.relim()
+    ax.autoscale_view()
+    ax.set_xlabel("a second, longer label")
+    ax.set_title("a second, longer label")
+    again = pixels(plots.png(fig))
+    new = line_figure([3.0, -2.0, 250.0, 1.0], "a second, longer label")
+    buf = io.BytesIO()
+    new.savefig(buf, format="png", dpi=plots.DPI)
+    assert np.array_equal(again, pixels(plots.png(new)))
+    assert np.array_equal(again, pixels(buf.getvalue()))
+    assert not np.array_equal(again, first)
+
+
 def titled(lo: float, hi: float, title: str, how: str) -> tuple[bytes, Figure]:
     """A line from ``lo`` to ``hi`` titled with ``set_title`` (``how="ours"``), matplotlib's
     ``Axes.set_title`` (``"auto"``) or a title fixed at the top (``"top"``)."""
