@@ -388,11 +388,10 @@ def main() -> None:
         f"load average at start {load[0]:.1f}\n"
     )
     jobs = (("table", table), ("nulls", nulls), ("effects", effects), ("timing", timing))
-    for name, fn in (*jobs, ("smart", smart), ("contraction", contraction)):
+    scan = "--margins" in sys.argv[2:]
+    for name, fn in (*jobs, ("smart", smart), ("contraction", lambda: contraction(scan))):
         if what in (name, "all"):
             fn()
-    if what == "--margins" or "--margins" in sys.argv[2:]:
-        contraction(margins=True)
     print(f"\nload average at end {os.getloadavg()[0]:.1f}")
 
 
