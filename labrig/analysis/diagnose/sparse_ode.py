@@ -385,26 +385,10 @@ def contracts(
     growth rate there (:func:`growth_rate`, the check of :func:`sparse_ode_trial`) is negative
     and its long-run growth rate's bound under a sustained drive of mean ``|V'|`` ``rate_abs``
     (V/s) is at most ``-margin`` (1/s; :func:`~.contraction.long_run_growth`, to a relative
-    1e-9: a refinement that ends on the bound counts; with a positive ``S|S|`` coefficient,
-    along its free run over the driven samples)."""
-    c = model.coefficients[[t.name for t in LIBRARY].index("S|S|")]
-    strain_abs = _mean_abs_strain(model, items) if c > 0 else math.inf
-    if not long_run_growth(model, rate_abs, strain_abs) <= -margin * (1.0 - 1e-9):
+    1e-9: a refinement that ends on the bound counts)."""
+    if not long_run_growth(model, rate_abs) <= -margin * (1.0 - 1e-9):
         return False
     return growth_rate(model, items) < 0.0
-
-
-def _mean_abs_strain(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> float:
-    """The mean ``|S|`` (ue) of ``model``'s free run over the driven scored samples of
-    ``items``."""
-    total, count = 0.0, 0
-    for seq, segs in driven_items(items):
-        end = max(g.hi for g in segs)
-        y = np.abs(model.predict(seq.voltage_V[:end], seq.rest_V, seq.rate_hz))
-        for g in segs:
-            total += float(np.sum(y[g.lo : g.hi]))
-            count += g.hi - g.lo
-    return total / count if count else 0.0
 
 
 def identify(
