@@ -108,8 +108,11 @@ def test_the_bounded_refinement_contracts_at_its_margin_and_settles_into_a_perio
 
 def test_contracts_holds_the_margin_just_inside_and_just_outside():
     """A lag-only ODE ``dS/dt = -k S + 0.07 V + 0.13 V'`` has the bound ``-k``: with ``k`` a
-    millionth above the margin it contracts, a millionth below it does not; a positive
-    ``S|S|`` never does (its bound is infinite)."""
+    millionth above the margin it contracts, a millionth below it does not. A positive
+    ``S|S|`` has no bound (infinite without its free run): judged along its free run (the
+    pick's test), a tiny one (1e-6) beside the lag of 1 /s contracts and a large one (1 per
+    ue s: the free run leaves for the strain limit) does not; without (the contracting stage's
+    test) neither does."""
     items = _items()
     margin = 0.05
     rate_abs = mean_abs_rate(items)
@@ -122,8 +125,10 @@ def test_contracts_holds_the_margin_just_inside_and_just_outside():
 
     assert contracts(lag(margin * (1 + 1e-6)), items, margin, rate_abs)
     assert not contracts(lag(margin * (1 - 1e-6)), items, margin, rate_abs)
-    assert not contracts(lag(1.0, 1e-6), items, margin, rate_abs)
     assert long_run_growth(lag(1.0, 1e-6), rate_abs) == math.inf
+    assert contracts(lag(1.0, 1e-6), items, margin, rate_abs)
+    assert not contracts(lag(1.0, 1.0), items, margin, rate_abs)
+    assert not contracts(lag(1.0, 1e-6), items, margin, rate_abs, along_run=False)
 
 
 def test_the_margin_is_per_drive_period_or_per_span_without_one():

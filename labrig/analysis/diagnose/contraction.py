@@ -11,8 +11,9 @@ so the ``V' S`` term adds nothing to the long-run rate and
 
     lambda = xi_S + xi_{|V'|S} mean|V'| + 2 c mean|S|  <=  g = xi_S + xi_{|V'|S} mean|V'|
 
-whenever ``c <= 0`` (:func:`long_run_growth` is ``g``, ``inf`` for ``c > 0``: a positive
-``S|S|`` runs away from a large enough strain). ``g < 0`` is the Duhem / Bouc-Wen condition
+whenever ``c <= 0`` (:func:`long_run_growth` is ``g``; a positive ``S|S|`` runs away from a
+large enough strain, so it has no such bound and is judged along its free run, ``g + 2 c
+mean|S|``). ``g < 0`` is the Duhem / Bouc-Wen condition
 ``dS/dt = a V' + |V'| (b V - c' S)`` contracts iff ``c' > 0``, with the lag ``S`` and the
 saturation ``S|S|`` added; a linear ``dS/dt = a(t) + b(t) S`` under a periodic drive is bounded
 iff the period's mean of ``b`` is negative (Floquet), so ``g <= -margin`` keeps its free run
@@ -118,12 +119,15 @@ def mean_abs_rate(items: Sequence[tuple[Any, list]]) -> float:
     return total / count if count else 0.0
 
 
-def long_run_growth(model: SindyBaseline, rate_abs: float) -> float:
+def long_run_growth(model: SindyBaseline, rate_abs: float, strain_abs: float = math.inf) -> float:
     """``g = xi_S + xi_{|V'|S} rate_abs`` (1/s; module docstring), the long-run growth rate's
     bound under a sustained drive of mean ``|V'|`` ``rate_abs`` (V/s) when the ``S|S|``
-    coefficient is not positive; ``inf`` when it is."""
+    coefficient ``c`` is not positive. A positive ``c`` has no such bound (the ODE runs away
+    from a large enough strain); it is then judged along its free run: ``g + 2 c strain_abs``
+    with ``strain_abs`` the free run's mean ``|S|`` under the drive (``inf`` by default)."""
     xi = model.coefficients
-    return math.inf if xi[_C] > 0 else float(xi[_S] + xi[_AS] * rate_abs)
+    g = float(xi[_S] + xi[_AS] * rate_abs)
+    return g if xi[_C] <= 0 else g + 2.0 * float(xi[_C]) * strain_abs
 
 
 def contraction_margin(items: Sequence[tuple[Any, list]]) -> float:

@@ -379,16 +379,37 @@ def growth_rate(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> floa
 
 
 def contracts(
-    model: SindyBaseline, items: Sequence[tuple[Any, list]], margin: float, rate_abs: float
+    model: SindyBaseline,
+    items: Sequence[tuple[Any, list]],
+    margin: float,
+    rate_abs: float,
+    along_run: bool = True,
 ) -> bool:
     """Whether ``model`` contracts under the drive of ``items`` (their driven segments): its
     growth rate there (:func:`growth_rate`, the check of :func:`sparse_ode_trial`) is negative
     and its long-run growth rate's bound under a sustained drive of mean ``|V'|`` ``rate_abs``
     (V/s) is at most ``-margin`` (1/s; :func:`~.contraction.long_run_growth`, to a relative
-    1e-9: a refinement that ends on the bound counts)."""
-    if not long_run_growth(model, rate_abs) <= -margin * (1.0 - 1e-9):
+    1e-9: a refinement that ends on the bound counts). A positive ``S|S|`` coefficient has no
+    such bound: with ``along_run`` it is judged along its free run over the driven samples
+    (``g + 2 c mean|S|``), without it such an ODE never contracts."""
+    c = model.coefficients[[t.name for t in LIBRARY].index("S|S|")]
+    strain_abs = _mean_abs_strain(model, items) if c > 0 and along_run else math.inf
+    if not long_run_growth(model, rate_abs, strain_abs) <= -margin * (1.0 - 1e-9):
         return False
     return growth_rate(model, items) < 0.0
+
+
+def _mean_abs_strain(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> float:
+    """The mean ``|S|`` (ue) of ``model``'s free run over the driven scored samples of
+    ``items``."""
+    total, count = 0.0, 0
+    for seq, segs in driven_items(items):
+        end = max(g.hi for g in segs)
+        y = np.abs(model.predict(seq.voltage_V[:end], seq.rest_V, seq.rate_hz))
+        for g in segs:
+            total += float(np.sum(y[g.lo : g.hi]))
+            count += g.hi - g.lo
+    return total / count if count else 0.0
 
 
 def identify(
@@ -403,11 +424,12 @@ def identify(
     training voltages; all when none does), the sparsest whose refined training score is within
     :data:`~labrig.analysis.sindy.TOLERANCE` (5 %) of the best: the pick, kept when it
     contracts under the drive (:func:`contracts`, with the margin of
-    :func:`~.contraction.contraction_margin`). When it does not, the
-    :data:`CONTRACTING_TRIES` best-scoring candidates that do not contract are refined again
-    with their long-run growth rate bounded (:func:`~.contraction.refine_contracting`), and of
-    the candidates that contract and settle, the sparsest within 5 % of the best is returned;
-    when there is none, the growing pick (:func:`sparse_ode_trial` refuses it)."""
+    :func:`~.contraction.contraction_margin`; a positive ``S|S|`` judged along its free run).
+    When it does not, the :data:`CONTRACTING_TRIES` best-scoring candidates that do not contract
+    (here a positive ``S|S|`` never does: it has no long-run bound) are refined again with
+    their long-run growth rate bounded (:func:`~.contraction.refine_contracting`), and of the
+    candidates that contract and settle, the sparsest within 5 % of the best is returned; when
+    there is none, the growing pick (:func:`sparse_ode_trial` refuses it)."""
     driven = driven_items(items)
     volts = np.concatenate([seq.voltage_V[g.lo : g.hi] for seq, segs in driven for g in segs])
     v_lo, v_hi = float(np.min(volts)), float(np.max(volts))
@@ -445,7 +467,7 @@ def identify(
     kept: dict[tuple[int, ...], tuple[SindyBaseline, float, bool]] = {}
     growing = []
     for key, c in cands.items():
-        if math.isfinite(c[1]) and contracts(c[0], driven, margin, rate_abs):
+        if math.isfinite(c[1]) and contracts(c[0], driven, margin, rate_abs, along_run=False):
             kept[key] = c
         else:
             growing.append(c)
