@@ -2,7 +2,8 @@
 (issue "close the loop on measured data from other labs").
 
 Writes a markdown report on stdout (``python benchmarks/study_real_drives.py [table|nulls|effects|
-timing|smart|all]``); the figures are copied into docs/diagnose.md and the README.
+timing|smart|contraction|all] [--margins]``); the figures are copied into docs/diagnose.md and
+the README.
 
 - ``table``: held-out NRMSE per dataset: ours before and after diagnose's effects (diagnose's
   scoring: each left-out entry's second half, in % of its span), Prandtl-Ishlinskii, Bouc-Wen and
@@ -20,6 +21,15 @@ timing|smart|all]``); the figures are copied into docs/diagnose.md and the READM
   7.36 s idle then 2.64 periods, seed 1) at 5 kHz, 10 kHz and 1 kHz, with the stand-in truth's
   own held-out score (the noise floor's reference); CPU seconds of each diagnosis
   (``time.process_time``) and their ratio to the yardstick (``numpy.sort`` of 1e6 floats).
+- ``contraction``: the sparse ODE alone (its five identifications and their scoring, as
+  ``sparse_ode_trial`` runs them, offset the only nuisance term) on the real SmartHysteresis,
+  ``Model_Vi_Do`` and ``Test_Vi_Do_Di`` records and the 5 kHz stand-in: held-out NRMSE, the
+  identified ODE's growth rate under the records' drive (``growth_rate``), the stroke of its
+  free run over the 1st, 2nd and 20th period of the records' own drive repeated (the
+  SmartHysteresis drive, ``150 sin(2 pi t)``; for the micromanipulator records their own
+  record played 5 times), the separation after 20 periods of two free runs started 1 ue apart,
+  and CPU seconds (``time.process_time``; ratio to the yardstick). ``--margins`` also scans
+  the contraction margin (``contraction.MARGIN_PER_PERIOD``) on SmartHysteresis.
 """
 
 from __future__ import annotations
@@ -264,6 +274,111 @@ def smart() -> None:
         )
 
 
+def _sparse_ode_alone(records: list[Record]) -> dict[str, float | str]:
+    """The sparse ODE's five identifications on ``records`` and their held-out score (as
+    ``sparse_ode_trial``, offset the only nuisance term), its growth rate, the stroke (max -
+    min) of its free run over periods 1, 2 and 20 of the drive repeated, the separation of two
+    free runs 1 ue apart after them, and the CPU seconds of the identifications and scoring."""
+    from labrig.analysis.baseline_kernels import sindy_free_run
+    from labrig.analysis.diagnose.sparse_ode import (
+        decimation,
+        entry_score,
+        growth_rate,
+        identify,
+        working_records,
+    )
+    from labrig.analysis.simulate import scored_sequences
+    from labrig.analysis.sindy import SindyCache, equilibrium
+    from labrig.core.blas import single_thread_blas
+
+    names = [r.name for r in records]
+    scored = scored_sequences(records, names, 0.0, True)
+    work = scored_sequences(working_records(records, decimation(records)), names, 0.0, True)
+
+    def items(leave_out: str | None = None) -> list:
+        return [(s.seq, [g for g in s.segments if g.name != leave_out]) for s in work]
+
+    def ones(t: np.ndarray, _rate: float) -> np.ndarray:
+        return np.ones((t.size, 1))
+
+    cache = SindyCache()
+    t0 = time.process_time()
+    with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
+        model = identify(items(), True, cache)
+        held = [
+            entry_score(scored, identify(items(n), True, cache), n, ones, True)[0] for n in names
+        ]
+    cpu = time.process_time() - t0
+    seq = scored[0].seq
+    rate = seq.rate_hz
+    if records[0].name.startswith("smart") or records[0].name.startswith("standin"):
+        per = round(rate)  # one period of the 1 Hz drive
+        one = 150.0 * np.sin(2 * np.pi * np.arange(per) / rate)
+    else:  # the record's own voltage as one "period"
+        one = np.asarray(seq.voltage_V, dtype=float)
+        per = one.size
+    reps = 20 if per <= 20_000 else 5
+    v = np.concatenate(([float(one[0])], np.tile(one, reps)))
+    xi = np.asarray(model.coefficients, dtype=float)
+    s0 = equilibrium(xi, float(v[0]))
+    a = sindy_free_run(xi, v, rate, s0, np.inf)
+    b = sindy_free_run(xi, v, rate, s0 + 1.0, np.inf)
+    stroke = [float(np.ptp(a[1 + k * per : 1 + (k + 1) * per])) for k in (0, 1, reps - 1)]
+    return {
+        "heldout": float(np.mean(held)),
+        "folds": " / ".join(f"{h:.3g}" for h in held),
+        "growth": growth_rate(model, items()),
+        "stroke": " / ".join(f"{x:.4g}" for x in stroke) + f" ({reps} periods)",
+        "separation": float(abs(b[-1] - a[-1])),
+        "cpu": cpu,
+        "equation": model.equation(),
+    }
+
+
+def contraction(margins: bool = False) -> None:
+    """The ``contraction`` report (module docstring)."""
+    from yardstick import yardstick_s
+
+    YARD[0] = yardstick_s()
+    print("\n## The sparse ODE alone: held-out, growth and a long drive\n")
+    print(f"yardstick (numpy.sort of 1e6 floats, best of 5): {YARD[0] * 1e3:.1f} ms CPU\n")
+    print(
+        "| record | held-out % (folds) | growth 1/s | stroke: period 1 / 2 / last | separation "
+        "after the last (from 1) | CPU s | CPU / yardstick | equation |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
+    recs = (
+        ("real SmartHysteresis, 2 periods at 1 kHz", smart_records),
+        ("real Model_Vi_Do", lambda: real_records("Model_Vi_Do.dat")),
+        ("real Test_Vi_Do_Di", lambda: real_records("Test_Vi_Do_Di.dat")),
+        ("SIMULATED stand-in at 5 kHz", lambda: _standin(5000.0)),
+    )
+    for label, make in recs:
+        r = _sparse_ode_alone(make())
+        print(
+            f"| {label} | {r['heldout']:.4g} ({r['folds']}) | {r['growth']:+.3g} | {r['stroke']} "
+            f"| {r['separation']:.3g} | {r['cpu']:.1f} | {r['cpu'] / YARD[0]:.0f} | "
+            f"`{r['equation']}` |",
+            flush=True,
+        )
+    if margins:
+        import labrig.analysis.diagnose.contraction as contr
+
+        keep = contr.MARGIN_PER_PERIOD
+        print("\nMargin scan on SmartHysteresis (fraction per drive period):\n")
+        print("| margin | held-out % (folds) | growth 1/s | stroke | CPU s |")
+        print("|---|---|---|---|---|")
+        for m in (0.01, 0.05, 0.1, 0.3, 1.0):
+            contr.MARGIN_PER_PERIOD = m
+            r = _sparse_ode_alone(smart_records())
+            print(
+                f"| {m} | {r['heldout']:.4g} ({r['folds']}) | {r['growth']:+.3g} | "
+                f"{r['stroke']} | {r['cpu']:.1f} |",
+                flush=True,
+            )
+        contr.MARGIN_PER_PERIOD = keep
+
+
 def main() -> None:
     what = sys.argv[1] if len(sys.argv) > 1 else "all"
     load = os.getloadavg()
@@ -273,7 +388,8 @@ def main() -> None:
         f"load average at start {load[0]:.1f}\n"
     )
     jobs = (("table", table), ("nulls", nulls), ("effects", effects), ("timing", timing))
-    for name, fn in (*jobs, ("smart", smart)):
+    scan = "--margins" in sys.argv[2:]
+    for name, fn in (*jobs, ("smart", smart), ("contraction", lambda: contraction(scan))):
         if what in (name, "all"):
             fn()
     print(f"\nload average at end {os.getloadavg()[0]:.1f}")

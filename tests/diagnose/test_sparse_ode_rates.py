@@ -6,8 +6,10 @@ and a long idle start of a single record is left out before it is cut into parts
 
 The reference of every score is independent of the identification: the truth's own held-out
 prediction (its free run, scored by the same rule), whose error is the sensor noise alone.
-Fast tier: a Duhem-form truth (the stand-in's, :mod:`labrig.studies.smart_standin`) driven
-bipolar +-150 V at 1 Hz for two periods, sampled at 250 Hz and at 2 kHz, two folds each; the
+Fast tier: a Duhem-form truth (the stand-in's, :mod:`labrig.studies.smart_standin`, with a
+tenth of its ``|V'| S`` coefficient so that it contracts under its drive: the identification
+keeps contracting ODEs) driven bipolar +-150 V at 1 Hz for two periods, sampled at 250 Hz and
+at 2 kHz, two folds each; the
 building blocks against their own references. ``@pytest.mark.slow``: every fold at both rates,
 and the whole-file stand-in (5 kHz, 7.36 s idle then 2.64 periods) through ``diagnose``.
 """
@@ -42,12 +44,23 @@ def _ones(t: np.ndarray, _rate: float) -> np.ndarray:
     return np.ones((t.size, 1))
 
 
-def two_periods(rate_hz: float, seed: int = 3) -> list[Record]:
-    """The truth driven by ``150 sin(2 pi t)`` V for 2 s from rest, noise ``NOISE_UM``, cut into
-    4 chained parts as diagnose cuts an imported record (one offset per part)."""
+#: the stand-in's truth with a tenth of its ``|V'| S`` coefficient: it contracts under the
+#: +-150 V 1 Hz drive (long-run growth -0.2088 + 1.196e-4 x 600 = -0.137 /s), where the
+#: stand-in's own grows (+0.51 /s) and is, since the identification keeps contracting ODEs,
+#: no longer what it returns (tests/diagnose/test_sparse_ode_contraction.py)
+CONTRACTING_XI = tuple(
+    x * 0.1 if t == "|V'| S" else x for x, t in zip(TRUTH_XI, TERMS, strict=True)
+)
+
+
+def two_periods(
+    rate_hz: float, seed: int = 3, truth: tuple[float, ...] = CONTRACTING_XI
+) -> list[Record]:
+    """``truth`` driven by ``150 sin(2 pi t)`` V for 2 s from rest, noise ``NOISE_UM``, cut
+    into 4 chained parts as diagnose cuts an imported record (one offset per part)."""
     t = np.arange(round(2.0 * rate_hz)) / rate_hz
     v = 150.0 * np.sin(2.0 * math.pi * t)
-    s = free_run(TRUTH_XI, v, rate_hz) + np.random.default_rng(seed).normal(0, NOISE_UM, t.size)
+    s = free_run(truth, v, rate_hz) + np.random.default_rng(seed).normal(0, NOISE_UM, t.size)
     rec = Record.from_arrays("truth", rate_hz, v, s, hold="linear")
     rec.meta["kind"] = "import"
     return split_entries([rec], 4)
@@ -68,8 +81,10 @@ def heldout(records: list[Record], fit, folds: tuple[int, ...] | None = None) ->
     return float(np.mean(out))
 
 
-def truth_heldout(records: list[Record], folds: tuple[int, ...] | None = None) -> float:
-    model = SindyBaseline(TRUTH_XI, records[0].rate_hz, 0.0)
+def truth_heldout(
+    records: list[Record], folds: tuple[int, ...] | None = None, truth: tuple = CONTRACTING_XI
+) -> float:
+    model = SindyBaseline(truth, records[0].rate_hz, 0.0)
     return heldout(records, lambda _items: model, folds)
 
 
@@ -78,8 +93,8 @@ def test_the_sparse_ode_predicts_two_held_out_parts_within_1_25x_the_truth_at_tw
     """At 250 Hz (no resampling) and 2 kHz (identified at a working rate of 1/4 of it), the ODE
     identified without part 2 (then without part 4, the last) predicts it within 1.25x of the
     truth's own held-out score there (the noise alone: 0.05 um on parts of 20-23 um, about
-    0.24 %). Measured 2026-11-27: 1.17x at 250 Hz, 1.04x at 2 kHz; 2.4 and 1.0 s of CPU (two
-    of the four folds; all four: the slow test below)."""
+    0.24 %). Measured 2026-11-27 (the contracting truth): 1.06x at 250 Hz, 1.02x at 2 kHz;
+    2.9 and 1.2 s of CPU (two of the four folds; all four: the slow test below)."""
     recs = two_periods(rate_hz)
     ref = truth_heldout(recs, (1, 3))
     got = heldout(recs, lambda items: identify(items, True), (1, 3))
@@ -90,8 +105,9 @@ def test_the_sparse_ode_predicts_two_held_out_parts_within_1_25x_the_truth_at_tw
 @pytest.mark.slow
 @pytest.mark.parametrize("rate_hz", [250.0, 2000.0])
 def test_the_sparse_ode_predicts_held_out_parts_within_1_25x_the_truth_at_two_rates(rate_hz):
-    """Every fold of the test above. Measured 2026-11-27: 0.267 % against the truth's 0.244 %
-    (1.09x) at 250 Hz, 0.260 % against 0.239 % (1.09x) at 2 kHz; 3.7 and 5.7 s of CPU."""
+    """Every fold of the test above. Measured 2026-11-27 (the contracting truth): 0.276 %
+    against the truth's 0.251 % (1.10x) at 250 Hz, 0.249 % against 0.246 % (1.01x) at 2 kHz;
+    3.0 s of CPU each."""
     recs = two_periods(rate_hz)
     ref = truth_heldout(recs)
     got = heldout(recs, lambda items: identify(items, True))
@@ -134,7 +150,7 @@ def test_refinement_recovers_the_truth_from_coefficients_30_percent_off():
     """Output error from a start 30 % off in every coefficient: the refined coefficients are
     the truth's within 3 % (noise 0.05 um on parts of 20-23 um), and the training score (RMS of
     the parts' NRMSE) falls to within 5 % of the noise's own (``NOISE_UM`` over each span)."""
-    recs = two_periods(500.0)
+    recs = two_periods(500.0, truth=TRUTH_XI)
     items = [(s.seq, s.segments) for s in scored_sequences(recs, [r.name for r in recs], 0, True)]
     start = SindyBaseline(tuple(1.3 * x for x in TRUTH_XI), 500.0, 0.0)
     model, score = refine(items, start, True)
@@ -197,13 +213,15 @@ def test_a_long_idle_start_is_left_out_and_said_a_short_one_kept():
 
 @pytest.mark.slow
 @pytest.mark.timeout(900)
-def test_whole_file_standin_at_5khz_is_identified_near_its_floor_and_refused_for_growth():
+def test_whole_file_standin_at_5khz_whose_truth_grows_is_refused_for_growth():
     """SIMULATED stand-in of the whole SmartHysteresis file (10 s at 5 kHz, 7.36 s idle, then
-    2.64 periods), as ``labrig import`` + ``diagnose`` read it: the idle start is left out and
-    the sparse ODE predicts the held-out parts within 1.25x of the truth's own held-out score;
-    the truth is the record's ODE, which grows under this drive, so the identified one does too
-    and is refused, saying so. About 60 s of CPU: slow tier (the fast equivalents: the two-rate
-    test above, test_sparse_ode_growth.py)."""
+    2.64 periods), as ``labrig import`` + ``diagnose`` read it: the idle start is left out; the
+    truth is the record's first ODE, which grows under this drive (+0.55 /s), and no contracting
+    ODE follows it, so the ODE identified on all parts is the growing one and is refused, saying
+    so. Measured 2026-11-27 (fifth round): the sparse ODE 1.38 % held-out against the truth's
+    own 0.155 % (the folds' contracting ODEs: 2.7-5.7 % per part), refused for growth; 30 s of
+    CPU: slow tier (the fast equivalents: test_sparse_ode_contraction.py,
+    test_sparse_ode_growth.py)."""
     rows = standin_rows(1)
     rec = Record.from_arrays("standin", 5000.0, rows[:, 2], rows[:, 1], hold="linear")
     rec.meta["kind"] = "import"
@@ -211,5 +229,5 @@ def test_whole_file_standin_at_5khz_is_identified_near_its_floor_and_refused_for
     assert parts[0].meta["idle_lead_s"] == pytest.approx(drive_on_s(), abs=5e-3)
     d = diagnose(parts, offset=True)
     ode = next(c for c in d.candidates if c["effect"] == NAME)
-    assert ode["heldout_nrmse_pct"] <= 1.25 * truth_heldout(parts), ode["evidence"]
+    assert ode["heldout_nrmse_pct"] is not None, ode["evidence"]
     assert all(e["effect"] != NAME for e in d.effects_added) and "grows under" in d.verdict

@@ -38,6 +38,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from labrig.analysis.diagnose.acceptance import Acceptance, Candidate, accept
+from labrig.analysis.diagnose.contraction import (
+    REFINE_NFEV,
+    contraction_margin,
+    long_run_growth,
+    mean_abs_rate,
+    output_residual,
+    refine_contracting,
+    scored_runs,
+    training_score,
+)
 from labrig.analysis.diagnose.evidence import Evidence, collect_evidence
 from labrig.analysis.diagnose.state import Model, Settings, Setup
 from labrig.analysis.diagnose.verdict import AT_FLOOR, headline
@@ -52,7 +62,6 @@ from labrig.analysis.sindy import (
     SindyCache,
     equilibrium,
     fit_sindy,
-    free_run,
     threshold_path,
 )
 from labrig.core.blas import single_thread_blas
@@ -78,6 +87,7 @@ class DiagnosisLike(Protocol):
 
 
 __all__ = [
+    "CONTRACTING_TRIES",
     "IDLE_FRACTION",
     "NAME",
     "PASSES",
@@ -86,9 +96,11 @@ __all__ = [
     "SparseOdeEffect",
     "SparseOdeTrial",
     "adopt",
+    "contracts",
     "decimation",
     "driven_items",
     "entry_score",
+    "growth_rate",
     "identify",
     "path",
     "refine",
@@ -191,9 +203,10 @@ SAMPLES_PER_PERIOD = 250
 #: further one from the best-scoring and the picked candidates' zeros, while the best training
 #: score still falls by 1 %)
 PASSES = 4
-#: the output-error refinement's budget of free runs (``scipy.optimize.least_squares``'s
-#: ``max_nfev``; its finite-difference Jacobian's runs not counted)
-REFINE_NFEV = 40
+#: at most this many of the candidates that grow under the drive (the best-scoring first) are
+#: refined again with their long-run growth rate bounded below zero
+#: (:func:`~.contraction.refine_contracting`)
+CONTRACTING_TRIES = 4
 
 
 def decimation(records: Sequence[Record]) -> int:
@@ -264,21 +277,6 @@ def driven_items(items: Sequence[tuple[Any, list]]) -> list[tuple[Any, list]]:
     return out if out and widest > 0 else [(seq, list(segs)) for seq, segs in items]
 
 
-def _runs(items: Sequence[tuple[Any, list]]) -> list[tuple[NDArray, float, float, list]]:
-    """Per sequence: its voltage up to its last scored sample, rest voltage, rate and the
-    scored segments as ``(lo, hi, measured, 1 / (span sqrt(n)))``."""
-    runs = []
-    for seq, segs in items:
-        end = max(g.hi for g in segs)
-        cuts = [
-            (g.lo, g.hi, g.measured_ue, 1.0 / (float(np.ptp(g.measured_ue)) * np.sqrt(g.hi - g.lo)))
-            for g in segs
-            if np.ptp(g.measured_ue) > 0
-        ]
-        runs.append((seq.voltage_V[:end], seq.rest_V, seq.rate_hz, cuts))
-    return runs
-
-
 def refine(
     items: Sequence[tuple[Any, list]], model: SindyBaseline, offset: bool
 ) -> tuple[SindyBaseline, float]:
@@ -297,31 +295,22 @@ def refine(
 
     xi0 = np.asarray(model.coefficients, dtype=float)
     sup = np.flatnonzero(xi0)
-    runs = _runs(items)
+    runs = scored_runs(items)
     count = sum(len(c) for *_, c in runs) or 1
 
     def residual(z: NDArray) -> NDArray:
         xi = xi0.copy()
         xi[sup] = z * xi0[sup]
-        out = []
-        for v, rest, rate, cuts in runs:
-            y = free_run(xi, v, rate, rest, model.limit_ue)
-            for lo, hi, m, w in cuts:
-                r = m - y[lo:hi]
-                out.append(w * (r - r.mean() if offset else r))
-        return np.concatenate(out) if out else np.zeros(1)
-
-    def score(r: NDArray) -> float:
-        return 100.0 * math.sqrt(float(r @ r) / count) if np.all(np.isfinite(r)) else math.inf
+        return output_residual(runs, xi, offset, model.limit_ue)
 
     with np.errstate(over="ignore", invalid="ignore"):
-        s0 = score(residual(np.ones(sup.size)))
+        s0 = training_score(residual(np.ones(sup.size)), count)
         if sup.size == 0 or not math.isfinite(s0):
             return model, s0
         sol = least_squares(
             residual, np.ones(sup.size), method="trf", diff_step=1e-6, max_nfev=REFINE_NFEV
         )
-        s1 = score(sol.fun)
+        s1 = training_score(sol.fun, count)
     if not s1 < s0:
         return model, s0
     xi = xi0.copy()
@@ -389,6 +378,40 @@ def growth_rate(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> floa
     return total / count if count else 0.0
 
 
+def contracts(
+    model: SindyBaseline,
+    items: Sequence[tuple[Any, list]],
+    margin: float,
+    rate_abs: float,
+    along_run: bool = True,
+) -> bool:
+    """Whether ``model`` contracts under the drive of ``items`` (their driven segments): its
+    growth rate there (:func:`growth_rate`, the check of :func:`sparse_ode_trial`) is negative
+    and its long-run growth rate's bound under a sustained drive of mean ``|V'|`` ``rate_abs``
+    (V/s) is at most ``-margin`` (1/s; :func:`~.contraction.long_run_growth`, to a relative
+    1e-9: a refinement that ends on the bound counts). A positive ``S|S|`` coefficient has no
+    such bound: with ``along_run`` it is judged along its free run over the driven samples
+    (``g + 2 c mean|S|``), without it such an ODE never contracts."""
+    c = model.coefficients[[t.name for t in LIBRARY].index("S|S|")]
+    strain_abs = _mean_abs_strain(model, items) if c > 0 and along_run else math.inf
+    if not long_run_growth(model, rate_abs, strain_abs) <= -margin * (1.0 - 1e-9):
+        return False
+    return growth_rate(model, items) < 0.0
+
+
+def _mean_abs_strain(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> float:
+    """The mean ``|S|`` (ue) of ``model``'s free run over the driven scored samples of
+    ``items``."""
+    total, count = 0.0, 0
+    for seq, segs in driven_items(items):
+        end = max(g.hi for g in segs)
+        y = np.abs(model.predict(seq.voltage_V[:end], seq.rest_V, seq.rate_hz))
+        for g in segs:
+            total += float(np.sum(y[g.lo : g.hi]))
+            count += g.hi - g.lo
+    return total / count if count else 0.0
+
+
 def identify(
     items: Sequence[tuple[Any, list]], offset: bool, cache: SindyCache | None = None
 ) -> SindyBaseline:
@@ -399,9 +422,14 @@ def identify(
     candidates' zeros while the best training score falls by 1 %; each refined by output error
     (:func:`refine`). Of those that settle at a held voltage (:func:`settles`, over the
     training voltages; all when none does), the sparsest whose refined training score is within
-    :data:`~labrig.analysis.sindy.TOLERANCE` (5 %) of the best. (Whether it grows under the
-    drive is judged after, by :func:`sparse_ode_trial`: such an ODE is refused, not replaced by a
-    worse one.)"""
+    :data:`~labrig.analysis.sindy.TOLERANCE` (5 %) of the best: the pick, kept when it
+    contracts under the drive (:func:`contracts`, with the margin of
+    :func:`~.contraction.contraction_margin`; a positive ``S|S|`` judged along its free run).
+    When it does not, the :data:`CONTRACTING_TRIES` best-scoring candidates that do not contract
+    (here a positive ``S|S|`` never does: it has no long-run bound) are refined again with
+    their long-run growth rate bounded (:func:`~.contraction.refine_contracting`), and of the
+    candidates that contract and settle, the sparsest within 5 % of the best is returned; when
+    there is none, the growing pick (:func:`sparse_ode_trial` refuses it)."""
     driven = driven_items(items)
     volts = np.concatenate([seq.voltage_V[g.lo : g.hi] for seq, segs in driven for g in segs])
     v_lo, v_hi = float(np.min(volts)), float(np.max(volts))
@@ -409,17 +437,19 @@ def identify(
     start = fit_sindy(driven, offset, cache=cache)
     cands: dict[tuple[int, ...], tuple[SindyBaseline, float, bool]] = {}
 
+    def sparsest(pool: Sequence[tuple[SindyBaseline, float, bool]]) -> tuple[SindyBaseline, float]:
+        best = min(c[1] for c in pool)
+        ok = [c for c in pool if c[1] <= (1.0 + TOLERANCE) * best]
+        pick = min(ok, key=lambda c: (len(c[0].support), c[1]))
+        return pick[0], pick[1]
+
     def add(models: Sequence[SindyBaseline]) -> tuple[SindyBaseline, float]:
         for m in models:
             key = tuple(int(k) for k in np.flatnonzero(m.coefficients))
             refined, score = refine(driven, m, offset)
             if key not in cands or score < cands[key][1]:
                 cands[key] = (refined, score, settles(refined, v_lo, v_hi))
-        pool = [c for c in cands.values() if c[2]] or list(cands.values())
-        best = min(pool, key=lambda c: c[1])
-        ok = [c for c in pool if c[1] <= (1.0 + TOLERANCE) * best[1]]
-        pick = min(ok, key=lambda c: (len(c[0].support), c[1]))
-        return pick[0], pick[1]
+        return sparsest([c for c in cands.values() if c[2]] or list(cands.values()))
 
     pick, score = add([start, *path(driven, start, offset, cache)])
     if not math.isfinite(score):
@@ -430,7 +460,26 @@ def identify(
         pick, score = add([*path(driven, best, offset, cache), *path(driven, pick, offset, cache)])
         if not min(c[1] for c in cands.values()) < (1.0 - 0.01) * before:
             break
-    return pick
+    margin, rate_abs = contraction_margin(driven), mean_abs_rate(driven)
+    if contracts(pick, driven, margin, rate_abs):
+        return pick
+    # the pick grows: the candidates that contract, and the best growing ones bounded
+    kept: dict[tuple[int, ...], tuple[SindyBaseline, float, bool]] = {}
+    growing = []
+    for key, c in cands.items():
+        if math.isfinite(c[1]) and contracts(c[0], driven, margin, rate_abs, along_run=False):
+            kept[key] = c
+        else:
+            growing.append(c)
+    for m, _, _ in sorted(growing, key=lambda c: c[1])[:CONTRACTING_TRIES]:
+        bounded, score = refine_contracting(driven, m, offset, margin)
+        key = tuple(int(k) for k in np.flatnonzero(bounded.coefficients))
+        if not (math.isfinite(score) and contracts(bounded, driven, margin, rate_abs)):
+            continue
+        if key not in kept or score < kept[key][1]:
+            kept[key] = (bounded, score, settles(bounded, v_lo, v_hi))
+    pool = [c for c in kept.values() if c[2]]
+    return sparsest(pool)[0] if pool else pick
 
 
 def _entry(
