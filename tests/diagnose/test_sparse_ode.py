@@ -151,6 +151,7 @@ def test_real_record_short_segment_a_contracting_ode_twice_better_is_adopted():
     assert trial.heldout_pct <= 0.5 * base.heldout_pct, (trial.heldout_pct, base.heldout_pct)
     assert trial.acceptance.accepted and trial.candidate.accepted, trial.candidate.evidence
     assert "grows under" not in trial.candidate.evidence
+    assert "contracts under the records' own drive" in trial.candidate.evidence
     xi = np.asarray(trial.model.coefficients)
     v = 150.0 * np.sin(2 * np.pi * np.arange(2000) / 100.0)  # 20 periods at 100 Hz
     vp = np.concatenate(([0.0], v))

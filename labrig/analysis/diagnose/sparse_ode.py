@@ -588,6 +588,12 @@ def sparse_ode_trial(
         f"{equation_text(model)}, {verb} "
         f"held-out entries at {c.heldout_nrmse_pct:.3g} % against {current.heldout_pct:.3g} % "
         f"for {what} (better in {a.wins}, worse in {a.losses} of {len(names)} folds)"
+        + (
+            f"; its free run contracts under the records' own drive (a disturbance decays as "
+            f"exp({grow:.2g} t), t in s)"
+            if grow < 0.0
+            else ""
+        )
         + ("; refused: " + "; ".join(c.reasons) if c.reasons else "")
     )
     return SparseOdeTrial(model, per_entry, held, preds, a, c, what)
