@@ -22,6 +22,7 @@ import pytest
 from labrig.analysis.baseline_kernels import sindy_free_run
 from labrig.analysis.diagnose.contraction import (
     contraction_margin,
+    critical_rate,
     long_run_growth,
     mean_abs_rate,
     refine_contracting,
@@ -159,3 +160,47 @@ def test_identify_on_a_growing_truth_returns_a_contracting_ode():
         for g in segs:
             r = g.measured_ue - y[g.lo : g.hi]
             assert 100 * np.std(r) / np.ptp(g.measured_ue) < 1.0
+
+
+def _sine_separation(xi: tuple[float, ...], amp: float, f_hz: float, periods: int) -> float:
+    """|run2 - run1| after ``periods`` periods of ``amp sin(2 pi f t)`` V at 1 kHz, two compiled
+    free runs from the rest strain and 1 ue above it."""
+    rate = 1000.0
+    t = np.arange(round(periods * rate / f_hz)) / rate
+    v = np.concatenate(([0.0], amp * np.sin(2.0 * math.pi * f_hz * t)))
+    s0 = equilibrium(xi, 0.0)
+    a = sindy_free_run(np.asarray(xi), v, rate, s0, np.inf)
+    b = sindy_free_run(np.asarray(xi), v, rate, s0 + 1.0, np.inf)
+    if a is None or b is None:
+        pytest.skip("numba not available")
+    return float(abs(b[-1] - a[-1]))
+
+
+def test_the_critical_rate_separates_drives_under_which_the_ode_contracts_from_those_it_grows():
+    """An ODE of the form adopted on the SmartHysteresis record (a lag ``-0.8 S`` and a
+    positive ``|V'| S``, 0.00117 /V, with ``V' S``) contracts only while the drive is slow
+    enough: :func:`critical_rate` says where (mean ``|V'|`` 0.8 / 0.00117 = 684 V/s, a 150 V
+    sine at 1.14 Hz). Checked by the compiled free run, not the formula: a 150 V sine whose mean
+    ``|V'|`` (600 f V/s) is 10 % below it brings two runs 1 ue apart closer over 40 periods, 10 %
+    above it drives them apart (rates about -0.08 and +0.08 /s: exp(-3.1) and exp(+2.6)), and at 5
+    Hz (4.4x) they separate by more than 1e6 in 50 periods (10 s). With the Duhem / Bouc-Wen sign of
+    ``|V'| S`` the ODE contracts under any drive (``inf``): 20 Hz keeps them closer."""
+    xi = _xi(**{"1": -3.9, "S": -0.8, "V": 0.15, "V'": 0.11, "V' S": -0.0025, "|V'| S": 0.00117})
+    crit = critical_rate(SindyBaseline(xi, 1000.0, 0.0))
+    assert crit == pytest.approx(0.8 / 0.00117, rel=1e-9)
+    f_crit = crit / 600.0  # a 150 V sine: mean |V'| = 4 x 150 V x f
+    assert _sine_separation(xi, 150.0, 0.9 * f_crit, 40) < 1.0
+    assert _sine_separation(xi, 150.0, 1.1 * f_crit, 40) > 1.0
+    assert _sine_separation(xi, 150.0, 5.0, 50) > 1e6
+    bw = _xi(**{"1": -3.9, "S": -0.8, "V": 0.15, "V'": 0.11, "|V'| S": -0.00117})
+    assert critical_rate(SindyBaseline(bw, 1000.0, 0.0)) == math.inf
+    assert _sine_separation(bw, 150.0, 20.0, 40) < 1.0
+    sat = _xi(**{"S": -0.8, "|V'| S": 0.001, "S|S|": 1e-6})
+    assert math.isnan(critical_rate(SindyBaseline(sat, 1000.0, 0.0)))
+
+
+def _xi(**terms: float) -> tuple[float, ...]:
+    xi = [0.0] * len(TERMS)
+    for k, v in terms.items():
+        xi[TERMS.index(k)] = v
+    return tuple(xi)

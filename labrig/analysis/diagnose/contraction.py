@@ -45,6 +45,7 @@ __all__ = [
     "REFINE_NFEV",
     "Run",
     "contraction_margin",
+    "critical_rate",
     "long_run_growth",
     "mean_abs_rate",
     "output_residual",
@@ -128,6 +129,22 @@ def long_run_growth(model: SindyBaseline, rate_abs: float, strain_abs: float = m
     xi = model.coefficients
     g = float(xi[_S] + xi[_AS] * rate_abs)
     return g if xi[_C] <= 0 else g + 2.0 * float(xi[_C]) * strain_abs
+
+
+def critical_rate(model: SindyBaseline) -> float:
+    """The mean ``|V'|`` (V/s) of a sustained drive above which ``model``'s long-run growth
+    bound ``g = xi_S + xi_{|V'|S} mean|V'|`` (module docstring) is positive: ``-xi_S /
+    xi_{|V'|S}`` when ``xi_{|V'|S} > 0`` (a lag ``xi_S < 0`` holds a growing ``|V'| S`` back
+    only while the drive is slow enough; 0 when ``xi_S >= 0``); ``inf`` when ``xi_{|V'|S} <= 0``
+    and ``xi_S < 0`` (the Duhem / Bouc-Wen sign: contracts under any drive), 0 when both are
+    ``>= 0``. ``nan`` for a positive ``S|S|`` coefficient (no long-run bound)."""
+    xi = model.coefficients
+    s, a = float(xi[_S]), float(xi[_AS])
+    if xi[_C] > 0:
+        return math.nan
+    if a > 0:
+        return max(-s / a, 0.0)
+    return math.inf if s < 0 else 0.0
 
 
 def contraction_margin(items: Sequence[tuple[Any, list]]) -> float:

@@ -41,6 +41,7 @@ from labrig.analysis.diagnose.acceptance import Acceptance, Candidate, accept
 from labrig.analysis.diagnose.contraction import (
     REFINE_NFEV,
     contraction_margin,
+    critical_rate,
     long_run_growth,
     mean_abs_rate,
     output_residual,
@@ -590,13 +591,28 @@ def sparse_ode_trial(
         f"for {what} (better in {a.wins}, worse in {a.losses} of {len(names)} folds)"
         + (
             f"; its free run contracts under the records' own drive (a disturbance decays as "
-            f"exp({grow:.2g} t), t in s)"
+            f"exp({grow:.2g} t), t in s)" + _drive_range(model, _items(work))
             if grow < 0.0
             else ""
         )
         + ("; refused: " + "; ".join(c.reasons) if c.reasons else "")
     )
     return SparseOdeTrial(model, per_entry, held, preds, a, c, what)
+
+
+def _drive_range(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> str:
+    """Where the contraction holds, in words: under a sustained drive whose mean ``|V'|`` stays
+    below :func:`~.contraction.critical_rate` (with the records' own mean ``|V'|`` for scale);
+    empty when it contracts under any drive or has no long-run bound."""
+    crit = critical_rate(model)
+    if not math.isfinite(crit):
+        return ""
+    own = mean_abs_rate(driven_items(items))
+    ratio = f", {crit / own:.3g}x the records' {own:.3g} V/s" if own > 0 else ""
+    return (
+        f", but only while a sustained drive's mean |V'| stays below {crit:.3g} V/s{ratio} "
+        f"(its |V'| S term then outweighs the lag S and a disturbance grows)"
+    )
 
 
 def _what(current: Model) -> str:
