@@ -420,7 +420,10 @@ def prepare_diagnosis(
         raise _issue(
             path,
             f"diagnose needs at least {MIN_DIAGNOSE_ENTRIES} complete entries "
-            f"(leave-one-entry-out), found {len(records)}",
+            f"(leave-one-entry-out), found {len(records)}; a file of one entry is cut into "
+            f"{DIAGNOSE_SPLIT} parts, so import each record on its own (`labrig import FILE "
+            "--out F.h5 ...`), or identify on one and predict the other (`labrig validate "
+            "A.h5 --on B.h5 --diagnose`)",
             "entries",
         )
     return DiagnoseSetup(records, offset, start)
