@@ -120,15 +120,17 @@ def test_to_xarray_without_xarray_says_how_to_install_it(
 
 
 def test_reprs_stay_short_for_a_run_of_many_entries(tmp_path: Path):
-    steps = [("sine", 10.0 + i, 1.0) for i in range(60)]
+    # 30 entries: more than either repr lists (8 lines of text, 20 rows of HTML), so both cut
+    steps = [("sine", 10.0 + i, 1.0) for i in range(30)]
     path = write_run(tmp_path / "many.h5", "long campaign", steps, samples=5)
     run = labrig.open(path)
     text = repr(run)
     assert len(text) < 1500 and len(text.splitlines()) <= 12
-    assert "60 entries" in text and "sine_10V_1Hz" in text and "sine_69V_1Hz" in text
-    assert "more" in text
+    assert "30 entries" in text and "sine_10V_1Hz" in text and "sine_39V_1Hz" in text
+    assert "more" in text and "sine_20V_1Hz" not in text
     page = run._repr_html_()
-    assert len(page) < 6000 and "sine_10V_1Hz" in page and "40 more" in page
+    assert len(page) < 6000 and "sine_10V_1Hz" in page and "10 more" in page
+    assert "sine_29V_1Hz" in page and "sine_30V_1Hz" not in page
 
 
 def test_fit_is_what_fit_json_prints(seeded: Path):

@@ -97,14 +97,10 @@ def test_batch_diagnose_equals_the_one_by_one_commands(fleet, tmp_path):
     result = json.loads((out / "runs" / run.stem / "result-diagnose.json").read_text())
     assert set(result["row"]) <= set(rows[0])
     entries = read_table(out / "fleet_entries.parquet")
-    assert [e["entry"] for e in entries] == list(json.loads(res_fit(run))["per_entry"])
+    # the run's fit.json, which check_equals_cli found equal to ``labrig fit --json``
+    fit = json.loads((out / "runs" / rows[0]["key"] / "fit.json").read_text())
+    assert [e["entry"] for e in entries] == list(fit["per_entry"])
     assert set().union(*(e.keys() for e in result["entries"])) <= set(entries[0])
-
-
-def res_fit(run: Path) -> str:
-    res = invoke("fit", run, "--json")
-    assert res.exit_code == 0, res.stderr
-    return res.stdout
 
 
 @pytest.mark.slow
@@ -218,9 +214,14 @@ def test_rerun_skips_only_unchanged_runs(fleet, tmp_path):
     assert json.loads(other.stdout)["skipped"] == 0
 
 
-def test_rerun_skips_an_unchanged_run_and_refits_a_changed_one(fleet, tmp_path):
+def test_rerun_skips_an_unchanged_run_and_refits_a_changed_one(fleet, tmp_path, monkeypatch):
     """The default tier's twin of the test above: one run, fitted, skipped, then its content
-    replaced by another actuator's run and fitted again."""
+    replaced by another actuator's run and fitted again. The fleet page (``fleet.html``, drawn
+    again by each batch and about two thirds of its CPU here) is left out: the skips are read
+    from the JSON summary, and the page has its own tests (above and tests/api/test_day_one.py)."""
+    import labrig.fleet.fleet_report as fleet_report
+
+    monkeypatch.setattr(fleet_report, "write_fleet_report", lambda path, *args: path)
     runs = tmp_path / "runs"
     shutil.copytree(fleet, runs, ignore=shutil.ignore_patterns("setup", "truth.json"))
     first, other = sorted(runs.glob("*.h5"))[:2]
@@ -238,7 +239,7 @@ def test_without_dask_serial_with_a_note_and_without_pyarrow_csv(fleet, tmp_path
         "import sys; sys.modules['distributed'] = None; sys.modules['pyarrow'] = None; "
         "from labrig.cli import app; app()"
     )
-    files = sorted(str(p) for p in fleet.glob("*.h5"))[:2]
+    files = sorted(str(p) for p in fleet.glob("*.h5"))[:1]
     cmd = [sys.executable, "-c", code, "batch", "fit", *files, "--out", str(out), "--no-heldout"]
     p = subprocess.run(cmd, capture_output=True, text=True, timeout=240)
     assert p.returncode == 0, p.stderr

@@ -19,6 +19,7 @@ import sys
 import threading
 import time
 import urllib.request
+from collections.abc import Iterator
 from datetime import datetime
 from pathlib import Path
 
@@ -235,10 +236,14 @@ def request(port: int, target: str, host: str | None, method: str = "GET", extra
     )
 
 
-@pytest.fixture
-def finished_run(tmp_path: Path) -> Path:
-    """A finished run file of three entries whose samples are known (written here)."""
-    return write_run(tmp_path / "run.h5")
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """A finished run file of three entries whose samples are known (written here once; the
+    tests only read it)."""
+    path = write_run(tmp_path_factory.mktemp("finished") / "run.h5")
+    before = path.read_bytes()
+    yield path
+    assert path.read_bytes() == before, "a test changed the shared run file"
 
 
 #: the entries of write_run: name, drive frequency (Hz), samples (1 kHz), peak voltage (V)
