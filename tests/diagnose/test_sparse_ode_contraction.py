@@ -58,10 +58,16 @@ def _items(seed: int = 3) -> list:
 def _separation(xi: tuple[float, ...], periods: int) -> float:
     """|run2 - run1| after ``periods`` periods of the drive, two compiled free runs from the
     rest strain and 1 um above it (the gap at the start: 1)."""
-    v = np.concatenate(([0.0], _drive(periods)))
+    return _separation_under(xi, _drive(periods), RATE)
+
+
+def _separation_under(xi: tuple[float, ...], drive: np.ndarray, rate: float) -> float:
+    """|run2 - run1| at the end of ``drive`` (V, from rest at 0 V), two compiled free runs from
+    the rest strain and 1 ue above it."""
+    v = np.concatenate(([0.0], drive))
     s0 = equilibrium(xi, 0.0)
-    a = sindy_free_run(np.asarray(xi), v, RATE, s0, np.inf)
-    b = sindy_free_run(np.asarray(xi), v, RATE, s0 + 1.0, np.inf)
+    a = sindy_free_run(np.asarray(xi), v, rate, s0, np.inf)
+    b = sindy_free_run(np.asarray(xi), v, rate, s0 + 1.0, np.inf)
     if a is None or b is None:
         pytest.skip("numba not available")
     return float(abs(b[-1] - a[-1]))
@@ -167,13 +173,7 @@ def _sine_separation(xi: tuple[float, ...], amp: float, f_hz: float, periods: in
     free runs from the rest strain and 1 ue above it."""
     rate = 1000.0
     t = np.arange(round(periods * rate / f_hz)) / rate
-    v = np.concatenate(([0.0], amp * np.sin(2.0 * math.pi * f_hz * t)))
-    s0 = equilibrium(xi, 0.0)
-    a = sindy_free_run(np.asarray(xi), v, rate, s0, np.inf)
-    b = sindy_free_run(np.asarray(xi), v, rate, s0 + 1.0, np.inf)
-    if a is None or b is None:
-        pytest.skip("numba not available")
-    return float(abs(b[-1] - a[-1]))
+    return _separation_under(xi, amp * np.sin(2.0 * math.pi * f_hz * t), rate)
 
 
 def test_the_critical_rate_separates_drives_under_which_the_ode_contracts_from_those_it_grows():

@@ -30,7 +30,7 @@ with bounds (trust region reflective).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -51,6 +51,7 @@ __all__ = [
     "output_residual",
     "refine_contracting",
     "scored_runs",
+    "segment_mean",
     "training_score",
 ]
 
@@ -105,19 +106,30 @@ def training_score(r: NDArray, count: int) -> float:
     return 100.0 * math.sqrt(float(r @ r) / count) if np.all(np.isfinite(r)) else math.inf
 
 
+def segment_mean(
+    items: Sequence[tuple[Any, list]], per_sample: Callable[[Any, NDArray], NDArray]
+) -> float:
+    """The mean over the scored samples of ``items`` of ``per_sample(seq, v)``, a per-sample
+    quantity of each sequence computed over its voltage ``v`` up to its last scored sample; 0
+    without scored samples."""
+    total, count = 0.0, 0
+    for seq, segs in items:
+        end = max(g.hi for g in segs)
+        x = per_sample(seq, seq.voltage_V[:end])
+        for g in segs:
+            total += float(np.sum(x[g.lo : g.hi]))
+            count += g.hi - g.lo
+    return total / count if count else 0.0
+
+
 def mean_abs_rate(items: Sequence[tuple[Any, list]]) -> float:
     """The mean ``|V'|`` (V/s) over the scored samples of ``items``, ``V'`` as the free run sees
     it (the difference of consecutive samples, the first from the rest voltage, times the
     rate)."""
-    total, count = 0.0, 0
-    for seq, segs in items:
-        end = max(g.hi for g in segs)
-        v = seq.voltage_V[:end]
-        d = np.abs(np.diff(np.concatenate(([float(seq.rest_V)], v)))) * seq.rate_hz
-        for g in segs:
-            total += float(np.sum(d[g.lo : g.hi]))
-            count += g.hi - g.lo
-    return total / count if count else 0.0
+    return segment_mean(
+        items,
+        lambda seq, v: np.abs(np.diff(np.concatenate(([float(seq.rest_V)], v)))) * seq.rate_hz,
+    )
 
 
 def long_run_growth(model: SindyBaseline, rate_abs: float, strain_abs: float = math.inf) -> float:

@@ -47,6 +47,7 @@ from labrig.analysis.diagnose.contraction import (
     output_residual,
     refine_contracting,
     scored_runs,
+    segment_mean,
     training_score,
 )
 from labrig.analysis.diagnose.evidence import Evidence, collect_evidence
@@ -103,7 +104,6 @@ __all__ = [
     "entry_score",
     "growth_rate",
     "identify",
-    "path",
     "refine",
     "settles",
     "sparse_ode_trial",
@@ -321,16 +321,6 @@ def refine(
     ), s1
 
 
-def path(
-    items: Sequence[tuple[Any, list]], start: SindyBaseline, offset: bool, cache: SindyCache
-) -> list[SindyBaseline]:
-    """The STLSQ threshold path of the regression ``dS/dt = Theta xi`` on the scored segments
-    of ``items`` as :func:`~labrig.analysis.sindy.fit_sindy` sets it up, with each segment's
-    strain zero (``offset``) where ``start``'s free run puts it
-    (:func:`~labrig.analysis.sindy.threshold_path`; ``cache`` keeps each segment's rows)."""
-    return threshold_path(items, start, offset, cache)
-
-
 def settles(model: SindyBaseline, v_lo: float, v_hi: float) -> bool:
     """Whether ``model`` brings the strain to rest at every voltage held in ``[v_lo, v_hi]``
     (nine voltages checked): with ``V' = 0`` the equation reads ``dS/dt = a(V) + b S + c S|S|``
@@ -363,20 +353,16 @@ def growth_rate(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> floa
     from period to period, which the per-entry offsets of a short record do not show."""
     xi = np.asarray(model.coefficients, dtype=float)
     c = sum(float(x) for x, t in zip(xi, LIBRARY, strict=True) if t.kind == "c")
-    total, count = 0.0, 0
-    for seq, segs in driven_items(items):
-        end = max(g.hi for g in segs)
-        v = seq.voltage_V[:end]
+
+    def dfds(seq: Any, v: NDArray) -> NDArray:
         y = model.predict(v, seq.rest_V, seq.rate_hz)
         d = np.diff(np.concatenate(([float(seq.rest_V)], v))) * seq.rate_hz  # the free run's V'
-        dfds = sum(
+        return sum(
             (float(x) * t.factor(v, d) for x, t in zip(xi, LIBRARY, strict=True) if t.kind == "b"),
             np.zeros(v.size),
         ) + 2.0 * c * np.abs(y)
-        for g in segs:
-            total += float(np.sum(dfds[g.lo : g.hi]))
-            count += g.hi - g.lo
-    return total / count if count else 0.0
+
+    return segment_mean(driven_items(items), dfds)
 
 
 def contracts(
@@ -403,14 +389,9 @@ def contracts(
 def _mean_abs_strain(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> float:
     """The mean ``|S|`` (ue) of ``model``'s free run over the driven scored samples of
     ``items``."""
-    total, count = 0.0, 0
-    for seq, segs in driven_items(items):
-        end = max(g.hi for g in segs)
-        y = np.abs(model.predict(seq.voltage_V[:end], seq.rest_V, seq.rate_hz))
-        for g in segs:
-            total += float(np.sum(y[g.lo : g.hi]))
-            count += g.hi - g.lo
-    return total / count if count else 0.0
+    return segment_mean(
+        driven_items(items), lambda seq, v: np.abs(model.predict(v, seq.rest_V, seq.rate_hz))
+    )
 
 
 def identify(
@@ -418,7 +399,8 @@ def identify(
 ) -> SindyBaseline:
     """The sparse ODE of the scored segments of ``items`` (their driven segments,
     :func:`driven_items`). Candidates: :func:`~labrig.analysis.sindy.fit_sindy`'s model and
-    every support of the threshold path (:func:`path`) with the segments' zeros from that
+    every support of the STLSQ threshold path
+    (:func:`~labrig.analysis.sindy.threshold_path`) with the segments' zeros from that
     model's free run, then up to ``PASSES - 1`` more paths from the best-scoring and the picked
     candidates' zeros while the best training score falls by 1 %; each refined by output error
     (:func:`refine`). Of those that settle at a held voltage (:func:`settles`, over the
@@ -452,13 +434,18 @@ def identify(
                 cands[key] = (refined, score, settles(refined, v_lo, v_hi))
         return sparsest([c for c in cands.values() if c[2]] or list(cands.values()))
 
-    pick, score = add([start, *path(driven, start, offset, cache)])
+    pick, score = add([start, *threshold_path(driven, start, offset, cache)])
     if not math.isfinite(score):
         return start
     for _ in range(PASSES - 1):
         best = min(cands.values(), key=lambda c: c[1])[0]
         before = min(c[1] for c in cands.values())
-        pick, score = add([*path(driven, best, offset, cache), *path(driven, pick, offset, cache)])
+        pick, score = add(
+            [
+                *threshold_path(driven, best, offset, cache),
+                *threshold_path(driven, pick, offset, cache),
+            ]
+        )
         if not min(c[1] for c in cands.values()) < (1.0 - 0.01) * before:
             break
     margin, rate_abs = contraction_margin(driven), mean_abs_rate(driven)
