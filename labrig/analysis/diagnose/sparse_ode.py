@@ -37,6 +37,7 @@ from typing import Any, Protocol, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
+from labrig.analysis.band_limit import band_limit
 from labrig.analysis.diagnose.acceptance import Acceptance, Candidate, accept
 from labrig.analysis.diagnose.contraction import (
     REFINE_NFEV,
@@ -231,16 +232,18 @@ def decimation(records: Sequence[Record]) -> int:
 
 def working_records(records: Sequence[Record], q: int) -> list[Record]:
     """The records resampled to ``1/q`` of their rate for the identification: strain and
-    voltage through the same anti-aliasing low-pass (``scipy.signal.resample_poly``, zero
-    phase, a Kaiser-windowed FIR with its cutoff at the new Nyquist frequency; each record's
-    ends extended by a fitted line), every ``q``-th time stamp; the auxiliary channels every
-    ``q``-th sample. White noise of RMS ``sigma`` comes out at about ``sigma / sqrt q``."""
+    voltage through the same anti-aliasing low-pass (:func:`~labrig.analysis.band_limit.
+    band_limit`: zero phase, a Kaiser-windowed FIR with its cutoff at the new Nyquist
+    frequency, each record's ends extended by a line; ``scipy.signal.resample_poly`` to
+    rounding), every ``q``-th sample and time stamp; the auxiliary channels every ``q``-th
+    sample. White noise of RMS ``sigma`` comes out at about ``sigma / sqrt q``. The identified
+    ODE predicts a record at its own rate through the same low-pass
+    (:meth:`~labrig.analysis.sindy.SindyBaseline.predict`)."""
     if q <= 1:
         return list(records)
-    from scipy.signal import resample_poly
 
     def down(x: NDArray) -> NDArray:
-        return np.asarray(resample_poly(x, 1, q, padtype="line"), dtype=float)
+        return band_limit(x, 1.0 / q)[::q]
 
     out = []
     for r in records:
@@ -343,24 +346,30 @@ def settles(model: SindyBaseline, v_lo: float, v_hi: float) -> bool:
 
 
 def growth_rate(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> float:
-    """How fast a disturbance of ``model``'s strain grows (1/s, > 0) or decays (< 0) under the
-    drive of ``items`` (their driven segments): the mean over the driven samples of
-    ``df/dS = b(V') + 2 c |S|`` along the free run (``b`` of the terms ``S``, ``V' S``,
-    ``|V'| S``; ``c`` of ``S|S|``). For one state variable this is the free run's Lyapunov
-    exponent: two runs a little apart separate as ``exp(mean(df/dS) t)``. An ODE that settles at
-    every held voltage (:func:`settles`) may still grow under a sustained drive (a Bouc-Wen-like
-    ``|V'| S`` with a positive coefficient outweighing the lag): its prediction then wanders off
-    from period to period, which the per-entry offsets of a short record do not show."""
+    """How fast a disturbance of ``model``'s strain grows (1/s, > 0) or decays (< 0) under a
+    sustained drive like that of ``items`` (their driven segments): the mean over the driven
+    samples of ``df/dS = b(V') + 2 c |S|`` along the free run (``b`` of the terms ``S``,
+    ``V' S``, ``|V'| S``; ``c`` of ``S|S|``), the ``V' S`` term left out. For one state variable
+    two runs a little apart separate as ``exp(int df/dS dt)``; the ``V' S`` term's part of that
+    integral is ``xi_{V'S} (V_end - V_start)``, bounded however long the drive lasts (on a record
+    of one and a half periods it still weighs ``xi_{V'S}`` times the mean ``V'``, which a
+    sustained drive does not have), so what is left is the free run's Lyapunov exponent. An ODE
+    that settles at every held voltage (:func:`settles`) may still grow under a sustained drive
+    (a Bouc-Wen-like ``|V'| S`` with a positive coefficient outweighing the lag): its prediction
+    then wanders off from period to period, which the per-entry offsets of a short record do
+    not show."""
     xi = np.asarray(model.coefficients, dtype=float)
     c = sum(float(x) for x, t in zip(xi, LIBRARY, strict=True) if t.kind == "c")
+    b_terms = [
+        (float(x), t)
+        for x, t in zip(xi, LIBRARY, strict=True)
+        if t.kind == "b" and t.name != "V' S" and x != 0
+    ]
 
     def dfds(seq: Any, v: NDArray) -> NDArray:
         y = model.predict(v, seq.rest_V, seq.rate_hz)
         d = np.diff(np.concatenate(([float(seq.rest_V)], v))) * seq.rate_hz  # the free run's V'
-        return sum(
-            (float(x) * t.factor(v, d) for x, t in zip(xi, LIBRARY, strict=True) if t.kind == "b"),
-            np.zeros(v.size),
-        ) + 2.0 * c * np.abs(y)
+        return sum((x * t.factor(v, d) for x, t in b_terms), np.zeros(v.size)) + 2.0 * c * np.abs(y)
 
     return segment_mean(driven_items(items), dfds)
 
@@ -449,9 +458,7 @@ def identify(
         if not min(c[1] for c in cands.values()) < (1.0 - 0.01) * before:
             break
     margin, rate_abs = contraction_margin(driven), mean_abs_rate(driven)
-    if contracts(pick, driven, margin, rate_abs):
-        return pick
-    # the pick grows: the candidates that contract, and the best growing ones bounded
+    # the candidates that contract, and the best growing ones bounded
     kept: dict[tuple[int, ...], tuple[SindyBaseline, float, bool]] = {}
     growing = []
     for key, c in cands.items():
@@ -467,7 +474,71 @@ def identify(
         if key not in kept or score < kept[key][1]:
             kept[key] = (bounded, score, settles(bounded, v_lo, v_hi))
     pool = [c for c in kept.values() if c[2]]
-    return sparsest(pool)[0] if pool else pick
+    if not pool:
+        return pick
+    front: dict[int, tuple[SindyBaseline, float, bool]] = {}
+    for c in pool:  # the best training score of each number of terms
+        k = len(c[0].support)
+        if k not in front or c[1] < front[k][1]:
+            front[k] = c
+    finalists = sorted(front.values(), key=lambda c: (c[1], len(c[0].support)))[:FINALISTS]
+    groups = inner_folds(driven)
+    if len(finalists) == 1 or len(groups) < 2:
+        return sparsest(pool)[0]
+    inner = [inner_score(driven, c[0], groups, offset, margin) for c in finalists]
+    best = min(inner)
+    near = [i for i in range(len(finalists)) if inner[i] <= (1.0 + TOLERANCE) * best]
+    return finalists[min(near, key=lambda i: (len(finalists[i][0].support), inner[i]))][0]
+
+
+#: the contracting candidates with the best training scores judged by :func:`inner_score`
+FINALISTS = 10
+#: at most this many inner folds (groups of consecutive driven segments)
+INNER_FOLDS = 4
+
+
+def inner_folds(driven: Sequence[tuple[Any, list]]) -> list[list[str]]:
+    """The inner folds of an identification on ``driven`` (driven segments only): the
+    segments' names in at most :data:`INNER_FOLDS` groups of consecutive segments."""
+    names = [g.name for _, segs in driven for g in segs]
+    k = min(INNER_FOLDS, len(names))
+    return [list(a) for a in np.array_split(np.array(names, dtype=object), k) if len(a)]
+
+
+def inner_score(
+    driven: Sequence[tuple[Any, list]],
+    model: SindyBaseline,
+    groups: Sequence[Sequence[str]],
+    offset: bool,
+    margin: float,
+) -> float:
+    """How well ``model``'s support predicts data it was not refitted on, within the training
+    segments ``driven``: for each group of :func:`inner_folds`, the coefficients refitted on
+    the other segments from ``model``'s (:func:`~.contraction.refine_contracting`, so the
+    refit contracts too), the free run through the whole chained sequence, each held segment's
+    offset (with ``offset``) fitted on its first half and its NRMSE (%) taken on the second
+    (the outer folds' rule); the mean over the held segments. ``inf`` when a refit diverges."""
+    per_group = []
+    for group in groups:
+        held = set(group)
+        train = [(seq, [g for g in segs if g.name not in held]) for seq, segs in driven]
+        train = [(seq, segs) for seq, segs in train if segs]
+        refit, score = refine_contracting(train, model, offset, margin)
+        if not math.isfinite(score):
+            return math.inf
+        scores = []
+        for seq, segs in driven:
+            mine = [g for g in segs if g.name in held]
+            if not mine:
+                continue
+            end = max(g.hi for g in mine)
+            y = refit.predict(seq.voltage_V[:end], seq.rest_V, seq.rate_hz)
+            scores.extend(
+                second_half_nrmse_pct(g.measured_ue, y[g.lo : g.hi], offset) for g in mine
+            )
+        per_group.append(float(np.mean(scores)))
+    out = float(np.median(per_group)) if per_group else math.inf
+    return out if math.isfinite(out) else math.inf
 
 
 def _entry(
