@@ -10,9 +10,12 @@ over the library of :mod:`labrig.analysis.sindy` (``1``, ``S``, ``V``, ``V'``, `
 ``V' S``, ``V' V``, ``|V'| S``, ``|V'| V``, ``S|S|``: the six terms of a Duhem / Bouc-Wen model,
 ``1, S, V, V', |V'|, |V'| S``, are among them), identified with pysindy's STLSQ from
 :func:`~labrig.analysis.sindy.fit_sindy`'s start on a band-limited resampling of the records,
-every support of the threshold path refined by output error (:func:`identify`), and simulated
-forward from rest (free run, never fed the measured strain). One that grows under the records'
-own drive (:func:`growth_rate`) is refused whatever its score.
+every support of the threshold path refined by output error, the one chosen among those that
+contract under the drive by how they predict training parts left out of their refit
+(:func:`identify`), and simulated forward from rest (free run, never fed the measured strain;
+a record sampled faster than the identification's working rate through the same band limit).
+One that grows under the records' own drive (:func:`growth_rate`) is refused whatever its
+score.
 
 It is scored **exactly as the model's candidates are** (:meth:`labrig.analysis.extended.
 ExtendedProblem.score_second_half`): leave-one-entry-out, the ODE identified without the held-out
@@ -91,7 +94,9 @@ class DiagnosisLike(Protocol):
 
 __all__ = [
     "CONTRACTING_TRIES",
+    "FINALISTS",
     "IDLE_FRACTION",
+    "INNER_FOLDS",
     "NAME",
     "PASSES",
     "REFINE_NFEV",
@@ -105,6 +110,8 @@ __all__ = [
     "entry_score",
     "growth_rate",
     "identify",
+    "inner_folds",
+    "inner_score",
     "refine",
     "settles",
     "sparse_ode_trial",
@@ -411,17 +418,24 @@ def identify(
     every support of the STLSQ threshold path
     (:func:`~labrig.analysis.sindy.threshold_path`) with the segments' zeros from that
     model's free run, then up to ``PASSES - 1`` more paths from the best-scoring and the picked
-    candidates' zeros while the best training score falls by 1 %; each refined by output error
-    (:func:`refine`). Of those that settle at a held voltage (:func:`settles`, over the
-    training voltages; all when none does), the sparsest whose refined training score is within
-    :data:`~labrig.analysis.sindy.TOLERANCE` (5 %) of the best: the pick, kept when it
-    contracts under the drive (:func:`contracts`, with the margin of
-    :func:`~.contraction.contraction_margin`; a positive ``S|S|`` judged along its free run).
-    When it does not, the :data:`CONTRACTING_TRIES` best-scoring candidates that do not contract
-    (here a positive ``S|S|`` never does: it has no long-run bound) are refined again with
-    their long-run growth rate bounded (:func:`~.contraction.refine_contracting`), and of the
-    candidates that contract and settle, the sparsest within 5 % of the best is returned; when
-    there is none, the growing pick (:func:`sparse_ode_trial` refuses it)."""
+    candidates' zeros (the pick: of those that settle at a held voltage, :func:`settles`, the
+    sparsest whose training score is within :data:`~labrig.analysis.sindy.TOLERANCE`, 5 %, of
+    the best) while the best training score falls by 1 %; each refined by output error
+    (:func:`refine`).
+
+    Then the choice among the candidates that **contract** under the drive (:func:`contracts`,
+    with the margin of :func:`~.contraction.contraction_margin`; a positive ``S|S|``, which has
+    no long-run bound, never does here) and settle: those that do, and the
+    :data:`CONTRACTING_TRIES` best-scoring ones that do not refined again with their long-run
+    growth rate bounded (:func:`~.contraction.refine_contracting`). Of these, the best training
+    score of each number of terms (at most :data:`FINALISTS`) are judged by how they predict
+    training parts they were not refitted on (:func:`inner_score` over :func:`inner_folds`),
+    and the sparsest within 5 % of the best inner score is returned: the training score alone
+    cannot choose here (on one and a half periods every support of 6 to 10 terms follows the
+    training parts to the noise, and which of them was "sparsest within 5 %" hung on the last
+    digits of the data). With one finalist or a single driven segment, the sparsest within 5 %
+    of the best training score; when none contracts and settles, the growing pick
+    (:func:`sparse_ode_trial` refuses it)."""
     driven = driven_items(items)
     volts = np.concatenate([seq.voltage_V[g.lo : g.hi] for seq, segs in driven for g in segs])
     v_lo, v_hi = float(np.min(volts)), float(np.max(volts))
