@@ -472,22 +472,24 @@ def identify(
         if not min(c[1] for c in cands.values()) < (1.0 - 0.01) * before:
             break
     margin, rate_abs = contraction_margin(driven), mean_abs_rate(driven)
-    # the candidates that contract, and the best growing ones bounded
-    kept: dict[tuple[int, ...], tuple[SindyBaseline, float, bool]] = {}
+    if contracts(pick, driven, margin, rate_abs):
+        return pick
+    # the pick grows: the candidates that contract and settle, and the best growing ones
+    # refitted bounded
+    pool: list[tuple[SindyBaseline, float, bool]] = []
     growing = []
-    for key, c in cands.items():
-        if math.isfinite(c[1]) and contracts(c[0], driven, margin, rate_abs, along_run=False):
-            kept[key] = c
-        else:
-            growing.append(c)
+    for c in cands.values():
+        if not math.isfinite(c[1]):
+            continue
+        if c[2] and contracts(c[0], driven, margin, rate_abs):  # a positive S|S| along its run
+            pool.append(c)
+        if not contracts(c[0], driven, margin, rate_abs, along_run=False):
+            growing.append(c)  # a positive S|S| too: bounded, it may settle where it does not
     for m, _, _ in sorted(growing, key=lambda c: c[1])[:CONTRACTING_TRIES]:
         bounded, score = refine_contracting(driven, m, offset, margin)
-        key = tuple(int(k) for k in np.flatnonzero(bounded.coefficients))
-        if not (math.isfinite(score) and contracts(bounded, driven, margin, rate_abs)):
-            continue
-        if key not in kept or score < kept[key][1]:
-            kept[key] = (bounded, score, settles(bounded, v_lo, v_hi))
-    pool = [c for c in kept.values() if c[2]]
+        ok = math.isfinite(score) and contracts(bounded, driven, margin, rate_abs)
+        if ok and settles(bounded, v_lo, v_hi):
+            pool.append((bounded, score, True))
     if not pool:
         return pick
     front: dict[int, tuple[SindyBaseline, float, bool]] = {}
