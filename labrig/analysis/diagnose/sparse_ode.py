@@ -59,6 +59,7 @@ from labrig.analysis.diagnose.state import Model, Settings, Setup
 from labrig.analysis.diagnose.verdict import AT_FLOOR, headline
 from labrig.analysis.extended import FitOutcome
 from labrig.analysis.metrics import drive_frequency_hz, nrmse_pct, second_half_nrmse_pct
+from labrig.analysis.parallel import map_tasks
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import Scored, scored_sequences
 from labrig.analysis.sindy import (
@@ -101,10 +102,12 @@ __all__ = [
     "PASSES",
     "REFINE_NFEV",
     "SAMPLES_PER_PERIOD",
+    "CrossValidation",
     "SparseOdeEffect",
     "SparseOdeTrial",
     "adopt",
     "contracts",
+    "cross_validate",
     "decimation",
     "driven_items",
     "entry_score",
@@ -112,6 +115,7 @@ __all__ = [
     "identify",
     "inner_folds",
     "inner_score",
+    "offset_columns",
     "refine",
     "settles",
     "sparse_ode_trial",
@@ -599,30 +603,86 @@ def entry_score(
     return (second_half_nrmse_pct(mm, pm) if held else nrmse_pct(mm, pm)), out
 
 
+Columns = Callable[[NDArray, float], NDArray]
+
+
+def offset_columns(t: NDArray, _rate_hz: float) -> NDArray:
+    """The nuisance columns of a sensor with no fixed zero and nothing else: one offset."""
+    return np.ones((t.size, 1))
+
+
+@dataclass
+class CrossValidation:
+    """The sparse ODE of :func:`cross_validate`: identified on every entry, its in-sample NRMSE
+    (%) and prediction per entry, each entry's held-out NRMSE (%) by the ODE identified without
+    it, and the working records' scored segments (``(sequence, segments)``, the identification's
+    data)."""
+
+    model: SindyBaseline
+    per_entry: dict[str, float]
+    predictions: dict[str, NDArray]
+    heldout: dict[str, float]
+    work: list[tuple[Any, list]]
+
+
+def cross_validate(
+    records: Sequence[Record],
+    names: Sequence[str],
+    warmup_s: float,
+    chain: bool,
+    offset: bool,
+    columns: Columns = offset_columns,
+    workers: int = 1,
+) -> CrossValidation:
+    """The sparse ODE of ``records`` scored as the model's candidates are (module docstring):
+    identified (:func:`identify`) on the working records (:func:`working_records`) of every
+    entry of ``names`` and again without each, each entry's nuisance ``columns`` fitted on the
+    first half of its scored samples and its NRMSE taken on the second (:func:`entry_score`).
+    The identifications run on ``workers`` processes (:func:`~labrig.analysis.parallel.
+    map_tasks`); the result does not depend on it. Raises ``ValueError`` when the records
+    cannot be differentiated (too short) or differ in sample rate."""
+    names = list(names)
+    scored = scored_sequences(records, names, warmup_s, chain)
+    work = scored_sequences(working_records(records, decimation(records)), names, warmup_s, chain)
+    cache = SindyCache()
+
+    def task(k: int) -> tuple[SindyBaseline, Any]:
+        leave = None if k == 0 else names[k - 1]
+        with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
+            model = identify(_items(work, leave_out=leave), offset, cache)
+            if leave is None:
+                return model, {n: entry_score(scored, model, n, columns, held=False) for n in names}
+            return model, entry_score(scored, model, leave, columns, held=True)[0]
+
+    out = map_tasks(task, len(names) + 1, workers if len(names) > 1 else 1)
+    model, whole = out[0]
+    return CrossValidation(
+        model,
+        {n: float(whole[n][0]) for n in names},
+        {n: whole[n][1] for n in names},
+        {n: float(h) for n, (_, h) in zip(names, out[1:], strict=True)},
+        _items(work),
+    )
+
+
 def sparse_ode_trial(
     setup: Setup, settings: Settings, current: Model, rnd: int, say: Progress
 ) -> SparseOdeTrial:
     """Identify the sparse ODE, cross-validate it and judge it against ``current`` (module
     docstring). Raises ``ValueError`` when the records cannot be differentiated (too short)
     or differ in sample rate."""
-    say(f"round {rnd + 1}: sparse ODE of the strain (Duhem library, STLSQ)")
+    say(f"round {rnd + 1}: sparse ODE of the strain (Duhem library, STLSQ), cross-validated")
+    cv = cross_validate(
+        list(setup.records),
+        list(current.heldout),
+        settings.warmup_s,
+        settings.chain,
+        settings.offset,
+        current.problem.nuisance_columns,
+        settings.workers,
+    )
+    model, per_entry, held, work = cv.model, cv.per_entry, cv.heldout, cv.work
     names = list(current.heldout)
-    records = list(setup.records)
-    scored = scored_sequences(records, names, settings.warmup_s, settings.chain)
-    q = decimation(records)
-    work = scored_sequences(working_records(records, q), names, settings.warmup_s, settings.chain)
-    cache = SindyCache()
-    columns = current.problem.nuisance_columns
-    with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
-        model = identify(_items(work), settings.offset, cache)
-        per_entry, preds = {}, {}
-        for n in names:
-            per_entry[n], preds[n] = entry_score(scored, model, n, columns, held=False)
-        say(f"round {rnd + 1}: cross-validating the sparse ODE")
-        held = {}
-        for n in names:
-            fold = identify(_items(work, leave_out=n), settings.offset, cache)
-            held[n] = entry_score(scored, fold, n, columns, held=True)[0]
     eff = SparseOdeEffect(model)
     fo = FitOutcome({}, {NAME: {}}, {}, {}, per_entry, math.nan)
     a = accept(
@@ -647,7 +707,7 @@ def sparse_ode_trial(
             else "its free run diverges on held-out data",
             *[r for r in a.reasons if "numerical precision" not in r],
         ]
-    grow = growth_rate(model, _items(work))
+    grow = growth_rate(model, work)
     if (
         grow > 0.0
     ):  # whatever its score: a model that runs away under its own drive explains nothing
@@ -665,22 +725,29 @@ def sparse_ode_trial(
         f"for {what} (better in {a.wins}, worse in {a.losses} of {len(names)} folds)"
         + (
             f"; its free run contracts under the records' own drive (a disturbance decays as "
-            f"exp({grow:.2g} t), t in s)" + _drive_range(model, _items(work))
+            f"exp({grow:.2g} t), t in s)" + _drive_range(model, work)
             if grow < 0.0
             else ""
         )
         + ("; refused: " + "; ".join(c.reasons) if c.reasons else "")
     )
-    return SparseOdeTrial(model, per_entry, held, preds, a, c, what)
+    return SparseOdeTrial(model, per_entry, held, cv.predictions, a, c, what)
 
 
 def _drive_range(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> str:
     """Where the contraction holds, in words: under a sustained drive whose mean ``|V'|`` stays
     below :func:`~.contraction.critical_rate` (with the records' own mean ``|V'|`` for scale);
-    empty when it contracts under any drive or has no long-run bound."""
+    empty when it contracts under any drive or has no long-run bound. When its lag and ``|V'| S``
+    terms grow under any drive (the rate is 0), what holds it back is its ``S|S|`` term at the
+    strain the records reach, and the words say so."""
     crit = critical_rate(model)
     if not math.isfinite(crit):
         return ""
+    if crit <= 0.0:
+        return (
+            ", but only through its S|S| term at the strain these records reach (its lag S and "
+            "|V'| S terms alone grow under any drive: a larger drive may not be held back)"
+        )
     own = mean_abs_rate(driven_items(items))
     ratio = f", {crit / own:.3g}x the records' {own:.3g} V/s" if own > 0 else ""
     return (
