@@ -148,12 +148,12 @@ def test_the_trial_adopts_the_contracting_ode_of_a_contracting_truth() -> None:
     assert "grows under" not in trial.candidate.evidence
 
 
-def test_the_verdicts_drive_range_names_what_holds_the_ode_back() -> None:
+def test_the_verdictsdrive_range_names_what_holds_the_ode_back() -> None:
     """A lag that outweighs a positive ``|V'| S`` term below some drive rate: the words give
     that rate (``-xi_S / xi_{|V'|S}`` = 0.797 / 0.00117 = 681 V/s) and its ratio to the records'
     about 600 V/s; a non-negative lag with the same ``|V'| S`` grows under any drive, and what holds
     it back is its ``S|S|`` term, which the words then say instead of a rate of 0 V/s."""
-    from labrig.analysis.diagnose.sparse_ode import _drive_range
+    from labrig.analysis.diagnose.sparse_ode import drive_range
 
     v = 150.0 * np.sin(2 * np.pi * np.arange(1000) / 1000.0)  # mean |V'| 600 V/s
     items = [
@@ -170,7 +170,7 @@ def test_the_verdicts_drive_range_names_what_holds_the_ode_back() -> None:
             xi[names.index(k)] = x
         return SindyBaseline(tuple(xi), 1000.0, 0.0)
 
-    lag = _drive_range(model(S=-0.797, **{"|V'| S": 0.00117}), items)
+    lag = drive_range(model(S=-0.797, **{"|V'| S": 0.00117}), items)
     assert "stays below 681 V/s" in lag and "1.14x the records'" in lag, lag
-    sat = _drive_range(model(S=0.05, **{"|V'| S": 0.00117, "S|S|": -0.01}), items)
+    sat = drive_range(model(S=0.05, **{"|V'| S": 0.00117, "S|S|": -0.01}), items)
     assert "S|S| term" in sat and "0 V/s" not in sat, sat

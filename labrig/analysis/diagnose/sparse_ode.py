@@ -109,6 +109,7 @@ __all__ = [
     "contracts",
     "cross_validate",
     "decimation",
+    "drive_range",
     "driven_items",
     "entry_score",
     "growth_rate",
@@ -506,8 +507,8 @@ def identify(
     if len(finalists) == 1 or len(groups) < 2:
         return sparsest(pool)[0]
     inner = [inner_score(driven, c[0], groups, offset, margin) for c in finalists]
-    best = min(inner)
-    near = [i for i in range(len(finalists)) if inner[i] <= (1.0 + TOLERANCE) * best]
+    lowest = min(inner)
+    near = [i for i in range(len(finalists)) if inner[i] <= (1.0 + TOLERANCE) * lowest]
     return finalists[min(near, key=lambda i: (len(finalists[i][0].support), inner[i]))][0]
 
 
@@ -546,7 +547,7 @@ def inner_score(
         refit, score = refine_contracting(train, model, offset, margin)
         if not math.isfinite(score):
             return math.inf
-        scores = []
+        scores: list[float] = []
         for seq, segs in driven:
             mine = [g for g in segs if g.name in held]
             if not mine:
@@ -725,7 +726,7 @@ def sparse_ode_trial(
         f"for {what} (better in {a.wins}, worse in {a.losses} of {len(names)} folds)"
         + (
             f"; its free run contracts under the records' own drive (a disturbance decays as "
-            f"exp({grow:.2g} t), t in s)" + _drive_range(model, work)
+            f"exp({grow:.2g} t), t in s)" + drive_range(model, work)
             if grow < 0.0
             else ""
         )
@@ -734,7 +735,7 @@ def sparse_ode_trial(
     return SparseOdeTrial(model, per_entry, held, cv.predictions, a, c, what)
 
 
-def _drive_range(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> str:
+def drive_range(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> str:
     """Where the contraction holds, in words: under a sustained drive whose mean ``|V'|`` stays
     below :func:`~.contraction.critical_rate` (with the records' own mean ``|V'|`` for scale);
     empty when it contracts under any drive or has no long-run bound. When its lag and ``|V'| S``
