@@ -1,9 +1,9 @@
 """Diagnosis on the drives and effects other labs' data show, beside the data-driven peers
 (issue "close the loop on measured data from other labs").
 
-Writes a markdown report on stdout (``python benchmarks/study_real_drives.py [table|nulls|effects|
-timing|smart|contraction|all] [--margins]``); the figures are copied into docs/diagnose.md and
-the README.
+Writes a markdown report on stdout (``python benchmarks/study_real_drives.py [table|nulls|
+effects|timing|smart|contraction|readings|all] [--margins]``); the figures are copied into
+docs/diagnose.md and the README.
 
 - ``table``: held-out NRMSE per dataset: ours before and after diagnose's effects (diagnose's
   scoring: each left-out entry's second half, in % of its span), Prandtl-Ishlinskii, Bouc-Wen and
@@ -30,6 +30,10 @@ the README.
   record played 5 times), the separation after 20 periods of two free runs started 1 ue apart,
   and CPU seconds (``time.process_time``; ratio to the yardstick). ``--margins`` also scans
   the contraction margin (``contraction.MARGIN_PER_PERIOD``) on SmartHysteresis.
+- ``readings``: the sparse ODE alone (as ``contraction``) on the SmartHysteresis record read
+  the ways an independent review found the selection fragile (the rate to its last digits,
+  samples dropped, resampled to 500 Hz, 2 kHz and 5 kHz, the voltage jittered by 1e-9), and on
+  a whole-file-like record built from it (7.36 s at rest, 2.64 periods, 5 kHz).
 """
 
 from __future__ import annotations
@@ -280,37 +284,15 @@ def _sparse_ode_alone(records: list[Record]) -> dict[str, float | str]:
     min) of its free run over periods 1, 2 and 20 of the drive repeated, the separation of two
     free runs 1 ue apart after them, and the CPU seconds of the identifications and scoring."""
     from labrig.analysis.baseline_kernels import sindy_free_run
-    from labrig.analysis.diagnose.sparse_ode import (
-        decimation,
-        entry_score,
-        growth_rate,
-        identify,
-        working_records,
-    )
-    from labrig.analysis.simulate import scored_sequences
-    from labrig.analysis.sindy import SindyCache, equilibrium
-    from labrig.core.blas import single_thread_blas
+    from labrig.analysis.diagnose.sparse_ode import cross_validate, growth_rate
+    from labrig.analysis.sindy import equilibrium
 
-    names = [r.name for r in records]
-    scored = scored_sequences(records, names, 0.0, True)
-    work = scored_sequences(working_records(records, decimation(records)), names, 0.0, True)
-
-    def items(leave_out: str | None = None) -> list:
-        return [(s.seq, [g for g in s.segments if g.name != leave_out]) for s in work]
-
-    def ones(t: np.ndarray, _rate: float) -> np.ndarray:
-        return np.ones((t.size, 1))
-
-    cache = SindyCache()
     t0 = time.process_time()
-    with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
-        model = identify(items(), True, cache)
-        held = [
-            entry_score(scored, identify(items(n), True, cache), n, ones, True)[0] for n in names
-        ]
+    cv = cross_validate(records, [r.name for r in records], 0.0, True, True)
     cpu = time.process_time() - t0
-    seq = scored[0].seq
-    rate = seq.rate_hz
+    model, held = cv.model, list(cv.heldout.values())
+    seq = cv.work[0][0]
+    rate = records[0].rate_hz
     if records[0].name.startswith("smart") or records[0].name.startswith("standin"):
         per = round(rate)  # one period of the 1 Hz drive
         one = 150.0 * np.sin(2 * np.pi * np.arange(per) / rate)
@@ -327,12 +309,82 @@ def _sparse_ode_alone(records: list[Record]) -> dict[str, float | str]:
     return {
         "heldout": float(np.mean(held)),
         "folds": " / ".join(f"{h:.3g}" for h in held),
-        "growth": growth_rate(model, items()),
+        "growth": growth_rate(model, cv.work),
         "stroke": " / ".join(f"{x:.4g}" for x in stroke) + f" ({reps} periods)",
         "separation": float(abs(b[-1] - a[-1])),
         "cpu": cpu,
         "equation": model.equation(),
     }
+
+
+def _readings() -> list[tuple[str, list[Record]]]:
+    """The SmartHysteresis record read the ways an independent review tried (2026-11-27): the
+    rate from the time column or stated, samples dropped at either end, resampled (``resample
+    _poly``, line padding), the voltage jittered by 1e-9 relative; and a whole-file-like
+    record built from it (the file's 7.36 s at rest, then the drive from its start: the 0.41 s
+    before the kept rows and the 0.23 s after them taken one period away, the whole at 5 kHz)."""
+    from scipy.signal import resample_poly
+
+    rows = np.loadtxt(
+        SMART / "hysteresis_v_150_1hz_2cycles_1khz.csv", delimiter=",", usecols=(1, 2, 3)
+    )
+    t, s, v = rows[:, 0], rows[:, 1], rows[:, 2]
+
+    def cut(rate: float, volts: np.ndarray, strain: np.ndarray) -> list[Record]:
+        rec = Record.from_arrays("smart", rate, volts, strain, hold="linear")
+        rec.meta["kind"] = "import"
+        return split_entries([rec], 4)
+
+    def up(x: np.ndarray, k: int) -> np.ndarray:
+        return resample_poly(x, k, 1, padtype="line")
+
+    def down(x: np.ndarray) -> np.ndarray:
+        return resample_poly(x, 1, 2, padtype="line")
+
+    k = t.size // 100
+    out = [
+        ("as `labrig import --time 2` reads it (1000.01 Hz)", cut(1000.0100000996063, v, s)),
+        ("first to last time stamp (1000.000005 Hz)", cut((t.size - 1) / (t[-1] - t[0]), v, s)),
+        ("1000.0000000005542 Hz", cut(1000.0000000005542, v, s)),
+        ("exactly 1000 Hz", cut(1000.0, v, s)),
+        ("first 1 % of samples dropped", cut(1000.0, v[k:], s[k:])),
+        ("last 1 % dropped", cut(1000.0, v[:-k], s[:-k])),
+        ("resampled to 500 Hz", cut(500.0, down(v), down(s))),
+        ("resampled to 2 kHz", cut(2000.0, up(v, 2), up(s, 2))),
+        ("resampled to 5 kHz", cut(5000.0, up(v, 5), up(s, 5))),
+    ]
+    for seed in (1, 2, 3, 4):
+        jitter = 1e-9 * np.random.default_rng(seed).normal(size=v.size)
+        out.append((f"voltage jittered by 1e-9, seed {seed}", cut(1000.0, v * (1 + jitter), s)))
+    # the drive 150 sin(2 pi t - 46.2178545458) V starts at 7.3558 s, the kept rows at 7.769 s
+    # and the file ends at 10 s: the 413 samples before and the 231 after them, one period away
+    on_s = 46.2178545458 / (2 * np.pi)
+    lead = round((t[0] - on_s) * 1000.0)
+    tail = round((10.0 - t[-1]) * 1000.0) - 1
+    sv = np.concatenate((np.zeros(round(on_s * 1000.0)), v[1000 - lead : 1000], v, v[:tail]))
+    ss = np.concatenate((s[1000 - lead : 1000], s, s[:tail]))
+    ss = np.concatenate((np.full(sv.size - ss.size, ss[0]), ss))
+    whole = cut(5000.0, up(sv, 5), up(ss, 5))
+    out.append(("whole-file-like at 5 kHz (7.36 s at rest, then 2.64 periods)", whole))
+    return out
+
+
+def readings() -> None:
+    """The ``readings`` report (module docstring)."""
+    from yardstick import yardstick_s
+
+    YARD[0] = yardstick_s()
+    print("\n## The sparse ODE on the SmartHysteresis record read several ways\n")
+    print(f"yardstick (numpy.sort of 1e6 floats, best of 5): {YARD[0] * 1e3:.1f} ms CPU\n")
+    print("| the record as | held-out % (folds) | CPU s | CPU / yardstick | equation |")
+    print("|---|---|---|---|---|")
+    for label, recs in _readings():
+        r = _sparse_ode_alone(recs)
+        print(
+            f"| {label} | {r['heldout']:.4g} ({r['folds']}) | {r['cpu']:.1f} | "
+            f"{r['cpu'] / YARD[0]:.0f} | `{r['equation']}` |",
+            flush=True,
+        )
 
 
 def contraction(margins: bool = False) -> None:
@@ -389,7 +441,8 @@ def main() -> None:
     )
     jobs = (("table", table), ("nulls", nulls), ("effects", effects), ("timing", timing))
     scan = "--margins" in sys.argv[2:]
-    for name, fn in (*jobs, ("smart", smart), ("contraction", lambda: contraction(scan))):
+    more = (("smart", smart), ("contraction", lambda: contraction(scan)), ("readings", readings))
+    for name, fn in (*jobs, *more):
         if what in (name, "all"):
             fn()
     print(f"\nload average at end {os.getloadavg()[0]:.1f}")

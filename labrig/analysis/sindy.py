@@ -70,7 +70,8 @@ integrated exactly,
 with it, and stable for any lag however fast. The record is preceded by the voltage it rested
 at (:attr:`~labrig.analysis.records.Record.rest_V`), where the strain starts at the equation's
 stable equilibrium (0 when there is none). A free run that leaves 100 x the training strain
-span is held there (diverged).
+span is held there (diverged). A voltage sampled faster than the rate the model was identified
+at is band-limited to that rate first (:meth:`SindyBaseline.predict`).
 """
 
 from __future__ import annotations
@@ -84,6 +85,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from labrig.analysis.band_limit import band_limit
 from labrig.analysis.baseline_kernels import sindy_free_run
 from labrig.analysis.metrics import drive_frequency_hz
 from labrig.analysis.simulate import Segment, SimSequence
@@ -276,8 +278,15 @@ class SindyBaseline:
     def predict(
         self, v: ArrayLike, rest_V: float = 0.0, rate_hz: float | None = None
     ) -> NDArray[np.float64]:
-        """Free-run strain (ue) for the voltage ``v`` from rest at ``rest_V``."""
+        """Free-run strain (ue) for the voltage ``v`` (V, sampled at ``rate_hz``; the model's
+        own rate by default) from rest at ``rest_V``. A voltage sampled faster than the model's
+        rate is first cut to the model's band (:func:`~labrig.analysis.band_limit.band_limit`,
+        the filter that decimated the records it was identified on): its ``V'`` and ``|V'|``
+        are then the ones the coefficients were fitted to, not a rate inflated by the noise
+        above that band."""
         rate = self.rate_hz if rate_hz is None else rate_hz
+        if rate > self.rate_hz * (1.0 + 1e-9):
+            v = band_limit(v, self.rate_hz / rate)
         return free_run(self.coefficients, v, rate, rest_V, self.limit_ue)
 
     @property

@@ -49,3 +49,21 @@ def test_growth_rate_is_the_rate_two_free_runs_separate(scale: float) -> None:
     want = _separation_rate(xi, v)
     assert got == pytest.approx(want, rel=0.02, abs=1e-3)
     assert (got > 0) is (scale == 1.0)
+
+
+def test_the_v_prime_s_term_adds_no_long_run_growth() -> None:
+    """``V' S`` integrates to ``xi (V_end - V_start)``, bounded however long the drive: on a
+    record of 1.25 periods (the voltage ends 150 V above where it started, so that term weighs
+    0.004 x 150 / 1.25 s = 0.48 /s there) the growth rate is still the rate at which two free
+    runs separate over 10 whole periods of the same drive, within 2 %."""
+    names = ["1", "S", "V", "V'", "|V'|", "V' S", "V' V", "|V'| S", "|V'| V", "S|S|"]
+    xi = np.zeros(len(names))
+    for name, value in (("S", -0.6), ("V", 0.15), ("V'", 0.11), ("V' S", 0.004)):
+        xi[names.index(name)] = value
+    short = _drive(2)[: int(1.25 * RATE)]
+    seq = SimpleNamespace(voltage_V=short, rest_V=0.0, rate_hz=RATE)
+    items = [(seq, [SimpleNamespace(lo=0, hi=short.size)])]
+    got = growth_rate(SindyBaseline(tuple(xi), RATE, 0.0), items)
+    want = _separation_rate(xi, _drive(10))
+    assert got == pytest.approx(want, rel=0.02)
+    assert _separation_rate(xi, short) > want + 0.4  # the short record's own: the boundary term

@@ -213,21 +213,32 @@ def test_a_long_idle_start_is_left_out_and_said_a_short_one_kept():
 
 @pytest.mark.slow
 @pytest.mark.timeout(900)
-def test_whole_file_standin_at_5khz_whose_truth_grows_is_refused_for_growth():
+def test_whole_file_standin_at_5khz_whose_truth_grows_gets_a_contracting_ode_that_cannot_follow():
     """SIMULATED stand-in of the whole SmartHysteresis file (10 s at 5 kHz, 7.36 s idle, then
     2.64 periods), as ``labrig import`` + ``diagnose`` read it: the idle start is left out; the
-    truth is the record's first ODE, which grows under this drive (+0.55 /s), and no contracting
-    ODE follows it, so the ODE identified on all parts is the growing one and is refused, saying
-    so. Measured 2026-11-27 (fifth round): the sparse ODE 1.38 % held-out against the truth's
-    own 0.155 % (the folds' contracting ODEs: 2.7-5.7 % per part), refused for growth; 30 s of
-    CPU: slow tier (the fast equivalents: test_sparse_ode_contraction.py,
-    test_sparse_ode_growth.py)."""
+    truth is the record's first ODE, which grows under this drive (+0.55 /s). What diagnose
+    returns contracts (it never adopts one that grows), so it cannot follow the truth to the
+    noise: at least 5x the truth's own held-out error, while still better than the model by the
+    acceptance rule, and then named EMPIRICAL, never "explained". Measured 2026-11-27: fifth
+    round, the growing ODE 1.38 % refused for growth (the folds' contracting ODEs 2.7-5.7 % per
+    part: their ``|V'|`` read the noise above the identification's band); sixth round, with the
+    band limit and the inner-fold choice, a contracting ODE 1.53 % adopted against 4.38 % for
+    the model with offset_drift and empirical_terms, the truth's own 0.155 %. 30-60 s of CPU:
+    slow tier (the fast equivalents: test_sparse_ode_contraction.py, test_sparse_ode_growth.py,
+    tests/analysis/test_band_limit.py)."""
+    from labrig.analysis.sindy import SindyBaseline
+
     rows = standin_rows(1)
     rec = Record.from_arrays("standin", 5000.0, rows[:, 2], rows[:, 1], hold="linear")
     rec.meta["kind"] = "import"
     parts = split_entries([rec], 4)
     assert parts[0].meta["idle_lead_s"] == pytest.approx(drive_on_s(), abs=5e-3)
+    truth = heldout(parts, lambda _items: SindyBaseline(TRUTH_XI, 5000.0, 0.0))
     d = diagnose(parts, offset=True)
     ode = next(c for c in d.candidates if c["effect"] == NAME)
     assert ode["heldout_nrmse_pct"] is not None, ode["evidence"]
-    assert all(e["effect"] != NAME for e in d.effects_added) and "grows under" in d.verdict
+    assert ode["heldout_nrmse_pct"] >= 5.0 * truth, (ode["heldout_nrmse_pct"], truth)
+    assert "grows under" not in ode["evidence"] and "contracts under" in ode["evidence"]
+    assert d.classification != "explained"
+    if any(e["effect"] == NAME for e in d.effects_added):
+        assert "EMPIRICAL alternative base" in d.verdict

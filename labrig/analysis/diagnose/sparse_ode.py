@@ -10,9 +10,12 @@ over the library of :mod:`labrig.analysis.sindy` (``1``, ``S``, ``V``, ``V'``, `
 ``V' S``, ``V' V``, ``|V'| S``, ``|V'| V``, ``S|S|``: the six terms of a Duhem / Bouc-Wen model,
 ``1, S, V, V', |V'|, |V'| S``, are among them), identified with pysindy's STLSQ from
 :func:`~labrig.analysis.sindy.fit_sindy`'s start on a band-limited resampling of the records,
-every support of the threshold path refined by output error (:func:`identify`), and simulated
-forward from rest (free run, never fed the measured strain). One that grows under the records'
-own drive (:func:`growth_rate`) is refused whatever its score.
+every support of the threshold path refined by output error, the one chosen among those that
+contract under the drive by how they predict training parts left out of their refit
+(:func:`identify`), and simulated forward from rest (free run, never fed the measured strain;
+a record sampled faster than the identification's working rate through the same band limit).
+One that grows under the records' own drive (:func:`growth_rate`) is refused whatever its
+score.
 
 It is scored **exactly as the model's candidates are** (:meth:`labrig.analysis.extended.
 ExtendedProblem.score_second_half`): leave-one-entry-out, the ODE identified without the held-out
@@ -37,6 +40,7 @@ from typing import Any, Protocol, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
+from labrig.analysis.band_limit import band_limit
 from labrig.analysis.diagnose.acceptance import Acceptance, Candidate, accept
 from labrig.analysis.diagnose.contraction import (
     REFINE_NFEV,
@@ -55,6 +59,7 @@ from labrig.analysis.diagnose.state import Model, Settings, Setup
 from labrig.analysis.diagnose.verdict import AT_FLOOR, headline
 from labrig.analysis.extended import FitOutcome
 from labrig.analysis.metrics import drive_frequency_hz, nrmse_pct, second_half_nrmse_pct
+from labrig.analysis.parallel import map_tasks
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import Scored, scored_sequences
 from labrig.analysis.sindy import (
@@ -90,20 +95,28 @@ class DiagnosisLike(Protocol):
 
 __all__ = [
     "CONTRACTING_TRIES",
+    "FINALISTS",
     "IDLE_FRACTION",
+    "INNER_FOLDS",
     "NAME",
     "PASSES",
     "REFINE_NFEV",
     "SAMPLES_PER_PERIOD",
+    "CrossValidation",
     "SparseOdeEffect",
     "SparseOdeTrial",
     "adopt",
     "contracts",
+    "cross_validate",
     "decimation",
+    "drive_range",
     "driven_items",
     "entry_score",
     "growth_rate",
     "identify",
+    "inner_folds",
+    "inner_score",
+    "offset_columns",
     "refine",
     "settles",
     "sparse_ode_trial",
@@ -231,16 +244,18 @@ def decimation(records: Sequence[Record]) -> int:
 
 def working_records(records: Sequence[Record], q: int) -> list[Record]:
     """The records resampled to ``1/q`` of their rate for the identification: strain and
-    voltage through the same anti-aliasing low-pass (``scipy.signal.resample_poly``, zero
-    phase, a Kaiser-windowed FIR with its cutoff at the new Nyquist frequency; each record's
-    ends extended by a fitted line), every ``q``-th time stamp; the auxiliary channels every
-    ``q``-th sample. White noise of RMS ``sigma`` comes out at about ``sigma / sqrt q``."""
+    voltage through the same anti-aliasing low-pass (:func:`~labrig.analysis.band_limit.
+    band_limit`: zero phase, a Kaiser-windowed FIR with its cutoff at the new Nyquist
+    frequency, each record's ends extended by a line; ``scipy.signal.resample_poly`` to
+    rounding), every ``q``-th sample and time stamp; the auxiliary channels every ``q``-th
+    sample. White noise of RMS ``sigma`` comes out at about ``sigma / sqrt q``. The identified
+    ODE predicts a record at its own rate through the same low-pass
+    (:meth:`~labrig.analysis.sindy.SindyBaseline.predict`)."""
     if q <= 1:
         return list(records)
-    from scipy.signal import resample_poly
 
     def down(x: NDArray) -> NDArray:
-        return np.asarray(resample_poly(x, 1, q, padtype="line"), dtype=float)
+        return band_limit(x, 1.0 / q)[::q]
 
     out = []
     for r in records:
@@ -343,24 +358,30 @@ def settles(model: SindyBaseline, v_lo: float, v_hi: float) -> bool:
 
 
 def growth_rate(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> float:
-    """How fast a disturbance of ``model``'s strain grows (1/s, > 0) or decays (< 0) under the
-    drive of ``items`` (their driven segments): the mean over the driven samples of
-    ``df/dS = b(V') + 2 c |S|`` along the free run (``b`` of the terms ``S``, ``V' S``,
-    ``|V'| S``; ``c`` of ``S|S|``). For one state variable this is the free run's Lyapunov
-    exponent: two runs a little apart separate as ``exp(mean(df/dS) t)``. An ODE that settles at
-    every held voltage (:func:`settles`) may still grow under a sustained drive (a Bouc-Wen-like
-    ``|V'| S`` with a positive coefficient outweighing the lag): its prediction then wanders off
-    from period to period, which the per-entry offsets of a short record do not show."""
+    """How fast a disturbance of ``model``'s strain grows (1/s, > 0) or decays (< 0) under a
+    sustained drive like that of ``items`` (their driven segments): the mean over the driven
+    samples of ``df/dS = b(V') + 2 c |S|`` along the free run (``b`` of the terms ``S``,
+    ``V' S``, ``|V'| S``; ``c`` of ``S|S|``), the ``V' S`` term left out. For one state variable
+    two runs a little apart separate as ``exp(int df/dS dt)``; the ``V' S`` term's part of that
+    integral is ``xi_{V'S} (V_end - V_start)``, bounded however long the drive lasts (on a record
+    of one and a half periods it still weighs ``xi_{V'S}`` times the mean ``V'``, which a
+    sustained drive does not have), so what is left is the free run's Lyapunov exponent. An ODE
+    that settles at every held voltage (:func:`settles`) may still grow under a sustained drive
+    (a Bouc-Wen-like ``|V'| S`` with a positive coefficient outweighing the lag): its prediction
+    then wanders off from period to period, which the per-entry offsets of a short record do
+    not show."""
     xi = np.asarray(model.coefficients, dtype=float)
     c = sum(float(x) for x, t in zip(xi, LIBRARY, strict=True) if t.kind == "c")
+    b_terms = [
+        (float(x), t)
+        for x, t in zip(xi, LIBRARY, strict=True)
+        if t.kind == "b" and t.name != "V' S" and x != 0
+    ]
 
     def dfds(seq: Any, v: NDArray) -> NDArray:
         y = model.predict(v, seq.rest_V, seq.rate_hz)
         d = np.diff(np.concatenate(([float(seq.rest_V)], v))) * seq.rate_hz  # the free run's V'
-        return sum(
-            (float(x) * t.factor(v, d) for x, t in zip(xi, LIBRARY, strict=True) if t.kind == "b"),
-            np.zeros(v.size),
-        ) + 2.0 * c * np.abs(y)
+        return sum((x * t.factor(v, d) for x, t in b_terms), np.zeros(v.size)) + 2.0 * c * np.abs(y)
 
     return segment_mean(driven_items(items), dfds)
 
@@ -402,17 +423,24 @@ def identify(
     every support of the STLSQ threshold path
     (:func:`~labrig.analysis.sindy.threshold_path`) with the segments' zeros from that
     model's free run, then up to ``PASSES - 1`` more paths from the best-scoring and the picked
-    candidates' zeros while the best training score falls by 1 %; each refined by output error
-    (:func:`refine`). Of those that settle at a held voltage (:func:`settles`, over the
-    training voltages; all when none does), the sparsest whose refined training score is within
-    :data:`~labrig.analysis.sindy.TOLERANCE` (5 %) of the best: the pick, kept when it
-    contracts under the drive (:func:`contracts`, with the margin of
-    :func:`~.contraction.contraction_margin`; a positive ``S|S|`` judged along its free run).
-    When it does not, the :data:`CONTRACTING_TRIES` best-scoring candidates that do not contract
-    (here a positive ``S|S|`` never does: it has no long-run bound) are refined again with
-    their long-run growth rate bounded (:func:`~.contraction.refine_contracting`), and of the
-    candidates that contract and settle, the sparsest within 5 % of the best is returned; when
-    there is none, the growing pick (:func:`sparse_ode_trial` refuses it)."""
+    candidates' zeros (the pick: of those that settle at a held voltage, :func:`settles`, the
+    sparsest whose training score is within :data:`~labrig.analysis.sindy.TOLERANCE`, 5 %, of
+    the best) while the best training score falls by 1 %; each refined by output error
+    (:func:`refine`).
+
+    Then the choice among the candidates that **contract** under the drive (:func:`contracts`,
+    with the margin of :func:`~.contraction.contraction_margin`; a positive ``S|S|``, which has
+    no long-run bound, never does here) and settle: those that do, and the
+    :data:`CONTRACTING_TRIES` best-scoring ones that do not refined again with their long-run
+    growth rate bounded (:func:`~.contraction.refine_contracting`). Of these, the best training
+    score of each number of terms (at most :data:`FINALISTS`) are judged by how they predict
+    training parts they were not refitted on (:func:`inner_score` over :func:`inner_folds`),
+    and the sparsest within 5 % of the best inner score is returned: the training score alone
+    cannot choose here (on one and a half periods every support of 6 to 10 terms follows the
+    training parts to the noise, and which of them was "sparsest within 5 %" hung on the last
+    digits of the data). With one finalist or a single driven segment, the sparsest within 5 %
+    of the best training score; when none contracts and settles, the growing pick
+    (:func:`sparse_ode_trial` refuses it)."""
     driven = driven_items(items)
     volts = np.concatenate([seq.voltage_V[g.lo : g.hi] for seq, segs in driven for g in segs])
     v_lo, v_hi = float(np.min(volts)), float(np.max(volts))
@@ -451,23 +479,87 @@ def identify(
     margin, rate_abs = contraction_margin(driven), mean_abs_rate(driven)
     if contracts(pick, driven, margin, rate_abs):
         return pick
-    # the pick grows: the candidates that contract, and the best growing ones bounded
-    kept: dict[tuple[int, ...], tuple[SindyBaseline, float, bool]] = {}
+    # the pick grows: the candidates that contract and settle, and the best growing ones
+    # refitted bounded
+    pool: list[tuple[SindyBaseline, float, bool]] = []
     growing = []
-    for key, c in cands.items():
-        if math.isfinite(c[1]) and contracts(c[0], driven, margin, rate_abs, along_run=False):
-            kept[key] = c
-        else:
-            growing.append(c)
+    for c in cands.values():
+        if not math.isfinite(c[1]):
+            continue
+        if c[2] and contracts(c[0], driven, margin, rate_abs):  # a positive S|S| along its run
+            pool.append(c)
+        if not contracts(c[0], driven, margin, rate_abs, along_run=False):
+            growing.append(c)  # a positive S|S| too: bounded, it may settle where it does not
     for m, _, _ in sorted(growing, key=lambda c: c[1])[:CONTRACTING_TRIES]:
         bounded, score = refine_contracting(driven, m, offset, margin)
-        key = tuple(int(k) for k in np.flatnonzero(bounded.coefficients))
-        if not (math.isfinite(score) and contracts(bounded, driven, margin, rate_abs)):
-            continue
-        if key not in kept or score < kept[key][1]:
-            kept[key] = (bounded, score, settles(bounded, v_lo, v_hi))
-    pool = [c for c in kept.values() if c[2]]
-    return sparsest(pool)[0] if pool else pick
+        ok = math.isfinite(score) and contracts(bounded, driven, margin, rate_abs)
+        if ok and settles(bounded, v_lo, v_hi):
+            pool.append((bounded, score, True))
+    if not pool:
+        return pick
+    front: dict[int, tuple[SindyBaseline, float, bool]] = {}
+    for c in pool:  # the best training score of each number of terms
+        k = len(c[0].support)
+        if k not in front or c[1] < front[k][1]:
+            front[k] = c
+    finalists = sorted(front.values(), key=lambda c: (c[1], len(c[0].support)))[:FINALISTS]
+    groups = inner_folds(driven)
+    if len(finalists) == 1 or len(groups) < 2:
+        return sparsest(pool)[0]
+    inner = [inner_score(driven, c[0], groups, offset, margin) for c in finalists]
+    lowest = min(inner)
+    near = [i for i in range(len(finalists)) if inner[i] <= (1.0 + TOLERANCE) * lowest]
+    return finalists[min(near, key=lambda i: (len(finalists[i][0].support), inner[i]))][0]
+
+
+#: the contracting candidates with the best training scores judged by :func:`inner_score`
+FINALISTS = 10
+#: at most this many inner folds (groups of consecutive driven segments)
+INNER_FOLDS = 4
+
+
+def inner_folds(driven: Sequence[tuple[Any, list]]) -> list[list[str]]:
+    """The inner folds of an identification on ``driven`` (driven segments only): the
+    segments' names in at most :data:`INNER_FOLDS` groups of consecutive segments."""
+    names = [g.name for _, segs in driven for g in segs]
+    k = min(INNER_FOLDS, len(names))
+    return [list(a) for a in np.array_split(np.array(names, dtype=object), k) if len(a)]
+
+
+def inner_score(
+    driven: Sequence[tuple[Any, list]],
+    model: SindyBaseline,
+    groups: Sequence[Sequence[str]],
+    offset: bool,
+    margin: float,
+) -> float:
+    """How well ``model``'s support predicts data it was not refitted on, within the training
+    segments ``driven``: for each group of :func:`inner_folds`, the coefficients refitted on
+    the other segments from ``model``'s (:func:`~.contraction.refine_contracting`, so the
+    refit contracts too), the free run through the whole chained sequence, each held segment's
+    offset (with ``offset``) fitted on its first half and its NRMSE (%) taken on the second
+    (the outer folds' rule); the mean over the held segments. ``inf`` when a refit diverges."""
+    per_group = []
+    for group in groups:
+        held = set(group)
+        train = [(seq, [g for g in segs if g.name not in held]) for seq, segs in driven]
+        train = [(seq, segs) for seq, segs in train if segs]
+        refit, score = refine_contracting(train, model, offset, margin)
+        if not math.isfinite(score):
+            return math.inf
+        scores: list[float] = []
+        for seq, segs in driven:
+            mine = [g for g in segs if g.name in held]
+            if not mine:
+                continue
+            end = max(g.hi for g in mine)
+            y = refit.predict(seq.voltage_V[:end], seq.rest_V, seq.rate_hz)
+            scores.extend(
+                second_half_nrmse_pct(g.measured_ue, y[g.lo : g.hi], offset) for g in mine
+            )
+        per_group.append(float(np.mean(scores)))
+    out = float(np.median(per_group)) if per_group else math.inf
+    return out if math.isfinite(out) else math.inf
 
 
 def _entry(
@@ -512,30 +604,86 @@ def entry_score(
     return (second_half_nrmse_pct(mm, pm) if held else nrmse_pct(mm, pm)), out
 
 
+Columns = Callable[[NDArray, float], NDArray]
+
+
+def offset_columns(t: NDArray, _rate_hz: float) -> NDArray:
+    """The nuisance columns of a sensor with no fixed zero and nothing else: one offset."""
+    return np.ones((t.size, 1))
+
+
+@dataclass
+class CrossValidation:
+    """The sparse ODE of :func:`cross_validate`: identified on every entry, its in-sample NRMSE
+    (%) and prediction per entry, each entry's held-out NRMSE (%) by the ODE identified without
+    it, and the working records' scored segments (``(sequence, segments)``, the identification's
+    data)."""
+
+    model: SindyBaseline
+    per_entry: dict[str, float]
+    predictions: dict[str, NDArray]
+    heldout: dict[str, float]
+    work: list[tuple[Any, list]]
+
+
+def cross_validate(
+    records: Sequence[Record],
+    names: Sequence[str],
+    warmup_s: float,
+    chain: bool,
+    offset: bool,
+    columns: Columns = offset_columns,
+    workers: int = 1,
+) -> CrossValidation:
+    """The sparse ODE of ``records`` scored as the model's candidates are (module docstring):
+    identified (:func:`identify`) on the working records (:func:`working_records`) of every
+    entry of ``names`` and again without each, each entry's nuisance ``columns`` fitted on the
+    first half of its scored samples and its NRMSE taken on the second (:func:`entry_score`).
+    The identifications run on ``workers`` processes (:func:`~labrig.analysis.parallel.
+    map_tasks`); the result does not depend on it. Raises ``ValueError`` when the records
+    cannot be differentiated (too short) or differ in sample rate."""
+    names = list(names)
+    scored = scored_sequences(records, names, warmup_s, chain)
+    work = scored_sequences(working_records(records, decimation(records)), names, warmup_s, chain)
+    cache = SindyCache()
+
+    def task(k: int) -> tuple[SindyBaseline, Any]:
+        leave = None if k == 0 else names[k - 1]
+        with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
+            model = identify(_items(work, leave_out=leave), offset, cache)
+            if leave is None:
+                return model, {n: entry_score(scored, model, n, columns, held=False) for n in names}
+            return model, entry_score(scored, model, leave, columns, held=True)[0]
+
+    out = map_tasks(task, len(names) + 1, workers if len(names) > 1 else 1)
+    model, whole = out[0]
+    return CrossValidation(
+        model,
+        {n: float(whole[n][0]) for n in names},
+        {n: whole[n][1] for n in names},
+        {n: float(h) for n, (_, h) in zip(names, out[1:], strict=True)},
+        _items(work),
+    )
+
+
 def sparse_ode_trial(
     setup: Setup, settings: Settings, current: Model, rnd: int, say: Progress
 ) -> SparseOdeTrial:
     """Identify the sparse ODE, cross-validate it and judge it against ``current`` (module
     docstring). Raises ``ValueError`` when the records cannot be differentiated (too short)
     or differ in sample rate."""
-    say(f"round {rnd + 1}: sparse ODE of the strain (Duhem library, STLSQ)")
+    say(f"round {rnd + 1}: sparse ODE of the strain (Duhem library, STLSQ), cross-validated")
+    cv = cross_validate(
+        list(setup.records),
+        list(current.heldout),
+        settings.warmup_s,
+        settings.chain,
+        settings.offset,
+        current.problem.nuisance_columns,
+        settings.workers,
+    )
+    model, per_entry, held, work = cv.model, cv.per_entry, cv.heldout, cv.work
     names = list(current.heldout)
-    records = list(setup.records)
-    scored = scored_sequences(records, names, settings.warmup_s, settings.chain)
-    q = decimation(records)
-    work = scored_sequences(working_records(records, q), names, settings.warmup_s, settings.chain)
-    cache = SindyCache()
-    columns = current.problem.nuisance_columns
-    with single_thread_blas(), np.errstate(over="ignore", invalid="ignore"):
-        model = identify(_items(work), settings.offset, cache)
-        per_entry, preds = {}, {}
-        for n in names:
-            per_entry[n], preds[n] = entry_score(scored, model, n, columns, held=False)
-        say(f"round {rnd + 1}: cross-validating the sparse ODE")
-        held = {}
-        for n in names:
-            fold = identify(_items(work, leave_out=n), settings.offset, cache)
-            held[n] = entry_score(scored, fold, n, columns, held=True)[0]
     eff = SparseOdeEffect(model)
     fo = FitOutcome({}, {NAME: {}}, {}, {}, per_entry, math.nan)
     a = accept(
@@ -560,7 +708,7 @@ def sparse_ode_trial(
             else "its free run diverges on held-out data",
             *[r for r in a.reasons if "numerical precision" not in r],
         ]
-    grow = growth_rate(model, _items(work))
+    grow = growth_rate(model, work)
     if (
         grow > 0.0
     ):  # whatever its score: a model that runs away under its own drive explains nothing
@@ -578,22 +726,29 @@ def sparse_ode_trial(
         f"for {what} (better in {a.wins}, worse in {a.losses} of {len(names)} folds)"
         + (
             f"; its free run contracts under the records' own drive (a disturbance decays as "
-            f"exp({grow:.2g} t), t in s)" + _drive_range(model, _items(work))
+            f"exp({grow:.2g} t), t in s)" + drive_range(model, work)
             if grow < 0.0
             else ""
         )
         + ("; refused: " + "; ".join(c.reasons) if c.reasons else "")
     )
-    return SparseOdeTrial(model, per_entry, held, preds, a, c, what)
+    return SparseOdeTrial(model, per_entry, held, cv.predictions, a, c, what)
 
 
-def _drive_range(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> str:
+def drive_range(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> str:
     """Where the contraction holds, in words: under a sustained drive whose mean ``|V'|`` stays
     below :func:`~.contraction.critical_rate` (with the records' own mean ``|V'|`` for scale);
-    empty when it contracts under any drive or has no long-run bound."""
+    empty when it contracts under any drive or has no long-run bound. When its lag and ``|V'| S``
+    terms grow under any drive (the rate is 0), what holds it back is its ``S|S|`` term at the
+    strain the records reach, and the words say so."""
     crit = critical_rate(model)
     if not math.isfinite(crit):
         return ""
+    if crit <= 0.0:
+        return (
+            ", but only through its S|S| term at the strain these records reach (its lag S and "
+            "|V'| S terms alone grow under any drive: a larger drive may not be held back)"
+        )
     own = mean_abs_rate(driven_items(items))
     ratio = f", {crit / own:.3g}x the records' {own:.3g} V/s" if own > 0 else ""
     return (
