@@ -176,22 +176,47 @@ def _split(xi: NDArray) -> tuple[Weighted, Weighted, float]:
     return a, b, c
 
 
+def _at_rest() -> tuple[NDArray, NDArray, NDArray, int]:
+    """Each term's factor held at ``V`` (``V' = 0``) as ``f0 + f1 V`` (an ``"a"`` factor is
+    affine in ``V`` at fixed ``V'``, a ``"b"`` factor depends on ``V'`` only): ``f0`` and
+    ``f1`` of the ``"a"`` terms, ``f0`` of the ``"b"`` terms (0 elsewhere), and the index of
+    the ``"c"`` term."""
+    zero, one = np.zeros(1), np.ones(1)
+    f0 = np.array([float(t.factor(zero, zero)[0]) for t in LIBRARY])
+    f1 = np.array([float(t.factor(one, zero)[0]) for t in LIBRARY]) - f0
+    kinds = np.array([t.kind for t in LIBRARY])
+    a0, a1 = np.where(kinds == "a", f0, 0.0), np.where(kinds == "a", f1, 0.0)
+    b0 = np.where(kinds == "b", f0, 0.0)
+    return a0, a1, b0, int(np.flatnonzero(kinds == "c")[0])
+
+
+_A0, _A1, _B0, _C = _at_rest()
+
+
 def equilibrium(xi: ArrayLike, V: float) -> float:
     """The stable equilibrium strain (ue) of ``dS/dt = Theta xi`` held at ``V`` (``V' = 0``):
     ``a + b S + c S|S| = 0`` with ``b + 2 c |S| < 0``, the root nearest the linear one;
-    0 when there is none."""
-    a_terms, b_terms, c = _split(np.asarray(xi, dtype=float))
-    v, d = np.array([float(V)]), np.zeros(1)
-    a = sum(x * float(t.factor(v, d)[0]) for x, t in a_terms)
-    b = sum(x * float(t.factor(v, d)[0]) for x, t in b_terms)
+    0 when there is none. The quadratic of each sign of ``S`` is solved in closed form (the
+    cancellation-free pair ``q = -(b + sign(b) sqrt(b^2 - 4 k a)) / 2``, roots ``q / k`` and
+    ``a / q``; ``numpy.roots`` is the tests' reference)."""
+    x = np.asarray(xi, dtype=float)
+    v = float(V)
+    a = float(x @ _A0 + v * (x @ _A1))
+    b = float(x @ _B0)
+    c = float(x[_C])
     linear = -a / b if b < 0 else 0.0
     if c == 0.0:
-        return linear if b < 0 else 0.0
+        return linear
     roots = []
     for sgn in (1.0, -1.0):  # S >= 0: c S^2 + b S + a = 0; S < 0: -c S^2 + b S + a = 0
-        for s in np.roots([sgn * c, b, a]):
-            if abs(s.imag) < 1e-12 and sgn * s.real >= 0 and b + 2 * c * abs(s.real) < 0:
-                roots.append(float(s.real))
+        k = sgn * c
+        disc = b * b - 4.0 * k * a
+        if disc < -1e-12 * (b * b + abs(4.0 * k * a)):
+            continue
+        q = -0.5 * (b + math.copysign(math.sqrt(max(disc, 0.0)), b))
+        for s in (q / k, a / q if q != 0.0 else math.nan):
+            if s == s and sgn * s >= 0 and b + 2 * c * abs(s) < 0:
+                roots.append(s)
     return min(roots, key=lambda s: abs(s - linear)) if roots else 0.0
 
 

@@ -177,11 +177,12 @@ def test_real_record_whole_kept_segment_is_explained_by_a_contracting_ode():
     """The whole kept record (2 periods at 1 kHz) through diagnose: the sparse ODE predicts the
     held-out parts at less than half the base's error and under the 0.216 % a six-term ODE
     reached on the whole file, does not grow under the record's own drive, and is adopted as the
-    EMPIRICAL alternative base ("partially explained"). Measured 2026-11-27 (sixth round, the
-    inner-fold choice): base 1.53 %, sensor_lowpass 0.70 %, sparse ODE 0.210 % adopted (growth
-    -0.23 /s; floor 0.151 %). Its lag and ``|V'| S`` terms hold a disturbance back only while a
-    sustained drive's mean |V'| stays below 0.815 / 0.0012 = 681 V/s (a 150 V sine up to 1.13
-    Hz), its ``S|S|`` term further; the verdict gives that limit."""
+    EMPIRICAL alternative base ("partially explained"). Measured 2026-11-27 (sixth round): base
+    1.53 %, a named effect about 0.66-0.70 %, the sparse ODE 0.19-0.21 % adopted depending on
+    how the record is read (benchmarks/RESULTS.md, "Sixth round"; floor 0.151 %). Its lag and
+    ``|V'| S`` terms hold a disturbance back only while a sustained drive's mean |V'| stays below
+    ``-xi_S / xi_{|V'|S}`` (680-700 V/s, a 150 V sine up to about 1.15 Hz), a negative ``S|S|``
+    term further; the verdict gives that limit."""
     d = diagnose(smart_records(1), offset=True)
     ode = next(c for c in d.candidates if c["effect"] == NAME)
     assert ode["heldout_nrmse_pct"] <= 0.5 * d.before["heldout_nrmse_pct"]
