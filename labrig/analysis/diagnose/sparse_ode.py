@@ -428,11 +428,12 @@ def identify(
     the best) while the best training score falls by 1 %; each refined by output error
     (:func:`refine`).
 
-    Then the choice among the candidates that **contract** under the drive (:func:`contracts`,
-    with the margin of :func:`~.contraction.contraction_margin`; a positive ``S|S|``, which has
-    no long-run bound, never does here) and settle: those that do, and the
-    :data:`CONTRACTING_TRIES` best-scoring ones that do not refined again with their long-run
-    growth rate bounded (:func:`~.contraction.refine_contracting`). Of these, the best training
+    When the pick **contracts** under the drive (:func:`contracts`, with the margin of
+    :func:`~.contraction.contraction_margin`; a positive ``S|S|`` judged along its free run) it
+    is returned. Otherwise the choice is among the candidates that contract and settle, and the
+    :data:`CONTRACTING_TRIES` best-scoring ones that do not contract (a positive ``S|S|``, which
+    has no long-run bound, counted among them) refined again with their long-run growth rate
+    bounded (:func:`~.contraction.refine_contracting`). Of these, the best training
     score of each number of terms (at most :data:`FINALISTS`) are judged by how they predict
     training parts they were not refitted on (:func:`inner_score` over :func:`inner_folds`),
     and the sparsest within 5 % of the best inner score is returned: the training score alone
@@ -538,7 +539,9 @@ def inner_score(
     the other segments from ``model``'s (:func:`~.contraction.refine_contracting`, so the
     refit contracts too), the free run through the whole chained sequence, each held segment's
     offset (with ``offset``) fitted on its first half and its NRMSE (%) taken on the second
-    (the outer folds' rule); the mean over the held segments. ``inf`` when a refit diverges."""
+    (the outer folds' rule); the median over the groups of each group's mean (a group whose
+    training segments lack what it must predict, e.g. a rising half-period predicted from two
+    falling ones, says nothing of the support). ``inf`` when a refit diverges."""
     per_group = []
     for group in groups:
         held = set(group)
