@@ -207,6 +207,9 @@ def equilibrium(xi: ArrayLike, V: float) -> float:
     linear = -a / b if b < 0 else 0.0
     if c == 0.0:
         return linear
+    size = max(abs(a), abs(b), abs(c))
+    if not 1e-100 < size < 1e100:  # the squares below would under- or overflow
+        a, b, c = a / size, b / size, c / size
     roots = []
     for sgn in (1.0, -1.0):  # S >= 0: c S^2 + b S + a = 0; S < 0: -c S^2 + b S + a = 0
         k = sgn * c

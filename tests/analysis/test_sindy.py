@@ -117,6 +117,16 @@ def test_equilibrium_agrees_with_numpy_roots_on_random_equations() -> None:
         assert equilibrium(xi, v) == pytest.approx(want, rel=1e-12, abs=1e-300), (xi, v)
 
 
+@pytest.mark.parametrize("scale", [1e-165, 1e-120, 1e120, 1e160])
+def test_equilibrium_of_an_equation_scaled_to_extreme_magnitudes(scale: float) -> None:
+    """The root does not change when the whole equation is multiplied by a constant: at
+    magnitudes where ``b^2`` would under- or overflow the result is the unscaled one."""
+    xi = np.zeros(len(NAMES))
+    for name, x in (("1", 0.5), ("S", -0.4), ("V", 0.01), ("S|S|", -0.3)):
+        xi[NAMES.index(name)] = x
+    assert equilibrium(xi * scale, 70.0) == pytest.approx(equilibrium(xi, 70.0), rel=1e-12)
+
+
 @pytest.mark.parametrize("lag_per_s", [-30.0, -0.5])  # steps beyond and within the series
 def test_linear_part_is_exact_for_a_voltage_linear_between_samples(lag_per_s: float) -> None:
     """Without S|S| each step is exact: a triangle with corners on samples, solve_ivp per leg."""

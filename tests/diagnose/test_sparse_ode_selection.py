@@ -152,7 +152,10 @@ def test_the_verdictsdrive_range_names_what_holds_the_ode_back() -> None:
     """A lag that outweighs a positive ``|V'| S`` term below some drive rate: the words give
     that rate (``-xi_S / xi_{|V'|S}`` = 0.797 / 0.00117 = 681 V/s) and its ratio to the records'
     about 600 V/s; a non-negative lag with the same ``|V'| S`` grows under any drive, and what holds
-    it back is its ``S|S|`` term, which the words then say instead of a rate of 0 V/s."""
+    it back is its ``S|S|`` term, which the words then say instead of a rate of 0 V/s; a
+    non-negative lag with a negative ``|V'| S`` is held back by fast drives only (above
+    ``xi_S / |xi_{|V'|S}|`` = 100 V/s), and a negative lag with a non-positive ``|V'| S`` by
+    any drive (no words)."""
     from labrig.analysis.diagnose.sparse_ode import drive_range
 
     v = 150.0 * np.sin(2 * np.pi * np.arange(1000) / 1000.0)  # mean |V'| 600 V/s
@@ -174,3 +177,13 @@ def test_the_verdictsdrive_range_names_what_holds_the_ode_back() -> None:
     assert "stays below 681 V/s" in lag and "1.14x the records'" in lag, lag
     sat = drive_range(model(S=0.05, **{"|V'| S": 0.00117, "S|S|": -0.01}), items)
     assert "S|S| term" in sat and "0 V/s" not in sat, sat
+    # a non-negative lag with a negative |V'| S: held back by fast drives, not slow ones
+    fast = drive_range(model(S=0.2, **{"|V'| S": -0.002, "S|S|": -0.001}), items)
+    assert "stays above 100 V/s" in fast and "slower drives" in fast, fast
+    assert drive_range(model(S=-0.5, **{"|V'| S": -0.001}), items) == ""  # any drive
+
+
+def test_one_entry_cannot_be_cross_validated_and_says_so() -> None:
+    recs = two_periods(250.0)[:1]
+    with pytest.raises(ValueError, match="at least two entries"):
+        cross_validate(recs, [recs[0].name], 0.0, True, True)

@@ -646,6 +646,8 @@ def cross_validate(
     map_tasks`); the result does not depend on it. Raises ``ValueError`` when the records
     cannot be differentiated (too short) or differ in sample rate."""
     names = list(names)
+    if len(names) < 2:
+        raise ValueError(f"cross-validation needs at least two entries, got {len(names)}")
     scored = scored_sequences(records, names, warmup_s, chain)
     work = scored_sequences(working_records(records, decimation(records)), names, warmup_s, chain)
     cache = SindyCache()
@@ -739,25 +741,45 @@ def sparse_ode_trial(
 
 
 def drive_range(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> str:
-    """Where the contraction holds, in words: under a sustained drive whose mean ``|V'|`` stays
-    below :func:`~.contraction.critical_rate` (with the records' own mean ``|V'|`` for scale);
-    empty when it contracts under any drive or has no long-run bound. When its lag and ``|V'| S``
-    terms grow under any drive (the rate is 0), what holds it back is its ``S|S|`` term at the
-    strain the records reach, and the words say so."""
+    """Where the contraction holds, in words, from the long-run bound ``g = xi_S +
+    xi_{|V'|S} mean|V'|`` (:func:`~.contraction.long_run_growth`): empty when ``g < 0`` under
+    any drive (a negative lag and a non-positive ``|V'| S``) or there is no bound (a positive
+    ``S|S|``); "only while mean |V'| stays below" the critical rate (:func:`~.contraction.
+    critical_rate`) for a negative lag and a positive ``|V'| S``; "above" ``-xi_S /
+    xi_{|V'|S}`` for a non-negative lag and a negative ``|V'| S`` (slower drives and holds then
+    rest on ``S|S|``); and when neither term holds it back, that its ``S|S|`` term does, at the
+    strain the records reach. The drive's own mean ``|V'|`` is given for scale: over the driven
+    samples, the step from the rest voltage to a record's first sample left out (a record cut
+    in mid-swing starts with a jump that is not part of its drive)."""
     crit = critical_rate(model)
     if not math.isfinite(crit):
         return ""
-    if crit <= 0.0:
+    names = [t.name for t in LIBRARY]
+    lag, rate_term = model.coefficients[names.index("S")], model.coefficients[names.index("|V'| S")]
+    held = ", held back only by its S|S| term at the strain these records reach"
+    if lag >= 0.0 and rate_term < 0.0:
         return (
-            ", but only through its S|S| term at the strain these records reach (its lag S and "
-            "|V'| S terms alone grow under any drive: a larger drive may not be held back)"
+            f", but only while a sustained drive's mean |V'| stays above {-lag / rate_term:.3g} "
+            f"V/s{_scale(-lag / rate_term, items)} (its |V'| S term holds it back, its lag S does "
+            f"not: slower drives and holds are{held[1:]})"
         )
-    own = mean_abs_rate(driven_items(items))
-    ratio = f", {crit / own:.3g}x the records' {own:.3g} V/s" if own > 0 else ""
+    if crit <= 0.0:
+        return f"{held} (its lag S and |V'| S terms alone do not hold it back under any drive)"
     return (
-        f", but only while a sustained drive's mean |V'| stays below {crit:.3g} V/s{ratio} "
-        f"(its |V'| S term then outweighs the lag S and a disturbance grows)"
+        f", but only while a sustained drive's mean |V'| stays below {crit:.3g} V/s"
+        f"{_scale(crit, items)} (its |V'| S term then outweighs the lag S and a disturbance grows)"
     )
+
+
+def _scale(rate: float, items: Sequence[tuple[Any, list]]) -> str:
+    """``", 1.16x the records' 600 V/s"``: ``rate`` against the drive's own mean ``|V'|`` over
+    the driven samples (each sequence's first sample counted as a step of 0, not the jump from
+    its rest voltage)."""
+    own = segment_mean(
+        driven_items(items),
+        lambda seq, v: np.abs(np.diff(v, prepend=v[:1])) * seq.rate_hz,
+    )
+    return f", {rate / own:.3g}x the records' {own:.3g} V/s" if own > 0 else ""
 
 
 def _what(current: Model) -> str:
