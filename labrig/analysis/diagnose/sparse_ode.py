@@ -125,6 +125,9 @@ __all__ = [
 
 #: the candidate's name in ``candidates`` and ``effects_added``
 NAME = "sparse_ode"
+_TERMS = [t.name for t in LIBRARY]
+#: where the ``S|S|`` coefficient is in a model's coefficients
+_SS = _TERMS.index("S|S|")
 
 Progress = Callable[[str], Any]
 
@@ -400,7 +403,7 @@ def contracts(
     1e-9: a refinement that ends on the bound counts). A positive ``S|S|`` coefficient has no
     such bound: with ``along_run`` it is judged along its free run over the driven samples
     (``g + 2 c mean|S|``), without it such an ODE never contracts."""
-    c = model.coefficients[[t.name for t in LIBRARY].index("S|S|")]
+    c = model.coefficients[_SS]
     strain_abs = _mean_abs_strain(model, items) if c > 0 and along_run else math.inf
     if not long_run_growth(model, rate_abs, strain_abs) <= -margin * (1.0 - 1e-9):
         return False
@@ -487,9 +490,10 @@ def identify(
     for c in cands.values():
         if not math.isfinite(c[1]):
             continue
-        if c[2] and contracts(c[0], driven, margin, rate_abs):  # a positive S|S| along its run
+        contracting = contracts(c[0], driven, margin, rate_abs)  # a positive S|S| along its run
+        if c[2] and contracting:
             pool.append(c)
-        if not contracts(c[0], driven, margin, rate_abs, along_run=False):
+        if not contracting or c[0].coefficients[_SS] > 0:
             growing.append(c)  # a positive S|S| too: bounded, it may settle where it does not
     for m, _, _ in sorted(growing, key=lambda c: c[1])[:CONTRACTING_TRIES]:
         bounded, score = refine_contracting(driven, m, offset, margin)
@@ -660,7 +664,7 @@ def cross_validate(
                 return model, {n: entry_score(scored, model, n, columns, held=False) for n in names}
             return model, entry_score(scored, model, leave, columns, held=True)[0]
 
-    out = map_tasks(task, len(names) + 1, workers if len(names) > 1 else 1)
+    out = map_tasks(task, len(names) + 1, workers)
     model, whole = out[0]
     return CrossValidation(
         model,
@@ -688,7 +692,6 @@ def sparse_ode_trial(
         settings.workers,
     )
     model, per_entry, held, work = cv.model, cv.per_entry, cv.heldout, cv.work
-    names = list(current.heldout)
     eff = SparseOdeEffect(model)
     fo = FitOutcome({}, {NAME: {}}, {}, {}, per_entry, math.nan)
     a = accept(
@@ -714,9 +717,8 @@ def sparse_ode_trial(
             *[r for r in a.reasons if "numerical precision" not in r],
         ]
     grow = growth_rate(model, work)
-    if (
-        grow > 0.0
-    ):  # whatever its score: a model that runs away under its own drive explains nothing
+    # whatever its score: a model that runs away under its own drive explains nothing
+    if grow > 0.0:
         c.accepted = False
         c.reasons.append(
             f"its free run grows under the records' own drive (a disturbance grows as "
@@ -728,7 +730,7 @@ def sparse_ode_trial(
         f"a sparse ODE of Duhem form identified by STLSQ and refined by output error, "
         f"{equation_text(model)}, {verb} "
         f"held-out entries at {c.heldout_nrmse_pct:.3g} % against {current.heldout_pct:.3g} % "
-        f"for {what} (better in {a.wins}, worse in {a.losses} of {len(names)} folds)"
+        f"for {what} (better in {a.wins}, worse in {a.losses} of {len(held)} folds)"
         + (
             f"; its free run contracts under the records' own drive (a disturbance decays as "
             f"exp({grow:.2g} t), t in s)" + drive_range(model, work)
@@ -754,8 +756,8 @@ def drive_range(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> str:
     crit = critical_rate(model)
     if not math.isfinite(crit):
         return ""
-    names = [t.name for t in LIBRARY]
-    lag, rate_term = model.coefficients[names.index("S")], model.coefficients[names.index("|V'| S")]
+    lag = model.coefficients[_TERMS.index("S")]
+    rate_term = model.coefficients[_TERMS.index("|V'| S")]
     held = ", held back only by its S|S| term at the strain these records reach"
     if lag >= 0.0 and rate_term < 0.0:
         return (

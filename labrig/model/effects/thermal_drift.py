@@ -7,42 +7,7 @@ from numpy.typing import NDArray
 
 from labrig.model.effects.base import Context, Effect, Param, fmt3, plus_minus
 
-__all__ = ["ThermalDrift", "lag_of_steps"]
-
-
-def lag_of_steps(x: NDArray, a: float) -> NDArray:
-    """The first-order lag ``y[n] = a y[n-1] + (1 - a) x[n-1]``, ``y[0] = 0``, of a piecewise-
-    constant ``x``, in closed form: on a run of ``x = P`` starting at ``s``,
-    ``y[s + k] = P + (y[s] - P) a^k``, and ``y[s] = a y[s-1] + (1 - a) x[s-1]``. One numpy
-    step per run of equal samples (the entries' loss powers: a few dozen runs), where the
-    recursion (``scipy.signal.lfilter``, whose import costs about half a second of CPU) steps
-    through every sample; the same numbers to rounding (exact for any ``x``, fast for few
-    runs).
-
-    Parameters
-    ----------
-    x : ndarray
-        The input, constant over runs of samples.
-    a : float
-        The pole, ``exp(-1 / (rate tau))`` (0 <= a < 1).
-
-    Returns
-    -------
-    ndarray
-        ``y``, the shape of ``x``.
-    """
-    y = np.empty(x.size)
-    if x.size == 0:
-        return y
-    starts = np.concatenate([[0], np.flatnonzero(np.diff(x)) + 1])
-    ends = np.append(starts[1:], x.size)
-    y_s = 0.0
-    for s, e in zip(starts.tolist(), ends.tolist(), strict=True):
-        if s > 0:
-            y_s = a * y[s - 1] + (1.0 - a) * x[s - 1]
-        p = float(x[s])
-        y[s:e] = p + (y_s - p) * a ** np.arange(e - s)
-    return y
+__all__ = ["ThermalDrift"]
 
 
 class ThermalDrift(Effect):
@@ -94,12 +59,16 @@ class ThermalDrift(Effect):
         return [{"k_rel": 0.01, "tau_th_s": tau} for tau in (3.0, 30.0, 300.0)]
 
     def theta(self, ctx: Context, tau_s: float | None = None) -> NDArray:
+        from scipy import signal  # lazy: a second of import CPU
+
         if self.temperature:
             T = ctx.temperature
             ref = T[0] if ctx.temperature_ref is None else ctx.temperature_ref
             return ctx.cached(("theta_T",), lambda: T - ref)
         a = float(np.exp(-1.0 / (ctx.rate_hz * tau_s)))
-        return ctx.cached(("theta_P", tau_s), lambda: lag_of_steps(_entry_power(ctx), a))
+        return ctx.cached(
+            ("theta_P", tau_s), lambda: signal.lfilter([0.0, 1.0 - a], [1.0, -a], _entry_power(ctx))
+        )
 
     def apply(self, x, ctx, p):
         if self.temperature:
