@@ -24,7 +24,11 @@ compiles on first use (``@njit(cache=True)``, so later processes load it from th
   Jacobian formed sample by sample, so the residual's square is not a difference of large sums).
 - :func:`sindy_free_run`: the exponential Rosenbrock-Euler free run of
   :func:`labrig.analysis.sindy.free_run_numpy` (the reference) with the library's factors
-  inlined, one step per sample.
+  inlined, one step per sample; :func:`sindy_free_run_sensitivities` the same run with the
+  derivative of every output with respect to each coefficient, the recursion's own
+  (``J_{n+1} = (dS_{n+1}/dS_n) J_n + dS_{n+1}/dxi``, the derivatives of ``phi1`` and
+  ``phi2`` taken of the forms evaluated, series included; tested against central
+  differences of the reference).
 
 Without numba (it cannot be imported) each function warns once and computes the same values
 with NumPy (the Bouc-Wen sensitivities then by forward differences of the closed form).
@@ -52,6 +56,7 @@ __all__ = [
     "residual_gram",
     "segment_moments",
     "sindy_free_run",
+    "sindy_free_run_sensitivities",
 ]
 
 #: compiled kernels by name (``None``: numba could not be imported; emptied, the next use
@@ -508,6 +513,107 @@ def _free_run_py(
         if not abs(s) <= limit:
             s = math.copysign(limit, s) if s == s else limit
         out[i] = s
+
+
+def _free_run_sensitivities_py(
+    xi: NDArray,
+    vp: NDArray,
+    rate: float,
+    s0: float,
+    ds0: NDArray,
+    limit: float,
+    out: NDArray,
+    jac: NDArray,
+) -> None:
+    # _free_run_py's recursion and its derivative with respect to each coefficient, step by
+    # step: S_{n+1} = E S_n + h p1 g + h p2 (a1 - a0), E = 1 + z p1, g = a0 - c S_n|S_n|,
+    # z = (b + 2 c |S_n|) h; with Q = dS_{n+1}/dz = (p1 + z p1') S_n + h p1' g + h p2' (a1 - a0)
+    # (p1', p2' the derivatives of the forms the recursion evaluates, series included),
+    # J_{n+1} = dS_{n+1}/dS_n J_n + the step's own derivative of each coefficient.
+    x1, xs, xv, xd, xad, xds, xdv, xads, xadv, c = (
+        xi[0], xi[1], xi[2], xi[3], xi[4], xi[5], xi[6], xi[7], xi[8], xi[9],
+    )  # fmt: skip
+    h = 1.0 / rate
+    s = s0
+    m = xi.size
+    js = np.empty(m)
+    for k in range(m):
+        js[k] = ds0[k]
+    step = np.empty(m)
+    for i in range(vp.size - 1):
+        v0 = vp[i]
+        v1 = vp[i + 1]
+        d = (v1 - v0) * rate
+        ad = abs(d)
+        a0 = x1 + xv * v0 + xd * d + xad * ad + xdv * (d * v0) + xadv * (ad * v0)
+        a1 = x1 + xv * v1 + xd * d + xad * ad + xdv * (d * v1) + xadv * (ad * v1)
+        b = xs + xds * d + xads * ad
+        sa = abs(s)
+        sg = 1.0 if s > 0 else (-1.0 if s < 0 else 0.0)
+        z = (b + 2.0 * c * sa) * h
+        if abs(z) < 1e-3:
+            p1 = 1.0 + z / 2 + z * z / 6
+            p2 = 0.5 + z / 6 + z * z / 24
+            q1 = 0.5 + z / 3
+            q2 = 1.0 / 6 + z / 12
+        else:
+            em = math.expm1(z)
+            p1 = em / z
+            p2 = (em - z) / (z * z)
+            q1 = (1.0 + em - p1) / z
+            q2 = (p1 - 2.0 * p2) / z
+        g = a0 - c * s * sa
+        e = 1.0 + z * p1
+        dq = (p1 + z * q1) * s + h * (q1 * g + q2 * (a1 - a0))
+        ds = e - 2.0 * h * p1 * c * sa + dq * 2.0 * c * h * sg
+        wa0 = h * (p1 - p2)
+        wa1 = h * p2
+        step[0] = wa0 + wa1
+        step[1] = dq * h
+        step[2] = wa0 * v0 + wa1 * v1
+        step[3] = (wa0 + wa1) * d
+        step[4] = (wa0 + wa1) * ad
+        step[5] = dq * h * d
+        step[6] = (wa0 * v0 + wa1 * v1) * d
+        step[7] = dq * h * ad
+        step[8] = (wa0 * v0 + wa1 * v1) * ad
+        step[9] = -h * p1 * s * sa + dq * 2.0 * h * sa
+        s = e * s + h * (p1 * g + p2 * (a1 - a0))
+        if not abs(s) <= limit:
+            s = math.copysign(limit, s) if s == s else limit
+            for k in range(m):
+                js[k] = 0.0
+        else:
+            for k in range(m):
+                js[k] = ds * js[k] + step[k]
+        out[i] = s
+        for k in range(m):
+            jac[i, k] = js[k]
+
+
+def sindy_free_run_sensitivities(
+    xi: NDArray, vp: NDArray, rate_hz: float, s0: float, ds0: NDArray, limit_ue: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """:func:`sindy_free_run` and the derivative of each output with respect to each of the
+    ten coefficients (``(samples, 10)``), the exact derivative of the recursion as computed
+    (forward sensitivities; a held output's is 0); ``ds0``: the start's derivative.
+    ``None`` without numba."""
+    k = kernel("free_run_sensitivities")
+    if k is None:
+        return None
+    n = vp.size - 1
+    out, jac = np.empty(n), np.empty((n, 10))
+    k(
+        np.ascontiguousarray(xi, dtype=float),
+        np.ascontiguousarray(vp, dtype=float),
+        float(rate_hz),
+        float(s0),
+        np.ascontiguousarray(ds0, dtype=float),
+        float(limit_ue),
+        out,
+        jac,
+    )
+    return out, jac
 
 
 def sindy_free_run(

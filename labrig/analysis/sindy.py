@@ -72,6 +72,10 @@ at (:attr:`~labrig.analysis.records.Record.rest_V`), where the strain starts at 
 stable equilibrium (0 when there is none). A free run that leaves 100 x the training strain
 span is held there (diverged). A voltage sampled faster than the rate the model was identified
 at is band-limited to that rate first (:meth:`SindyBaseline.predict`).
+:func:`free_run_sensitivities` returns the run with its derivative with respect to each
+coefficient (the forward sensitivities of the recursion, from the rest strain's,
+:func:`equilibrium_gradient`), for the output-error refinements of
+:mod:`labrig.analysis.diagnose.contraction`.
 """
 
 from __future__ import annotations
@@ -86,7 +90,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from labrig.analysis.band_limit import band_limit
-from labrig.analysis.baseline_kernels import sindy_free_run
+from labrig.analysis.baseline_kernels import sindy_free_run, sindy_free_run_sensitivities
 from labrig.analysis.metrics import drive_frequency_hz
 from labrig.analysis.simulate import Segment, SimSequence
 
@@ -98,9 +102,11 @@ __all__ = [
     "SindyCache",
     "SindyTerm",
     "equilibrium",
+    "equilibrium_gradient",
     "fit_sindy",
     "free_run",
     "free_run_numpy",
+    "free_run_sensitivities",
     "library_matrix",
     "same_run_up_to",
     "smoothed_derivative",
@@ -221,6 +227,40 @@ def equilibrium(xi: ArrayLike, V: float) -> float:
             if s == s and sgn * s >= 0 and b + 2 * c * abs(s) < 0:
                 roots.append(s)
     return min(roots, key=lambda s: abs(s - linear)) if roots else 0.0
+
+
+def equilibrium_gradient(xi: ArrayLike, V: float) -> NDArray[np.float64]:
+    """The derivative of :func:`equilibrium` with respect to each coefficient (implicit
+    function theorem on ``F(S) = a + b S + c S|S| = 0``: ``dS/dxi_k = -(dF/dxi_k) / (b +
+    2 c |S|)``); zeros where there is no equilibrium (its 0 does not move)."""
+    x = np.asarray(xi, dtype=float)
+    v = float(V)
+    s = equilibrium(x, v)
+    b = float(x @ _B0)
+    slope = b + 2.0 * float(x[_C]) * abs(s)
+    a = float(x @ _A0 + v * (x @ _A1))
+    if not slope < 0 or not abs(a + b * s + float(x[_C]) * s * abs(s)) <= 1e-9 * (
+        abs(a) + abs(b * s) + abs(float(x[_C]) * s * s)
+    ):
+        return np.zeros(x.size)
+    dF = _A0 + v * _A1 + _B0 * s
+    dF[_C] = s * abs(s)
+    return -dF / slope
+
+
+def free_run_sensitivities(
+    xi: ArrayLike, v: ArrayLike, rate_hz: float, rest_V: float = 0.0, limit_ue: float = math.inf
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """:func:`free_run` and its derivative with respect to each of the ten coefficients
+    (``(samples, 10)``): the forward sensitivities of the recursion as computed, from the
+    start's (:func:`equilibrium_gradient`). Compiled
+    (:func:`labrig.analysis.baseline_kernels.sindy_free_run_sensitivities`); ``None`` without
+    numba (then differentiate :func:`free_run` numerically)."""
+    xi = np.asarray(xi, dtype=float)
+    vp = np.concatenate(([float(rest_V)], np.asarray(v, dtype=float)))
+    return sindy_free_run_sensitivities(
+        xi, vp, rate_hz, equilibrium(xi, vp[0]), equilibrium_gradient(xi, vp[0]), limit_ue
+    )
 
 
 def _phis(z: float) -> tuple[float, float]:

@@ -46,6 +46,7 @@ from labrig.analysis.diagnose.contraction import (
     REFINE_NFEV,
     contraction_margin,
     critical_rate,
+    least_squares_jacobian,
     long_run_growth,
     mean_abs_rate,
     output_residual,
@@ -305,8 +306,10 @@ def refine(
     The free run's residual on the scored segments of ``items``, each segment's divided by
     ``span_e sqrt(n_e)`` (so the cost is the sum of the segments' squared NRMSE) and, with
     ``offset``, less its mean, is minimised by ``scipy.optimize.least_squares`` (trust region,
-    finite-difference Jacobian, at most :data:`REFINE_NFEV` runs) in the coefficients' ratios to
-    ``model``'s. The regression that found ``model`` fits a derivative estimated from noisy
+    at most :data:`REFINE_NFEV` runs) in the coefficients' ratios to ``model``'s, on the exact
+    Jacobian (the free run's forward sensitivities,
+    :func:`~labrig.analysis.diagnose.contraction.output_jacobian`; forward differences
+    without numba). The regression that found ``model`` fits a derivative estimated from noisy
     samples; the free run does not differentiate the data, so the refined coefficients do not
     depend on how the derivative was estimated. ``model`` itself when refining does not lower
     the cost; ``inf`` for a free run that diverges."""
@@ -317,17 +320,27 @@ def refine(
     runs = scored_runs(items)
     count = sum(len(c) for *_, c in runs) or 1
 
-    def residual(z: NDArray) -> NDArray:
+    def unpack(z: NDArray) -> NDArray:
         xi = xi0.copy()
         xi[sup] = z * xi0[sup]
-        return output_residual(runs, xi, offset, model.limit_ue)
+        return xi
 
+    def residual(z: NDArray) -> NDArray:
+        return output_residual(runs, unpack(z), offset, model.limit_ue)
+
+    chain = np.zeros((xi0.size, sup.size))
+    chain[sup, np.arange(sup.size)] = xi0[sup]
     with np.errstate(over="ignore", invalid="ignore"):
         s0 = training_score(residual(np.ones(sup.size)), count)
         if sup.size == 0 or not math.isfinite(s0):
             return model, s0
         sol = least_squares(
-            residual, np.ones(sup.size), method="trf", diff_step=1e-6, max_nfev=REFINE_NFEV
+            residual,
+            np.ones(sup.size),
+            jac=least_squares_jacobian(runs, offset, model.limit_ue, unpack, chain),
+            method="trf",
+            diff_step=1e-6,
+            max_nfev=REFINE_NFEV,
         )
         s1 = training_score(sol.fun, count)
     if not s1 < s0:
