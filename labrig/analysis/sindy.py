@@ -525,8 +525,10 @@ def stlsq(
     """Sequentially thresholded least squares of ``y`` on the columns of ``x`` for each
     threshold: pysindy's ``STLSQ(threshold, alpha=RIDGE, unbias=True, max_iter=MAX_ITER)``
     (imported here, on first use: pysindy and scikit-learn cost about a second to import),
-    with scikit-learn's input checks off (the rows are finite and the parameters fixed here;
-    those checks are most of the cost of a call on this 10-column problem).
+    with scikit-learn's input checks off (the rows are finite float64 arrays and the parameters
+    fixed here; those checks are most of the cost of a call on this 10-column problem; the
+    ridge solves' ``check_input=False`` alone saves about a sixth of a call, the same
+    coefficients to the bit).
 
     A threshold is fitted only when the previous fit's result does not already answer it
     (:func:`same_run_up_to`): each iterate of STLSQ keeps the ridge coefficients ``|c| >=
@@ -548,7 +550,13 @@ def stlsq(
             if last is not None and last[0] <= lam <= last[1]:
                 out.append((float(lam), last[2].copy()))
                 continue
-            opt = STLSQ(threshold=float(lam), alpha=RIDGE, max_iter=MAX_ITER, unbias=True)
+            opt = STLSQ(
+                threshold=float(lam),
+                alpha=RIDGE,
+                max_iter=MAX_ITER,
+                unbias=True,
+                ridge_kw={"check_input": False},
+            )
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 opt.fit(x, y)
