@@ -39,10 +39,18 @@ def taps(ratio: float) -> NDArray[np.float64]:
 def band_limit(x: ArrayLike, ratio: float) -> NDArray[np.float64]:
     """``x`` low-passed to ``ratio`` (0 < ratio <= 1) times its Nyquist frequency, zero phase,
     same length (module docstring); ``x`` itself (as floats) for ``ratio == 1`` or fewer than
-    two samples."""
+    two samples. Raises ``ValueError`` for a non-finite sample: the filter would spread it over
+    its length, and a NaN at either end, through the line the ends are extended by, over the
+    whole signal."""
     x = np.asarray(x, dtype=float)
     if ratio == 1.0 or x.size < 2:
         return x.copy()
+    bad = np.flatnonzero(~np.isfinite(x))
+    if bad.size:
+        raise ValueError(
+            f"cannot band-limit a signal with {bad.size} non-finite sample(s), the first at "
+            f"index {int(bad[0])} of {x.size}: drop or fill them first"
+        )
     h = taps(ratio)
     half = h.size // 2
     line = np.linspace(x[0], x[-1], x.size)

@@ -77,3 +77,17 @@ def test_a_faster_noisy_record_is_predicted_like_its_clean_drive() -> None:
     raw = free_run(xi, noisy, rate)
     assert np.max(np.abs(got - want)) < 0.005 * span
     assert np.max(np.abs(raw - want)) > 0.05 * span
+
+
+@pytest.mark.parametrize("where", [0, 57, -1])
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_a_non_finite_sample_is_refused_with_its_index(where: int, bad: float) -> None:
+    """A NaN at either end would spread over the whole signal through the line its ends are
+    extended by; anywhere, over the filter's length: refused, naming the first such sample.
+    With ``ratio == 1`` nothing is filtered and the signal is returned as it is."""
+    x = np.sin(np.linspace(0.0, 6.0, 200))
+    x[where] = bad
+    with pytest.raises(ValueError, match=f"index {where % x.size} of 200"):
+        band_limit(x, 0.25)
+    same = band_limit(x, 1.0)
+    assert np.array_equal(same, x, equal_nan=True)
