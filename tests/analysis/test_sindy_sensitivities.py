@@ -154,18 +154,19 @@ def test_the_output_residuals_jacobian_equals_central_differences(offset: bool) 
 
 
 def test_the_least_squares_jacobian_follows_the_parametrisation() -> None:
-    """Parameters ``p`` with ``xi = chain p + const``: the Jacobian in ``p`` is the chain rule's,
-    checked against central differences in ``p``."""
+    """Parameters ``p`` with ``xi = unpack(p)`` affine (ratios to the coefficients, and
+    ``xi_S`` moving with a third parameter too, as the bounded refit's growth rate does): the
+    Jacobian in ``p`` against central differences in ``p``."""
     runs = _runs()
     sup = np.array([1, 2, 3, 9])
-    chain = np.zeros((10, sup.size))
-    chain[sup, np.arange(sup.size)] = FULL[sup]
-    chain[1, 2] = -0.7 * FULL[3]  # xi_S also moves with the third parameter
 
     def unpack(p: np.ndarray) -> np.ndarray:
-        return FULL + chain @ (p - 1.0)
+        xi = FULL.copy()
+        xi[sup] = p * FULL[sup]
+        xi[1] -= 0.7 * FULL[3] * (p[2] - 1.0)
+        return xi
 
-    jac = least_squares_jacobian(runs, True, math.inf, unpack, chain)
+    jac = least_squares_jacobian(runs, True, math.inf, unpack, sup.size)
     assert callable(jac)
     p = np.array([1.02, 0.97, 1.01, 1.05])
     got = jac(p)

@@ -137,13 +137,16 @@ def least_squares_jacobian(
     offset: bool,
     limit_ue: float,
     unpack: Callable[[NDArray], NDArray],
-    chain: NDArray,
+    size: int,
 ) -> Callable[[NDArray], NDArray] | str:
-    """A ``jac`` for ``scipy.optimize.least_squares`` of :func:`output_residual` in parameters
-    ``p`` with ``xi = unpack(p)`` affine (``chain = dxi/dp``, ``10 x len(p)``): the exact one,
-    or ``"2-point"`` (forward differences) without numba."""
+    """A ``jac`` for ``scipy.optimize.least_squares`` of :func:`output_residual` in ``size``
+    parameters ``p`` with ``xi = unpack(p)`` affine: the exact one (the chain ``dxi/dp`` read
+    off ``unpack`` itself, column ``j`` as ``unpack(e_j) - unpack(0)``), or ``"2-point"``
+    (forward differences) without numba."""
     if kernel("free_run_sensitivities") is None:
         return "2-point"
+    zero = unpack(np.zeros(size))
+    chain = np.column_stack([unpack(np.eye(size)[j]) - zero for j in range(size)])
 
     def jac(p: NDArray) -> NDArray:
         J = output_jacobian(runs, unpack(p), offset, limit_ue, chain)
@@ -265,19 +268,12 @@ def refine_contracting(
     def residual(p: NDArray) -> NDArray:
         return output_residual(runs, unpack(p), offset, model.limit_ue)
 
-    chain = np.zeros((xi0.size, p0.size))
-    for j, k in enumerate(others):
-        chain[k, j] = scale[k]
-    chain[_S, -1] = scale[_S]
-    if _AS in others:
-        chain[_S, others.index(_AS)] = -scale[_AS] * rate_abs
-
     with np.errstate(over="ignore", invalid="ignore"):
         s0 = training_score(residual(p0), count)
         sol = least_squares(
             residual,
             p0,
-            jac=least_squares_jacobian(runs, offset, model.limit_ue, unpack, chain),
+            jac=least_squares_jacobian(runs, offset, model.limit_ue, unpack, p0.size),
             bounds=(lo, hi),
             method="trf",
             diff_step=1e-6,

@@ -328,8 +328,6 @@ def refine(
     def residual(z: NDArray) -> NDArray:
         return output_residual(runs, unpack(z), offset, model.limit_ue)
 
-    chain = np.zeros((xi0.size, sup.size))
-    chain[sup, np.arange(sup.size)] = xi0[sup]
     with np.errstate(over="ignore", invalid="ignore"):
         s0 = training_score(residual(np.ones(sup.size)), count)
         if sup.size == 0 or not math.isfinite(s0):
@@ -337,7 +335,7 @@ def refine(
         sol = least_squares(
             residual,
             np.ones(sup.size),
-            jac=least_squares_jacobian(runs, offset, model.limit_ue, unpack, chain),
+            jac=least_squares_jacobian(runs, offset, model.limit_ue, unpack, sup.size),
             method="trf",
             diff_step=1e-6,
             max_nfev=REFINE_NFEV,
