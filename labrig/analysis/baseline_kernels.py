@@ -550,7 +550,7 @@ def _free_run_sensitivities_py(
         b = xs + xds * d + xads * ad
         sa = abs(s)
         sg = 1.0 if s > 0 else (-1.0 if s < 0 else 0.0)
-        z = (b + 2.0 * c * sa) * h
+        z = b * h if c == 0.0 else (b + 2.0 * c * sa) * h  # as _free_run_py (no 0 * inf)
         if abs(z) < 1e-3:
             p1 = 1.0 + z / 2 + z * z / 6
             p2 = 0.5 + z / 6 + z * z / 24
@@ -598,6 +598,8 @@ def sindy_free_run_sensitivities(
     ten coefficients (``(samples, 10)``), the exact derivative of the recursion as computed
     (forward sensitivities; a held output's is 0); ``ds0``: the start's derivative.
     ``None`` without numba."""
+    if np.size(xi) != 10:
+        raise ValueError(f"the sensitivities need the 10 coefficients, got {np.size(xi)}")
     k = kernel("free_run_sensitivities")
     if k is None:
         return None

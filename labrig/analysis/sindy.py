@@ -69,9 +69,9 @@ integrated exactly,
 ``phi1(z) = (e^z - 1)/z``, ``phi2(z) = (e^z - 1 - z)/z^2``): exact without ``S|S|``, second order
 with it, and stable for any lag however fast. The record is preceded by the voltage it rested
 at (:attr:`~labrig.analysis.records.Record.rest_V`), where the strain starts at the equation's
-stable equilibrium (0 when there is none). A free run that leaves 100 x the training strain
-span is held there (diverged). A voltage sampled faster than the rate the model was identified
-at is band-limited to that rate first (:meth:`SindyBaseline.predict`).
+stable equilibrium (0 when there is none). A free run is clipped at 100 x the training
+strain span at each step (diverged). A voltage sampled faster than the rate the model was
+identified at is band-limited to that rate first (:meth:`SindyBaseline.predict`).
 :func:`free_run_sensitivities` returns the run with its derivative with respect to each
 coefficient (the forward sensitivities of the recursion, from the rest strain's,
 :func:`equilibrium_gradient`), for the output-error refinements of
@@ -276,9 +276,9 @@ def free_run(
 ) -> NDArray[np.float64]:
     """The strain (ue) of ``dS/dt = Theta(S, V, V') xi`` driven by ``v`` (V) sampled at
     ``rate_hz``, from rest at ``rest_V`` (module docstring: exponential Rosenbrock-Euler, one
-    step per sample, ``V`` linear between samples); held at ``+- limit_ue`` once it leaves it.
-    Compiled (:func:`labrig.analysis.baseline_kernels.sindy_free_run`); without numba
-    :func:`free_run_numpy`."""
+    step per sample, ``V`` linear between samples); clipped to ``+- limit_ue`` at each step
+    (it may come back). Compiled (:func:`labrig.analysis.baseline_kernels.sindy_free_run`);
+    without numba :func:`free_run_numpy`."""
     xi = np.asarray(xi, dtype=float)
     vp = np.concatenate(([float(rest_V)], np.asarray(v, dtype=float)))
     out = sindy_free_run(xi, vp, rate_hz, equilibrium(xi, vp[0]), limit_ue)

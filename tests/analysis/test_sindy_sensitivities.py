@@ -19,6 +19,7 @@ import math
 import numpy as np
 import pytest
 
+from labrig.analysis.baseline_kernels import sindy_free_run_sensitivities
 from labrig.analysis.diagnose.contraction import (
     least_squares_jacobian,
     output_jacobian,
@@ -173,3 +174,45 @@ def test_the_least_squares_jacobian_follows_the_parametrisation() -> None:
     for j in range(p.size):
         ref = _central(lambda q: output_residual(runs, unpack(q), True, math.inf), p, j)
         assert np.max(np.abs(got[:, j] - ref)) <= 1e-6 * np.max(np.abs(ref))
+
+
+def test_a_run_that_leaves_its_limit_and_comes_back() -> None:
+    """Clipped at each step, a run can come back from its limit: from there its sensitivities
+    start again from zero (the clipped value does not move with the coefficients); a kernel
+    that carried them through the clip would be wrong after the first return."""
+    xi = _only(**{"S": -50.0, "V": 50.0})
+    v = _drive(bias=0.0)
+    y, J = free_run_sensitivities(xi, v, RATE, 0.0, limit_ue=20.0)
+    held = np.abs(y) == 20.0
+    assert np.sum(np.diff(held.astype(int)) == -1) >= 3  # leaves the limit several times
+    for k in (1, 2):
+        ref = _central(lambda x: free_run_numpy(x, v, RATE, 0.0, 20.0), xi, k)
+        assert np.max(np.abs(J[:, k] - ref)) <= 1e-6 * np.max(np.abs(ref)), NAMES[k]
+
+
+def test_no_stable_root_with_a_negative_lag_has_no_gradient() -> None:
+    """``1 - S + S|S|``: ``b < 0`` yet no stable rest (the start is 0, fixed); only the check
+    that the start solves the rest equation tells."""
+    xi = _only(**{"1": 1.0, "S": -1.0, "S|S|": 1.0})
+    assert equilibrium(xi, 0.0) == 0.0
+    assert not equilibrium_gradient(xi, 0.0).any()
+
+
+def test_the_series_branch_under_a_large_forcing() -> None:
+    """``|z| < 1e-3`` everywhere with a forcing large against the lag, so the series
+    derivatives ``phi1'``, ``phi2'`` weigh in every column."""
+    xi = _only(**{"1": 200.0, "S": -0.5, "V": 20.0, "V'": 3.0, "V' S": 1e-4})
+    v = _drive(bias=0.0)
+    _, J = free_run_sensitivities(xi, v, RATE, 0.0)
+    for k in np.flatnonzero(xi):
+        ref = _central(lambda x: free_run_numpy(x, v, RATE, 0.0), xi, int(k))
+        assert np.max(np.abs(J[:, k] - ref)) <= 1e-6 * np.max(np.abs(ref)), NAMES[k]
+
+
+def test_the_kernel_needs_the_ten_coefficients() -> None:
+    """The compiled kernel writes one column per coefficient into a ten-column array (numba
+    does not check bounds): any other count is refused before it runs."""
+    vp = np.concatenate(([0.0], _drive()))
+    for n in (9, 11):
+        with pytest.raises(ValueError, match="10 coefficients"):
+            sindy_free_run_sensitivities(np.zeros(n), vp, RATE, 0.0, np.zeros(n), math.inf)

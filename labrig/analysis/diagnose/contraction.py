@@ -29,8 +29,9 @@ with bounds (trust region reflective).
 Both refinements run on the exact Jacobian of the output error (:func:`output_jacobian`): the
 forward sensitivities of the free run's recursion, ``J_{n+1} = (dS_{n+1}/dS_n) J_n +
 dS_{n+1}/dxi``, computed beside the run (:func:`~labrig.analysis.sindy.free_run_sensitivities`)
-and carried through the parametrisation by the chain rule. One sensitivity run costs about 1.4
-free runs, where forward differences cost one per parameter, and it carries no difference
+and carried through the parametrisation by the chain rule. One sensitivity run costs 1.5-1.7
+free runs (about 2 with the weighting of its rows), where forward differences cost one per
+parameter, and it carries no difference
 step's error (forward differences with a step of 1e-6 of each coefficient: 1e-9 to 1.4e-6 of
 each column on a ten-term test equation).
 """
