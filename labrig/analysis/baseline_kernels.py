@@ -80,9 +80,11 @@ def kernel(name: str) -> Any:
             )
         COMPILED[name] = None
         return None
-    global _psi
+    global _psi, _forcing
     if _psi is _psi_py:
         _psi = njit(cache=True)(_psi_py)
+    if _forcing is _forcing_py:
+        _forcing = njit(cache=True)(_forcing_py)
     fn = njit(cache=True)(globals()[f"_{name}_py"])
     COMPILED[name] = fn
     return fn
@@ -460,38 +462,43 @@ def residual_gram(
 # -- SINDy -------------------------------------------------------------------------------------
 
 
+def _forcing_py(xi: NDArray, v0: float, v1: float, rate: float) -> tuple:
+    # one interval of the free run, the library of labrig.analysis.sindy.LIBRARY in its order
+    # (1, S, V, V', |V'|, V' S, V' V, |V'| S, |V'| V, S|S|): V' = d, |V'| = ad, the forcing
+    # a0 at the interval's start and a1 at its end, and b, the coefficient of S
+    d = (v1 - v0) * rate
+    ad = abs(d)
+    a0 = 0.0 + xi[0] * 1.0
+    a0 = a0 + xi[2] * v0
+    a0 = a0 + xi[3] * d
+    a0 = a0 + xi[4] * ad
+    a0 = a0 + xi[6] * (d * v0)
+    a0 = a0 + xi[8] * (ad * v0)
+    a1 = 0.0 + xi[0] * 1.0
+    a1 = a1 + xi[2] * v1
+    a1 = a1 + xi[3] * d
+    a1 = a1 + xi[4] * ad
+    a1 = a1 + xi[6] * (d * v1)
+    a1 = a1 + xi[8] * (ad * v1)
+    b = 0.0 + xi[1] * 1.0
+    b = b + xi[5] * d
+    b = b + xi[7] * ad
+    return d, ad, a0, a1, b
+
+
+_forcing = _forcing_py
+
+
 def _free_run_py(
     xi: NDArray, vp: NDArray, rate: float, s0: float, limit: float, out: NDArray
 ) -> None:
-    # the library of labrig.analysis.sindy.LIBRARY, in its order:
-    # 1, S, V, V', |V'|, V' S, V' V, |V'| S, |V'| V, S|S|
-    x1, xs, xv, xd, xad, xds, xdv, xads, xadv, c = (
-        xi[0], xi[1], xi[2], xi[3], xi[4], xi[5], xi[6], xi[7], xi[8], xi[9],
-    )  # fmt: skip
+    c = xi[9]
     h = 1.0 / rate
     s = s0
     z_last = math.nan
     p1 = p2 = 0.0
     for i in range(vp.size - 1):
-        v0 = vp[i]
-        v1 = vp[i + 1]
-        d = (v1 - v0) * rate
-        ad = abs(d)
-        a0 = 0.0 + x1 * 1.0
-        a0 = a0 + xv * v0
-        a0 = a0 + xd * d
-        a0 = a0 + xad * ad
-        a0 = a0 + xdv * (d * v0)
-        a0 = a0 + xadv * (ad * v0)
-        a1 = 0.0 + x1 * 1.0
-        a1 = a1 + xv * v1
-        a1 = a1 + xd * d
-        a1 = a1 + xad * ad
-        a1 = a1 + xdv * (d * v1)
-        a1 = a1 + xadv * (ad * v1)
-        b = 0.0 + xs * 1.0
-        b = b + xds * d
-        b = b + xads * ad
+        _d, _ad, a0, a1, b = _forcing(xi, vp[i], vp[i + 1], rate)
         if c == 0.0:
             z = b * h
         else:
@@ -530,9 +537,7 @@ def _free_run_sensitivities_py(
     # z = (b + 2 c |S_n|) h; with Q = dS_{n+1}/dz = (p1 + z p1') S_n + h p1' g + h p2' (a1 - a0)
     # (p1', p2' the derivatives of the forms the recursion evaluates, series included),
     # J_{n+1} = dS_{n+1}/dS_n J_n + the step's own derivative of each coefficient.
-    x1, xs, xv, xd, xad, xds, xdv, xads, xadv, c = (
-        xi[0], xi[1], xi[2], xi[3], xi[4], xi[5], xi[6], xi[7], xi[8], xi[9],
-    )  # fmt: skip
+    c = xi[9]
     h = 1.0 / rate
     s = s0
     m = xi.size
@@ -543,11 +548,7 @@ def _free_run_sensitivities_py(
     for i in range(vp.size - 1):
         v0 = vp[i]
         v1 = vp[i + 1]
-        d = (v1 - v0) * rate
-        ad = abs(d)
-        a0 = x1 + xv * v0 + xd * d + xad * ad + xdv * (d * v0) + xadv * (ad * v0)
-        a1 = x1 + xv * v1 + xd * d + xad * ad + xdv * (d * v1) + xadv * (ad * v1)
-        b = xs + xds * d + xads * ad
+        d, ad, a0, a1, b = _forcing(xi, v0, v1, rate)
         sa = abs(s)
         sg = 1.0 if s > 0 else (-1.0 if s < 0 else 0.0)
         z = b * h if c == 0.0 else (b + 2.0 * c * sa) * h  # as _free_run_py (no 0 * inf)

@@ -6,10 +6,12 @@ noise the estimate is the one before the rule, to the bit."""
 from __future__ import annotations
 
 from pathlib import Path
+from unittest.mock import patch
 
 import numpy as np
 import pytest
 
+from labrig.analysis import spectra
 from labrig.analysis.diagnose import split_entries
 from labrig.analysis.diagnose.sparse_ode import decimation
 from labrig.analysis.records import Record
@@ -21,26 +23,10 @@ REAL = Path(__file__).resolve().parents[1] / "data" / "real"
 
 def _before_the_rule(voltage: np.ndarray, rate_hz: float) -> float | None:
     """The estimate as it was before the noise-floor rule (the whole rate spectrum's peak): the
-    reference the clean records must still give, bit for bit."""
-    v = np.asarray(voltage, dtype=float)
-    if v.size < 8 or not np.ptp(v) > 0:
-        return None
-    w = np.hanning(v.size)
-    mag_v = np.abs(np.fft.rfft((v - v.mean()) * w))
-    dv = np.diff(v, prepend=v[0])
-    mag_r = np.abs(np.fft.rfft((dv - dv.mean()) * w))
-    mag_r[0] = 0.0
-    k = int(np.argmax(mag_r))
-    if k == 0:
-        return None
-    mag = mag_v if 1 <= k < mag_v.size - 1 and mag_v[k] >= mag_v[k - 1 : k + 2].max() else mag_r
-    delta = 0.0
-    if 1 <= k < mag.size - 1 and np.all(mag[k - 1 : k + 2] > 0):
-        a, b, c = np.log(mag[k - 1 : k + 2])
-        den = a - 2 * b + c
-        if den < 0:
-            delta = 0.5 * (a - c) / den
-    return float((k + delta) * rate_hz / v.size)
+    reference the clean records must still give, bit for bit. With the ratio at 0 no bin is
+    below the floor (magnitudes are not negative), so the rule keeps every bin."""
+    with patch.object(spectra, "DRIVE_FLOOR_RATIO", 0.0):
+        return estimate_frequency_hz(voltage, rate_hz)
 
 
 def _smart_rows() -> np.ndarray:
