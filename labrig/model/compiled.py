@@ -27,6 +27,9 @@ import numpy as np
 from numba import njit
 
 _SQRT_PI = math.sqrt(math.pi)
+#: a relaxor mode's state below this magnitude is set to 0 at the end of each block of samples
+#: (:func:`_flush`)
+TINY_STATE = 1e-200
 
 
 # -- the hysteresis operator -------------------------------------------------------------------
@@ -240,6 +243,15 @@ def operator_pass(
 # -- the relaxor banks -------------------------------------------------------------------------
 
 
+@njit(cache=True, inline="always")
+def _flush(x: float) -> float:
+    """``x``, or 0 below :data:`TINY_STATE` in magnitude. A mode decaying through a rest (the
+    input exactly 0 for seconds) would otherwise spend thousands of samples among subnormal
+    numbers, on which the processor's arithmetic is many times slower; what a state under
+    1e-200 adds to an output is below the last bit of any output not itself below ~1e-180."""
+    return x if abs(x) >= TINY_STATE else 0.0
+
+
 @njit(cache=True)
 def bank_run(
     a: np.ndarray,
@@ -299,13 +311,19 @@ def mode_derivative(
     x = 0.0 + 0.0j
     z = 0.0 + 0.0j
     up = 0.0
-    for k in range(u.shape[0]):
-        uk = u[k]
-        z = a * z + da * x + db0 * up + db1 * uk
-        x = a * x + b0 * up + b1 * uk
-        for p in range(g.shape[0]):
-            out[k, p] += (g[p] * z).real
-        up = uk
+    n = u.shape[0]
+    k0 = 0
+    while k0 < n:  # blocks of eight samples, the states flushed after each (_flush)
+        for k in range(k0, min(k0 + 8, n)):
+            uk = u[k]
+            z = a * z + da * x + db0 * up + db1 * uk
+            x = a * x + b0 * up + b1 * uk
+            for p in range(g.shape[0]):
+                out[k, p] += (g[p] * z).real
+            up = uk
+        x = complex(_flush(x.real), _flush(x.imag))
+        z = complex(_flush(z.real), _flush(z.imag))
+        k0 += 8
 
 
 # -- the exact method's interpolant ------------------------------------------------------------
@@ -446,7 +464,7 @@ def _bank_block(a, cw, feed, ca, ccw, w, wc, u, n, up, y):  # fmt: skip
                 for t in range(nb):
                     wt = ai * wt + us[t]
                     acc[t] += cw[i] * wt
-                w[i] = wt
+                w[i] = _flush(wt)
         for i in range(ca.shape[0]):  # the complex modes (a few), in real arithmetic
             ar, ai = ca[i].real, ca[i].imag
             cr, ci = ccw[i].real, ccw[i].imag
@@ -454,7 +472,7 @@ def _bank_block(a, cw, feed, ca, ccw, w, wc, u, n, up, y):  # fmt: skip
             for t in range(nb):
                 wr, wi = ar * wr - ai * wi + us[t], ar * wi + ai * wr
                 acc[t] += cr * wr - ci * wi
-            wc[i] = complex(wr, wi)
+            wc[i] = complex(_flush(wr), _flush(wi))
         for t in range(nb):
             y[k + t] = acc[t] + feed * u[k + t]
         up = u[k + nb - 1]
@@ -478,7 +496,7 @@ def _sweep8s(a, cw, w, u0, u1, u2, u3, u4, u5, u6, u7):  # fmt: skip
         w5 = ai * w4 + u5
         w6 = ai * w5 + u6
         w7 = ai * w6 + u7
-        w[i] = w7
+        w[i] = _flush(w7)
         s0 += ci * w0
         s1 += ci * w1
         s2 += ci * w2
@@ -514,7 +532,7 @@ def _complex8(ca, ccw, wc, u0, u1, u2, u3, u4, u5, u6, u7):  # fmt: skip
         s6 += cr * wr - ci * wi
         wr, wi = ar * wr - ai * wi + u7, ar * wi + ai * wr
         s7 += cr * wr - ci * wi
-        wc[i] = complex(wr, wi)
+        wc[i] = complex(_flush(wr), _flush(wi))
     return s0, s1, s2, s3, s4, s5, s6, s7
 
 
