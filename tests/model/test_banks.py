@@ -51,8 +51,8 @@ def test_compiled_bank_equals_numpy_blocks(tau: float, lam: float, hold: str) ->
 def test_a_rest_leaves_no_subnormal_state(tau: float, lam: float, hold: str) -> None:
     # a drive, then 30 s at exactly 0 V: the modes decay through the rest, and a mode whose
     # state reaches the subnormal range stays there for thousands of samples (slow arithmetic).
-    # The compiled banks set a state under TINY_STATE to 0 at the end of each block; the numpy
-    # path, which does not, shows that this input gets there
+    # The compiled banks set a state under TINY_STATE to 0 every 64 samples; the numpy path,
+    # which does not, shows that this input gets there
     from labrig.model.compiled import TINY_STATE  # imports numba
 
     bank = Relaxor(tau, lam).bank(1e3, hold)
