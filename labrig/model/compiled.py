@@ -246,8 +246,8 @@ def operator_pass(
 
 @njit(cache=True, inline="always")
 def _flush(x: float) -> float:
-    """``x``, or 0 below :data:`TINY_STATE` in magnitude."""
-    return x if abs(x) >= TINY_STATE else 0.0
+    """``x``, or 0 below :data:`TINY_STATE` in magnitude (a NaN stays NaN)."""
+    return 0.0 if abs(x) < TINY_STATE else x
 
 
 @njit(cache=True)

@@ -70,6 +70,20 @@ def test_a_rest_leaves_no_subnormal_state(tau: float, lam: float, hold: str) -> 
     assert tiny_parts(s1) == 0
 
 
+@needs_numba
+def test_a_nan_input_is_not_flushed_away() -> None:
+    # a NaN in the input makes every later output NaN (the states carry it; the numpy path's
+    # blocks make all of them NaN): the compiled banks' flush of tiny states, every 64 samples,
+    # must not set a NaN state to 0 and hand finite outputs back after it
+    bank = Relaxor(2e-3, 1.35).bank(1e3, "linear")
+    v = np.full(300, 50.0)
+    v[10] = np.nan
+    y1, _ = run_bank(bank, v, engine="compiled")
+    y0, _ = run_bank(bank, v, engine="numpy")
+    assert np.all(np.isnan(y0[10:]))
+    assert np.all(np.isfinite(y1[:10])) and np.all(np.isnan(y1[10:]))
+
+
 def test_run_bank_multi_against_a_plain_loop() -> None:
     # columns and output rows against BankStepper, an independent per-sample loop: the rows'
     # weights are put into banks of their own
