@@ -253,12 +253,12 @@ def _flush(x: float) -> float:
 @njit(cache=True)
 def _flush_states(w: np.ndarray, wc: np.ndarray) -> None:
     """A bank's states under :data:`TINY_STATE` (each part of a complex one) set to 0, every
-    ``FLUSH_MASK + 1`` samples. A mode decaying through a rest (the input exactly 0 for
-    seconds) would otherwise spend thousands of samples among subnormal numbers, on which the
-    processor's arithmetic is many times slower; what a state under 1e-200 adds to an output
-    is below the last bit of any output not itself below ~1e-180. (Checked every 64 samples,
-    not in the sweeps: a compare in the vectorised sweep costs more than the rests save on an
-    input without rests.)"""
+    ``FLUSH_MASK + 1`` samples of a call and at its end. A mode decaying through a rest (its
+    input exactly 0 for seconds: the relaxors act on ``v - rest_V``) would otherwise spend
+    thousands of samples among subnormal numbers, on which the processor's arithmetic is many
+    times slower; what a state under 1e-200 adds to an output is below the last bit of any
+    output not itself below ~1e-180. (Checked outside the sweeps: a compare in the vectorised
+    sweep costs more than the check every 64 samples.)"""
     for i in range(w.shape[0]):
         w[i] = _flush(w[i])
     for i in range(wc.shape[0]):
@@ -492,6 +492,7 @@ def _bank_block(a, cw, feed, ca, ccw, w, wc, u, n, up, y):  # fmt: skip
         k += nb
         if k & FLUSH_MASK == 0:
             _flush_states(w, wc)
+    _flush_states(w, wc)  # and at the end: a stream of short calls flushes too
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
@@ -677,6 +678,8 @@ def model_run(
         if k & FLUSH_MASK == 0:
             _flush_states(wt, wct)
             _flush_states(wd, wcd)
+    _flush_states(wt, wct)  # and at the end: a stream of short calls flushes too
+    _flush_states(wd, wcd)
     ups[0], ups[1] = up_t, up_d
     rx, ry = np.empty(top), np.empty(top)
     _copy_rows(sx, rx, top)

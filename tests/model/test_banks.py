@@ -45,6 +45,14 @@ def test_compiled_bank_equals_numpy_blocks(tau: float, lam: float, hold: str) ->
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.max(np.abs(b)))
 
 
+def _tiny_parts(state) -> int:
+    """How many parts (real, imaginary) of the arrays in ``state`` are nonzero and under
+    1e-200 in magnitude."""
+    x = np.concatenate([np.ravel(np.asarray(g)).astype(complex) for g in state])
+    parts = np.abs(np.concatenate([x.real, x.imag]))
+    return int(np.sum((parts > 0) & (parts < 1e-200)))
+
+
 @needs_numba
 @pytest.mark.parametrize("hold", ["zoh", "linear"])
 @pytest.mark.parametrize(("tau", "lam"), [(15.5e-5, 0.15), (2e-3, 1.35), (1e3, 0.02)])
@@ -61,13 +69,34 @@ def test_a_rest_leaves_no_subnormal_state(tau: float, lam: float, hold: str) -> 
     y0, s0 = run_bank(bank, v, engine="numpy")
     np.testing.assert_allclose(y1, y0, rtol=0, atol=1e-12 * 100)
 
-    def tiny_parts(state: list) -> int:
-        x = np.concatenate([np.ravel(np.asarray(g)).astype(complex) for g in state])
-        parts = np.abs(np.concatenate([x.real, x.imag]))
-        return int(np.sum((parts > 0) & (parts < TINY_STATE)))
+    assert TINY_STATE == 1e-200  # the bound _tiny_parts counts under
+    assert _tiny_parts(s0) > 0
+    assert _tiny_parts(s1) == 0
 
-    assert tiny_parts(s0) > 0
-    assert tiny_parts(s1) == 0
+
+@needs_numba
+def test_short_calls_flush_too() -> None:
+    # the flush counts the samples of each call; a stream of calls shorter than 64 samples
+    # (a live view's frames) is flushed at the end of each call: the banks through run_bank,
+    # and the fused model through ModelStream. The numpy path, which never flushes, shows that
+    # this input takes the paper's G_t bank into the subnormal range
+    from labrig.model import PAPER_TABLE1, DynamicHysteresisModel, ModelStream
+
+    v = np.concatenate([unipolar_sweep(3000, 1e3, 10.0, 100.0), np.zeros(30_000)])
+    chunks = np.split(v, np.arange(50, v.size, 50))
+    model = DynamicHysteresisModel(PAPER_TABLE1)
+    bank = model.g_t.bank(1e3, "zoh")
+    _, reference = run_bank(bank, v, engine="numpy")
+    assert _tiny_parts(reference) > 0
+    state, up = None, 0.0
+    for c in chunks:
+        _, state = run_bank(bank, c, state, up, engine="compiled")
+        up = float(c[-1])
+    assert _tiny_parts(state) == 0
+    fused = ModelStream(model, 1e3)
+    for c in chunks:
+        fused.process(c)
+    assert _tiny_parts([fused._bt[5], fused._bt[6], fused._bd[5], fused._bd[6]]) == 0
 
 
 @needs_numba
