@@ -3,6 +3,7 @@ protocols. (Fixtures built on them are in ``conftest.py``.)"""
 
 from __future__ import annotations
 
+import resource
 import subprocess
 import sys
 from pathlib import Path
@@ -230,3 +231,9 @@ def planted_records(
         Record(r.name, fs, r.time_s, r.voltage_V, s, {}, "zoh", dict(meta))
         for r, s in zip(recs, noisy, strict=True)
     ]
+
+
+def children_cpu_s() -> float:
+    """CPU seconds (user + system) of this process's children that have been waited for."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime

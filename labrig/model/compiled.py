@@ -250,6 +250,12 @@ def _flush(x: float) -> float:
     return 0.0 if abs(x) < TINY_STATE else x
 
 
+@njit(cache=True, inline="always")
+def _flush_complex(z: complex) -> complex:
+    """:func:`_flush` of each part of ``z``."""
+    return complex(_flush(z.real), _flush(z.imag))
+
+
 @njit(cache=True)
 def _flush_states(w: np.ndarray, wc: np.ndarray) -> None:
     """A bank's states under :data:`TINY_STATE` (each part of a complex one) set to 0, every
@@ -262,7 +268,7 @@ def _flush_states(w: np.ndarray, wc: np.ndarray) -> None:
     for i in range(w.shape[0]):
         w[i] = _flush(w[i])
     for i in range(wc.shape[0]):
-        wc[i] = complex(_flush(wc[i].real), _flush(wc[i].imag))
+        wc[i] = _flush_complex(wc[i])
 
 
 @njit(cache=True)
@@ -334,8 +340,8 @@ def mode_derivative(
             for p in range(g.shape[0]):
                 out[k, p] += (g[p] * z).real
             up = uk
-        x = complex(_flush(x.real), _flush(x.imag))
-        z = complex(_flush(z.real), _flush(z.imag))
+        x = _flush_complex(x)
+        z = _flush_complex(z)
         k0 += FLUSH_MASK + 1
 
 

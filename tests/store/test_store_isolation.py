@@ -14,7 +14,6 @@
 from __future__ import annotations
 
 import os
-import resource
 import signal
 import subprocess
 import sys
@@ -33,7 +32,7 @@ from labrig.store.format import SEAL_ATTR
 from labrig.store.isolated import IsolatedReadError, call_isolated
 from labrig.store.writer import seal_all
 
-from helpers import invoke
+from helpers import children_cpu_s, invoke
 
 EXE = Path(sys.executable).parent / "labrig"
 #: h5py reading every attribute and dataset of a file (the precondition: does libhdf5 loop?)
@@ -174,12 +173,6 @@ def _value(n: int) -> dict:
 def test_a_crashing_reader_is_reported_not_fatal():
     with pytest.raises(IsolatedReadError, match="crashed reading it \\(SIGSEGV\\)"):
         call_isolated(_crash, size_bytes=0)
-
-
-def children_cpu_s() -> float:
-    """CPU seconds (user + system) of this process's children that have been waited for."""
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
 
 
 def test_a_looping_reader_is_stopped_by_its_cpu_time():
