@@ -4,12 +4,14 @@ tests/analysis, tests/diagnose, ...). Helpers that are not fixtures are in ``hel
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
-from helpers import TINY, run_protocol
+from helpers import ROOT, TINY, run_protocol
 
 #: test files that take the longest (CPU seconds measured on the suite, cold caches for mypy),
 #: handed out first: with ``--dist loadfile`` a file runs on one worker, and a long file started
@@ -35,9 +37,59 @@ def pytest_configure(config: pytest.Config) -> None:
     """Lets this session and the commands its tests start cache bytecode even where the
     environment sets ``PYTHONDONTWRITEBYTECODE``: the tests start hundreds of ``labrig``
     processes, and each would otherwise compile labrig's ~200 modules from source (about
-    0.25 s of CPU per process). The caches are ``__pycache__`` folders, ignored by git."""
+    0.25 s of CPU per process). The caches are ``__pycache__`` folders, ignored by git.
+
+    In the controller of a parallel session, also fills numba's cache when it is empty
+    (:func:`compile_kernels_once`)."""
     os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
     sys.dont_write_bytecode = False
+    if not hasattr(config, "workerinput") and config.getoption("numprocesses", None):
+        compile_kernels_once()
+
+
+#: the modules of numba kernels, each cached in the ``__pycache__`` beside it
+KERNEL_MODULES = (
+    ROOT / "labrig" / "model" / "compiled.py",
+    ROOT / "labrig" / "analysis" / "baseline_kernels.py",
+)
+
+
+def kernel_cache_is_cold(modules: tuple[Path, ...] = KERNEL_MODULES) -> bool:
+    """Whether one of ``modules`` has no numba index (``*.nbi``) at least as new as its
+    source: a new checkout, or a kernel edited since it was last compiled."""
+    for src in modules:
+        made = src.stat().st_mtime
+        index = (src.parent / "__pycache__").glob(f"{src.stem}.*.nbi")
+        if not any(f.stat().st_mtime >= made for f in index):
+            return True
+    return False
+
+
+def compile_kernels_once(timeout_s: float = 300.0) -> None:
+    """Before the workers start, compile the numba kernels into their cache when it is cold:
+    ``tests/compile_kernels.py``'s two groups at once (about 11 s of wall clock on 2 cores in
+    a new checkout), instead of every worker and every ``labrig`` command the first tests
+    start compiling the same kernels at the same time. Only a warm-up: a failure or a
+    timeout here leaves the kernels to be compiled where they are first used."""
+    if not kernel_cache_is_cold():
+        return
+    script = ROOT / "tests" / "compile_kernels.py"
+    procs = [
+        subprocess.Popen(
+            [sys.executable, str(script), group],
+            cwd=ROOT,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        for group in ("stream_and_peers", "fit")
+    ]
+    deadline = time.monotonic() + timeout_s
+    for p in procs:
+        try:
+            p.wait(timeout=max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -1,0 +1,67 @@
+"""Compile labrig's numba kernels into their on-disk cache before a parallel test session.
+
+In a new checkout numba's cache (``__pycache__`` beside each kernel's module) is empty, and
+every process that first needs a kernel compiles it: the test workers and the ``labrig``
+commands the tests start did so at the same time, compiling the same kernels several times
+over. ``tests/conftest.py`` runs this file twice at once before the workers start (one process
+per group below, each a small workload that reaches its group's kernels), so that the workers
+load machine code instead. It is only a warm-up: a kernel it misses is compiled where it is
+first used, as before.
+
+Usage: ``python tests/compile_kernels.py stream_and_peers|fit``.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+RATE = 500.0
+
+
+def _records(strain_of):
+    """Two short unipolar sines (100 V 1 Hz, 50 V 5 Hz; 1 s at 500 Hz) as fit records."""
+    from labrig.analysis.records import Record
+
+    rng = np.random.default_rng(1)
+    out = []
+    for a, f in [(100, 1), (50, 5)]:
+        t = np.arange(round(RATE)) / RATE
+        v = a / 2 * (1 - np.cos(2 * np.pi * f * t))
+        s = strain_of(v) + rng.normal(0, 1.0, v.size)
+        out.append(Record(f"s{a}_{f}", RATE, t, v, s, {}, "zoh", {"frequency_hz": f}))
+    return out
+
+
+def stream_and_peers() -> None:
+    """The simulator's streaming kernels, both prediction methods, and the peers' fits
+    (Prandtl-Ishlinskii, Bouc-Wen, SINDy)."""
+    from labrig.analysis.baselines import fit_baseline
+    from labrig.model import PAPER_TABLE1, DynamicHysteresisModel
+    from labrig.model.warm import warm
+
+    warm()
+    records = _records(lambda v: 0.9 * v + 0.002 * v * v)
+    DynamicHysteresisModel(PAPER_TABLE1).predict(records[0].voltage_V, RATE, method="exact")
+    for kind in ("prandtl_ishlinskii", "bouc_wen", "sindy"):
+        fit_baseline(records, kind, heldout=False)
+
+
+def fit() -> None:
+    """Our model's fit with its sensitivities, and the compiled effects."""
+    from labrig.analysis.fit import fit_model
+    from labrig.model.effects.amplifier_bandwidth import charging_lowpass
+    from labrig.model.effects.rate_hysteresis import rate_hysteresis_state
+
+    records = _records(lambda v: 0.9 * v + 0.002 * v * v)
+    fit_model(records, heldout=False)
+    v = records[0].voltage_V
+    charging_lowpass(v, 1e-3, 0.1, 100.0, RATE)
+    rate_hysteresis_state(v, 0.1, 0.01, 0.1, RATE)
+
+
+GROUPS = {"stream_and_peers": stream_and_peers, "fit": fit}
+
+if __name__ == "__main__":
+    GROUPS[sys.argv[1]]()

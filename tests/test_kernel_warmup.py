@@ -1,0 +1,49 @@
+"""The test session's numba warm-up (tests/conftest.py): when it runs, and that its workload
+reaches the kernels it is there for."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import KERNEL_MODULES, kernel_cache_is_cold
+
+from helpers import ROOT
+
+
+def test_cold_without_an_index_warm_with_a_newer_one_cold_again_after_an_edit(tmp_path: Path):
+    src = tmp_path / "compiled.py"
+    src.write_text("x = 1\n")
+    os.utime(src, (1000, 1000))
+    assert kernel_cache_is_cold((src,))
+    cache = tmp_path / "__pycache__"
+    cache.mkdir()
+    index = cache / "compiled.kernel-10.py311.nbi"
+    index.write_bytes(b"")
+    os.utime(index, (999, 999))  # older than its source: numba recompiles
+    assert kernel_cache_is_cold((src,))
+    os.utime(index, (1000, 1000))
+    assert not kernel_cache_is_cold((src,))
+    os.utime(src, (1001, 1001))  # the kernel edited since
+    assert kernel_cache_is_cold((src,))
+    other = cache / "baseline_kernels.k-3.py311.nbi"  # another module's index does not count
+    other.write_bytes(b"")
+    assert kernel_cache_is_cold((src,))
+
+
+@pytest.mark.slow  # compiles every kernel it reaches from nothing: about 22 s of CPU
+def test_the_warm_up_fills_an_empty_cache(tmp_path: Path):
+    """Both groups, with numba's cache sent to an empty folder (``NUMBA_CACHE_DIR``), leave
+    indexes of both kernel modules' kernels there."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    for group in ("stream_and_peers", "fit"):
+        res = subprocess.run(
+            [sys.executable, str(ROOT / "tests" / "compile_kernels.py"), group],
+            cwd=ROOT, env=env, capture_output=True, text=True, timeout=240,
+        )  # fmt: skip
+        assert res.returncode == 0, res.stderr
+    for src in KERNEL_MODULES:
+        assert list(tmp_path.rglob(f"{src.stem}.*.nbi")), src.name
