@@ -179,6 +179,17 @@ class BenchConfig(_Cfg):
     def effect(self, kind: type):
         return next((e for e in self.effects if isinstance(e, kind)), None)
 
+    def filters(self, conditioner_filter_hz: float = 0.0) -> bool:
+        """Whether this bench runs scipy.signal's filters: with an effect on, a truth other than
+        the paper's model, or the conditioner's low-pass on at power-on or set to
+        ``conditioner_filter_hz`` later. The paper's truth with none of them needs none."""
+        return (
+            bool(self.effects)
+            or self.truth.preset != "paper"
+            or self.gauge.filter_hz > 0
+            or conditioner_filter_hz > 0
+        )
+
     @classmethod
     def ideal(cls, truth: str = "paper") -> BenchConfig:
         """Every non-ideality off: no noise, offset, quantisation, current limit or filter."""
@@ -415,10 +426,13 @@ class VirtualBench:
         k = 1.0 - math.exp(-1.0 / (fs * self.config.amplifier.avg_tau_s))
         i_unl = np.abs(C * fs * np.diff(cmd, prepend=a.v_out))
         if not a.folded and float(np.max(i_unl)) <= i_pk:
-            # vectorised when nothing limits: below the peak rating, average never above its own
-            from scipy.signal import lfilter
+            # vectorised when nothing limits: below the peak rating, average never above its own.
+            # The average, i_avg[n] = (1 - k) i_avg[n-1] + k |i[n]|, is one first-order mode of
+            # the model's modal bank (compiled; scipy.signal's lfilter costs a second of import)
+            from labrig.model.modal import DiscreteBank, run_bank
 
-            ema, _ = lfilter([k], [1, -(1 - k)], i_unl, zi=[(1 - k) * a.i_avg])
+            ema_bank = DiscreteBank.from_arrays([1.0 - k], [0.0], [k], [1.0])
+            ema, _ = run_bank(ema_bank, i_unl, state=[np.array([a.i_avg])])
             if float(np.max(ema)) <= i_av:
                 a.i_avg = float(ema[-1])
                 return cmd, False, False

@@ -222,11 +222,11 @@ class ButterLowpass:
     Nyquist), run with ``lfilter`` state. ``cutoff_hz <= 0`` means off (identity)."""
 
     def __init__(self, cutoff_hz: float, order: int, rate_hz: float):
-        from scipy import signal
-
         self.cutoff_hz, self.order = float(cutoff_hz), int(order)
         self.on = self.cutoff_hz > 0
-        if self.on:
+        if self.on:  # scipy.signal only when on: a second of import CPU
+            from scipy import signal
+
             b, a = signal.butter(self.order, 2 * math.pi * self.cutoff_hz, analog=True)
             bd, ad, _ = signal.cont2discrete((b, a), 1.0 / rate_hz, method="foh")
             self.b = np.atleast_1d(np.squeeze(bd)) / ad[0]
@@ -234,10 +234,10 @@ class ButterLowpass:
             self.zi: NDArray | None = None
 
     def process(self, x: NDArray) -> NDArray:
-        from scipy import signal
-
         if not self.on or x.size == 0:
             return x
+        from scipy import signal
+
         if self.zi is None:  # start in steady state with the first value
             self.zi = signal.lfilter_zi(self.b, self.a) * x[0]
         y, self.zi = signal.lfilter(self.b, self.a, x, zi=self.zi)

@@ -64,8 +64,13 @@ class Simulators:
         axis: str = "A",
         channel: str = "1",
         unit: int = 1,
+        conditioner_filter_hz: float | None = None,
     ):
         self.bench = VirtualBench(config, limits, seed)
+        # a client may switch the conditioner's low-pass on at any time (None: unknown)
+        self._filters = conditioner_filter_hz is None or self.bench.config.filters(
+            conditioner_filter_hz
+        )
         ports = ports or {}
         self.gcs = GCSServer(self.bench, port=ports.get("gcs", 0), axis=axis, channel=channel)
         self.modbus_tcp = ModbusConditionerServer(
@@ -79,9 +84,12 @@ class Simulators:
         self._clock_stop = threading.Event()
 
     def start(self) -> Simulators:
-        # the truth's compiled kernels loaded before any server answers (a first block must
-        # not hold the bench past a driver's answer timeout)
+        # the truth's compiled kernels, and scipy.signal when the bench filters (a second of
+        # import CPU), loaded before any server answers: a first block or a filter setting
+        # must not hold the bench past a driver's answer timeout
         warm_model()
+        if self._filters:
+            import scipy.signal  # noqa: F401
         kinds = {"gcs": self.gcs, "modbus_tcp": self.modbus_tcp, "modbus_rtu": self.modbus_rtu}
         try:
             for kind, srv in kinds.items():
@@ -186,6 +194,7 @@ def start_for_rig(spec: RigSpec, seed: int | None) -> Simulators:
             axis=getattr(amp_s, "axis", "A"),
             channel=getattr(amp_s, "channel", "1"),
             unit=getattr(spec.settings["conditioner"], "unit", 1),
+            conditioner_filter_hz=float(getattr(spec.settings["conditioner"], "filter_hz", 0)),
         ).start()
     except SimulatorPortError as e:
         raise InputFileError([InputIssue(spec.source, None, e.field, e.detail)]) from None

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -261,3 +263,58 @@ def test_rate_change_rebuilds_the_chain_at_rest():
     assert b.rate_hz == 2000.0
     out = b.step(np.zeros(10))
     assert np.all(np.isfinite(out["gauge"]))
+
+
+def test_the_average_current_below_the_peak_rating_is_its_first_order_recursion():
+    """Below the peak rating the amplifier's average current is computed block by block by the
+    model's modal bank; a plain loop of ``i_avg = (1 - k) i_avg + k |C fs dv|`` (k from the
+    averaging time) over the same blocks is the reference (1e-12 relative)."""
+    bench = VirtualBench(BenchConfig(), rate_hz=10_000.0)
+    amp = bench.config.amplifier
+    fs, C = bench.rate_hz, bench.c_eff_F
+    k = 1.0 - math.exp(-1.0 / (fs * amp.avg_tau_s))
+    i_peak, _ = bench.current_ratings_A
+    f = 0.6 * i_peak / (C * 2 * np.pi * 50.0)  # a 50 V sine at 60 % of the peak current
+    cmd = unipolar(100.0, f, fs, 0.3)
+    ref, v_prev = 0.0, 0.0
+    for block in np.array_split(cmd, [1000, 1999]):
+        out, limited, _ = bench._slew(block)
+        assert not limited and np.array_equal(out, block)
+        for v in block:
+            ref = (1 - k) * ref + k * abs(C * fs * (v - v_prev))
+            v_prev = v
+        bench.amp.v_out = float(block[-1])  # as the bench's step leaves it
+        assert bench.amp.i_avg == pytest.approx(ref, rel=1e-12)
+    assert ref > 0.1 * i_peak  # the average moved: the comparison is not of zeros
+
+
+def test_which_benches_load_scipy_signal():
+    """``BenchConfig.filters``: scipy.signal (a second of import CPU) only for a bench with an
+    effect, a truth other than the paper's, or the conditioner's low-pass on (1 Hz is on)."""
+    assert not BenchConfig().filters()
+    assert not BenchConfig().filters(0)
+    assert BenchConfig().filters(1)
+    assert BenchConfig(gauge={"filter_hz": 1}).filters()
+    assert BenchConfig(truth={"preset": "hybrid"}).filters()
+    assert BenchConfig(effects=[{"name": "mains_pickup"}]).filters()
+
+
+def test_simulators_load_scipy_signal_before_answering_only_when_the_bench_filters():
+    """A paper-truth bench without a filter runs blocks through the current limit without
+    scipy.signal; one whose rig sets the conditioner's low-pass has it loaded at start, before
+    any server answers (its import must not delay a reply past a driver's timeout)."""
+    code = (
+        "import sys, numpy as np\n"
+        "from labrig.drivers.sim.bench import BenchConfig\n"
+        "from labrig.drivers.sim.serve import Simulators\n"
+        "for hz in (0.0, 1.0):\n"
+        "    sims = Simulators(BenchConfig(), conditioner_filter_hz=hz).start()\n"
+        "    try:\n"
+        "        sims.bench.step(np.linspace(0.0, 5.0, 3000))\n"
+        "    finally:\n"
+        "        sims.stop()\n"
+        "    print('scipy.signal' in sys.modules)\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.split() == ["False", "True"]
