@@ -431,10 +431,10 @@ class VirtualBench:
             # the model's modal bank (compiled; scipy.signal's lfilter costs a second of import)
             from labrig.model.modal import DiscreteBank, run_bank
 
-            ema_bank = DiscreteBank.from_arrays([1.0 - k], [0.0], [k], [1.0])
-            ema, _ = run_bank(ema_bank, i_unl, state=[np.array([a.i_avg])])
-            if float(np.max(ema)) <= i_av:
-                a.i_avg = float(ema[-1])
+            average = DiscreteBank.from_arrays([1.0 - k], [0.0], [k], [1.0])
+            i_avg, _ = run_bank(average, i_unl, state=[np.array([a.i_avg])])
+            if float(np.max(i_avg)) <= i_av:
+                a.i_avg = float(i_avg[-1])
                 return cmd, False, False
         out = np.empty(cmd.size)
         v, ema, folded, limited, now = a.v_out, a.i_avg, a.folded, False, False
