@@ -43,7 +43,8 @@ def pytest_configure(config: pytest.Config) -> None:
     (:func:`compile_kernels_once`)."""
     os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
     sys.dont_write_bytecode = False
-    if not hasattr(config, "workerinput") and config.getoption("numprocesses", None):
+    parallel = config.getoption("numprocesses", None) and not config.getoption("collectonly")
+    if parallel and not hasattr(config, "workerinput"):
         compile_kernels_once()
 
 
@@ -54,12 +55,23 @@ KERNEL_MODULES = (
 )
 
 
-def kernel_cache_is_cold(modules: tuple[Path, ...] = KERNEL_MODULES) -> bool:
-    """Whether one of ``modules`` has no numba index (``*.nbi``) at least as new as its
-    source: a new checkout, or a kernel edited since it was last compiled."""
+def kernel_cache_is_cold(
+    modules: tuple[Path, ...] = KERNEL_MODULES, cache_dir: str | None = None
+) -> bool:
+    """Whether one of ``modules`` has no numba index for this Python (``*.py311.nbi``) at least
+    as new as its source: a new checkout, or a kernel edited since it was last compiled. The
+    indexes are in the ``__pycache__`` beside each module, or anywhere under ``cache_dir``
+    (default ``$NUMBA_CACHE_DIR``) when that is set, as numba itself places them."""
+    cache_dir = os.environ.get("NUMBA_CACHE_DIR") if cache_dir is None else cache_dir
+    tag = f"py{sys.version_info.major}{sys.version_info.minor}"
     for src in modules:
         made = src.stat().st_mtime
-        index = (src.parent / "__pycache__").glob(f"{src.stem}.*.nbi")
+        pattern = f"{src.stem}.*.{tag}.nbi"
+        index = (
+            Path(cache_dir).rglob(pattern)
+            if cache_dir
+            else (src.parent / "__pycache__").glob(pattern)
+        )
         if not any(f.stat().st_mtime >= made for f in index):
             return True
     return False
@@ -84,12 +96,16 @@ def compile_kernels_once(timeout_s: float = 300.0) -> None:
         for group in ("stream_and_peers", "fit")
     ]
     deadline = time.monotonic() + timeout_s
-    for p in procs:
-        try:
+    try:
+        for p in procs:
             p.wait(timeout=max(0.0, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
+    except subprocess.TimeoutExpired:
+        pass
+    finally:  # past the timeout, or the session interrupted: none is left running
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

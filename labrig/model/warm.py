@@ -22,6 +22,7 @@ def warm() -> bool:
     import numpy as np
 
     from labrig.model.dynamic import DynamicHysteresisModel
+    from labrig.model.modal import DiscreteBank, run_bank
     from labrig.model.params import PAPER_TABLE1
 
     if kernels() is None:
@@ -29,4 +30,6 @@ def warm() -> bool:
     model = DynamicHysteresisModel(PAPER_TABLE1)
     model.stream(1000.0).process(np.zeros(8))
     model.operator.apply(np.zeros(8))
+    # a bank run on its own: the simulated amplifier's average current is one such mode
+    run_bank(DiscreteBank.from_arrays([0.5], [0.0], [0.5], [1.0]), np.zeros(8))
     return True
