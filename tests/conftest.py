@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import pytest
+from compile_kernels import GROUPS
 
 from helpers import ROOT, TINY, run_protocol
 
@@ -93,7 +94,7 @@ def compile_kernels_once(timeout_s: float = 300.0) -> None:
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
         )
-        for group in ("stream_and_peers", "fit")
+        for group in GROUPS
     ]
     deadline = time.monotonic() + timeout_s
     try:

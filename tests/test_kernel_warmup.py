@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from compile_kernels import GROUPS
 from conftest import KERNEL_MODULES, kernel_cache_is_cold
 
 from helpers import ROOT
@@ -63,7 +64,7 @@ def test_the_warm_up_fills_an_empty_cache(tmp_path: Path):
     """Both groups, with numba's cache sent to an empty folder (``NUMBA_CACHE_DIR``), leave
     indexes of both kernel modules' kernels there."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
-    for group in ("stream_and_peers", "fit"):
+    for group in GROUPS:
         res = subprocess.run(
             [sys.executable, str(ROOT / "tests" / "compile_kernels.py"), group],
             cwd=ROOT, env=env, capture_output=True, text=True, timeout=240,

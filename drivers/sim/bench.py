@@ -34,11 +34,12 @@ sample rate rebuilds the discretised physics with the actuator at rest.
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from labrig.drivers.sim.effects import (
@@ -79,6 +80,9 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from labrig.rig.instruments import TEMPERATURE_V_PER_DEGC
 from labrig.rig.limits import RigLimits
+
+if TYPE_CHECKING:
+    from labrig.model.modal import DiscreteBank
 
 # -- configuration (the rig file's ``bench:`` section) ---------------------------------------
 
@@ -248,6 +252,17 @@ class _Chain:
     thermal: Thermal | None
     retardation: Retardation | None = None
     extra: dict = field(default_factory=dict)
+
+
+@functools.lru_cache(maxsize=8)
+def average_current_bank(k: float) -> DiscreteBank:
+    """The amplifier's average current, ``i_avg[n] = (1 - k) i_avg[n-1] + k |i[n]|``, as one
+    first-order mode of the model's modal bank (compiled; scipy.signal's ``lfilter`` costs a
+    second of import). Kept per ``k`` (a rate and an averaging time): the bank keeps the forms
+    it derives for its runs, and a run has hundreds of blocks."""
+    from labrig.model.modal import DiscreteBank
+
+    return DiscreteBank.from_arrays([1.0 - k], [0.0], [k], [1.0])
 
 
 class VirtualBench:
@@ -426,13 +441,10 @@ class VirtualBench:
         k = 1.0 - math.exp(-1.0 / (fs * self.config.amplifier.avg_tau_s))
         i_unl = np.abs(C * fs * np.diff(cmd, prepend=a.v_out))
         if not a.folded and float(np.max(i_unl)) <= i_pk:
-            # vectorised when nothing limits: below the peak rating, average never above its own.
-            # The average, i_avg[n] = (1 - k) i_avg[n-1] + k |i[n]|, is one first-order mode of
-            # the model's modal bank (compiled; scipy.signal's lfilter costs a second of import)
-            from labrig.model.modal import DiscreteBank, run_bank
+            # vectorised when nothing limits: below the peak rating, average never above its own
+            from labrig.model.modal import run_bank
 
-            average = DiscreteBank.from_arrays([1.0 - k], [0.0], [k], [1.0])
-            i_avg, _ = run_bank(average, i_unl, state=[np.array([a.i_avg])])
+            i_avg, _ = run_bank(average_current_bank(k), i_unl, state=[np.array([a.i_avg])])
             if float(np.max(i_avg)) <= i_av:
                 a.i_avg = float(i_avg[-1])
                 return cmd, False, False
