@@ -183,7 +183,8 @@ def staged_fit(
     if not freq:
         raise ValueError(
             "staged identification needs periodic entries (sines at known or detectable "
-            "frequencies); use method='global'"
+            "frequencies); the global method fits any drive (`labrig fit --method global`, "
+            "method='global' in Python)"
         )
     f_low = min(freq.values())
     low = [i for i, f in freq.items() if f <= 1.1 * f_low]

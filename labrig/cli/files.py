@@ -100,7 +100,9 @@ def import_(
     strain_scale: float = typer.Option(1.0, help="Multiply the strain (-1: flip its sign)."),
     strain_offset: float = typer.Option(0.0, help="Then add this (ue)."),
     strain_units: str | None = typer.Option(
-        None, help="Unit of the strain column in the file (default: from the header; else ue)."
+        None,
+        help="Unit of the strain column (default: from the header; a strain stating no unit is"
+        " refused): ue, %, mm/m, um with --stack-length-mm, or raw to keep the numbers.",
     ),
     stack_length_mm: float | None = typer.Option(
         None, help="Stack length: a displacement column (um...) becomes strain = d / L."
@@ -125,6 +127,7 @@ def import_(
     """Bring measured data into a run file, one entry per input file or ControlDesk capture
     (named after the file's stem). docs/import.md describes the formats and options."""
     from labrig.importers import ImportOptions, check_options, import_files, list_table, read_tables
+    from labrig.importers.entry import conversion_notes
     from labrig.importers.table import option_error
 
     opt = ImportOptions(
@@ -149,4 +152,6 @@ def import_(
             "; aux " + ", ".join(f"{k} [{u}]" for k, (_, u) in e.aux.items()) if e.aux else ""
         )
         typer.echo(f"{e.name}: {e.voltage_V.size} samples at {e.rate_hz:g} Hz ({cols}{aux_text})")
+        for note in conversion_notes(e.meta):
+            typer.echo(f"  {note}")
     typer.echo(str(out))

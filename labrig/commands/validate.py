@@ -40,6 +40,7 @@ summary per model is the mean over the folds (every file weighs the same).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 from collections.abc import Sequence
@@ -374,6 +375,39 @@ def _floor(tests: Sequence[Setup], ours: ValidatedModel) -> tuple[float | None, 
     return float(np.mean(vals)), f"{SOURCE} (our model on the test records)"
 
 
+def _samples_digest(r: Record) -> bytes:
+    """SHA-256 of a record's voltage and strain samples (float64, little-endian)."""
+    h = hashlib.sha256(np.ascontiguousarray(r.voltage_V, dtype="<f8").tobytes())
+    h.update(np.ascontiguousarray(r.strain_ue, dtype="<f8").tobytes())
+    return h.digest()
+
+
+def check_unseen(train: Setup, tests: Sequence[Setup]) -> None:
+    """No test record holds the very samples of a training record: the same capture imported
+    twice under two names, or a file gathering several captures one of which is also tested,
+    would score a model on data it was identified on (:func:`check_files` catches the same
+    file only). Records are compared by their voltage and strain samples
+    (:func:`_samples_digest`)."""
+    seen: dict[bytes, str] = {}
+    for r in train.records:
+        seen.setdefault(_samples_digest(r), r.name)
+    issues = [
+        InputIssue(
+            str(s.path),
+            None,
+            "--on",
+            f"its record {r.name!r} holds the same samples as the training record "
+            f"{seen[d]!r}: a model would be scored on data it was identified on; test on a "
+            "record that no training file holds",
+        )
+        for s in tests
+        for r in s.records
+        if (d := _samples_digest(r)) in seen
+    ]
+    if issues:
+        raise InputFileError(issues)
+
+
 def validate_runs(
     train: Sequence[Path | str],
     on: Sequence[Path | str],
@@ -410,6 +444,7 @@ def validate_runs(
     doc = _read_diagnosis(Path(effects_from)) if effects_from is not None else None
     tr = training_setup(train_p, warmup_s, offset)
     tests = [prepare(p, None, warmup_s, offset) for p in test_p]
+    check_unseen(tr, tests)
     ui.announce(tr)
     notes = [f"training: {n}" for n in tr.notes]
     for s in tests:

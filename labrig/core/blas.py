@@ -14,6 +14,7 @@ import functools
 import glob
 import os
 from collections.abc import Iterator
+from types import ModuleType
 from typing import Any
 
 
@@ -30,7 +31,8 @@ def _openblas_libs() -> list[tuple[Any, Any, Any]]:
         ("openblas_set_num_threads64_", "openblas_get_num_threads64_"),
         ("openblas_set_num_threads", "openblas_get_num_threads"),
     )
-    for pkg in (numpy, scipy):
+    packages: tuple[ModuleType, ...] = (numpy, scipy)  # annotated: mypy is slow to join two modules
+    for pkg in packages:
         libdir = os.path.join(
             os.path.dirname(pkg.__file__ or ""), os.pardir, pkg.__name__ + ".libs"
         )

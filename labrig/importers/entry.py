@@ -16,8 +16,10 @@ scale applied, the time base found, the window cut; every step stated in the ent
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -101,7 +103,22 @@ def _in_unit(
     out, stored, note = convert(values, unit, role)
     if unit.kind != role:
         note = f"unit {unit.text!r} kept as it is (no conversion to {RUN_UNITS[role]} defined)"
+    if role == "strain" and checked.opt.stack_length_mm is not None:
+        unused = f"--stack-length-mm not used: the strain is in {unit.text}, not a displacement"
+        note = f"{note}; {unused}" if note else unused
     return out, stored, note
+
+
+def conversion_notes(meta: Mapping[str, Any]) -> list[str]:
+    """What an import did to the units of an entry's columns, as ``CHANNEL: note``: the time's
+    conversion (``taken as s`` when the column states no unit), then each channel's (the
+    ``conversion`` notes of ``meta["channels"]``); for the person importing, who would not see
+    an assumption otherwise."""
+    notes = [f"time: {meta['time_conversion']}"] if meta.get("time_conversion") else []
+    for name, ch in meta.get("channels", {}).items():
+        if isinstance(ch, Mapping) and ch.get("conversion"):
+            notes.append(f"{name}: {ch['conversion']}")
+    return notes
 
 
 def _time_base(

@@ -410,7 +410,11 @@ def _scaled(bank: DiscreteBank, extra: NDArray | None) -> tuple:
         b = g.a * g.b1 + g.b0
         live = b != 0  # b = 0: the mode is never driven (a pure feedthrough, in `feed`)
         parts.append((g, rows, b, live))
-    feed = sum(np.sum(rows * g.b1[None, :], axis=1).real for g, rows, _, _ in parts)
+    # each group's feedthrough added in turn (a loop: mypy is slow to infer ``sum`` over a
+    # generator of numpy expressions)
+    feed = np.zeros(parts[0][1].shape[0])
+    for g, rows, _, _ in parts:
+        feed = feed + np.sum(rows * g.b1[None, :], axis=1).real
     real = [p for p in parts if not np.iscomplexobj(p[0].a)]
     cplx = [p for p in parts if np.iscomplexobj(p[0].a)]
 

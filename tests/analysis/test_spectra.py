@@ -173,3 +173,35 @@ def test_lines_are_those_found_bin_by_bin(n: int) -> None:
         got = spectral_lines(x, RATE, None, min_hz=1.0, max_lines=max_lines, snr=3.0)
         assert got == _lines_one_by_one(x, RATE, None, 1.0, max_lines, 3.0)
         assert len(got) >= 2
+
+
+@pytest.mark.parametrize(
+    ("freqs", "amps", "scaled"),
+    [
+        ((10.0, 10.25, 10.5), (100.0, 100.0, 100.0), False),  # 4.8 % apart: one drive
+        ((10.0, 10.3, 10.56), (100.0, 100.0, 100.0), True),  # 5.3 %: a frequency scaling
+        ((10.0, 10.0, 10.0), (100.0, 102.0, 104.8), False),  # amplitudes 4.6 % apart
+        ((10.0, 10.0, 10.0), (100.0, 102.0, 105.6), True),  # 5.3 %
+    ],
+)
+def test_no_scaling_is_read_from_entries_of_one_drive(freqs, amps, scaled) -> None:
+    """The residual's scaling with frequency or amplitude is read only from entries whose
+    frequencies (amplitudes) differ by at least 5 % of the largest: the parts of one record,
+    whose estimates differ by rounding, would otherwise give a correlation of noise ("the
+    residual shrinks with frequency (r = -0.69)")."""
+    from labrig.analysis.diagnose.evidence import MIN_SPREAD, collect_evidence
+
+    assert MIN_SPREAD == 0.05
+    t = np.arange(4000) / RATE
+    recs, preds = [], {}
+    rng = np.random.default_rng(3)
+    for k, (f, a) in enumerate(zip(freqs, amps, strict=True)):
+        v = a / 2 * (1 - np.cos(2 * np.pi * f * t))
+        s = 10 * v + 0.05 * rng.standard_normal(t.size)
+        recs.append(Record.from_arrays(f"e{k}", RATE, v, s))
+        preds[f"e{k}"] = s - (1 + k) * 0.5 * np.sin(2 * np.pi * f * t)  # error grows along
+    feats = collect_evidence(recs, preds).features
+    which = "excess_vs_log_frequency" if len(set(freqs)) > 1 else "excess_vs_amplitude"
+    assert (feats[which] is not None) is scaled, feats
+    if scaled:
+        assert np.isfinite(feats[which])

@@ -22,9 +22,10 @@ import labrig
 from labrig.analysis.baselines import fit_baseline
 from labrig.analysis.load import records_from_run
 from labrig.cli.validate import print_scores
-from labrig.commands.prepare import prepare
+from labrig.commands.prepare import prepare, training_setup
 from labrig.commands.report import fit_report_models, report_data
-from labrig.commands.validate import score_entry
+from labrig.commands.validate import check_unseen, score_entry
+from labrig.core.errors import InputFileError
 from labrig.report.html import render
 
 from helpers import TINY, invoke, run_protocol
@@ -179,6 +180,46 @@ def test_bad_input_exits_2_naming_the_file(files, tmp_path: Path) -> None:
     res = invoke("validate", train, "--on", test, "--out", existing)
     assert res.exit_code == 2 and "--overwrite" in res.output
     assert existing.read_text() == "keep"
+
+
+def test_a_test_record_held_by_a_training_file_is_refused(files, tmp_path: Path) -> None:
+    """The test capture imported again under another name, or gathered with another capture in
+    one training file, is the data a model would be scored on: exit 2 naming the test file and
+    the training record, before anything is fitted. The same capture with one sample changed
+    by 1e-9 of its value is another record and passes the check."""
+    train, test = files
+    d = tmp_path / "again"
+    d.mkdir()
+    copy = import_cut(REAL / FILES[1], d, "copy")
+    both = tmp_path / "both.h5"
+    cuts = [tmp_path / "a.dat", tmp_path / "b.dat"]
+    for src, cut in zip(FILES, cuts, strict=True):
+        cut.write_text("\n".join((REAL / src).read_text().splitlines()[:ROWS]) + "\n")
+    res = invoke("import", *cuts, "--out", both, "--voltage", "1", "--strain", "5",
+                 "--rate-hz", "200", "--strain-units", "raw")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    for args, record in [([train, copy], "copy"), ([both], "b")]:
+        res = invoke("validate", *args, "--on", test)
+        assert res.exit_code == 2, (args, res.output)
+        assert "Traceback" not in res.output
+        assert str(test) in res.output and "holds the same samples" in res.output
+        assert f"training record {record!r}" in res.output
+    res = invoke("validate", "--leave-one-out", train, copy, test)
+    assert res.exit_code == 2 and "holds the same samples" in res.output, res.output
+    # one sample changed: not the same record (the check itself, without the fits)
+    lines = (REAL / FILES[1]).read_text().splitlines()[:ROWS]
+    cols = lines[500].split()
+    cols[4] = repr(float(cols[4]) * (1 + 1e-9))
+    lines[500] = "\t".join(cols)
+    near = tmp_path / "near.dat"
+    near.write_text("\n".join(lines) + "\n")
+    near_h5 = tmp_path / "near.h5"
+    res = invoke("import", near, "--out", near_h5, "--voltage", "1", "--strain", "5",
+                 "--rate-hz", "200", "--strain-units", "raw")  # fmt: skip
+    assert res.exit_code == 0, res.output
+    check_unseen(training_setup([train, near_h5]), [prepare(test)])
+    with pytest.raises(InputFileError, match="holds the same samples"):
+        check_unseen(training_setup([train, copy]), [prepare(test)])
 
 
 def test_several_training_files_are_fitted_together(files, tmp_path: Path) -> None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import pytest
 
 from labrig.analysis.diagnose import FOLD_TOL, MIN_GAIN, accept
+from labrig.analysis.diagnose.acceptance import NUMERICAL_PCT
 from labrig.analysis.extended import FitOutcome
 from labrig.model.effects import library
 
@@ -104,6 +105,26 @@ def test_a_gain_within_rounding_is_no_gain():
     assert any("numerical precision" in r for r in verdict.reasons)
     held, ref = folds([0.5] * 6, ref=2e-3)  # 1e-3 % is a real gain
     assert accept(library()["time_delay"], outcome(), held, ref).accepted
+
+
+@pytest.mark.parametrize(
+    ("rise_pct", "says"),
+    [(0.5, "numerical precision"), (2.0, "held-out NRMSE rises"), (1e5, "held-out NRMSE rises")],
+)
+def test_a_candidate_that_raises_the_heldout_error_is_said_to(rise_pct: float, says: str):
+    """A held-out NRMSE that rises by more than rounding (``NUMERICAL_PCT``; 2x and 1e5x it here)
+    is refused as rising, with both figures, not as "below numerical precision" (a rise within
+    rounding, 0.5x, still is)."""
+    ref = 0.5
+    held, base = folds([1.0] * 5, ref=ref)
+    held = {k: v + rise_pct * NUMERICAL_PCT for k, v in held.items()}
+    a = accept(library()["time_delay"], outcome(), held, base)
+    assert not a.accepted
+    assert any(says in r for r in a.reasons), a.reasons
+    other = "numerical precision" if says != "numerical precision" else "rises"
+    assert not any(other in r for r in a.reasons), a.reasons
+    if says.endswith("rises"):
+        assert any(f"{ref:.3g} % -> {ref + rise_pct * NUMERICAL_PCT:.3g} %" in r for r in a.reasons)
 
 
 # -- near the noise floor ------------------------------------------------------------------------

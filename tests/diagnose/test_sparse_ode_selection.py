@@ -181,6 +181,10 @@ def test_the_verdictsdrive_range_names_what_holds_the_ode_back() -> None:
     fast = drive_range(model(S=0.2, **{"|V'| S": -0.002, "S|S|": -0.001}), items)
     assert "stays above 100 V/s" in fast and "slower drives" in fast, fast
     assert drive_range(model(S=-0.5, **{"|V'| S": -0.001}), items) == ""  # any drive
+    # no lag term at all: said in words, not as a threshold of 0 V/s ("0x the records' ...")
+    moving = drive_range(model(**{"|V'| S": -0.002, "S|S|": -0.001}), items)
+    assert "while the drive moves" in moving and "0 V/s" not in moving, moving
+    assert "0x" not in moving and "S|S| term" in moving, moving
 
 
 def test_one_entry_cannot_be_cross_validated_and_says_so() -> None:

@@ -167,3 +167,34 @@ def test_scale_sign_and_stack_length_are_applied_and_recorded(tmp_path: Path) ->
     ch = e.step["channels"]
     assert ch["strain"]["scale"] == -1.0 and ch["strain"]["unit_in_file"] == "um"
     assert ch["command_voltage"]["conversion"] == "mV -> V" and ch["command_voltage"]["scale"] == 10
+
+
+def test_the_import_says_what_it_assumed_of_the_units(tmp_path: Path) -> None:
+    """A column stating no unit is taken in the run file's unit, and the import says so for
+    that column (a time in ms would otherwise pass for seconds unnoticed); a column stating its
+    unit gets no such line; ``--stack-length-mm`` given for a strain that is no displacement is
+    said to be unused. The entry's metadata holds the same notes."""
+    t = np.arange(400) / 1000.0
+    v = 50 * (1 - np.cos(2 * np.pi * 5 * t))
+    bare = tmp_path / "bare.csv"
+    np.savetxt(bare, np.column_stack([t * 1000, v, 9 * v]), delimiter=",")  # time in ms
+    labelled = tmp_path / "labelled.csv"
+    with labelled.open("w") as f:
+        f.write("time [ms],voltage [V],strain [ue]\n")
+        np.savetxt(f, np.column_stack([t * 1000, v, 9 * v]), delimiter=",")
+    runner = CliRunner()
+    res = runner.invoke(app, ["import", str(bare), "--out", str(tmp_path / "a.h5"),
+                              "--time", "1", "--voltage", "2", "--strain", "3",
+                              "--strain-units", "ue", "--stack-length-mm", "18"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    lines = res.output.splitlines()
+    assert "  time: no unit given: taken as s" in lines
+    assert "  command_voltage: no unit given: taken as V" in lines
+    assert any("--stack-length-mm not used" in line for line in lines)
+    (rec,) = records_from_run(tmp_path / "a.h5")
+    assert rec.rate_hz == pytest.approx(1.0)  # what the notes warn of: ms read as s
+    res = runner.invoke(app, ["import", str(labelled), "--out", str(tmp_path / "b.h5")])
+    assert res.exit_code == 0, res.output
+    assert "taken as" not in res.output and "not used" not in res.output
+    (rec,) = records_from_run(tmp_path / "b.h5")
+    assert rec.rate_hz == pytest.approx(1000.0)

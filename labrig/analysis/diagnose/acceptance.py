@@ -36,11 +36,17 @@ __all__ = [
     "MIN_NEAR_GAIN",
     "NEAR_FLOOR_RATIO",
     "NUMERICAL_PCT",
+    "ROUNDING",
+    "WORSE",
     "Acceptance",
     "Candidate",
     "accept",
 ]
 
+#: the reasons of a candidate that does not lower the held-out NRMSE: it raises it, or changes
+#: it by less than rounding
+WORSE = "held-out NRMSE rises"
+ROUNDING = "held-out gain below numerical precision"
 #: minimum relative held-out gain for an effect to be added
 MIN_GAIN = 0.15
 #: a fold counts as better / worse when it changes by more than this (relative)
@@ -89,10 +95,12 @@ def accept(
     wins = int(np.sum(c < b * (1 - FOLD_TOL)))
     losses = int(np.sum(c > b * (1 + FOLD_TOL)))
     reasons, suspicious = [], []
-    if float(b.mean()) - float(c.mean()) < NUMERICAL_PCT:
+    drop = float(b.mean()) - float(c.mean())
+    if drop <= -NUMERICAL_PCT:
+        reasons.append(f"{WORSE} ({float(b.mean()):.3g} % -> {float(c.mean()):.3g} %)")
+    elif drop < NUMERICAL_PCT:
         reasons.append(
-            f"held-out gain below numerical precision ({NUMERICAL_PCT:g} % of NRMSE): the "
-            "model already reproduces the data"
+            f"{ROUNDING} ({NUMERICAL_PCT:g} % of NRMSE): the model already reproduces the data"
         )
     elif gain < min_gain and not _removes_the_excess(c.mean(), b.mean(), gain, floor_pct):
         reasons.append(

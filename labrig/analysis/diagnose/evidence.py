@@ -33,7 +33,13 @@ from labrig.analysis.spectra import spectral_lines
 from labrig.model import DynamicHysteresisModel, ModelParams
 from labrig.model.effects import Context, Effect
 
-__all__ = ["EntryEvidence", "Evidence", "collect_evidence", "modelled_creep_per_decade"]
+__all__ = [
+    "MIN_SPREAD",
+    "EntryEvidence",
+    "Evidence",
+    "collect_evidence",
+    "modelled_creep_per_decade",
+]
 
 
 @dataclass
@@ -162,6 +168,18 @@ def _entry_evidence(r: Record, m: NDArray, p: NDArray) -> EntryEvidence:
     return e
 
 
+#: entries whose frequencies (or amplitudes) all lie within this share of the largest are one
+#: drive: no scaling with frequency (amplitude) is read from them (the parts of one record
+#: differ by the rounding of their estimates)
+MIN_SPREAD = 0.05
+
+
+def _spread(x: NDArray) -> bool:
+    """Whether the values ``x`` differ by at least :data:`MIN_SPREAD` of the largest |x|."""
+    top = float(np.max(np.abs(x))) if x.size else 0.0
+    return top > 0 and float(np.ptp(x)) >= MIN_SPREAD * top
+
+
 def _campaign_features(
     ents: list[EntryEvidence],
     res: NDArray,
@@ -186,10 +204,10 @@ def _campaign_features(
     ratio_e = np.array([e.nrmse_pct / max(e.floor_pct, 1e-12) for e in ents])
     ok = np.isfinite(fs) & (fs > 0)
     feats["excess_vs_log_frequency"] = (
-        _corr(np.log(fs[ok]), ratio_e[ok]) if ok.sum() >= 3 and np.ptp(fs[ok]) > 0 else None
+        _corr(np.log(fs[ok]), ratio_e[ok]) if ok.sum() >= 3 and _spread(fs[ok]) else None
     )
     feats["excess_vs_amplitude"] = (
-        _corr(amps, ratio_e) if len(ents) >= 3 and np.ptp(amps) > 0 else None
+        _corr(amps, ratio_e) if len(ents) >= 3 and _spread(amps) else None
     )
     q = [e.quadrature for e in ents if e.quadrature is not None]
     feats["mean_quadrature_fraction"] = float(np.mean(q)) if q else None

@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from labrig.analysis.band_limit import band_limit
-from labrig.analysis.diagnose.acceptance import Acceptance, Candidate, accept
+from labrig.analysis.diagnose.acceptance import ROUNDING, WORSE, Acceptance, Candidate, accept
 from labrig.analysis.diagnose.contraction import (
     REFINE_NFEV,
     contraction_margin,
@@ -720,12 +720,12 @@ def sparse_ode_trial(
     c.insample_gain = 1.0 - float(np.mean(list(per_entry.values()))) / current.fit.nrmse_pct
     c.judged(a)
     if not c.heldout_nrmse_pct < (current.heldout_pct or math.inf):
-        # the rule's wording for "no gain" is about rounding; say what happened
+        # say what happened to the free run instead of the rule's reason for no gain
         c.reasons = [
             f"it predicts held-out data worse than {_what(current)}"
             if math.isfinite(c.heldout_nrmse_pct)
             else "its free run diverges on held-out data",
-            *[r for r in a.reasons if "numerical precision" not in r],
+            *[r for r in a.reasons if not r.startswith((ROUNDING, WORSE))],
         ]
     grow = growth_rate(model, work)
     # whatever its score: a model that runs away under its own drive explains nothing
@@ -770,7 +770,12 @@ def drive_range(model: SindyBaseline, items: Sequence[tuple[Any, list]]) -> str:
     lag = model.coefficients[_TERMS.index("S")]
     rate_term = model.coefficients[_TERMS.index("|V'| S")]
     held = ", held back only by its S|S| term at the strain these records reach"
-    if lag >= 0.0 and rate_term < 0.0:
+    if lag == 0.0 and rate_term < 0.0:  # no lag term: a threshold of 0 V/s says nothing
+        return (
+            ", but only while the drive moves (its |V'| S term holds it back; it has no lag "
+            f"term S: holds are{held[1:]})"
+        )
+    if lag > 0.0 and rate_term < 0.0:
         return (
             f", but only while a sustained drive's mean |V'| stays above {-lag / rate_term:.3g} "
             f"V/s{_scale(-lag / rate_term, items)} (its |V'| S term holds it back, its lag S does "
