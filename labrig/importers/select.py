@@ -3,8 +3,8 @@
 A column is named by its 1-based number, its label (header cell, variable or channel name, with
 or without its unit: ``temperature`` or ``temperature_C``), a ControlDesk channel's short name,
 or its place (``Y(3)``, ``column 3``); case does not matter. Without an option, the time, voltage
-and strain are found by name (:data:`DEFAULT_NAMES`), else the voltage and strain as the only
-column in a unit of theirs (:data:`UNIT_KINDS`); a ControlDesk channel's time is its ``X``.
+and strain are found by name (:data:`DEFAULT_NAMES`), else each as the only column in a unit of
+theirs (:data:`UNIT_KINDS`: ``Zeit [s]`` is the time); a ControlDesk channel's time is its ``X``.
 Every other column with a name of its own becomes an auxiliary channel.
 """
 
@@ -22,8 +22,8 @@ DEFAULT_NAMES = {
     "voltage": ("voltage", "v", "u", "command_voltage", "voltage_v", "v_v"),
     "strain": ("strain", "s", "strain_ue", "strain_microstrain"),
 }
-#: unit kinds that mark the voltage or the strain when no name does (the only such column)
-UNIT_KINDS = {"voltage": ("voltage",), "strain": ("strain", "length")}
+#: unit kinds that mark a core column when no name does (the only such column)
+UNIT_KINDS = {"time": ("time",), "voltage": ("voltage",), "strain": ("strain", "length")}
 
 
 @dataclass

@@ -198,3 +198,34 @@ def test_the_import_says_what_it_assumed_of_the_units(tmp_path: Path) -> None:
     assert "taken as" not in res.output and "not used" not in res.output
     (rec,) = records_from_run(tmp_path / "b.h5")
     assert rec.rate_hz == pytest.approx(1000.0)
+
+
+def test_a_column_in_a_time_unit_is_the_time(tmp_path: Path) -> None:
+    """Named in another language (``Zeit``), the only column in a time unit is the time, as
+    the only one in volts is the voltage: its rate is read from it, and a wrong ``--rate-hz``
+    is refused against it. With two columns in seconds neither is chosen (give ``--time``)."""
+    t = np.arange(200) / 10_000.0
+    v = 50 * (1 - np.cos(2 * np.pi * 100 * t))
+    one = tmp_path / "zeit.csv"
+    with one.open("w") as f:
+        f.write("Zeit;Spannung;Weg\ns;V;um\n")
+        for a, b in zip(t, v, strict=True):
+            f.write(f"{a:.6f};{b:.5f};{0.16 * b:.5f}\n".replace(".", ","))
+    runner = CliRunner()
+    res = runner.invoke(app, ["import", str(one), "--out", str(tmp_path / "a.h5"),
+                              "--stack-length-mm", "18"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "time=column 1 (Zeit)" in res.output
+    (rec,) = records_from_run(tmp_path / "a.h5")
+    assert rec.rate_hz == pytest.approx(10_000.0)
+    res = runner.invoke(app, ["import", str(one), "--out", str(tmp_path / "b.h5"),
+                              "--stack-length-mm", "18", "--rate-hz", "1000"])  # fmt: skip
+    assert res.exit_code == 2 and "disagrees with the time column" in res.output
+    two = tmp_path / "two.csv"
+    with two.open("w") as f:
+        f.write("Zeit;Verzug;Spannung;Weg\ns;s;V;um\n")
+        for a, b in zip(t, v, strict=True):
+            f.write(f"{a:.6f};0,001;{b:.5f};{0.16 * b:.5f}\n".replace(".", ","))
+    res = runner.invoke(app, ["import", str(two), "--out", str(tmp_path / "c.h5"),
+                              "--stack-length-mm", "18"])  # fmt: skip
+    assert res.exit_code == 2 and "time" in res.output, res.output
