@@ -4,11 +4,15 @@ One estimator serves every command that prints a floor (``labrig fit``, ``report
 ``validate`` and ``diagnose``), so one file gets one floor. It is measured on a model's
 residual ``r = measured - predicted`` (ue), after the warm-up:
 
-- a periodic entry of period ``P`` samples: over its second half (at least two periods),
-  ``sigma = RMS(r[k + P] - r[k]) / sqrt 2``: errors of the model locked to the drive repeat
-  every period and cancel, white noise adds in quadrature;
+- a periodic entry of period ``P`` samples holding at least :data:`MIN_PERIODS` periods: over
+  its second half, ``sigma = RMS(r[k + P] - r[k]) / sqrt 2``: errors of the model locked to the
+  drive repeat every period and cancel, white noise adds in quadrature;
 - any other entry: ``sigma = RMS(second difference of r) / sqrt 6``: a smooth model error
-  cancels, white noise of RMS ``sigma`` gives ``6 sigma^2``.
+  cancels, white noise of RMS ``sigma`` gives ``6 sigma^2``. A periodic entry of fewer periods
+  is one of them: its second half would not hold two periods, and the differences would take in
+  how the residual settles after the entry's start (the relaxors' memory of a start from rest,
+  or from a state the model does not know in a part cut from a longer record), which is model
+  error, not noise.
 
 The floor of an entry is ``100 sigma / (max m - min m)`` percent, like the NRMSE, and the floor
 of the records is the mean over entries (the NRMSE is averaged the same way). A model that
@@ -28,8 +32,11 @@ from numpy.typing import NDArray
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic
 from labrig.analysis.records import Record
 
-__all__ = ["SOURCE", "NoiseFloor", "entry_period", "noise_floor", "residual_noise"]
+__all__ = ["MIN_PERIODS", "SOURCE", "NoiseFloor", "entry_period", "noise_floor", "residual_noise"]
 
+#: the periods a periodic entry's residual must hold for the period-to-period rule (its second
+#: half then holds two)
+MIN_PERIODS = 4
 #: where the floor's noise RMS comes from, in words (printed beside the floor)
 SOURCE = "the period-to-period scatter of the model's residual"
 
@@ -67,8 +74,8 @@ def residual_noise(res: NDArray[np.float64], period: int | None) -> float:
     >>> round(residual_noise(locked + rng.normal(0, 0.1, 4000), 100), 2)
     0.1
     """
-    if period and res.size >= 2 * period:
-        x = res[-max(res.size // 2, 2 * period) :]
+    if period and res.size >= MIN_PERIODS * period:
+        x = res[-(res.size // 2) :]
         d = x[period:] - x[:-period]
         return float(np.sqrt(np.mean(d * d)) / np.sqrt(2.0))
     d = np.diff(res, 2)
