@@ -10,13 +10,22 @@ Where an exception must not appear at an arbitrary point (while the output is en
 the ramp to 0 V, while a run file is being written), code runs under :meth:`SignalGuard.defer`:
 a signal is then only recorded, and :meth:`SignalGuard.check` raises it at a safe point of the
 caller's choosing (the runner checks after every acquired block).
+
+A signal handler runs between any two bytecodes, including those of a finaliser (``__del__``),
+a weakref callback or a garbage-collector callback, where Python prints an exception and drops
+it. A first signal lost that way would leave the command running with every later Ctrl-C
+ignored; :func:`interrupt_once` therefore watches ``sys.unraisablehook`` for its own exception and
+delivers the signal again (see :meth:`SignalGuard.lost`).
 """
 
 from __future__ import annotations
 
+import _thread
 import contextlib
 import signal
+import sys
 import threading
+import time
 from collections.abc import Iterator
 
 #: the signals a run stops on, with the words its run file records (SIGHUP and SIGQUIT do not
@@ -72,6 +81,7 @@ class SignalGuard:
         self.received: list[int] = []
         self.raised = False
         self._deferring = 0
+        self._resent: int | None = None
 
     @property
     def first(self) -> int | None:
@@ -80,23 +90,41 @@ class SignalGuard:
 
     @property
     def pending(self) -> bool:
-        """A signal arrived while deferred and has not been raised yet."""
+        """A signal arrived while deferred (or was lost) and has not been raised yet."""
         return bool(self.received) and not self.raised
 
     def handle(self, signum: int, frame: object = None) -> None:
-        # decide before recording: a repeat can run this handler again at any bytecode of this
-        # one, and the first call must still raise
-        first = not self.received
-        self.received.append(signum)
-        if first and not self._deferring:
+        # a repeat can run this handler again at any bytecode of this one; whichever call sees
+        # ``raised`` False first raises, and its exception unwinds the other
+        if self._resent == signum:
+            self._resent = None  # :meth:`lost` sent it again: already recorded
+        else:
+            self.received.append(signum)
+        if not self.raised and not self._deferring:
             self.raised = True
-            raise Interrupted(signum)
+            raise Interrupted(self.received[0])
 
     def check(self) -> None:
         """Raise the pending signal as :class:`Interrupted` (once); otherwise do nothing."""
         if self.pending:
             self.raised = True
             raise Interrupted(self.received[0])
+
+    def lost(self, exc: Interrupted) -> None:
+        """``exc`` was raised where Python drops exceptions (a finaliser or a callback): make the
+        signal pending again and, unless deferred, send it to the main thread once more."""
+        self.raised = False
+        if self._deferring:
+            return  # the caller's next :meth:`check` raises it
+        # from another thread, once this hook has returned: a handler that ran inside the hook
+        # would be dropped too (``threading.Thread.start`` waits, so the low-level call)
+        _thread.start_new_thread(self._send_again, (exc.signum,))
+
+    def _send_again(self, signum: int) -> None:
+        time.sleep(0.01)
+        if self.pending and not self._deferring and _active is self:
+            self._resent = signum
+            _thread.interrupt_main(signal.Signals(signum))
 
     @contextlib.contextmanager
     def defer(self) -> Iterator[SignalGuard]:
@@ -128,8 +156,17 @@ def interrupt_once() -> Iterator[SignalGuard]:
         return
     guard = SignalGuard()
     old = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    old_hook = sys.unraisablehook
+
+    def unraisable(info: sys.UnraisableHookArgs) -> None:
+        if isinstance(info.exc_value, Interrupted) and _active is guard:
+            guard.lost(info.exc_value)
+        else:
+            old_hook(info)
+
     _active = guard
     try:
+        sys.unraisablehook = unraisable
         for sig in old:
             signal.signal(sig, guard.handle)
         yield guard
@@ -139,3 +176,5 @@ def interrupt_once() -> Iterator[SignalGuard]:
             if h is not None:
                 signal.signal(sig, h)
         _active = None
+        if sys.unraisablehook is unraisable:
+            sys.unraisablehook = old_hook
