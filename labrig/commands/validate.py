@@ -582,7 +582,7 @@ def page_context(v: Validation) -> dict[str, Any]:
 
     from labrig.commands.report import strain_unit
     from labrig.core.version import __version__
-    from labrig.report.data import EntryView, amplitude_of
+    from labrig.report.data import EntryView, drive_of
     from labrig.report.plots import validation_figure
 
     scored = {k: m for k, m in v.models.items() if m.scores}
@@ -612,8 +612,8 @@ def page_context(v: Validation) -> dict[str, Any]:
                 sc = next(x for x in m.scores if x.file == str(s.path) and x.entry == r.name)
                 cells.append(f"{fmt_pct(sc.whole_nrmse_pct)} / {fmt_pct(sc.second_half_nrmse_pct)}")
                 preds[m.label] = fitted_prediction(m, s, r)
-            f = r.frequency_hz
-            view = EntryView(r, f, amplitude_of(r), False, str(r.meta.get("kind", "")))
+            f, _periodic, amplitude = drive_of(r)
+            view = EntryView(r, f, amplitude, False, str(r.meta.get("kind", "")))
             drive = f"{r.duration_s:.3g} s at {r.rate_hz:g} Hz, {view.amplitude_V:g} V"
             entries.append(
                 {

@@ -162,18 +162,32 @@ class ReportData:
         return float(np.mean(vals)) if vals else None
 
 
-def amplitude_of(record: Record) -> float:
+def amplitude_of(record: Record, frequency_hz: float | None) -> float:
     """The drive's peak-to-peak voltage: ``meta["amplitude_V"]`` if stated, else the span of
-    the last period (or of the record), rounded to 3 significant digits."""
+    the last period at ``frequency_hz`` (or of the whole record without one), rounded to 3
+    significant digits."""
     a = record.meta.get("amplitude_V")
     try:
         if a is not None and float(a) > 0:
             return float(a)
     except (TypeError, ValueError):
         pass
-    sl = last_period(record.n, record.rate_hz, drive_frequency_hz(record))
+    sl = last_period(record.n, record.rate_hz, frequency_hz)
     span = float(np.ptp(record.voltage_V[sl] if sl is not None else record.voltage_V))
     return float(f"{span:.3g}") if span > 0 else 0.0
+
+
+def drive_of(record: Record) -> tuple[float | None, bool, float]:
+    """The drive as a report states it: its frequency (Hz; stated in ``meta``, else estimated
+    from the voltage and kept only when the last two periods at it repeat), whether they repeat
+    (:func:`~labrig.analysis.metrics.is_periodic`) and the peak-to-peak voltage
+    (:func:`amplitude_of`). A step sequence or a PRBS has a strongest spectral line but no
+    period: an estimate there would describe it as a fast drive of one period's span."""
+    f = drive_frequency_hz(record)
+    periodic = is_periodic(record.voltage_V, record.rate_hz, f)
+    if record.frequency_hz is None and not periodic:
+        f = None
+    return f, periodic, amplitude_of(record, f)
 
 
 def build_report(
@@ -192,9 +206,8 @@ def build_report(
     notes = list(notes)
     entries = []
     for r in records:
-        f = drive_frequency_hz(r)
-        per = is_periodic(r.voltage_V, r.rate_hz, f)
-        ev = EntryView(r, f, amplitude_of(r), per, str(r.meta.get("kind", "")))
+        f, per, amplitude = drive_of(r)
+        ev = EntryView(r, f, amplitude, per, str(r.meta.get("kind", "")))
         for key, fm in models.items():
             if fm.predictions is None or r.name not in fm.predictions:
                 continue
