@@ -21,6 +21,11 @@ from labrig.cli.common import (
 )
 from labrig.cli.typer_app import LabrigTyper
 
+#: ``labrig model demo``'s sine: the fewest samples a period (a loop needs its two halves) and
+#: the most samples in all (about 80 MB of arrays)
+DEMO_MIN_SAMPLES_PER_PERIOD = 8
+DEMO_MAX_SAMPLES = 10_000_000
+
 model_app = LabrigTyper(help="The dynamic hysteresis model: demo and the paper's figures.")
 
 
@@ -33,10 +38,12 @@ def demo(
         metavar="PRESET",
         help=f"Parameter preset: {one_of(Preset)}.",
     ),
-    amplitude_v: float = typer.Option(100.0, help="Peak of the unipolar sine (V)."),
-    frequency_hz: float = typer.Option(1.0, help="Sine frequency (Hz)."),
-    cycles: int = typer.Option(5, help="Number of cycles."),
-    rate_hz: float = typer.Option(1000.0, help="Sample rate (Hz)."),
+    amplitude_v: float = typer.Option(100.0, help="Peak of the unipolar sine (V, above 0)."),
+    frequency_hz: float = typer.Option(1.0, help="Sine frequency (Hz, above 0)."),
+    cycles: int = typer.Option(5, min=1, help="Number of cycles."),
+    rate_hz: float = typer.Option(
+        1000.0, help=f"Sample rate (Hz; at least {DEMO_MIN_SAMPLES_PER_PERIOD} samples a period)."
+    ),
     as_json: bool = json_option("the table (one row per cycle)"),
     out: Path | None = out_file_option("the table as JSON (what --json prints)"),
     overwrite: bool = OVERWRITE_OPTION,
@@ -48,6 +55,7 @@ def demo(
 
     from labrig.model import PRESETS, DynamicHysteresisModel
 
+    check_demo_sine(amplitude_v, frequency_hz, cycles, rate_hz)
     check_out(out, [], overwrite)
     model = DynamicHysteresisModel(PRESETS[preset.value])
     t = np.arange(round(cycles * rate_hz / frequency_hz) + 1) / rate_hz
@@ -110,3 +118,29 @@ def figures(
         return
     for path in paths:
         typer.echo(str(path))
+
+
+def check_demo_sine(amplitude_v: float, frequency_hz: float, cycles: int, rate_hz: float) -> None:
+    """Refuse a demo sine that cannot be drawn as loops: a usage error (exit 64) naming the
+    option and what would be valid."""
+    import math
+
+    for value, name, unit in (
+        (amplitude_v, "--amplitude-v", "V"),
+        (frequency_hz, "--frequency-hz", "Hz"),
+    ):
+        if not (math.isfinite(value) and value > 0):
+            raise typer.BadParameter(f"{value:g}: must be a number above 0 {unit}", param_hint=name)
+    low = DEMO_MIN_SAMPLES_PER_PERIOD * frequency_hz
+    if not (math.isfinite(rate_hz) and rate_hz >= low):
+        raise typer.BadParameter(
+            f"{rate_hz:g}: must be at least {low:g} Hz ({DEMO_MIN_SAMPLES_PER_PERIOD} samples a "
+            f"period of {frequency_hz:g} Hz)",
+            param_hint="--rate-hz",
+        )
+    if cycles * rate_hz / frequency_hz > DEMO_MAX_SAMPLES:
+        raise typer.BadParameter(
+            f"{cycles} cycles of {rate_hz / frequency_hz:.6g} samples: at most "
+            f"{DEMO_MAX_SAMPLES:,} samples in all; fewer cycles or a lower rate",
+            param_hint="--cycles/--rate-hz",
+        )

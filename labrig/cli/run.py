@@ -9,6 +9,7 @@ from pathlib import Path
 import typer
 
 from labrig.cli.common import RIG_OPTION_HELP, flag, friendly
+from labrig.core.seeds import MAX_SEED
 
 META_HELP = (
     "KEY=VALUE recorded with the run (/run/metadata; repeatable), e.g. actuator_model=P-888.51, "
@@ -62,7 +63,9 @@ def run(
     out: Path | None = typer.Option(
         None, "--out", help="Run file to write (default: runs/NAME-DATE-TIME.h5).", metavar="FILE"
     ),
-    seed: int | None = typer.Option(None, "--seed", help="Random seed of the simulated rig."),
+    seed: int | None = typer.Option(
+        None, "--seed", min=0, max=MAX_SEED, help="Random seed of the simulated rig (0 to 2^63-1)."
+    ),
     realtime: bool | None = flag(
         None,
         "--realtime/--no-realtime",
@@ -83,7 +86,11 @@ def run(
         False, "--live", help="Serve a live view of the run on 127.0.0.1 (prints its address)."
     ),
     live_port: int | None = typer.Option(
-        None, "--live-port", help="Port of the live view (implies --live; default: a free one)."
+        None,
+        "--live-port",
+        min=0,
+        max=65535,
+        help="Port of the live view (implies --live; default: a free one).",
     ),
     params: Path | None = typer.Option(
         None, "--params", help="Live view: draw this model's prediction (labrig fit --out file)."

@@ -15,6 +15,7 @@ from labrig.cli.common import (
     plural,
 )
 from labrig.cli.typer_app import LabrigTyper
+from labrig.core.seeds import MAX_SEED
 
 sim_app = LabrigTyper(
     help="The simulated bench: run its instrument simulators standalone; simulate a fleet."
@@ -37,9 +38,15 @@ def serve(
 @sim_app.command("fleet")
 @friendly
 def fleet(
-    n: int = typer.Argument(..., min=1, help="Number of actuators."),
+    n: int = typer.Argument(..., min=1, help="Number of actuators (at most 100 000)."),
     out: Path = out_dir_option("the run files and truth.json", required=True),
-    seed: int = typer.Option(0, "--seed", help="Random seed of the fleet (spread, defects, runs)."),
+    seed: int = typer.Option(
+        0,
+        "--seed",
+        min=0,
+        max=MAX_SEED,
+        help="Random seed of the fleet (spread, defects, runs; 0 to 2^63-1).",
+    ),
     defects: float = typer.Option(
         0.05, "--defects", min=0.0, max=1.0, help="Fraction of defective actuators (0-1)."
     ),
@@ -56,8 +63,10 @@ def fleet(
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
-    from labrig.fleet.simfleet import write_fleet
+    from labrig.fleet.simfleet import MAX_FLEET, write_fleet
 
+    if n > MAX_FLEET:
+        raise typer.BadParameter(f"{n}: at most {MAX_FLEET:,} actuators", param_hint="N")
     err = Console(stderr=True)
     bar = Progress(
         "simulating", BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=err

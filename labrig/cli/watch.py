@@ -13,7 +13,9 @@ from labrig.cli.common import friendly
 @friendly
 def watch(
     run_file: Path = typer.Argument(..., help="Run file (HDF5), being written or not."),
-    port: int = typer.Option(0, "--port", help="Port on 127.0.0.1 (default: a free one)."),
+    port: int = typer.Option(
+        0, "--port", min=0, max=65535, help="Port on 127.0.0.1 (default: a free one)."
+    ),
     params: Path | None = typer.Option(
         None, "--params", help="Draw this model's prediction (a labrig fit --out file)."
     ),

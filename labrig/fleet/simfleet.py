@@ -33,6 +33,7 @@ import numpy as np
 import yaml
 
 from labrig.core.errors import InputFileError, InputIssue, LabrigError
+from labrig.core.seeds import check_seed
 from labrig.fleet.cache import write_atomic
 from labrig.model import PAPER_TABLE1
 
@@ -56,6 +57,8 @@ DEFECTS: dict[str, dict[str, Any]] = {
 }
 DEFECT_ORDER = ("depolarised", "cracked", "loose_gauge")
 STATIONS = ("sim-station-1", "sim-station-2")
+#: the largest fleet `labrig sim fleet` makes (its actuators are drawn one by one)
+MAX_FLEET = 100_000
 
 
 @dataclass
@@ -82,9 +85,10 @@ def _spread_factor(rng: np.random.Generator, s: float) -> float:
 
 
 def draw_fleet(n: int, seed: int, defect_fraction: float) -> list[Actuator]:
-    """The fleet's actuators (module docstring), reproducible from ``seed``."""
-    if n < 1:
-        raise ValueError("a fleet needs at least one actuator")
+    """The fleet's actuators (module docstring), reproducible from ``seed`` (0 to 2^63-1)."""
+    if not 1 <= n <= MAX_FLEET:
+        raise ValueError(f"a fleet has 1 to {MAX_FLEET} actuators, not {n}")
+    check_seed(seed, "--seed")
     if not 0 <= defect_fraction <= 1:
         raise ValueError("the defect fraction must be between 0 and 1")
     rng = np.random.default_rng(seed)

@@ -38,6 +38,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 
 from labrig.core.errors import DeviceError, InputFileError, InputIssue
+from labrig.core.seeds import MAX_SEED
 from labrig.core.yamlio import issues_from_validation, line_index, read_yaml
 from labrig.rig.instruments import DriverInfo, SimulatorInfo
 from labrig.rig.limits import RigLimits
@@ -138,7 +139,9 @@ class SimulatorSettings(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
 
-    seed: int | None = Field(None, description="bench RNG seed when open_rig is given none")
+    seed: int | None = Field(
+        None, ge=0, le=MAX_SEED, description="bench RNG seed when open_rig is given none"
+    )
     gcs_port: int = Field(0, ge=0, le=65535)
     modbus_tcp_port: int = Field(0, ge=0, le=65535)
     modbus_rtu_port: int = Field(0, ge=0, le=65535)

@@ -37,6 +37,7 @@ from labrig.core.errors import DeviceError, InputFileError, InputIssue, LabrigEr
 from labrig.core.interrupts import SignalGuard, exit_code_for, interrupt_once, reason_for, signum_of
 from labrig.core.metadata import RunMetadata, combine
 from labrig.core.outputs import Staged, check_outputs, stage
+from labrig.core.seeds import check_seed
 from labrig.core.version import __version__
 from labrig.protocol.check import load_plan
 from labrig.protocol.plan import Plan, PlannedStep
@@ -349,6 +350,7 @@ def execute(
     propagates as :class:`labrig.core.interrupts.Interrupted`, and bad input as
     :class:`~labrig.core.errors.InputFileError` (nothing energised).
     """
+    check_seed(seed)
     job = _Job(plan, rig_path, realtime, progress, overwrite, on_file)
     if resume is not None:
         job.resume = resume if isinstance(resume, ResumePlan) else check_resume_of(plan, resume)

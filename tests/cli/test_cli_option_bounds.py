@@ -1,0 +1,106 @@
+"""Option values at and beyond their bounds: a usage error (exit 64) naming the option, no
+traceback and nothing written, for seeds, ports, fleet sizes and the model demo's sine; each
+bound also tried just inside."""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import pytest
+
+import labrig
+from labrig.cli.model import DEMO_MAX_SAMPLES, check_demo_sine
+from labrig.core.errors import InputFileError
+from labrig.core.seeds import MAX_SEED
+from labrig.fleet.simfleet import MAX_FLEET, draw_fleet
+
+from helpers import TINY, invoke, rig_path, run_protocol
+
+
+def _usage_error(res, option: str) -> None:
+    assert res.exit_code == 64, res.output
+    assert "Traceback" not in res.output
+    assert option in res.output, res.output
+
+
+@pytest.mark.parametrize("seed", [-1, MAX_SEED + 1, 2**65 + 1])
+def test_a_seed_outside_0_to_2_63_is_refused_before_a_file_exists(tmp_path, seed):
+    proto = tmp_path / "p.yaml"
+    proto.write_text(TINY)
+    res = invoke("run", proto, "--seed", seed, "--out", tmp_path / "r.h5")
+    _usage_error(res, "--seed")
+    assert not (tmp_path / "r.h5").exists()
+
+
+def test_the_largest_seed_is_recorded_exactly(tmp_path):
+    assert MAX_SEED == 2**63 - 1 and MAX_SEED > 2**53  # not representable as a float
+    out = run_protocol(TINY, tmp_path, MAX_SEED)
+    with h5py.File(out) as f:
+        assert int(f["run/seed"][()]) == 2**63 - 1
+    info = invoke("info", out, "--json")
+    assert json.loads(info.stdout)["seed"] == 2**63 - 1
+    assert labrig.open(out).seed == 2**63 - 1
+
+
+def test_the_python_api_refuses_a_negative_seed_before_the_rig(tmp_path):
+    proto = tmp_path / "p.yaml"
+    proto.write_text(TINY)
+    with pytest.raises(InputFileError, match="seed"):
+        labrig.run(proto, out=tmp_path / "r.h5", seed=-1, progress=False)
+    assert not (tmp_path / "r.h5").exists()
+
+
+@pytest.mark.parametrize("seed", [-1, MAX_SEED + 1])
+def test_a_rig_files_seed_outside_the_range_is_a_bad_input(tmp_path, seed):
+    rig = rig_path(tmp_path, simulator={"seed": seed})
+    proto = tmp_path / "p.yaml"
+    proto.write_text(TINY)
+    res = invoke("run", proto, "--rig", rig, "--out", tmp_path / "r.h5")
+    assert res.exit_code == 2, res.output
+    assert "seed" in res.stderr and str(rig) in res.stderr and "Traceback" not in res.output
+
+
+@pytest.mark.parametrize("port", [-1, 65536])
+def test_ports_outside_0_to_65535_are_usage_errors(tmp_path, port):
+    out = run_protocol(TINY, tmp_path, 1)
+    _usage_error(invoke("watch", out, "--port", port), "--port")
+    proto = tmp_path / "protocol.yaml"
+    res = invoke("run", proto, "--live-port", port, "--out", tmp_path / "x.h5")
+    _usage_error(res, "--live-port")
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_a_fleet_beyond_its_bound_is_refused_and_one_at_it_is_drawn(tmp_path):
+    res = invoke("sim", "fleet", MAX_FLEET + 1, "--out", tmp_path / "fleet")
+    _usage_error(res, "100,000")
+    assert not (tmp_path / "fleet").exists()
+    _usage_error(invoke("sim", "fleet", 2, "--out", tmp_path / "f", "--seed", -1), "--seed")
+    assert len(draw_fleet(MAX_FLEET, 0, 0.05)) == MAX_FLEET  # the bound itself is a fleet
+    with pytest.raises(ValueError):
+        draw_fleet(MAX_FLEET + 1, 0, 0.05)
+
+
+@pytest.mark.parametrize(
+    ("option", "value"),
+    [
+        ("--frequency-hz", "0"),
+        ("--frequency-hz", "nan"),
+        ("--amplitude-v", "-5"),
+        ("--rate-hz", "7.99"),  # 8 samples a period of 1 Hz is the least
+        ("--rate-hz", "inf"),
+        ("--cycles", "0"),
+    ],
+)
+def test_the_demo_sine_refuses_what_it_cannot_draw(option, value):
+    _usage_error(invoke("model", "demo", option, value), option)
+
+
+def test_the_demo_sine_at_its_bounds():
+    res = invoke("model", "demo", "--rate-hz", "8", "--cycles", "1", "--json")
+    assert res.exit_code == 0, res.output
+    assert len(json.loads(res.stdout)["cycles"]) == 1
+    # the size bound: exactly DEMO_MAX_SAMPLES passes the check, one cycle more does not
+    check_demo_sine(100.0, 1.0, DEMO_MAX_SAMPLES // 1000, 1000.0)
+    with pytest.raises(Exception, match="samples in all"):
+        check_demo_sine(100.0, 1.0, DEMO_MAX_SAMPLES // 1000 + 1, 1000.0)
