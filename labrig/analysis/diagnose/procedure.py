@@ -140,14 +140,49 @@ def slow_mode_identifiable(records: Sequence[Record]) -> bool:
     """Whether a slow viscoelastic mode (time constant 0.1-1 s) can be told apart in
     ``records``: some record is at least :data:`SLOW_MODE_RECORD_S` long and driven at or
     below :data:`SLOW_MODE_MAX_HZ`, or is not periodic (a step, a hold, an envelope). A
-    campaign of fast sines only sees such a mode as a gain change."""
-    for r in records:
+    campaign of fast sines only sees such a mode as a gain change. The parts of a record cut
+    for the folds (``meta["split_of"]``, simulated back to back) are judged as the record they
+    were cut from: a 2 s capture in four parts is 2 s long."""
+    for r in whole_records(records):
         if r.duration_s < SLOW_MODE_RECORD_S:
             continue
         f = drive_frequency_hz(r)
         if f is None or f <= SLOW_MODE_MAX_HZ or not is_periodic(r.voltage_V, r.rate_hz, f):
             return True
     return False
+
+
+def whole_records(records: Sequence[Record]) -> list[Record]:
+    """``records`` with the parts of each cut record (:func:`labrig.analysis.split.split_entries`:
+    ``meta["split_of"]``, in order) joined again into one record of that name (voltage and
+    strain; the first part's rate and meta)."""
+    slots: list[Record | str] = []  # a record, or the name of a cut one (joined below)
+    parts: dict[str, list[Record]] = {}
+    for r in records:
+        src = r.meta.get("split_of")
+        if src is None:
+            slots.append(r)
+            continue
+        if str(src) not in parts:
+            parts[str(src)] = []
+            slots.append(str(src))
+        parts[str(src)].append(r)
+    out = []
+    for slot in slots:
+        if isinstance(slot, Record):
+            out.append(slot)
+            continue
+        group = parts[slot]
+        out.append(
+            Record.from_arrays(
+                slot,
+                group[0].rate_hz,
+                np.concatenate([g.voltage_V for g in group]),
+                np.concatenate([g.strain_ue for g in group]),
+                **group[0].meta,
+            )
+        )
+    return out
 
 
 #: a drive goes against the poling when some record reaches below minus this share of the
@@ -318,7 +353,7 @@ def candidate_names(
     names = [n for n in dict.fromkeys(effects or EFFECT_NAMES) if n in lib]
     if "viscoelastic_creep" in names and not slow_mode_identifiable(records):
         why = (
-            "no entry long and slow enough to identify a slow viscoelastic mode "
+            "no record long and slow enough to identify a slow viscoelastic mode "
             f"(at least {SLOW_MODE_RECORD_S:g} s at {SLOW_MODE_MAX_HZ:g} Hz or below, or a "
             "step)"
         )

@@ -1,0 +1,61 @@
+"""Whether a slow viscoelastic mode can be identified is judged on the record as measured, not
+on the parts it was cut into for the folds."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from labrig.analysis.diagnose.procedure import (
+    SLOW_MODE_MAX_HZ,
+    SLOW_MODE_RECORD_S,
+    slow_mode_identifiable,
+    whole_records,
+)
+from labrig.analysis.records import Record
+from labrig.analysis.split import split_entries
+
+RATE = 10_000.0
+
+
+def _prbs(seconds: float) -> Record:
+    n = int(seconds * RATE)
+    bits = np.random.default_rng(1).integers(0, 2, n // 50 + 1).repeat(50)[:n]
+    v = 20.0 + 60.0 * bits
+    return Record.from_arrays("capture", RATE, v, 0.8 * v)
+
+
+def _sine(seconds: float, f: float) -> Record:
+    t = np.arange(int(seconds * RATE)) / RATE
+    v = 50.0 + 40.0 * np.sin(2 * np.pi * f * t)
+    return Record.from_arrays("sine", RATE, v, 0.8 * v)
+
+
+def test_a_2_s_prbs_in_four_parts_counts_as_2_s():
+    parts = split_entries([_prbs(2.0)], 4)
+    assert len(parts) == 4 and all(p.duration_s < SLOW_MODE_RECORD_S for p in parts)
+    assert not any(slow_mode_identifiable([p]) for p in parts)  # each part alone: too short
+    assert slow_mode_identifiable(parts)  # the capture they were cut from
+
+
+def test_the_length_bound_on_a_cut_record_just_inside_and_outside():
+    inside = split_entries([_prbs(SLOW_MODE_RECORD_S + 0.01)], 4)
+    outside = split_entries([_prbs(SLOW_MODE_RECORD_S - 0.01)], 4)
+    assert slow_mode_identifiable(inside)
+    assert not slow_mode_identifiable(outside)
+
+
+def test_a_fast_sine_stays_unidentifiable_however_long():
+    parts = split_entries([_sine(4.0, 50.0)], 4)
+    assert not slow_mode_identifiable(parts)
+    slow = split_entries([_sine(4.0, SLOW_MODE_MAX_HZ)], 4)
+    assert slow_mode_identifiable(slow)
+
+
+def test_whole_records_rejoins_the_parts_exactly_and_keeps_other_records():
+    rec, other = _prbs(2.0), _sine(0.5, 20.0)
+    parts = split_entries([rec], 4)
+    joined = whole_records([other, *parts])
+    assert [r.name for r in joined] == ["sine", "capture"]
+    assert joined[0] is other
+    assert np.array_equal(joined[1].voltage_V, rec.voltage_V)
+    assert np.array_equal(joined[1].strain_ue, rec.strain_ue)
