@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from labrig.analysis.metrics import drive_frequency_hz, is_periodic
-from labrig.analysis.noise_floor import residual_noise
+from labrig.analysis.noise_floor import residual_noise, resolution_of
 from labrig.analysis.records import Record
 from labrig.analysis.signals import step_hold
 from labrig.analysis.spectra import spectral_lines
@@ -148,7 +148,7 @@ def _entry_evidence(r: Record, m: NDArray, p: NDArray) -> EntryEvidence:
     e = EntryEvidence(
         r.name,
         100 * rms / span,
-        100 * residual_noise(res, period) / span,
+        100 * residual_noise(res, period, resolution_of(m)) / span,
         span,
         rms,
         f0,
