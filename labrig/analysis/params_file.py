@@ -26,6 +26,7 @@ from labrig.analysis.baselines import KINDS
 from labrig.analysis.records import Record
 from labrig.core.errors import InputFileError, InputIssue
 from labrig.core.jsonsafe import loads_bounded
+from labrig.core.textfile import read_text_bounded
 from labrig.model import ModelParams
 from labrig.model.effects import Effect, RunContext
 
@@ -75,7 +76,7 @@ def read_params_file(path: Path, who: str, *, bare_ok: bool = False) -> ParamsFi
             raise file_issue(
                 path, f"larger than {MAX_PARAMS_BYTES // 1_000_000} MB: not a parameter file"
             )
-        raw = loads_bounded(path.read_text(encoding="utf-8"))
+        raw = loads_bounded(read_text_bounded(path, MAX_PARAMS_BYTES))
     except FileNotFoundError:
         raise file_issue(path, "parameter file not found") from None
     except (OSError, UnicodeDecodeError, ValueError) as e:  # JSONDecodeError is a ValueError

@@ -12,8 +12,10 @@ not import the numerical stack.
 
 from __future__ import annotations
 
+import errno
 import functools
 import json
+import os
 from collections.abc import Callable, Sequence
 from enum import StrEnum
 from pathlib import Path
@@ -43,6 +45,17 @@ def friendly(fn: Callable) -> Callable:
             raise typer.Exit(e.exit_code) from None
         except FileExistsError as e:
             typer.echo(f"error: {e}", err=True)
+            raise typer.Exit(2) from None
+        except OSError as e:
+            # a path the system cannot even look up (Python 3.11's Path.exists() raises it)
+            if e.errno != errno.ENAMETOOLONG:
+                raise
+            name = Path(str(e.filename)).name
+            typer.echo(
+                f"error: {e.filename}: file name too long ({len(os.fsencode(name))} bytes in one "
+                "name; file systems allow 255)",
+                err=True,
+            )
             raise typer.Exit(2) from None
         except KeyboardInterrupt:
             typer.echo("interrupted", err=True)

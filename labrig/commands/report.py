@@ -11,7 +11,6 @@ the figures (:mod:`labrig.report.plots`, :mod:`labrig.report.control_section`) a
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -36,8 +35,9 @@ from labrig.commands.fit import (
 )
 from labrig.commands.prepare import AnalysisError, Setup, prepare
 from labrig.core.blas import single_thread_blas
-from labrig.core.jsonsafe import json_safe
+from labrig.core.jsonsafe import MAX_JSON_BYTES, json_safe, loads_bounded
 from labrig.core.outputs import same_file
+from labrig.core.textfile import read_text_bounded
 from labrig.core.version import __version__
 from labrig.model import DynamicHysteresisModel, ModelParams
 from labrig.model.effects import Effect
@@ -195,7 +195,7 @@ def named_training_files(params_file: Path | None) -> list[Path]:
     if params_file is None:
         return []
     try:
-        doc = json.loads(Path(params_file).read_text(encoding="utf-8"))
+        doc = loads_bounded(read_text_bounded(params_file, MAX_JSON_BYTES))
     except (OSError, UnicodeDecodeError, ValueError, RecursionError):
         return []
     return training_files(doc, Path(params_file)) or []

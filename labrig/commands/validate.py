@@ -316,10 +316,11 @@ def accepted_effects(doc: Any, path: Path | str, records: Sequence[Record]) -> l
 
 
 def _read_diagnosis(path: Path) -> Any:
-    from labrig.core.jsonsafe import loads_bounded
+    from labrig.core.jsonsafe import MAX_JSON_BYTES, loads_bounded
+    from labrig.core.textfile import read_text_bounded
 
     try:
-        return loads_bounded(Path(path).read_text(encoding="utf-8"))
+        return loads_bounded(read_text_bounded(path, MAX_JSON_BYTES))
     except FileNotFoundError:
         raise _issue(path, "diagnosis file not found", "--effects-from") from None
     except (OSError, UnicodeDecodeError, ValueError) as e:

@@ -25,6 +25,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from labrig.core.jsonsafe import MAX_JSON_BYTES, loads_bounded
+from labrig.core.textfile import read_text_bounded
 from labrig.model import DynamicHysteresisModel, ModelParams
 from labrig.model.bouc_wen import bouc_wen_exact, max_slope
 from labrig.model.effects import INVERTIBLE_EFFECTS, kelvin_voigt_filter, library
@@ -113,7 +115,7 @@ def as_control_model(model: ModelParams | ControlModel) -> ControlModel:
 
 def _read_json(p: Path) -> Any:
     try:
-        return json.loads(p.read_text(encoding="utf-8"))
+        return loads_bounded(read_text_bounded(p, MAX_JSON_BYTES))
     except json.JSONDecodeError as e:
         raise ValueError(f"{p.name} is not valid JSON (line {e.lineno}: {e.msg})") from None
     except UnicodeDecodeError:

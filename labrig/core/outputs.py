@@ -94,6 +94,11 @@ def same_file(a: Path, b: Path) -> bool:
         return False
 
 
+#: the longest name an output may have (bytes): file systems allow 255 in one name, and an output
+#: is first written into ``.NAME.XXXXXXXX.partial`` beside it (18 bytes more)
+MAX_OUTPUT_NAME_BYTES = 255 - len(".") - len(".XXXXXXXX.partial")
+
+
 def _refusal(target: Path, option: str, message: str) -> InputIssue:
     return InputIssue(str(target), None, option, message)
 
@@ -118,6 +123,18 @@ def check_outputs(
     existing = []
     given = [Path(i) for i in inputs if i is not None]
     for t in (Path(t) for t in targets):
+        size = len(os.fsencode(t.name))
+        if size > MAX_OUTPUT_NAME_BYTES:
+            issues.append(
+                _refusal(
+                    t,
+                    option,
+                    f"name too long ({size} bytes; an output's name is at most "
+                    f"{MAX_OUTPUT_NAME_BYTES}: it is written beside first, as "
+                    ".NAME.XXXXXXXX.partial)",
+                )
+            )
+            continue
         source = next((i for i in given if same_file(t, i)), None)
         reader = next((f for f in folders if f.reads(t)), None)
         if source is not None:

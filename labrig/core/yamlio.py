@@ -19,6 +19,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from labrig.core.errors import InputFileError, InputIssue
+from labrig.core.textfile import read_bytes_bounded
 
 M = TypeVar("M", bound=BaseModel)
 MAX_BYTES = 5_000_000
@@ -208,11 +209,12 @@ def read_yaml(path: Path | str) -> tuple[object, dict, str]:
     p = Path(path)
     name = str(path)
     try:
-        raw = p.read_bytes()
+        raw = read_bytes_bounded(p, MAX_BYTES)
     except OSError as e:
         raise InputFileError([InputIssue(name, None, "", f"cannot read file: {e.strerror}")]) from e
-    if len(raw) > MAX_BYTES:
-        raise InputFileError([InputIssue(name, None, "", "file is too large for a YAML file")])
+    except ValueError as e:
+        msg = f"file is too large for a YAML file ({e})"
+        raise InputFileError([InputIssue(name, None, "", msg)]) from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:

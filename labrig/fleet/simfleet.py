@@ -34,6 +34,8 @@ import yaml
 
 from labrig.core.errors import InputFileError, InputIssue, LabrigError
 from labrig.core.seeds import check_seed
+from labrig.core.textfile import read_text_bounded
+from labrig.core.yamlio import MAX_BYTES as YAML_MAX_BYTES
 from labrig.fleet.cache import write_atomic
 from labrig.model import PAPER_TABLE1
 
@@ -186,9 +188,9 @@ def write_fleet(
 
     protocol = resolve_protocol(protocol)
     try:
-        base = protocol.read_text(encoding="utf-8")
-    except OSError as e:
-        why = e.strerror or str(e)
+        base = read_text_bounded(protocol, YAML_MAX_BYTES)
+    except (OSError, ValueError, UnicodeDecodeError) as e:
+        why = (e.strerror if isinstance(e, OSError) else None) or str(e)
         raise InputFileError([InputIssue(str(protocol), None, "--protocol", why)]) from None
     fleet = draw_fleet(n, seed, defect_fraction)
     check_free(out, fleet, protocol, overwrite)

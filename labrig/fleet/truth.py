@@ -15,11 +15,12 @@ A healthy actuator whose run is flagged is a false alarm.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from labrig.core.jsonsafe import MAX_JSON_BYTES, loads_bounded
+from labrig.core.textfile import read_text_bounded
 from labrig.fleet.outliers import Z_LIMIT
 
 
@@ -43,7 +44,7 @@ RIGHT_EFFECT: dict[str, Callable[[dict[str, Any]], bool]] = {
 
 
 def read_truth(path: Path) -> dict[str, Any]:
-    return json.loads(path.read_text(encoding="utf-8"))
+    return loads_bounded(read_text_bounded(path, MAX_JSON_BYTES))
 
 
 def score(rows: list[dict[str, Any]], truth: dict[str, Any]) -> dict[str, Any]:

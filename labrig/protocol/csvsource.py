@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from labrig.core.textfile import read_bytes_bounded
 from labrig.protocol.schema import CsvStep
 
 MAX_BYTES = 200_000_000
@@ -75,11 +76,11 @@ def _read_text(path: Path) -> str:
     """The file's text (UTF-8, an optional BOM dropped), refusing large, missing or binary files."""
     name = path.name
     try:
-        if not path.is_file():
+        if not path.exists():
             raise CsvError("path", f"CSV file not found: {path}")
-        if path.stat().st_size > MAX_BYTES:
-            raise CsvError("path", f"{name} is larger than {MAX_BYTES // 1_000_000} MB")
-        raw = path.read_bytes()
+        raw = read_bytes_bounded(path, MAX_BYTES)
+    except ValueError:
+        raise CsvError("path", f"{name} is larger than {MAX_BYTES // 1_000_000} MB") from None
     except OSError as e:
         raise CsvError("path", f"cannot read CSV file {path}: {e.strerror}") from e
     try:
