@@ -126,9 +126,9 @@ def import_(
 ) -> None:
     """Bring measured data into a run file, one entry per input file or ControlDesk capture
     (named after the file's stem). docs/import.md describes the formats and options."""
+    from labrig.core.errors import option_error
     from labrig.importers import ImportOptions, check_options, import_files, list_table, read_tables
     from labrig.importers.entry import conversion_notes
-    from labrig.importers.table import option_error
 
     opt = ImportOptions(
         time=time, voltage=voltage, strain=strain, rate_hz=rate_hz, window=window,

@@ -41,7 +41,7 @@ from labrig.analysis import load
 from labrig.analysis.metrics import drive_frequency_hz
 from labrig.analysis.records import Record
 from labrig.analysis.split import split_entries
-from labrig.core.errors import InputFileError, InputIssue, LabrigError
+from labrig.core.errors import InputFileError, InputIssue, LabrigError, option_error
 from labrig.model import ModelParams
 from labrig.store import RunFile, read_run
 
@@ -349,7 +349,7 @@ def _warmup(
             notes.append(why)
         return float(warmup)
     if warmup_s < 0 or not math.isfinite(warmup_s):
-        raise _issue(path, f"--warmup-s must be >= 0, got {warmup_s}", "--warmup-s")
+        raise option_error("--warmup-s", f"{warmup_s}: expected seconds >= 0")
     if warmup_s > 0:
         notes.append(f"warm-up: the first {warmup_s:g} s of each record are not scored")
     return float(warmup_s)

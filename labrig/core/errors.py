@@ -43,6 +43,19 @@ class InputFileError(LabrigError):
         return (type(self), (self.issues,))
 
 
+class OptionValueError(InputFileError):
+    """A command-line option's value that cannot be used, known before any file is read
+    (``--rate-hz 0``, ``--window 5:1``): a usage error, exit code 64 like the values the
+    parser itself refuses. An :class:`InputFileError` to Python callers."""
+
+    exit_code = 64
+
+
+def option_error(option: str, message: str) -> OptionValueError:
+    """The error for a bad option value: ``--OPTION: MESSAGE`` (exit 64)."""
+    return OptionValueError([InputIssue(option, None, "", message)])
+
+
 class DeviceError(LabrigError):
     """An instrument failed or refused: names the device and the operation (exit code 3)."""
 

@@ -1,5 +1,6 @@
-"""The options of ``labrig import``, checked before any file is read: a bad value is exit 2
-naming the option, the value and what would be valid."""
+"""The options of ``labrig import``, checked before any file is read: a bad value is a usage
+error (exit 64, :class:`~labrig.core.errors.OptionValueError`) naming the option, the value and
+what would be valid."""
 
 from __future__ import annotations
 
@@ -7,9 +8,9 @@ import codecs
 import math
 from dataclasses import dataclass, field
 
+from labrig.core.errors import option_error
 from labrig.importers.labels import CORE_NAMES, is_valid_name, split_label
 from labrig.importers.limits import RATE_RANGE_HZ
-from labrig.importers.table import option_error
 
 _SEPARATORS = {"tab": "\t", "\\t": "\t", "\t": "\t", "space": " ", "spaces": " ", " ": " "}
 

@@ -23,11 +23,6 @@ def bad(path: Path | str, message: str, line: int | None = None, where: str = ""
     return InputFileError([InputIssue(str(path), line, where, message)])
 
 
-def option_error(option: str, message: str) -> InputFileError:
-    """The error for a bad option value: ``--OPTION: MESSAGE`` (exit 2)."""
-    return InputFileError([InputIssue(option, None, "", message)])
-
-
 @dataclass
 class Column:
     """One signal: its label as the file gives it ("" if none), the unit the file states (""

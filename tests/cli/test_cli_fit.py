@@ -155,7 +155,6 @@ def test_fit_staged(small_run: Path) -> None:
         (["fit", "{missing}"], "run file not found"),
         (["fit", "{text}"], "not a readable HDF5 run file"),
         (["fit", "{run}", "--entries", "sine_50V_1Hz,nope"], "no entry 'nope'"),
-        (["fit", "{run}", "--warmup-s", "-1"], "--warmup-s must be >= 0"),
         (["fit", "{run}", "--warmup-s", "100"], "leaves nothing"),
         (["fit", "{run}", "--out", "{dir}"], "is a directory"),
         (["fit", "{run}", "--effect", "creep", "--effect", "creep"], "given twice"),
@@ -179,6 +178,15 @@ def test_bad_input_exits_2_without_traceback(
     assert res.stderr.startswith("error:")
     assert "Traceback" not in res.stderr + res.stdout
     assert res.stdout == ""
+
+
+@pytest.mark.parametrize("value", ["-1", "nan", "inf"])
+def test_a_bad_warmup_is_a_usage_error_naming_the_option(small_run: Path, value: str) -> None:
+    res = invoke("fit", small_run, "--warmup-s", value)
+    assert res.exit_code == 64, (res.stdout, res.stderr)
+    assert res.stderr.startswith("error: --warmup-s: ") and "expected seconds >= 0" in res.stderr
+    assert str(small_run) not in res.stderr  # the run file is not what is wrong
+    assert invoke("fit", small_run, "--warmup-s", "0", "--no-heldout").exit_code == 0
 
 
 def test_paper_campaign_on_the_simulated_rig(tmp_path: Path) -> None:

@@ -44,25 +44,25 @@ def precious(tmp_path: Path) -> Path:
 
 
 @pytest.mark.parametrize(
-    ("inputs", "options", "needle"),
+    ("inputs", "options", "needle", "code"),
     [
-        (["nan_time.csv"], [], "nan_time.csv:3"),
-        (["good.csv", "nan_time.csv"], [], "time is needed"),
-        (["good.csv"], ["--aux", "1bad=1"], "not a channel name"),
-        (["good.csv"], ["--rate-hz", "nan"], "--rate-hz"),
-        (["good.csv"], ["--aux", "strain=2"], "core channel"),
-        (["good.csv", "missing.csv"], [], "file not found"),
+        (["nan_time.csv"], [], "nan_time.csv:3", 2),
+        (["good.csv", "nan_time.csv"], [], "time is needed", 2),
+        (["good.csv"], ["--aux", "1bad=1"], "not a channel name", 64),  # an option's value
+        (["good.csv"], ["--rate-hz", "nan"], "--rate-hz", 64),
+        (["good.csv"], ["--aux", "strain=2"], "core channel", 64),
+        (["good.csv", "missing.csv"], [], "file not found", 2),
     ],
 )
 def test_bad_input_leaves_existing_run_file_untouched(
-    tmp_path: Path, precious: Path, inputs: list[str], options: list[str], needle: str
+    tmp_path: Path, precious: Path, inputs: list[str], options: list[str], needle: str, code: int
 ) -> None:
     csv(tmp_path / "good.csv", "time_s,voltage_V,strain_ue\n0,1,2\n0.1,2,3\n0.2,3,4\n")
     csv(tmp_path / "nan_time.csv", "time_s,voltage_V,strain_ue\n0,1,2\nnan,2,3\n0.2,3,4\n")
     before = digest(precious)
     files = [tmp_path / f for f in inputs]
     res = invoke("import", *files, "--out", precious, "--overwrite", *options)
-    assert res.exit_code == 2, res.output
+    assert res.exit_code == code, res.output
     assert needle in res.output and "Traceback" not in res.output
     assert digest(precious) == before
     assert sorted(p.name for p in tmp_path.iterdir() if "partial" in p.name) == []
@@ -112,10 +112,12 @@ def test_aux_never_replaces_core_channels(tmp_path: Path) -> None:
     np.testing.assert_array_equal(e.time, [0, 0.1, 0.2])
     np.testing.assert_allclose(e["time_aux"], [0, 0.1, 0.2])  # ms -> s, under its own name
     assert e.units["strain"] == "ue" and e.units["time_aux"] == "s"
-    for spec, needle in (("strain=1", "core channel"), ("time_ms", "--aux time_aux=time_ms"),
-                         ("voltage_V", "already the time, voltage or strain")):  # fmt: skip
+    # 64: the option alone is wrong; 2: it is wrong for this file
+    cases = [("strain=1", "core channel", 64), ("time_ms", "--aux time_aux=time_ms", 2),
+             ("voltage_V", "already the time, voltage or strain", 2)]  # fmt: skip
+    for spec, needle, code in cases:
         res = invoke("import", f, "--out", tmp_path / "b.h5", "--aux", spec)
-        assert res.exit_code == 2 and needle in res.output, res.output
+        assert res.exit_code == code and needle in res.output, res.output
         assert not (tmp_path / "b.h5").exists()
 
 
@@ -123,7 +125,7 @@ def test_aux_never_replaces_core_channels(tmp_path: Path) -> None:
 def test_absurd_rates_refused_with_range(tmp_path: Path, rate: str) -> None:
     res = invoke("import", DATA / "headerless_index.csv", "--out", tmp_path / "r.h5",
                  "--voltage", "3", "--strain", "4", "--rate-hz", rate)  # fmt: skip
-    assert res.exit_code == 2, res.output
+    assert res.exit_code == 64, res.output  # a bad option value: a usage error
     assert "expected a sample rate from 0.001 to 1e+08 Hz" in res.output
 
 
@@ -195,4 +197,4 @@ def test_list_writes_nothing(tmp_path: Path) -> None:
     res = invoke("import", DATA / "header.csv", "--list")
     assert res.exit_code == 0 and "temperature" in res.output
     res = invoke("import", DATA / "header.csv")
-    assert res.exit_code == 2 and "--out" in res.output
+    assert res.exit_code == 64 and "--out" in res.output  # a missing option: a usage error
