@@ -71,14 +71,21 @@ def test_ports_outside_0_to_65535_are_usage_errors(tmp_path, port):
     assert not (tmp_path / "x.h5").exists()
 
 
-def test_a_fleet_beyond_its_bound_is_refused_and_one_at_it_is_drawn(tmp_path):
+def test_a_fleet_beyond_its_bound_or_a_negative_seed_is_refused(tmp_path):
     res = invoke("sim", "fleet", MAX_FLEET + 1, "--out", tmp_path / "fleet")
     _usage_error(res, "100,000")
     assert not (tmp_path / "fleet").exists()
     _usage_error(invoke("sim", "fleet", 2, "--out", tmp_path / "f", "--seed", -1), "--seed")
-    assert len(draw_fleet(MAX_FLEET, 0, 0.05)) == MAX_FLEET  # the bound itself is a fleet
-    with pytest.raises(ValueError):
-        draw_fleet(MAX_FLEET + 1, 0, 0.05)
+
+
+def test_draw_fleet_takes_its_bound_and_not_one_more(monkeypatch):
+    import labrig.fleet.simfleet as simfleet
+
+    assert MAX_FLEET == 100_000
+    monkeypatch.setattr(simfleet, "MAX_FLEET", 12)  # the comparison, without 100 000 draws
+    assert len(draw_fleet(12, 0, 0.05)) == 12
+    with pytest.raises(ValueError, match="1 to 12"):
+        draw_fleet(13, 0, 0.05)
 
 
 @pytest.mark.parametrize(
