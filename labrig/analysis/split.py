@@ -117,3 +117,36 @@ def split_entries(records: Sequence[Record], parts: int = 4) -> list[Record]:
                 )
             )
     return out
+
+
+def whole_records(records: Sequence[Record]) -> list[Record]:
+    """``records`` with the parts of each cut record (:func:`split_entries`:
+    ``meta["split_of"]``, in order) joined again into one record of that name (voltage and
+    strain; the first part's rate and meta)."""
+    slots: list[Record | str] = []  # a record, or the name of a cut one (joined below)
+    parts: dict[str, list[Record]] = {}
+    for r in records:
+        src = r.meta.get("split_of")
+        if src is None:
+            slots.append(r)
+            continue
+        if str(src) not in parts:
+            parts[str(src)] = []
+            slots.append(str(src))
+        parts[str(src)].append(r)
+    out = []
+    for slot in slots:
+        if isinstance(slot, Record):
+            out.append(slot)
+            continue
+        group = parts[slot]
+        out.append(
+            Record.from_arrays(
+                slot,
+                group[0].rate_hz,
+                np.concatenate([g.voltage_V for g in group]),
+                np.concatenate([g.strain_ue for g in group]),
+                **group[0].meta,
+            )
+        )
+    return out

@@ -94,9 +94,11 @@ def same_file(a: Path, b: Path) -> bool:
         return False
 
 
+#: the staging folder's name: ``.NAME.`` + tempfile's 8 random characters + this suffix
+STAGING_SUFFIX = ".partial"
 #: the longest name an output may have (bytes): file systems allow 255 in one name, and an output
 #: is first written into ``.NAME.XXXXXXXX.partial`` beside it (18 bytes more)
-MAX_OUTPUT_NAME_BYTES = 255 - len(".") - len(".XXXXXXXX.partial")
+MAX_OUTPUT_NAME_BYTES = 255 - len("..") - len("XXXXXXXX") - len(STAGING_SUFFIX)
 
 
 def _refusal(target: Path, option: str, message: str) -> InputIssue:
@@ -304,7 +306,7 @@ def stage(
                 continue
             _make_folder(t.parent, staged.created)
             staged.folders[t.parent] = Path(
-                tempfile.mkdtemp(prefix=f".{t.name}.", suffix=".partial", dir=t.parent)
+                tempfile.mkdtemp(prefix=f".{t.name}.", suffix=STAGING_SUFFIX, dir=t.parent)
             )
     except OSError as e:
         staged.discard()

@@ -10,6 +10,7 @@ byte.
 from __future__ import annotations
 
 import errno
+import stat
 from pathlib import Path
 
 __all__ = ["read_bytes_bounded", "read_text_bounded"]
@@ -27,7 +28,12 @@ def read_bytes_bounded(path: Path | str, max_bytes: int) -> bytes:
         For a file of more than ``max_bytes`` bytes ("larger than ... MB").
     """
     p = Path(path)
-    if p.exists() and not p.is_dir() and not p.is_file():
+    try:
+        mode = p.stat().st_mode
+    except FileNotFoundError:
+        mode = None  # open() says so
+    # checked before opening: opening a pipe waits for a writer
+    if mode is not None and not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
         raise OSError(errno.EINVAL, "not a regular file (a device, a pipe or a socket)", str(p))
     with p.open("rb") as fh:
         data = fh.read(max_bytes + 1)

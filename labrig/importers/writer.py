@@ -15,6 +15,7 @@ import tempfile
 from pathlib import Path
 
 from labrig.core.metadata import RunMetadata
+from labrig.core.outputs import STAGING_SUFFIX
 from labrig.core.version import __version__
 from labrig.importers.entry import ImportedEntry
 from labrig.store import Channel, RunWriter
@@ -70,7 +71,7 @@ def write_run(
 ) -> None:
     """Write ``entries`` to ``out`` (beside it first, then renamed over it)."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    folder = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=out.parent))
+    folder = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=STAGING_SUFFIX, dir=out.parent))
     try:
         partial = folder / out.name
         write_entries(partial, entries, description, metadata)

@@ -9,10 +9,9 @@ from labrig.analysis.diagnose.procedure import (
     SLOW_MODE_MAX_HZ,
     SLOW_MODE_RECORD_S,
     slow_mode_identifiable,
-    whole_records,
 )
 from labrig.analysis.records import Record
-from labrig.analysis.split import split_entries
+from labrig.analysis.split import split_entries, whole_records
 
 RATE = 10_000.0
 

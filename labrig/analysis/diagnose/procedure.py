@@ -57,7 +57,7 @@ from labrig.analysis.parallel import map_tasks
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import build_sequences
 from labrig.analysis.spectra import detect_mains_hz
-from labrig.analysis.split import split_entries
+from labrig.analysis.split import split_entries, whole_records
 from labrig.analysis.terms import (
     TermScales,
     empirical_effect,
@@ -150,39 +150,6 @@ def slow_mode_identifiable(records: Sequence[Record]) -> bool:
         if f is None or f <= SLOW_MODE_MAX_HZ or not is_periodic(r.voltage_V, r.rate_hz, f):
             return True
     return False
-
-
-def whole_records(records: Sequence[Record]) -> list[Record]:
-    """``records`` with the parts of each cut record (:func:`labrig.analysis.split.split_entries`:
-    ``meta["split_of"]``, in order) joined again into one record of that name (voltage and
-    strain; the first part's rate and meta)."""
-    slots: list[Record | str] = []  # a record, or the name of a cut one (joined below)
-    parts: dict[str, list[Record]] = {}
-    for r in records:
-        src = r.meta.get("split_of")
-        if src is None:
-            slots.append(r)
-            continue
-        if str(src) not in parts:
-            parts[str(src)] = []
-            slots.append(str(src))
-        parts[str(src)].append(r)
-    out = []
-    for slot in slots:
-        if isinstance(slot, Record):
-            out.append(slot)
-            continue
-        group = parts[slot]
-        out.append(
-            Record.from_arrays(
-                slot,
-                group[0].rate_hz,
-                np.concatenate([g.voltage_V for g in group]),
-                np.concatenate([g.strain_ue for g in group]),
-                **group[0].meta,
-            )
-        )
-    return out
 
 
 #: a drive goes against the poling when some record reaches below minus this share of the
