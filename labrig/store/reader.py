@@ -14,6 +14,7 @@ import copy
 import os
 import re
 import time
+from collections import OrderedDict
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -43,10 +44,14 @@ __all__ = [
 RETRIES_WHILE_WRITTEN = 5
 RETRY_PAUSE_S = 0.15
 
-#: the last file read: (key, whether its samples were read, the run, the channels' shapes), the
-#: key being the path and the file's identity and change times; a command that reads one file
-#: twice (e.g. its metadata, then its records) reads it once
-_last: tuple[tuple, bool, RunFile, dict] | None = None
+#: the files read last, newest at the end: key -> (whether its samples were read, the run, the
+#: channels' shapes), the key being the path and the file's identity, size and change times
+#: (any write changes them); a command or a session that reads a file again (its metadata,
+#: then its records; a report after a fit) reads it once
+_recent: OrderedDict[tuple, tuple[bool, RunFile, dict]] = OrderedDict()
+#: at most this many files are kept, holding at most this many bytes of samples in all
+RECENT_FILES = 8
+RECENT_BYTES = 64 * 2**20
 
 
 def _not_a_file(p: Path) -> str:
@@ -67,25 +72,27 @@ def read_run(path: Path | str, load_data: bool = True) -> RunFile:
     a file that is not a labrig run file, is damaged, or makes libhdf5 loop or crash raises
     :class:`InputFileError` naming the file and, where known, the object.
     """
-    global _last
     p = Path(path)
     if not p.is_file():
         raise InputFileError([InputIssue(str(path), None, "", _not_a_file(p))])
     for attempt in range(RETRIES_WHILE_WRITTEN + 1):
         st = p.stat()
         key = (str(p.resolve()), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
-        if _last is not None and _last[0] == key and (_last[1] or not load_data):
+        kept = _recent.get(key)
+        if kept is not None and (kept[0] or not load_data):
+            _recent.move_to_end(key)
             break
         try:
-            run, shapes = _read_isolated(p, load_data, st.st_size)
+            read, shapes = _read_isolated(p, load_data, st.st_size)
         except InputFileError:
             if attempt == RETRIES_WHILE_WRITTEN or not _changing(p, st):
                 raise
             continue  # caught between two writes of a live writer: read it again
-        _last = (key, load_data, run, shapes)
+        kept = (load_data, read, shapes)
+        _keep(key, kept)
         break
-    assert _last is not None  # read above, or the cached read matched
-    run, shapes = copy.deepcopy(_last[2:])
+    assert kept is not None  # read above, or a kept read matched
+    run, shapes = copy.deepcopy(kept[1:])
     run.path = Path(path)
     if run.status == "running":
         w = writer_of(p, run.writer_pid, run.writer_host)
@@ -94,6 +101,19 @@ def read_run(path: Path | str, load_data: bool = True) -> RunFile:
         for e in run:
             e.data = {c: np.empty(shapes[e.name][c]) for c in e.data}
     return run
+
+
+def _keep(key: tuple, kept: tuple[bool, RunFile, dict]) -> None:
+    """Keep a read among the recent ones, dropping the oldest beyond :data:`RECENT_FILES` files
+    or :data:`RECENT_BYTES` of samples (a read larger than that alone is not kept)."""
+    _recent.pop(key, None)
+    _recent[key] = kept
+    while len(_recent) > RECENT_FILES or sum(map(_sample_bytes, _recent.values())) > RECENT_BYTES:
+        _recent.popitem(last=False)
+
+
+def _sample_bytes(kept: tuple[bool, RunFile, dict]) -> int:
+    return sum(a.nbytes for e in kept[1] for a in e.data.values())
 
 
 #: the first bytes of an HDF5 file (without a user block, as labrig writes them)

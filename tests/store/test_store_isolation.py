@@ -359,3 +359,36 @@ def test_one_file_read_twice_is_read_once(tmp_path: Path, monkeypatch):
     write_run(tmp_path / "other.h5", n=200)
     os.replace(tmp_path / "other.h5", path)  # a new file under the same name is read again
     assert read_run(path)["e1"].n_samples == 200 and len(calls) == 2
+
+
+def test_recent_files_are_kept_within_their_count_and_bytes(tmp_path: Path, monkeypatch):
+    calls = []
+    real = store_reader.call_isolated
+
+    def counting(*args, **kwargs):
+        calls.append(args[1])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(store_reader, "call_isolated", counting)
+    monkeypatch.setattr(store_reader, "_recent", type(store_reader._recent)())
+    files = [write_run(tmp_path / f"run{k}.h5", n=100 + k) for k in range(3)]
+    for path in [*files, *files]:  # a file read again after others is read once
+        read_run(path)
+    assert calls == files
+    # one file over the count: the oldest is dropped and read again, the newest two are kept
+    monkeypatch.setattr(store_reader, "RECENT_FILES", 2)
+    store_reader._recent.clear()
+    for path in [*files, files[0], files[2], files[0]]:
+        read_run(path)
+    assert calls == [*files, *files, files[0]]
+    # the bytes bound, at one file's samples (every array the read returns): one byte below,
+    # the file is not kept (read at each call); at exactly its size, it is
+    one = sum(a.nbytes for e in read_run(files[1]) for a in e.data.values())
+    assert one >= 3 * 2 * 101 * 8  # at least its entries' two channels
+    store_reader._recent.clear()
+    monkeypatch.setattr(store_reader, "RECENT_BYTES", one - 1)
+    read_run(files[1]), read_run(files[1])
+    assert calls[-2:] == [files[1], files[1]] and len(calls) == 10
+    monkeypatch.setattr(store_reader, "RECENT_BYTES", one)
+    read_run(files[1]), read_run(files[1])
+    assert calls[-3:] == [files[1], files[1], files[1]] and len(calls) == 11
