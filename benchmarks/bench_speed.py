@@ -6,6 +6,7 @@ Run from the repository root (a few minutes on a loaded 2-core machine)::
     .venv/bin/python benchmarks/bench_speed.py library RUN.h5       # 4 more candidates
     .venv/bin/python benchmarks/bench_speed.py fleet-task RUN.h5    # batch diagnose's base fit
     .venv/bin/python benchmarks/bench_speed.py documents A.h5 B.h5 --reference PYTHON  # pages
+    .venv/bin/python benchmarks/bench_speed.py reads A.h5 B.h5 C.h5   # files read again
 
 ``phases``: one fresh process each for ``fit`` and for ``diagnose`` (one worker), CPU seconds
 (``getrusage`` of the process and its children: the store reads a run file in a child process)
@@ -38,6 +39,13 @@ task's fit, then the diagnosis), then making their documents three times over, o
 the other, with a task's large temporaries allocated and freed between pages; CPU seconds of
 the first (matplotlib's import, the first figure) and the median of the others, and whether
 every ``diagnosis.json`` and every figure's pixels are the same across the installations.
+
+``reads``: what keeping the recent reads saves a session that reads files again after others
+(a notebook, a test suite, ``validate`` over several files): the files given read in turn, three
+times over, in this process, with the store keeping the last eight files (today) and the last
+one only (before; ``RECENT_FILES = 1``), interleaved ``--repeats`` times; CPU seconds of the
+process and its children (each read is made in a forked child), the number of reads made, and
+the yardstick.
 
 Prints markdown on stdout (copied into ``benchmarks/RESULTS.md``).
 """
@@ -332,15 +340,64 @@ def documents(paths: list[Path], repeats: int, reference: str | None) -> None:
           f"load average now {os.getloadavg()[0]:.2f}")  # fmt: skip
 
 
+def reads(paths: list[Path], repeats: int) -> None:
+    """The ``reads`` comparison (module docstring)."""
+    import resource
+
+    from labrig.store import reader
+
+    def cpu() -> float:
+        a, b = (resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+        return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
+
+    made: list[int] = []
+    real = reader.call_isolated
+
+    def counting(*args, **kwargs):  # type: ignore[no-untyped-def]
+        made.append(1)
+        return real(*args, **kwargs)
+
+    reader.call_isolated = counting  # type: ignore[assignment]
+    kept = reader.RECENT_FILES
+    times: dict[int, list[float]] = {kept: [], 1: []}
+    counts: dict[int, int] = {}
+    for _ in range(repeats):
+        for files in (kept, 1):
+            reader.RECENT_FILES = files
+            reader._recent.clear()
+            made.clear()
+            t = cpu()
+            for _round in range(3):
+                for p in paths:
+                    reader.read_run(p)
+            times[files].append(cpu() - t)
+            counts[files] = len(made)
+    reader.RECENT_FILES = kept
+    print(header())
+    print()
+    print("| files kept | reads made | CPU s (median; range) |")
+    print("|---|---|---|")
+    for files, ts in times.items():
+        print(
+            f"| {files} | {counts[files]} of {3 * len(paths)} | {statistics.median(ts):.3f}; "
+            f"{min(ts):.3f}-{max(ts):.3f} |"
+        )
+    ratio = statistics.median(times[1]) / statistics.median(times[kept])
+    print(f"\nlast one only / last {kept}: {ratio:.2f}x the CPU")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("phases", "library", "fleet-task", "documents"))
+    ap.add_argument("what", choices=("phases", "library", "fleet-task", "documents", "reads"))
     ap.add_argument("run", type=Path, nargs="+", help="run file(s); documents: several")
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--reference", help="documents: another installation's Python")
     a = ap.parse_args()
     if a.what == "documents":
         documents([r.resolve() for r in a.run], a.repeats, a.reference)
+        return 0
+    if a.what == "reads":
+        reads([r.resolve() for r in a.run], a.repeats)
         return 0
     run = {"phases": phases, "library": library, "fleet-task": fleet_task}[a.what]
     run(a.run[0].resolve(), a.repeats)
