@@ -27,6 +27,7 @@ imports run one way: ``rigfile -> drivers.sim.serve -> rigspec``.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import logging
 from dataclasses import dataclass
@@ -148,7 +149,14 @@ class SimulatorSettings(BaseModel):
 
 
 def simulator(name: str = "bench") -> SimulatorInfo:
-    """The virtual bench registered as ``name`` in the ``labrig.simulators`` entry points."""
+    """The virtual bench registered as ``name`` in the ``labrig.simulators`` entry points
+    (looked up once per process: each look-up reads every installed package's entry points,
+    tens of milliseconds; a failed look-up is not kept)."""
+    return _simulator(name)
+
+
+@functools.cache
+def _simulator(name: str) -> SimulatorInfo:
     try:
         eps = metadata.entry_points(group=SIMULATOR_GROUP, name=name)
     except Exception as e:  # a broken installation

@@ -19,7 +19,7 @@ from __future__ import annotations
 import itertools
 import json
 import zlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
@@ -155,18 +155,19 @@ def _crc(
     attrs: Sequence[str],
     members: Sequence[str] | None,
     values: Mapping[str, object] | None = None,
+    read_value: Callable[[], object] | None = None,
 ) -> int:
     """CRC-32 of the attributes ``attrs`` (names and values, sorted by name; ``values``: the
     attribute values read already), a group's member names ``members`` and a non-chunked
-    dataset's value."""
+    dataset's value (``read_value()``, default ``obj[()]``)."""
     crc = 0
+    values = obj.attrs if values is None else values
     for name in sorted(attrs):
-        value = values[name] if values is not None else obj.attrs[name]
-        crc = zlib.crc32(_attr_piece(name, value), crc)
+        crc = zlib.crc32(_attr_piece(name, values[name]), crc)
     if members is not None:
         crc = zlib.crc32(b"/" + "\x1f".join(sorted(members)).encode(), crc)
     elif isinstance(obj, h5py.Dataset) and obj.chunks is None:
-        crc = zlib.crc32(b"=" + _canonical(obj[()]), crc)
+        crc = zlib.crc32(b"=" + _canonical(read_value() if read_value else obj[()]), crc)
     return crc
 
 
@@ -211,10 +212,13 @@ def sealed_data(obj: h5py.Group | h5py.Dataset) -> tuple[int, int] | None:
         return None
 
 
-def sealed_members(group: h5py.Group) -> list[str] | None:
+def sealed_members(
+    group: h5py.Group, values: Mapping[str, object] | None = None
+) -> list[str] | None:
     """The member names a group's seal lists (what labrig wrote there), or None when it has no
-    seal of today's kind; not a check (:func:`check_seal` is)."""
-    text = group.attrs.get(SEAL_ATTR)
+    seal of today's kind; not a check (:func:`check_seal` is). ``values``: the group's
+    attributes, read already (:func:`read_attrs`)."""
+    text = (group.attrs if values is None else values).get(SEAL_ATTR)
     if not isinstance(text, str | bytes):
         return None
     try:
@@ -238,24 +242,39 @@ class SealCheck:
     legacy: bool = False
 
 
-def check_seal(obj: h5py.Group | h5py.Dataset) -> SealCheck:
+def read_attrs(obj: h5py.Group | h5py.Dataset) -> dict[str, object]:
+    """Every attribute of ``obj`` by name, as h5py reads it (a damaged attribute store raises
+    here, instead of being taken for a missing attribute)."""
+    attrs = obj.attrs  # one AttributeManager: h5py makes a new one at each ``.attrs``
+    return {name: attrs[name] for name in attrs}
+
+
+def check_seal(
+    obj: h5py.Group | h5py.Dataset,
+    values: Mapping[str, object] | None = None,
+    read_value: Callable[[], object] | None = None,
+) -> SealCheck:
     """Check an object against its seal: every attribute and member the seal names is there and
     holds what it held (CRC-32); names it does not cover are additions. Reads every attribute
-    of the object, sealed or not (a damaged attribute store raises here, instead of being taken
-    for a missing attribute). A legacy seal (:data:`LEGACY_SEAL_ATTR`, covering everything)
-    that does not match is explained, when it can be, by up to :data:`LEGACY_ADDITIONS` names
-    added since (a CRC-32 equality by chance: about 1 in 4e9 per try)."""
-    values = {name: obj.attrs[name] for name in obj.attrs}  # damage raises here
+    of the object (:func:`read_attrs`; ``values``: read already), sealed or not. A
+    non-chunked dataset's value is read by ``read_value()`` (default ``obj[()]``) when a seal
+    covers it. A legacy seal (:data:`LEGACY_SEAL_ATTR`, covering everything) that does not
+    match is explained, when it can be, by up to :data:`LEGACY_ADDITIONS` names added since
+    (a CRC-32 equality by chance: about 1 in 4e9 per try)."""
+    values = read_attrs(obj) if values is None else values
     members = sorted(obj) if isinstance(obj, h5py.Group) else None
     if SEAL_ATTR in values:
-        return _check_current(obj, values, members)
+        return _check_current(obj, values, members, read_value)
     if LEGACY_SEAL_ATTR in values:
-        return _check_legacy(obj, values, members)
+        return _check_legacy(obj, values, members, read_value)
     return SealCheck()
 
 
 def _check_current(
-    obj: h5py.Group | h5py.Dataset, values: dict[str, object], members: list[str] | None
+    obj: h5py.Group | h5py.Dataset,
+    values: Mapping[str, object],
+    members: list[str] | None,
+    read_value: Callable[[], object] | None,
 ) -> SealCheck:
     text = values[SEAL_ATTR]
     text = text.decode("utf-8", "replace") if isinstance(text, bytes) else text
@@ -273,7 +292,8 @@ def _check_current(
     if missing:
         gone = ", ".join(missing[:5])
         return SealCheck(True, f"does not match its checksum (@labrig_seal: {gone} missing)")
-    if _crc(obj, attrs, sealed_members if members is not None else None, values) != crc:
+    listed = sealed_members if members is not None else None
+    if _crc(obj, attrs, listed, values, read_value) != crc:
         return SealCheck(True, "does not match its checksum (@labrig_seal)")
     added = [f"@{a}" for a in values if a not in SEAL_ATTRS and a not in attrs]
     if members is not None:
@@ -282,14 +302,17 @@ def _check_current(
 
 
 def _check_legacy(
-    obj: h5py.Group | h5py.Dataset, values: dict[str, object], members: list[str] | None
+    obj: h5py.Group | h5py.Dataset,
+    values: Mapping[str, object],
+    members: list[str] | None,
+    read_value: Callable[[], object] | None,
 ) -> SealCheck:
     stored = values[LEGACY_SEAL_ATTR]
     attrs = sorted(a for a in values if a not in SEAL_ATTRS)
     pieces = {f"@{a}": _attr_piece(a, values[a]) for a in attrs}
     value = b""
     if members is None and isinstance(obj, h5py.Dataset) and obj.chunks is None:
-        value = b"=" + _canonical(obj[()])
+        value = b"=" + _canonical(read_value() if read_value else obj[()])
     candidates = [*pieces, *(members or [])]
 
     def crc_without(left_out: tuple[str, ...]) -> int:

@@ -25,6 +25,7 @@ from labrig.store.format import (
     data_crc,
     memory_long_name,
     memory_units,
+    read_attrs,
     sealed_members,
 )
 from labrig.store.isolated import allow_cpu
@@ -170,6 +171,10 @@ class _Reader:
         self.additions: list[str] = []
         #: the CRC-32 of each sealed channel's samples, by path (checked when they are read)
         self.data_seals: dict[str, int] = {}
+        #: what :meth:`check_seals` read, by HDF5 path (``obj.name``), read once: each
+        #: object's attributes and each scalar dataset's value
+        self.attrs_read: dict[str, dict[str, object]] = {}
+        self.values_read: dict[str, object] = {}
 
     def error(self, message: str, where: str | None = None) -> InputFileError:
         return InputFileError(
@@ -183,6 +188,14 @@ class _Reader:
         self.where = f"{(base or '').strip('/')}/{name}".strip("/")
         return self.where
 
+    def value(self, ds: h5py.Dataset) -> object:
+        """A dataset's value; a scalar's is read once (the seal check reads it first)."""
+        if ds.shape != ():
+            return ds[()]
+        if ds.name not in self.values_read:
+            self.values_read[ds.name] = ds[()]
+        return self.values_read[ds.name]
+
     def text(self, group: h5py.Group, name: str, default: str = "") -> str:
         """A scalar text dataset (a scalar number reads as its text)."""
         if name not in group:
@@ -191,7 +204,7 @@ class _Reader:
         ds = group[name]
         if not isinstance(ds, h5py.Dataset) or ds.shape != ():
             raise self.error("expected a text value (a scalar dataset)")
-        v = ds[()]
+        v = self.value(ds)
         return v.decode("utf-8", "replace") if isinstance(v, bytes) else str(v)
 
     def number(self, group: h5py.Group, name: str) -> float | None:
@@ -202,7 +215,7 @@ class _Reader:
         ds = group[name]
         if not isinstance(ds, h5py.Dataset) or ds.shape != () or ds.dtype.kind not in "iuf":
             raise self.error("expected a number (a scalar numeric dataset)")
-        return float(ds[()])
+        return float(self.value(ds))  # type: ignore[arg-type]
 
     def integer(self, group: h5py.Group, name: str) -> int | None:
         """A scalar whole number, or ``None`` when absent. An integer dataset is read as the
@@ -213,7 +226,7 @@ class _Reader:
             return None
         ds = group[name]
         if ds.dtype.kind in "iu":
-            return int(ds[()])
+            return int(self.value(ds))  # type: ignore[call-overload]
         if not (math.isfinite(v) and v == int(v)):
             raise self.error(f"expected a whole number, found {v:g}")
         return int(v)
@@ -221,7 +234,8 @@ class _Reader:
     def attr(self, obj: h5py.HLObject, name: str, default: object = "") -> object:
         """An attribute: text decoded, a text array as a list of texts, else as stored."""
         self.at(obj, f"@{name}")
-        v = obj.attrs.get(name, default)
+        read = self.attrs_read.get(obj.name) if obj.name else None
+        v = read.get(name, default) if read is not None else obj.attrs.get(name, default)
         if isinstance(v, bytes):
             return v.decode("utf-8", "replace")
         if isinstance(v, np.ndarray) and v.dtype.kind in "OSU":
@@ -359,7 +373,7 @@ class _Reader:
             if not isinstance(ds, h5py.Dataset) or ds.shape != ():
                 continue
             self.at(g, key)
-            v = ds[()]
+            v = self.value(ds)
             if isinstance(v, bytes):
                 out[key] = v.decode("utf-8", "replace")
             elif isinstance(v, np.bool_ | bool):
@@ -390,7 +404,7 @@ class _Reader:
         """The members of ``group`` that labrig wrote: those its seal lists, or (a file sealed
         before, or not at all) all but the additions :meth:`check_seals` found. A channel or
         a group another program added is not read as labrig's."""
-        listed = sealed_members(group)
+        listed = sealed_members(group, self.attrs_read.get(group.name))
         members = list(group)
         if listed is not None:
             return [m for m in members if m in listed]
@@ -413,7 +427,8 @@ class _Reader:
                 return  # inside an addition: not labrig's
             allow_cpu(size_bytes=obj.size * obj.dtype.itemsize if _contiguous(obj) else 0)
             self.where = path
-            found = check_seal(obj)
+            values = self.attrs_read[obj.name] = read_attrs(obj)
+            found = check_seal(obj, values, lambda: self.value(obj))
             if found.problem:
                 raise self.error(
                     f"{found.problem}: the file's metadata is damaged, or another program "

@@ -87,10 +87,11 @@ def _renew_seal(obj: h5py.Group | h5py.Dataset, data: tuple[int, int] | None = N
     if data is None and isinstance(obj, h5py.Dataset) and obj.chunks is not None:
         data = sealed_data(obj)
     seal = seal_of(obj, data)
-    if obj.attrs.get(SEAL_ATTR) != seal:
-        obj.attrs[SEAL_ATTR] = seal
-    if LEGACY_SEAL_ATTR in obj.attrs:
-        del obj.attrs[LEGACY_SEAL_ATTR]
+    attrs = obj.attrs  # one AttributeManager: h5py makes a new one at each ``.attrs``
+    if attrs.get(SEAL_ATTR) != seal:
+        attrs[SEAL_ATTR] = seal
+    if LEGACY_SEAL_ATTR in attrs:
+        del attrs[LEGACY_SEAL_ATTR]
 
 
 def _renew_all(obj: h5py.Group | h5py.Dataset) -> None:
