@@ -11,6 +11,7 @@ whose groups are :class:`LabrigGroup` unless told otherwise, so a command regist
 from __future__ import annotations
 
 import enum
+import functools
 import typing
 from pathlib import Path
 from typing import Any
@@ -71,6 +72,21 @@ def name_params(params: list[Any]) -> None:
             p.metavar = default_metavar(p)
 
 
+def refuse_empty_paths(params: list[Any]) -> None:
+    """Make an empty path (``labrig info ""``, ``--out ""``) a usage error naming the
+    parameter: typer would take it for ``.``, the current folder."""
+    for p in params:
+        if value_type(p) is Path:
+            p.process_value = functools.partial(_nonempty_path, p, p.process_value)
+
+
+def _nonempty_path(param: Any, process: Any, ctx: ClickContext, value: Any) -> Any:
+    given = value if isinstance(value, list | tuple) else [value]
+    if any(isinstance(v, str) and not v for v in given):
+        raise typer.BadParameter("an empty path: give a file or folder name", ctx=ctx, param=param)
+    return process(ctx, value)
+
+
 def usage_pieces(command: TyperCommand | TyperGroup, ctx: typer.Context) -> list[str]:
     """``[OPTIONS] RUN_FILE [PATHS]...``: the usage line after the command's name."""
     params = command.get_params(ctx)
@@ -94,6 +110,7 @@ class LabrigCommand(TyperCommand):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         name_params(self.params)
+        refuse_empty_paths(self.params)
 
     def collect_usage_pieces(self, ctx: ClickContext) -> list[str]:
         return usage_pieces(self, ctx)

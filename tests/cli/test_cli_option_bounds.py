@@ -1,10 +1,12 @@
 """Option values at and beyond their bounds: a usage error (exit 64) naming the option, no
 traceback and nothing written, for seeds, ports, fleet sizes and the model demo's sine; each
-bound also tried just inside."""
+bound also tried just inside. An empty path (``""``, which typer reads as ``.``) is a usage
+error for every path parameter of every command."""
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import h5py
 import pytest
@@ -111,3 +113,56 @@ def test_the_demo_sine_at_its_bounds():
     check_demo_sine(100.0, 1.0, DEMO_MAX_SAMPLES // 1000, 1000.0)
     with pytest.raises(Exception, match="samples in all"):
         check_demo_sine(100.0, 1.0, DEMO_MAX_SAMPLES // 1000 + 1, 1000.0)
+
+
+def _path_params() -> list[tuple[list[str], str, bool]]:
+    """Every command's path parameters: (the command's words, the parameter's option or
+    metavar, whether it is an argument), found by walking the command line."""
+    import typer.main
+
+    from labrig.cli import app
+    from labrig.cli.help_format import is_argument
+    from labrig.cli.typer_app import value_type
+
+    found = []
+
+    def walk(words: list[str], command) -> None:
+        for name, sub in getattr(command, "commands", {}).items():
+            walk([*words, name], sub)
+        for p in getattr(command, "params", []) if words else []:
+            if value_type(p) is Path:
+                arg = is_argument(p)
+                found.append((words, p.metavar if arg else p.opts[0], arg))
+
+    walk([], typer.main.get_command(app))
+    return found
+
+
+PATH_PARAMS = _path_params()
+
+
+def test_every_command_with_files_has_path_parameters_found():
+    commands = {" ".join(words) for words, _, _ in PATH_PARAMS}
+    assert {"info", "export", "run", "fit", "report", "diagnose", "batch fit"} <= commands
+
+
+@pytest.mark.parametrize(
+    ("words", "param", "argument"),
+    PATH_PARAMS,
+    ids=[f"{' '.join(w)} {p}" for w, p, _ in PATH_PARAMS],
+)
+def test_an_empty_path_is_a_usage_error_naming_it(tmp_path, monkeypatch, words, param, argument):
+    """``""`` is not taken for the current folder (typer's reading of it): exit 64 naming the
+    parameter, before anything is read or written."""
+    monkeypatch.chdir(tmp_path)
+    res = invoke(*words, *([""] if argument else [param, ""]))
+    _usage_error(res, param)
+    assert "an empty path" in res.output
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_path_that_is_not_empty_is_still_taken(tmp_path, monkeypatch):
+    """Just beside the refusal: ``.`` (the folder said as such) is a path like any other."""
+    monkeypatch.chdir(tmp_path)
+    res = invoke("runs", ".")
+    assert res.exit_code == 0, res.output
