@@ -7,6 +7,8 @@ Run from the repository root (a few minutes on a loaded 2-core machine)::
     .venv/bin/python benchmarks/bench_speed.py fleet-task RUN.h5    # batch diagnose's base fit
     .venv/bin/python benchmarks/bench_speed.py documents A.h5 B.h5 --reference PYTHON  # pages
     .venv/bin/python benchmarks/bench_speed.py reads A.h5 B.h5 C.h5   # files read again
+    git worktree add /tmp/before COMMIT    # the tree to compare with, then:
+    .venv/bin/python benchmarks/bench_speed.py checked-read A.h5 B.h5 --tree /tmp/before
 
 ``phases``: one fresh process each for ``fit`` and for ``diagnose`` (one worker), CPU seconds
 (``getrusage`` of the process and its children: the store reads a run file in a child process)
@@ -46,6 +48,14 @@ times over, in this process, with the store keeping the last eight files (today)
 one only (before; ``RECENT_FILES = 1``), interleaved ``--repeats`` times; CPU seconds of the
 process and its children (each read is made in a forked child), the number of reads made, and
 the yardstick.
+
+``checked-read``: one checked read of each file (``labrig.store.parse.read_run_here``: the
+seals, the types and shapes, every sample; what a command's forked reader does) with this
+tree's code and with ``--tree``'s (another checkout, imported ahead of the installed labrig),
+one fresh process per tree, interleaved ``--repeats`` times (default 2); each process reads
+every file 9 times and gives the median CPU seconds (``time.process_time``) of a read, and a
+yardstick (``numpy.sort`` of 1e6 floats) timed beside it; the ratio of the medians per file, and
+whether the two trees read the same (every field and every sample equal).
 
 Prints markdown on stdout (copied into ``benchmarks/RESULTS.md``).
 """
@@ -150,6 +160,44 @@ for rnd in range(3):
                   .tobytes()).hexdigest() for b in pngs]
         out[res.path.name] = [docs["diagnosis.json"], pixels]
 print(json.dumps([times[0], times[1:], out]))
+"""
+
+#: what the child process of ``checked-read`` runs: one JSON line (median CPU s of a read per
+#: file, the yardstick's median, a digest of what each file read to)
+CHECKED_READ = r"""
+import hashlib, json, statistics, sys, time
+from pathlib import Path
+import numpy as np
+tree = sys.argv[1]
+sys.path.insert(0, tree)
+from labrig.store import parse
+assert parse.__file__.startswith(tree), parse.__file__
+out, sticks = {}, []
+for p in map(Path, sys.argv[2:]):
+    run, shapes = parse.read_run_here(p)
+    ts = []
+    for _ in range(9):
+        t = time.process_time()
+        run, shapes = parse.read_run_here(p)
+        ts.append(time.process_time() - t)
+        x = np.random.default_rng(0).random(1_000_000)
+        t = time.process_time()
+        np.sort(x)
+        sticks.append(time.process_time() - t)
+    def canon(x):
+        if hasattr(x, "__dataclass_fields__"):
+            return canon(vars(x))
+        if isinstance(x, dict):
+            return [[repr(k), canon(v)] for k, v in sorted(x.items(), key=lambda kv: repr(kv[0]))]
+        if isinstance(x, list | tuple):
+            return [canon(v) for v in x]
+        if isinstance(x, np.ndarray):
+            return [x.dtype.str, x.shape, hashlib.sha256(x.tobytes()).hexdigest()]
+        return repr(x)
+    run.path = None
+    digest = hashlib.sha256(repr(canon([run, shapes])).encode()).hexdigest()
+    out[p.name] = [statistics.median(ts), digest]
+print(json.dumps([out, statistics.median(sticks)]))
 """
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -386,13 +434,56 @@ def reads(paths: list[Path], repeats: int) -> None:
     print(f"\nlast one only / last {kept}: {ratio:.2f}x the CPU")
 
 
+def checked_read(paths: list[Path], repeats: int, tree: Path) -> None:
+    """The ``checked-read`` comparison (module docstring)."""
+    trees = {"this tree": ROOT, f"`--tree` ({tree.name})": tree}
+    got: dict[str, list] = {k: [] for k in trees}
+    for _ in range(repeats):
+        for label, root in trees.items():
+            res = subprocess.run(
+                [sys.executable, "-c", CHECKED_READ, str(root), *map(str, paths)],
+                capture_output=True,
+                text=True,
+                check=True,
+                cwd="/",
+            )
+            got[label].append(json.loads(res.stdout.strip().splitlines()[-1]))
+    print(header() + "\n")
+    print("One checked read, CPU s (median of 9 reads in a process; median and range over "
+          f"{repeats} processes per tree, interleaved):\n")  # fmt: skip
+    print("| file | " + " | ".join(trees) + " | ratio |")
+    print("|---|" + "---|" * (len(trees) + 1))
+    this, other = (got[k] for k in trees)
+    for p in paths:
+        cells, meds = [], []
+        for rows in (this, other):
+            v = [r[0][p.name][0] for r in rows]
+            meds.append(statistics.median(v))
+            cells.append(f"{meds[-1]:.3f} ({min(v):.3f}-{max(v):.3f})")
+        print(f"| {p.name} | " + " | ".join(cells) + f" | {meds[0] / meds[1]:.2f} |")
+    same = {r[0][p.name][1] for rows in got.values() for r in rows for p in paths} == {
+        this[0][0][p.name][1] for p in paths
+    }
+    sticks = [r[1] for rows in got.values() for r in rows]
+    print(f"\nyardstick {1e3 * statistics.median(sticks):.1f} ms (median of the processes'); "
+          f"what each tree read the same (every field, every sample): {same}; load average "
+          f"now {os.getloadavg()[0]:.2f}")  # fmt: skip
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("phases", "library", "fleet-task", "documents", "reads"))
+    modes = ("phases", "library", "fleet-task", "documents", "reads", "checked-read")
+    ap.add_argument("what", choices=modes)
     ap.add_argument("run", type=Path, nargs="+", help="run file(s); documents: several")
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--reference", help="documents: another installation's Python")
+    ap.add_argument("--tree", type=Path, help="checked-read: another checkout to compare with")
     a = ap.parse_args()
+    if a.what == "checked-read":
+        if a.tree is None:
+            ap.error("checked-read needs --tree (another checkout)")
+        checked_read([r.resolve() for r in a.run], a.repeats, a.tree.resolve())
+        return 0
     if a.what == "documents":
         documents([r.resolve() for r in a.run], a.repeats, a.reference)
         return 0
