@@ -30,7 +30,7 @@ from labrig.cli.common import (
     plural,
 )
 from labrig.cli.diagnose import ALSO_OPTION, MAINS_HZ_OPTION, MAX_EFFECTS_OPTION
-from labrig.cli.typer_app import LabrigTyper
+from labrig.cli.typer_app import LabrigTyper, nonempty_paths
 
 batch_app = LabrigTyper(
     help="Analyse many run files at once (one task per file) on a Dask cluster or serially; "
@@ -38,7 +38,11 @@ batch_app = LabrigTyper(
     no_args_is_help=True,
 )
 
-FILES = typer.Argument(..., help="Run files, globs (quote them: 'runs/**/*.h5') or folders.")
+FILES = typer.Argument(
+    ...,
+    help="Run files, globs (quote them: 'runs/**/*.h5') or folders.",
+    callback=nonempty_paths,
+)
 OUT = out_dir_option("the table, the fleet report and per-run outputs", required=True)
 SCHEDULER = typer.Option(
     None, "--scheduler", help="Address of a running Dask scheduler (tcp://HOST:PORT)."

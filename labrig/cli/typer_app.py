@@ -81,10 +81,17 @@ def refuse_empty_paths(params: list[Any]) -> None:
 
 
 def _nonempty_path(param: Any, process: Any, ctx: ClickContext, value: Any) -> Any:
+    return process(ctx, nonempty_paths(ctx, param, value))
+
+
+def nonempty_paths(ctx: typer.Context, param: typer.CallbackParam, value: Any) -> Any:
+    """``value`` (one text or several) unless one is empty: then a usage error naming ``param``.
+    The callback of parameters that take paths as text (globs: ``batch``'s run files)."""
     given = value if isinstance(value, list | tuple) else [value]
     if any(isinstance(v, str) and not v for v in given):
-        raise typer.BadParameter("an empty path: give a file or folder name", ctx=ctx, param=param)
-    return process(ctx, value)
+        named: Any = param  # typer's BadParameter is typed for its own parameter classes
+        raise typer.BadParameter("an empty path: give a file or folder name", ctx=ctx, param=named)
+    return value
 
 
 def usage_pieces(command: TyperCommand | TyperGroup, ctx: typer.Context) -> list[str]:

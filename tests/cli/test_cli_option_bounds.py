@@ -130,7 +130,7 @@ def _path_params() -> list[tuple[list[str], str, bool]]:
         for name, sub in getattr(command, "commands", {}).items():
             walk([*words, name], sub)
         for p in getattr(command, "params", []) if words else []:
-            if value_type(p) is Path:
+            if value_type(p) is Path or p.name == "run_files":  # batch's: paths or globs
                 arg = is_argument(p)
                 found.append((words, p.metavar if arg else p.opts[0], arg))
 
@@ -144,6 +144,7 @@ PATH_PARAMS = _path_params()
 def test_every_command_with_files_has_path_parameters_found():
     commands = {" ".join(words) for words, _, _ in PATH_PARAMS}
     assert {"info", "export", "run", "fit", "report", "diagnose", "batch fit"} <= commands
+    assert ["batch", "report"] in [words for words, param, _ in PATH_PARAMS if param == "RUN_FILES"]
 
 
 @pytest.mark.parametrize(
