@@ -122,7 +122,7 @@ def split_entries(records: Sequence[Record], parts: int = 4) -> list[Record]:
 def whole_records(records: Sequence[Record]) -> list[Record]:
     """``records`` with the parts of each cut record (:func:`split_entries`:
     ``meta["split_of"]``, in order) joined again into one record of that name (voltage and
-    strain; the first part's rate and meta)."""
+    strain, time from 0; the first part's rate, hold and meta)."""
     slots: list[Record | str] = []  # a record, or the name of a cut one (joined below)
     parts: dict[str, list[Record]] = {}
     for r in records:
@@ -140,13 +140,16 @@ def whole_records(records: Sequence[Record]) -> list[Record]:
             out.append(slot)
             continue
         group = parts[slot]
+        v = np.concatenate([g.voltage_V for g in group])
         out.append(
-            Record.from_arrays(
+            Record(  # the meta as a mapping: a record's meta may hold "rate_hz", "hold", ...
                 slot,
                 group[0].rate_hz,
-                np.concatenate([g.voltage_V for g in group]),
+                np.arange(v.size) / group[0].rate_hz,
+                v,
                 np.concatenate([g.strain_ue for g in group]),
-                **group[0].meta,
+                hold=group[0].hold,
+                meta=dict(group[0].meta),
             )
         )
     return out

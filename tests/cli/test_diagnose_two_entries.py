@@ -1,9 +1,11 @@
 """``labrig diagnose`` of a file of two entries (two records imported together, as the
 micromanipulator pair is in docs/analysis.md): leave-one-entry-out needs three, a single entry
-is cut into parts; the refusal is exit 2 naming the file, the count and the ways on."""
+is cut into parts; the refusal is exit 2 naming the file, the count and the ways on. A run file
+of one entry is diagnosed (cut into parts)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from helpers import invoke, run_protocol
@@ -29,3 +31,27 @@ def test_two_entries_are_refused_with_the_ways_on(tmp_path: Path) -> None:
     assert str(run.name) in said and "found 2" in said
     assert "import each record on its own" in said and "labrig validate" in said
     assert "Traceback" not in res.output and not (tmp_path / "d").exists()
+
+
+ONE = """\
+name: one entry
+rate_hz: 1000
+rest_s: 0.5
+steps:
+  - kind: sweep
+    amplitudes_V: [100]
+    frequencies_hz: [2]
+    cycles: 4
+    min_duration_s: 2
+"""
+
+
+def test_one_entry_of_a_run_is_cut_into_parts_and_diagnosed(tmp_path: Path) -> None:
+    """A run's single entry (its record's meta holds the step's ``rate_hz``): exit 0, the
+    verdict and the four parts' held-out score, no traceback."""
+    run = run_protocol(ONE, tmp_path, seed=1)
+    res = invoke("diagnose", run, "--json")
+    assert res.exit_code == 0, res.output
+    assert "Traceback" not in res.output
+    doc = json.loads(res.stdout)
+    assert doc["verdict"] and doc["before"]["heldout_nrmse_pct"] > 0

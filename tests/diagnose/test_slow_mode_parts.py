@@ -58,3 +58,17 @@ def test_whole_records_rejoins_the_parts_exactly_and_keeps_other_records():
     assert joined[0] is other
     assert np.array_equal(joined[1].voltage_V, rec.voltage_V)
     assert np.array_equal(joined[1].strain_ue, rec.strain_ue)
+
+
+def test_whole_records_keeps_a_meta_naming_the_rate_and_the_hold():
+    """A run's record carries its step's definition in ``meta`` (a sweep's ``rate_hz``...):
+    joining its parts passed that as a second ``rate_hz`` (a TypeError: ``labrig diagnose`` of
+    any one-entry run file failed so)."""
+    rec = Record.from_arrays("capture", RATE, _prbs(2.0).voltage_V, _prbs(2.0).strain_ue, "linear")
+    rec.meta.update(rate_hz=5.0, hold="zoh", name="x", kind="prbs")
+    joined = whole_records(split_entries([rec], 4))
+    assert len(joined) == 1 and joined[0].name == "capture"
+    assert joined[0].rate_hz == RATE and joined[0].hold == "linear"
+    assert {k: joined[0].meta[k] for k in ("rate_hz", "hold", "name", "kind")} == rec.meta
+    assert np.array_equal(joined[0].voltage_V, rec.voltage_V)
+    assert joined[0].duration_s == rec.duration_s
