@@ -120,6 +120,25 @@ def _walk(folder: Path, rel: str = "") -> Iterator[tuple[str, Path, os.stat_resu
             continue
 
 
+def _drop_undecodable(targets: dict[Path, _Wanted]) -> list[str]:
+    """Take out of ``targets`` the files whose names are not UTF-8 (the index keeps names as
+    UTF-8 text); a note naming them."""
+    dropped = []
+    for folder, wanted in targets.items():
+        for rel in list(wanted.files):
+            try:
+                rel.encode("utf-8")
+            except UnicodeEncodeError:
+                del wanted.files[rel]
+                dropped.append(os.fsencode(folder / rel).decode("utf-8", "backslashreplace"))
+    if not dropped:
+        return []
+    return [
+        f"not listed: {len(dropped)} file(s) whose name is not UTF-8 text ({dropped[0]}"
+        f"{', ...' if len(dropped) > 1 else ''}): rename them to list them"
+    ]
+
+
 def find_run_files(folder: Path) -> dict[str, tuple[Path, Stamp]]:
     """The run files below ``folder``: path relative to it -> (path, stamp)."""
     return {rel: (path, Stamp.of(st)) for rel, path, st in _walk(folder)}
@@ -227,9 +246,9 @@ def list_runs(
     t0 = time.perf_counter()
     conditions = [c if isinstance(c, Condition) else parse_all([c])[0] for c in where]
     targets = _targets(paths)
+    notes: list[str] = _drop_undecodable(targets)
     total = sum(_stale_count(f, w, reindex) for f, w in targets.items()) if progress else 0
     listed: list[ListedRun] = []
-    notes: list[str] = []
     indexes: list[Path] = []
     read = 0
     seen: set[Path] = set()

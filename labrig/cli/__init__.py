@@ -17,6 +17,9 @@ library function and prints; this module lists the commands, in the order ``--he
 
 from __future__ import annotations
 
+import contextlib
+import sys
+
 import typer
 
 from labrig.cli import check, diagnose, drivers, files, fit, report, run, validate
@@ -56,6 +59,9 @@ def main(
     ),
 ) -> None:
     """labrig: piezo rigs, HDF5 run files, and the fractional-order hysteresis model."""
+    for stream in (sys.stdout, sys.stderr):  # a file name that is not UTF-8 prints as its bytes
+        with contextlib.suppress(AttributeError, ValueError):
+            stream.reconfigure(errors="surrogateescape")  # type: ignore[union-attr]
 
 
 app.command("check")(check.check)

@@ -12,10 +12,12 @@ not import the numerical stack.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import functools
 import json
 import os
+import sys
 from collections.abc import Callable, Sequence
 from enum import StrEnum
 from pathlib import Path
@@ -33,13 +35,29 @@ if TYPE_CHECKING:
 E = TypeVar("E", bound=StrEnum)
 
 
+#: what writing the standard output can fail with (a full disk or ``/dev/full``, a closed pipe,
+#: an I/O error): one message and exit 2, not a traceback
+OUTPUT_ERRNOS = frozenset({errno.ENOSPC, errno.EPIPE, errno.EIO, errno.EFBIG, errno.EDQUOT})
+
+
+def _stdout_to_devnull() -> None:
+    """Point the standard output at /dev/null, so that Python's last flush at the exit does not
+    fail again on what is still buffered."""
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
+
+
 def friendly(fn: Callable) -> Callable:
     """Expected failures print one clear message (no traceback) and exit with their code."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         try:
-            return fn(*args, **kwargs)
+            result = fn(*args, **kwargs)
+            sys.stdout.flush()  # a full or closed output fails here, not at the exit
+            return result
         except LabrigError as e:
             typer.echo(f"error: {e}", err=True)
             raise typer.Exit(e.exit_code) from None
@@ -47,6 +65,14 @@ def friendly(fn: Callable) -> Callable:
             typer.echo(f"error: {e}", err=True)
             raise typer.Exit(2) from None
         except OSError as e:
+            if e.errno == errno.ELOOP:
+                typer.echo(f"error: {e.filename}: a loop of symbolic links (no file at its end)",
+                           err=True)  # fmt: skip
+                raise typer.Exit(2) from None
+            if e.filename is None and e.errno in OUTPUT_ERRNOS:  # stdout: full, closed, failing
+                _stdout_to_devnull()
+                typer.echo(f"error: the standard output cannot be written: {e.strerror}", err=True)
+                raise typer.Exit(2) from None
             # a path the system cannot even look up (Python 3.11's Path.exists() raises it)
             if e.errno != errno.ENAMETOOLONG:
                 raise
@@ -56,6 +82,12 @@ def friendly(fn: Callable) -> Callable:
                 "name; file systems allow 255)",
                 err=True,
             )
+            raise typer.Exit(2) from None
+        except RuntimeError as e:  # pathlib's resolve() on a loop of symbolic links
+            if not str(e).startswith("Symlink loop from "):
+                raise
+            where = str(e).removeprefix("Symlink loop from ").strip("'\"")
+            typer.echo(f"error: {where}: a loop of symbolic links (no file at its end)", err=True)
             raise typer.Exit(2) from None
         except KeyboardInterrupt:
             typer.echo("interrupted", err=True)

@@ -14,7 +14,9 @@ run file of ``run``, ``sim fleet --out DIR``, ``batch --out DIR``) is checked by
   ``being_written`` the caller passes, :func:`labrig.store.writing.being_written`) is never
   replaced, even with ``--overwrite``;
 - an existing output is replaced only with ``--overwrite``;
-- a folder where a file goes, or a file where a folder goes, is refused.
+- a folder where a file goes, or a file where a folder goes, is refused; so are, even with
+  ``--overwrite``, a symbolic link (name the file it points to), a device, pipe or socket, and
+  a name that is not UTF-8.
 
 Then :func:`stage` creates a hidden folder ``.<name>.<random>.partial`` beside the targets
 (creating their folder if needed), which proves the place writable before the work starts; the
@@ -35,6 +37,7 @@ import contextlib
 import errno
 import os
 import shutil
+import stat
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -139,6 +142,7 @@ def check_outputs(
             continue
         source = next((i for i in given if same_file(t, i)), None)
         reader = next((f for f in folders if f.reads(t)), None)
+        unusable = _unusable(t)
         if source is not None:
             issues.append(
                 _refusal(
@@ -155,6 +159,8 @@ def check_outputs(
                     "outside that folder",
                 )
             )
+        elif unusable:
+            issues.append(_refusal(t, option, f"{unusable}; choose another {option}"))
         elif folder:
             if t.exists() and not t.is_dir():
                 issues.append(
@@ -198,6 +204,30 @@ def check_outputs(
                 )
             ]
         )
+
+
+def _unusable(t: Path) -> str:
+    """Why ``t`` can never be an output, even with ``--overwrite`` (empty when it can): a name
+    that is not UTF-8 (the run file records its own name as text), a symbolic link (replacing
+    the link would leave the file it points to as it was), or something that is not a file
+    (a device such as ``/dev/null``, a pipe, a socket: renaming onto it would replace it)."""
+    try:
+        str(t).encode("utf-8")
+    except UnicodeEncodeError:
+        return "its name is not valid UTF-8 text (a run file records it as text)"
+    if t.is_symlink():
+        try:
+            points = os.readlink(t)
+        except OSError:
+            points = "?"
+        return f"is a symbolic link (to {points}), never replaced (give the file it points to)"
+    try:
+        mode = t.stat().st_mode
+    except OSError:
+        return ""  # not there (or not reachable): the staging says so if it matters
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return ""
+    return "is not a regular file (a device, a pipe or a socket) and is never replaced"
 
 
 @dataclass
