@@ -142,7 +142,7 @@ def check_outputs(
             continue
         source = next((i for i in given if same_file(t, i)), None)
         reader = next((f for f in folders if f.reads(t)), None)
-        unusable = _unusable(t)
+        unusable = never_an_output(t)
         if source is not None:
             issues.append(
                 _refusal(
@@ -206,7 +206,7 @@ def check_outputs(
         )
 
 
-def _unusable(t: Path) -> str:
+def never_an_output(t: Path) -> str:
     """Why ``t`` can never be an output, even with ``--overwrite`` (empty when it can): a name
     that is not UTF-8 (the run file records its own name as text), a symbolic link (replacing
     the link would leave the file it points to as it was), or something that is not a file

@@ -36,7 +36,7 @@ import numpy as np
 from labrig.core.errors import DeviceError, InputFileError, InputIssue, LabrigError, StorageError
 from labrig.core.interrupts import SignalGuard, exit_code_for, interrupt_once, reason_for, signum_of
 from labrig.core.metadata import RunMetadata, combine
-from labrig.core.outputs import Staged, check_outputs, stage
+from labrig.core.outputs import Staged, check_outputs, never_an_output, stage
 from labrig.core.seeds import check_seed
 from labrig.core.version import __version__
 from labrig.protocol.check import load_plan
@@ -155,7 +155,12 @@ def run_inputs(plan: Plan, rig_path: Path | None) -> list[Path]:
 def check_resume_of(plan: Plan, path: Path) -> ResumePlan:
     """Whether the run file ``path`` can be resumed with ``plan`` and what remains
     (:func:`labrig.store.resume.check_resume`: the same protocol, not complete, not being
-    written, every sample and seal sound); :class:`InputFileError` (exit 2) otherwise."""
+    written, every sample and seal sound; not a symbolic link, which the resumed file, written
+    beside it and renamed into place, would replace); :class:`InputFileError` (exit 2)
+    otherwise."""
+    why = never_an_output(Path(path))
+    if why:
+        raise InputFileError([InputIssue(str(path), None, "--resume", why)])
     return check_resume(path, plan.text, [s.name for s in plan.steps], plan.file)
 
 

@@ -4,6 +4,7 @@ naming it and no traceback, and nothing it points to is replaced.
 - an output that is a symbolic link, a pipe (a device is the same case: not a regular file),
   or a name that is not UTF-8: refused even with ``--overwrite``; a regular file beside them is
   still replaced with ``--overwrite`` (just inside the rule);
+- a symbolic link given to ``run --resume`` (the resumed file would replace the link);
 - a loop of symbolic links as an input or an output folder;
 - a standard output that cannot be written (``/dev/full``);
 - a folder holding a run file whose name is not UTF-8: listed without it, with a note.
@@ -39,6 +40,19 @@ def test_a_symbolic_link_as_output_is_refused_and_its_file_kept(tiny_run, tmp_pa
     res = invoke("fit", tiny_run, "--out", link, "--overwrite")
     _refused(res, "symbolic link", "params.json")
     assert link.is_symlink() and target.read_text() == "{}"
+
+
+def test_a_symbolic_link_is_not_resumed(tiny_run, tmp_path):
+    from helpers import TINY
+
+    proto = tmp_path / "p.yaml"
+    proto.write_text(TINY)
+    link = tmp_path / "link.h5"
+    link.symlink_to(tiny_run)
+    before = tiny_run.read_bytes()
+    res = invoke("run", proto, "--resume", link)
+    _refused(res, "symbolic link", "--resume")
+    assert link.is_symlink() and tiny_run.read_bytes() == before
 
 
 def test_a_pipe_as_output_is_refused_a_regular_file_is_replaced(tiny_run, tmp_path):
