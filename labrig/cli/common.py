@@ -96,6 +96,19 @@ def friendly(fn: Callable) -> Callable:
     return wrapper
 
 
+def entries_option(what: str) -> Any:
+    """``--entries a,b``: entry names separated by commas; one that names none (``""``,
+    ``" , "``) is a usage error, not every entry."""
+
+    def named(value: str | None) -> str | None:
+        if value is not None and not any(n.strip() for n in value.split(",")):
+            raise typer.BadParameter("names no entry: give names separated by commas, or leave "
+                                     "the option out for every complete entry")  # fmt: skip
+        return value
+
+    return typer.Option(None, "--entries", help=ENTRIES_HELP.format(what), callback=named)
+
+
 # -- choices -------------------------------------------------------------------------------------
 
 

@@ -14,7 +14,6 @@ from rich.markup import escape
 from rich.table import Table
 
 from labrig.cli.common import (
-    ENTRIES_HELP,
     HELDOUT_OPTION,
     OFFSET_OPTION,
     OVERWRITE_OPTION,
@@ -26,6 +25,7 @@ from labrig.cli.common import (
     check_out,
     choice,
     deliver_json,
+    entries_option,
     friendly,
     json_option,
     one_of,
@@ -84,9 +84,7 @@ MEMORY_OPTION = typer.Option(
 @friendly
 def fit(
     run_file: Path = typer.Argument(..., help="Run file (HDF5), recorded or imported."),
-    entries: str | None = typer.Option(
-        None, "--entries", help=ENTRIES_HELP.format("Entries to fit")
-    ),
+    entries: str | None = entries_option("Entries to fit"),
     out: Path | None = out_file_option("the result as JSON (what --json prints)"),
     as_json: bool = json_option(),
     method: Method = METHOD_OPTION,

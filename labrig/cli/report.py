@@ -15,7 +15,6 @@ import typer
 from rich.markup import escape
 
 from labrig.cli.common import (
-    ENTRIES_HELP,
     HELDOUT_OPTION,
     OFFSET_OPTION,
     OVERWRITE_OPTION,
@@ -23,6 +22,7 @@ from labrig.cli.common import (
     Method,
     check_out,
     choice,
+    entries_option,
     friendly,
     json_option,
     json_text,
@@ -42,9 +42,7 @@ def report(
         help="Parameters from `labrig fit --out` (default: fit now).",
     ),
     as_json: bool = json_option("the metrics table"),
-    entries: str | None = typer.Option(
-        None, "--entries", help=ENTRIES_HELP.format("Entries to report")
-    ),
+    entries: str | None = entries_option("Entries to report"),
     method: Method = typer.Option(
         Method.GLOBAL,
         "--method",

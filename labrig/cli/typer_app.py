@@ -74,14 +74,22 @@ def name_params(params: list[Any]) -> None:
 
 def refuse_empty_paths(params: list[Any]) -> None:
     """Make an empty path (``labrig info ""``, ``--out ""``) a usage error naming the
-    parameter: typer would take it for ``.``, the current folder."""
+    parameter: typer would take it for ``.``, the current folder. So is a file's path that
+    ends with ``/`` (``--out FILE`` given ``new/``: pathlib drops the slash, and a file named
+    ``new`` would be written)."""
     for p in params:
         if value_type(p) is Path:
             p.process_value = functools.partial(_nonempty_path, p, p.process_value)
 
 
 def _nonempty_path(param: Any, process: Any, ctx: ClickContext, value: Any) -> Any:
-    return process(ctx, nonempty_paths(ctx, param, value))
+    value = nonempty_paths(ctx, param, value)
+    given = value if isinstance(value, list | tuple) else [value]
+    if param.metavar == "FILE" and any(isinstance(v, str) and v.endswith("/") for v in given):
+        raise typer.BadParameter(
+            "ends with /, which names a folder: give a file name", ctx=ctx, param=param
+        )
+    return process(ctx, value)
 
 
 def nonempty_paths(ctx: typer.Context, param: typer.CallbackParam, value: Any) -> Any:

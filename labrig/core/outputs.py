@@ -161,6 +161,10 @@ def check_outputs(
             )
         elif unusable:
             issues.append(_refusal(t, option, f"{unusable}; choose another {option}"))
+        elif _a_file(t.parent):
+            issue = _refusal(t.parent, option, "is a file; give a folder (new, or one to add to)")
+            if issue not in issues:  # one line for the outputs that go in it
+                issues.append(issue)
         elif folder:
             if t.exists() and not t.is_dir():
                 issues.append(
@@ -204,6 +208,13 @@ def check_outputs(
                 )
             ]
         )
+
+
+def _a_file(p: Path) -> bool:
+    try:
+        return p.exists() and not p.is_dir()
+    except OSError:
+        return False
 
 
 def never_an_output(t: Path) -> str:

@@ -167,3 +167,24 @@ def test_a_path_that_is_not_empty_is_still_taken(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     res = invoke("runs", ".")
     assert res.exit_code == 0, res.output
+
+
+@pytest.mark.parametrize(("words", "option"), [(["fit"], "--out"), (["info"], "--out")])
+def test_a_file_path_ending_with_a_slash_is_a_usage_error(tiny_run, tmp_path, words, option):
+    """pathlib drops the slash: ``--out new/`` wrote a file named ``new``."""
+    res = invoke(*words, tiny_run, option, f"{tmp_path}/new/")
+    _usage_error(res, option)
+    assert "ends with /" in res.output and list(tmp_path.iterdir()) == []
+    # just beside: a folder's path may end with one
+    res = invoke("export", tiny_run, "--out", f"{tmp_path}/csv/")
+    assert res.exit_code == 0, res.output
+    assert len(list((tmp_path / "csv").glob("*.csv"))) == 3
+
+
+@pytest.mark.parametrize("entries", ["", " ", " , ,"])
+def test_entries_that_name_none_are_a_usage_error(tiny_run, entries):
+    """``--entries " "`` fitted every entry; it names none."""
+    for command in ("fit", "report"):
+        res = invoke(command, tiny_run, "--entries", entries, "--json")
+        _usage_error(res, "--entries")
+        assert "names no entry" in res.output
