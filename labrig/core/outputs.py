@@ -231,7 +231,7 @@ def never_an_output(t: Path) -> str:
             points = os.readlink(t)
         except OSError:
             points = "?"
-        return f"is a symbolic link (to {points}), never replaced (give the file it points to)"
+        return f"is a symbolic link (to {points}), never replaced (give the path it points to)"
     try:
         mode = t.stat().st_mode
     except OSError:

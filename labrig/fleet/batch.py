@@ -23,6 +23,7 @@ from typing import Any
 from rich.console import Console
 
 from labrig.core.errors import InputFileError, InputIssue
+from labrig.core.outputs import never_an_output
 from labrig.core.version import __version__
 from labrig.core.words import plural
 from labrig.fleet.cache import MANIFEST, cached_result, run_keys, store_result, write_atomic
@@ -115,7 +116,12 @@ def expand_inputs(patterns: list[str]) -> list[Path]:
 
 
 def check_out_dir(out: Path) -> None:
-    """``--out`` must be a new or empty folder, or one a batch wrote (it has the manifest)."""
+    """``--out`` must be a new or empty folder, or one a batch wrote (it has the manifest); not
+    a symbolic link, a device or a name that is not UTF-8
+    (:func:`labrig.core.outputs.never_an_output`)."""
+    why = never_an_output(out)
+    if why:
+        raise _issue(str(out), why, "--out")
     if out.exists() and not out.is_dir():
         raise _issue(str(out), "is a file; give a folder for the batch's outputs", "--out")
     if out.is_dir() and any(out.iterdir()) and not (out / MANIFEST).is_file():

@@ -42,6 +42,14 @@ def test_a_symbolic_link_as_output_is_refused_and_its_file_kept(tiny_run, tmp_pa
     assert link.is_symlink() and target.read_text() == "{}"
 
 
+def test_a_symbolic_link_as_a_batch_folder_is_refused(tiny_run, tmp_path):
+    (tmp_path / "real").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "real")
+    res = invoke("batch", "fit", tiny_run, "--out", tmp_path / "link", "--serial")
+    _refused(res, "symbolic link")
+    assert list((tmp_path / "real").iterdir()) == []
+
+
 def test_a_symbolic_link_is_not_resumed(tiny_run, tmp_path):
     from helpers import TINY
 
