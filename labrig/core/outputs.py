@@ -142,7 +142,7 @@ def check_outputs(
             continue
         source = next((i for i in given if same_file(t, i)), None)
         reader = next((f for f in folders if f.reads(t)), None)
-        unusable = never_an_output(t)
+        unusable = never_an_output(t, folder)
         if source is not None:
             issues.append(
                 _refusal(
@@ -210,6 +210,13 @@ def check_outputs(
         )
 
 
+def _a_folder(p: Path) -> bool:
+    try:
+        return p.is_dir()
+    except OSError:
+        return False
+
+
 def _a_file(p: Path) -> bool:
     try:
         return p.exists() and not p.is_dir()
@@ -217,16 +224,17 @@ def _a_file(p: Path) -> bool:
         return False
 
 
-def never_an_output(t: Path) -> str:
+def never_an_output(t: Path, folder: bool = False) -> str:
     """Why ``t`` can never be an output, even with ``--overwrite`` (empty when it can): a name
     that is not UTF-8 (the run file records its own name as text), a symbolic link (replacing
     the link would leave the file it points to as it was), or something that is not a file
-    (a device such as ``/dev/null``, a pipe, a socket: renaming onto it would replace it)."""
+    (a device such as ``/dev/null``, a pipe, a socket: renaming onto it would replace it).
+    A ``folder`` the outputs go into may be a link to a folder (they are written in it)."""
     try:
         str(t).encode("utf-8")
     except UnicodeEncodeError:
         return "its name is not valid UTF-8 text (a run file records it as text)"
-    if t.is_symlink():
+    if t.is_symlink() and not (folder and _a_folder(t)):
         try:
             points = os.readlink(t)
         except OSError:

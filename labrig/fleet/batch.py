@@ -117,9 +117,9 @@ def expand_inputs(patterns: list[str]) -> list[Path]:
 
 def check_out_dir(out: Path) -> None:
     """``--out`` must be a new or empty folder, or one a batch wrote (it has the manifest); not
-    a symbolic link, a device or a name that is not UTF-8
+    a device, a name that is not UTF-8 or a symbolic link but to a folder
     (:func:`labrig.core.outputs.never_an_output`)."""
-    why = never_an_output(out)
+    why = never_an_output(out, folder=True)
     if why:
         raise _issue(str(out), why, "--out")
     if out.exists() and not out.is_dir():
