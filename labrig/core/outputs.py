@@ -233,7 +233,7 @@ def never_an_output(t: Path, folder: bool = False) -> str:
     try:
         str(t).encode("utf-8")
     except UnicodeEncodeError:
-        return "its name is not valid UTF-8 text (a run file records it as text)"
+        return "its path is not valid UTF-8 text (a run file records it as text)"
     if t.is_symlink() and not (folder and _a_folder(t)):
         try:
             points = os.readlink(t)
