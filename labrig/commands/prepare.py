@@ -21,7 +21,8 @@ stated in :attr:`Setup.notes` (the commands print them and the report shows them
 
 Data that cannot be fitted is refused before any fit (:func:`check_records`, exit code 2,
 naming the entry and what would be valid): a sample rate outside :data:`RATE_RANGE_HZ`;
-a non-finite time, voltage or scored strain sample; a scored entry of fewer than
+a non-finite time, voltage or scored strain sample, or one beyond :data:`MAX_ABS_VOLTAGE_V` or
+:data:`MAX_ABS_STRAIN_UE`; a scored entry of fewer than
 :data:`MIN_SAMPLES` samples; a voltage that spans less than :data:`MIN_VOLTAGE_SPAN_V` over the
 scored entries (and over each entry simulated on its own); a scored strain that does not
 change; a step definition whose ``rest_after_s`` is not a number from 0 to :data:`MAX_REST_S`.
@@ -55,6 +56,11 @@ MIN_VOLTAGE_SPAN_V = 1.0
 RATE_RANGE_HZ = (1e-3, 1e8)
 #: the longest rest after an entry (``rest_after_s``, s) simulated
 MAX_REST_S = 3600.0
+#: the largest |voltage| (V) and |strain| (ue) a sample may have: far beyond any piezo actuator
+#: (kilovolts, a few thousand ue), a bound that keeps sums of squares finite; a larger sample is
+#: a units mistake or a damaged value (an imported 1e300 made the fit divide by zero)
+MAX_ABS_VOLTAGE_V = 1e5
+MAX_ABS_STRAIN_UE = 1e7
 #: a run file of a single entry is cut into this many parts for ``diagnose``
 DIAGNOSE_SPLIT = 4
 
@@ -272,6 +278,10 @@ def check_records(
         raise InputFileError(issues)
 
 
+#: the magnitude bound of each channel checked by :func:`check_records` (bound, unit)
+LIMITS = {"command_voltage": (MAX_ABS_VOLTAGE_V, "V"), "strain": (MAX_ABS_STRAIN_UE, "ue")}
+
+
 def _record_issues(path: Path, r: Record, scored: bool, alone: bool) -> list[InputIssue]:
     """What makes one record unfit to simulate (and, when ``scored``, to fit)."""
 
@@ -285,12 +295,23 @@ def _record_issues(path: Path, r: Record, scored: bool, alone: bool) -> list[Inp
     channels = [("time", r.time_s), ("command_voltage", r.voltage_V)]
     for name, x in [*channels, *([("strain", r.strain_ue)] if scored else [])]:
         bad = np.flatnonzero(~np.isfinite(x))
+        bound, unit = LIMITS.get(name, (np.inf, ""))
+        huge = np.flatnonzero(np.abs(x) > bound) if not bad.size else bad[:0]
         if bad.size:
             out.append(
                 issue(
                     f"data/{name}",
                     f"{bad.size} non-finite sample(s) (first at sample {bad[0]}: {x[bad[0]]}); "
                     "every sample must be a finite number",
+                )
+            )
+        elif huge.size:
+            out.append(
+                issue(
+                    f"data/{name}",
+                    f"{huge.size} sample(s) beyond +-{bound:g} {unit} (first at sample "
+                    f"{huge[0]}: {x[huge[0]]:.4g}), far beyond any piezo actuator: a damaged "
+                    "value, or a column in other units (labrig import's --*-scale)",
                 )
             )
     rest = r.meta.get("rest_after_s", 0.0)

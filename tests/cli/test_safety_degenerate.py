@@ -19,6 +19,8 @@ import pytest
 
 from labrig.analysis.records import Record
 from labrig.commands.prepare import (
+    MAX_ABS_STRAIN_UE,
+    MAX_ABS_VOLTAGE_V,
     MAX_REST_S,
     MIN_SAMPLES,
     MIN_VOLTAGE_SPAN_V,
@@ -173,6 +175,34 @@ def test_the_minimums_at_their_boundaries(ok: Record, bad: Record):
     check_records(path, [ok], ["e"], alone=True)
     with pytest.raises(InputFileError):
         check_records(path, [bad], ["e"], alone=True)
+
+
+def with_sample(channel: str, value: float) -> Record:
+    """:func:`record` with one sample of ``channel`` set to ``value``."""
+    r = record()
+    getattr(r, channel)[40] = value
+    return r
+
+
+@pytest.mark.parametrize(
+    ("channel", "bound", "field"),
+    [
+        ("voltage_V", MAX_ABS_VOLTAGE_V, "command_voltage"),
+        ("strain_ue", MAX_ABS_STRAIN_UE, "strain"),
+    ],
+)
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_a_sample_beyond_the_magnitude_bound_is_refused_naming_it(channel, bound, field, sign):
+    """An imported 1e300 made the fit divide by zero (a traceback) or print inf %; the bound
+    just inside (accepted) and just outside (refused, naming the entry, the channel and the
+    sample), and far outside."""
+    path = Path("run.h5")
+    check_records(path, [with_sample(channel, sign * bound)], ["e"], alone=True)
+    for value in (sign * bound * (1 + 1e-9), sign * 1e300):
+        with pytest.raises(InputFileError) as e:
+            check_records(path, [with_sample(channel, value)], ["e"], alone=True)
+        said = str(e.value)
+        assert f"[e/data/{field}]" in said and "at sample 40" in said and "beyond" in said
 
 
 def test_a_constant_voltage_entry_is_fine_in_a_chain_but_not_alone():
