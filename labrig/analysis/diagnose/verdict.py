@@ -244,12 +244,14 @@ def _effects_added(
         f"adding {' then '.join(parts)} cuts held-out NRMSE from {hb:.3g} % to {ha:.3g} % "
         f"(in-sample {before['nrmse_pct']:.3g} % to {after['nrmse_pct']:.3g} %)"
     )
-    # confusable runner-ups of the first added effect
+    # confusable runner-ups of the first added effect (not one added too: both are kept)
     first = added[0]
+    kept = {c.effect for c in added}
     runners = [
         c
         for c in rounds[first.round]
         if c is not first
+        and c.effect not in kept
         and c.gain is not None
         and first.gain
         and c.gain >= (1 - CONFUSABLE_MARGIN) * first.gain
