@@ -420,6 +420,15 @@ def prepare_diagnosis(
     records = load.records_of(run, path) if run is not None else load.records_from_run(path)
     start = start_params(params_file, say) if params_file is not None else None
     if len(records) == 1 and records[0].duration_s > 0:
+        one = records[0]
+        if one.n < DIAGNOSE_SPLIT * MIN_SAMPLES:
+            raise _issue(
+                path,
+                f"{one.n} samples: diagnose cuts a file's single entry into {DIAGNOSE_SPLIT} "
+                f"parts of at least {MIN_SAMPLES} samples ({DIAGNOSE_SPLIT * MIN_SAMPLES} in "
+                "all); record a longer entry, or fit this one (`labrig fit`)",
+                f"{one.name}/data",
+            )
         records = split_entries(records, DIAGNOSE_SPLIT)
         idle = records[0].meta.get("idle_lead_s")
         if idle:
