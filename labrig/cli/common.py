@@ -21,7 +21,7 @@ import sys
 from collections.abc import Callable, Sequence
 from enum import StrEnum
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
 
 import typer
 
@@ -49,6 +49,13 @@ def _stdout_to_devnull() -> None:
         os.close(null)
 
 
+def _symlink_loop(where: object) -> NoReturn:
+    """The one message of a loop of symbolic links (an ``OSError`` ELOOP, or pathlib's
+    ``RuntimeError`` from ``resolve()``): exit 2."""
+    typer.echo(f"error: {where}: a loop of symbolic links (no file at its end)", err=True)
+    raise typer.Exit(2)
+
+
 def friendly(fn: Callable) -> Callable:
     """Expected failures print one clear message (no traceback) and exit with their code."""
 
@@ -66,9 +73,7 @@ def friendly(fn: Callable) -> Callable:
             raise typer.Exit(2) from None
         except OSError as e:
             if e.errno == errno.ELOOP:
-                typer.echo(f"error: {e.filename}: a loop of symbolic links (no file at its end)",
-                           err=True)  # fmt: skip
-                raise typer.Exit(2) from None
+                _symlink_loop(e.filename)
             if e.filename is None and e.errno in OUTPUT_ERRNOS:  # stdout: full, closed, failing
                 _stdout_to_devnull()
                 typer.echo(f"error: the standard output cannot be written: {e.strerror}", err=True)
@@ -86,9 +91,7 @@ def friendly(fn: Callable) -> Callable:
         except RuntimeError as e:  # pathlib's resolve() on a loop of symbolic links
             if not str(e).startswith("Symlink loop from "):
                 raise
-            where = str(e).removeprefix("Symlink loop from ").strip("'\"")
-            typer.echo(f"error: {where}: a loop of symbolic links (no file at its end)", err=True)
-            raise typer.Exit(2) from None
+            _symlink_loop(str(e).removeprefix("Symlink loop from ").strip("'\""))
         except KeyboardInterrupt:
             typer.echo("interrupted", err=True)
             raise typer.Exit(130) from None

@@ -72,20 +72,25 @@ def name_params(params: list[Any]) -> None:
             p.metavar = default_metavar(p)
 
 
-def refuse_empty_paths(params: list[Any]) -> None:
+def check_path_params(params: list[Any]) -> None:
     """Make an empty path (``labrig info ""``, ``--out ""``) a usage error naming the
     parameter: typer would take it for ``.``, the current folder. So is a file's path that
     ends with ``/`` (``--out FILE`` given ``new/``: pathlib drops the slash, and a file named
     ``new`` would be written)."""
     for p in params:
         if value_type(p) is Path:
-            p.process_value = functools.partial(_nonempty_path, p, p.process_value)
+            p.process_value = functools.partial(_checked_path, p, p.process_value)
 
 
-def _nonempty_path(param: Any, process: Any, ctx: ClickContext, value: Any) -> Any:
+def _given(value: Any) -> list[Any]:
+    """One value or several (``nargs=-1``, ``multiple``) as a list."""
+    return list(value) if isinstance(value, list | tuple) else [value]
+
+
+def _checked_path(param: Any, process: Any, ctx: ClickContext, value: Any) -> Any:
     value = nonempty_paths(ctx, param, value)
-    given = value if isinstance(value, list | tuple) else [value]
-    if param.metavar == "FILE" and any(isinstance(v, str) and v.endswith("/") for v in given):
+    slashed = any(isinstance(v, str) and v.endswith("/") for v in _given(value))
+    if param.metavar == "FILE" and slashed:
         raise typer.BadParameter(
             "ends with /, which names a folder: give a file name", ctx=ctx, param=param
         )
@@ -95,8 +100,7 @@ def _nonempty_path(param: Any, process: Any, ctx: ClickContext, value: Any) -> A
 def nonempty_paths(ctx: typer.Context, param: typer.CallbackParam, value: Any) -> Any:
     """``value`` (one text or several) unless one is empty: then a usage error naming ``param``.
     The callback of parameters that take paths as text (globs: ``batch``'s run files)."""
-    given = value if isinstance(value, list | tuple) else [value]
-    if any(isinstance(v, str) and not v for v in given):
+    if any(isinstance(v, str) and not v for v in _given(value)):
         named: Any = param  # typer's BadParameter is typed for its own parameter classes
         raise typer.BadParameter("an empty path: give a file or folder name", ctx=ctx, param=named)
     return value
@@ -125,7 +129,7 @@ class LabrigCommand(TyperCommand):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         name_params(self.params)
-        refuse_empty_paths(self.params)
+        check_path_params(self.params)
 
     def collect_usage_pieces(self, ctx: ClickContext) -> list[str]:
         return usage_pieces(self, ctx)

@@ -296,7 +296,6 @@ def _record_issues(path: Path, r: Record, scored: bool, alone: bool) -> list[Inp
     for name, x in [*channels, *([("strain", r.strain_ue)] if scored else [])]:
         bad = np.flatnonzero(~np.isfinite(x))
         bound, unit = LIMITS.get(name, (np.inf, ""))
-        huge = np.flatnonzero(np.abs(x) > bound) if not bad.size else bad[:0]
         if bad.size:
             out.append(
                 issue(
@@ -305,7 +304,7 @@ def _record_issues(path: Path, r: Record, scored: bool, alone: bool) -> list[Inp
                     "every sample must be a finite number",
                 )
             )
-        elif huge.size:
+        elif (huge := np.flatnonzero(np.abs(x) > bound)).size:
             out.append(
                 issue(
                     f"data/{name}",
