@@ -3,6 +3,7 @@ tests/analysis, tests/diagnose, ...). Helpers that are not fixtures are in ``hel
 
 from __future__ import annotations
 
+import functools
 import os
 import subprocess
 import sys
@@ -10,6 +11,8 @@ import time
 from pathlib import Path
 
 import pytest
+import typer.main
+import typer.testing
 from compile_kernels import GROUPS
 
 from helpers import ROOT, TINY, run_protocol
@@ -47,6 +50,15 @@ def pytest_configure(config: pytest.Config) -> None:
     parallel = config.getoption("numprocesses", None) and not config.getoption("collectonly")
     if parallel and not hasattr(config, "workerinput"):
         compile_kernels_once()
+
+
+#: typer's CliRunner turns the app into a click command on every ``invoke`` (about 20 ms for
+#: labrig's commands; the suite invokes the CLI in-process over a thousand times): one
+#: command per app for the session. Click commands are made to be invoked again and again
+#: (labrig's group and commands keep nothing between invocations); only the test runner's
+#: module is changed, not labrig's entry point, which builds its command once per process.
+if hasattr(typer.testing, "_get_command"):
+    typer.testing._get_command = functools.cache(typer.main.get_command)
 
 
 #: the modules of numba kernels, each cached in the ``__pycache__`` beside it

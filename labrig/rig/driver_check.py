@@ -20,9 +20,9 @@ from typing import Any
 from labrig.core.errors import DeviceError
 from labrig.rig.instruments import DriverInfo, Package
 from labrig.rig.rigspec import (
-    ENTRY_POINT_GROUP,
     ROLES,
     RigSpec,
+    driver_entries,
     driver_names,
     get_driver,
     missing_package,
@@ -99,14 +99,10 @@ def package_state(pkg: Package, import_it: bool) -> PackageState:
 
 def _providers() -> dict[str, str]:
     """Driver name -> ``distribution version`` of the entry point that registers it."""
-    out = {}
     try:
-        for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
-            dist = getattr(ep, "dist", None)
-            out[ep.name] = f"{dist.name} {dist.version}" if dist is not None else "?"
+        return {e.name: e.provided_by for e in driver_entries()}
     except Exception:  # a broken installation must not hide the built-in drivers
-        pass
-    return out
+        return {}
 
 
 def _report(

@@ -201,16 +201,43 @@ def _load_ref(ref: str) -> DriverInfo:
     return getattr(importlib.import_module(mod), attr)
 
 
+@dataclass(frozen=True)
+class DriverEntry:
+    """One ``labrig.drivers`` entry point: the driver's ``name``, its ``module:object``
+    reference and the installed distribution that registers it (``name version``, ``?`` if
+    unknown)."""
+
+    name: str
+    ref: str
+    provided_by: str
+
+
+def driver_entries() -> tuple[DriverEntry, ...]:
+    """The ``labrig.drivers`` entry points, read once per process (each read goes through
+    every installed package's entry points: about 12 ms, and a ``check`` or ``run`` needs the
+    list four times). A read that raises (a broken installation) is not kept: the next call
+    reads again."""
+    return _driver_entries()
+
+
+@functools.cache
+def _driver_entries() -> tuple[DriverEntry, ...]:
+    out = []
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        dist = getattr(ep, "dist", None)
+        provided_by = f"{dist.name} {dist.version}" if dist is not None else "?"
+        out.append(DriverEntry(ep.name, ep.value, provided_by))
+    return tuple(out)
+
+
 def driver_names() -> dict[str, str]:
     """Driver name -> ``module:object`` reference, from the ``labrig.drivers`` entry points
     (labrig's own drivers are registered there too, by its installation)."""
-    names: dict[str, str] = {}
     try:
-        for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
-            names[ep.name] = ep.value
-    except Exception as e:  # a broken installation: say so, list what was found
+        return {e.name: e.ref for e in driver_entries()}
+    except Exception as e:  # a broken installation: say so; the caller finds no driver
         log.warning("reading the %s entry points failed: %s", ENTRY_POINT_GROUP, e)
-    return names
+        return {}
 
 
 def missing_package(role: str, driver: str, e: ModuleNotFoundError) -> DeviceError:

@@ -128,6 +128,20 @@ def seal_groups(groups: Iterable[h5py.Group]) -> None:
                 _renew_seal(obj)
 
 
+def extend(ds: h5py.Dataset, n0: int, values: np.ndarray) -> None:
+    """Write the 1-D float ``values`` at index ``n0`` of the resizable 1-D dataset ``ds``,
+    growing it to ``n0 + len(values)`` samples. The same HDF5 calls as ``ds.resize`` and a
+    slice assignment, through h5py's low-level interface: its high-level one spends about
+    0.3 ms of Python per block and channel on selections and dtype checks, as much as a
+    simulated run's physics."""
+    m = len(values)
+    ds.id.set_extent((n0 + m,))
+    file_space = ds.id.get_space()
+    file_space.select_hyperslab((n0,), (m,))
+    block = np.ascontiguousarray(values, dtype=np.float64)
+    ds.id.write(h5py.h5s.create_simple((m,)), file_space, block)
+
+
 class EntryWriter:
     """Writes one NXentry; get it from :meth:`RunWriter.begin_entry`."""
 
@@ -138,6 +152,8 @@ class EntryWriter:
         self.rate_hz = float(rate_hz)
         self.channels = channels
         self._data = group["data"]
+        #: each channel's dataset, looked up once (a look-up by name costs h5py ~0.1 ms)
+        self._datasets = {c.name: self._data[c.name] for c in channels}
         self._n = 0
         #: CRC-32 of each channel's samples written so far (sealed when the entry finishes)
         self._crcs = {c.name: 0 for c in channels}
@@ -181,9 +197,7 @@ class EntryWriter:
         self._run.check_space(self._bytes_for(n0, n1), operation)
         try:
             for c in self.channels:
-                ds = self._data[c.name]
-                ds.resize((n1,))
-                ds[n0:n1] = arrays[c.name]
+                extend(self._datasets[c.name], n0, arrays[c.name])
             self._run.flush()
         except Exception as e:
             self._cut_back(n0)

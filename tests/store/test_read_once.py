@@ -4,8 +4,9 @@
   once: the seal check reads them and the parsing after it uses what it read (h5py's Python
   layer costs about 0.1 ms per attribute or value read, hundreds per file). Counted by
   wrapping h5py's own readers; the file read is also the same as a read that re-reads.
-- The virtual bench's entry point is looked up once per process (each look-up reads every
-  installed package's entry points); a failed look-up is not kept.
+- The virtual bench's entry point, and the drivers' entry points, are looked up once per
+  process (each look-up reads every installed package's entry points; a ``check`` needed the
+  drivers' four times); a failed look-up is not kept.
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ import numpy as np
 import pytest
 
 from labrig.core.errors import DeviceError
-from labrig.rig import rigspec
+from labrig.rig import driver_check, rigspec
+from labrig.runner.rigfile import load_rig
 from labrig.store import parse
 
 
@@ -81,3 +83,43 @@ def test_the_benchs_entry_point_is_looked_up_once(monkeypatch):
         assert len(calls) == 3, calls
     finally:
         rigspec._simulator.cache_clear()
+
+
+def test_the_drivers_entry_points_are_read_once(monkeypatch, caplog):
+    calls: list[dict] = []
+    look_up = metadata.entry_points
+
+    def counted(**kw):
+        calls.append(kw)
+        return look_up(**kw)
+
+    monkeypatch.setattr(metadata, "entry_points", counted)
+    rigspec._driver_entries.cache_clear()
+    try:
+        names = rigspec.driver_names()
+        # what a check of the built-in rig asks for: the names, the providers, the drivers
+        spec = load_rig(None)
+        reports = driver_check.load_rig_drivers(spec)
+        listed = driver_check.installed_drivers()
+        drivers = [c for c in calls if c.get("group") == rigspec.ENTRY_POINT_GROUP]
+        assert len(drivers) == 1, calls
+        # the same answers as a direct read of the entry points
+        direct = look_up(group=rigspec.ENTRY_POINT_GROUP)
+        assert names == {ep.name: ep.value for ep in direct}
+        assert {"sim_daq", "pi_e503", "strain_modbus", "nidaqmx"} <= names.keys()
+        assert all(r.provided_by.startswith("labrig ") for r in reports)
+        assert {r.name for r in listed} == names.keys()
+
+        def broken(**kw):
+            calls.append(kw)
+            raise OSError("a damaged METADATA file")
+
+        monkeypatch.setattr(metadata, "entry_points", broken)
+        rigspec._driver_entries.cache_clear()
+        calls.clear()
+        for _ in range(2):  # not kept: a second call reads again, and fails again
+            assert rigspec.driver_names() == {}
+        assert len(calls) == 2, calls
+        assert "a damaged METADATA file" in caplog.text
+    finally:
+        rigspec._driver_entries.cache_clear()
