@@ -16,7 +16,8 @@ reported: the machine is shared.
 The datasets: ``experiments/paper.yaml`` run on the simulated rig with seed 1 (11 entries) and the
 real micromanipulator record ``tests/data/real/yan9a-micromanipulator/Model_Vi_Do.dat`` imported as
 the README says. Commands: ``labrig --help``, ``fit --json``, ``report --json`` (every peer),
-``diagnose --json`` and ``runs``. The JSON documents of both implementations are compared: the
+``diagnose --json``, and on the run side ``check experiments/paper.yaml`` and ``run
+experiments/sweep.yaml`` (seed 1, 10 entries, 42 s of samples at 1 kHz, on the simulated rig). The JSON documents of both implementations are compared: the
 largest relative difference of every NRMSE, the effects added and the verdict's class.
 
 ``--floor`` measures instead what a command cannot go below in a fresh process: the CPU of a
@@ -224,11 +225,22 @@ def main() -> int:
             "--overwrite",
         ],
         "diagnose": lambda f: ["diagnose", str(f), "--json"],
+        # the run side: a preflight and the rig's drivers, and a whole simulated run
+        "check": lambda f: ["check", str(ROOT / "experiments" / "paper.yaml")],
+        "run": lambda f: [
+            "run",
+            str(ROOT / "experiments" / "sweep.yaml"),
+            "--seed",
+            "1",
+            "--out",
+            str(work / "sweep.h5"),
+            "--overwrite",
+        ],
     }
     only = [c for c in args.only.split(",") if c] or list(commands)
     rows = []
     for cname in only:
-        files = {"-": None} if cname == "help" else data
+        files = {"-": None} if cname in ("help", "check", "run") else data
         for dname, f in files.items():
             times: dict[str, list[float]] = {"this": [], "previous": []}
             outs: dict[str, str] = {}

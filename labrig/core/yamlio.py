@@ -6,8 +6,11 @@ and indices) is mapped back to the line where that value (or its parent) was wri
 Bounds, checked before the parts of PyYAML that recurse or allocate: at most
 :data:`MAX_BYTES` of text, :data:`MAX_DEPTH` levels of nesting (counted on the parser's events,
 which do not recurse), :data:`MAX_EXPANDED_NODES` values once aliases are expanded, integers of
-at most :data:`MAX_INT_DIGITS` digits. YAML 1.1's base-60 numbers (``1:30`` read as 90) are
-refused with their line: write the number, or quote the text.
+at most :data:`MAX_INT_DIGITS` digits. YAML 1.1's base-60 numbers (``1:30`` read as 90) and its
+integers in octal (``017`` read as 15), hexadecimal (``0x10``) or binary (``0b11``) are refused
+with their line: write the number in decimal, or quote the text. So is a merge of several
+mappings (``<<: [*a, *b]``), whose precedence PyYAML reverses from YAML's (the last one wins
+instead of the first): merge one mapping, or write the values.
 """
 
 from __future__ import annotations
@@ -36,7 +39,8 @@ class BoundedLoader(yaml.SafeLoader):
     :data:`MAX_INT_DIGITS` digits (a ``ConstructorError`` with the value's line)."""
 
     def refuse_odd_number(self, node: yaml.ScalarNode) -> None:
-        """A base-60 number or an integer with too many digits: ``ConstructorError``."""
+        """A base-60 number, an integer written in octal (a leading zero), hexadecimal or
+        binary, or an integer with too many digits: ``ConstructorError``."""
         value = str(self.construct_scalar(node))
         if ":" in value:
             raise yaml.constructor.ConstructorError(
@@ -44,6 +48,17 @@ class BoundedLoader(yaml.SafeLoader):
                 None,
                 f"{value!r} is a base-60 number in YAML 1.1; write the number, "
                 "or quote it if it is text",
+                node.start_mark,
+            )
+        body = value.replace("_", "").lstrip("+-").lower()
+        if body.startswith(("0x", "0b")) or (len(body) > 1 and body.startswith("0")):
+            kind = {"0x": "a hexadecimal", "0b": "a binary"}.get(body[:2], "an octal")
+            raise yaml.constructor.ConstructorError(
+                None,
+                None,
+                f"{value!r} is {kind} number in YAML 1.1 (read as "
+                f"{super().construct_yaml_int(node)}); write the number in decimal without "
+                "leading zeros, or quote it if it is text",
                 node.start_mark,
             )
         digits = sum(c.isdigit() for c in value)
@@ -105,6 +120,7 @@ def _compose(text: str, name: str) -> tuple[yaml.Node | None, object]:
         if bomb is not None:
             raise InputFileError([bomb])
         dups = duplicate_key_issues(node, name) if node is not None else []
+        dups += merge_list_issues(node, name) if node is not None else []
         if dups:
             raise InputFileError(dups)
         data = loader.construct_document(node) if node is not None else None
@@ -174,6 +190,33 @@ def duplicate_key_issues(root: yaml.Node, name: str) -> list[InputIssue]:
                     out.append(InputIssue(name, k.start_mark.line + 1, _field((*path, key)), msg))
                 keys.add(key)
                 stack.append((v, (*path, key)))
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend((v, (*path, i)) for i, v in enumerate(node.value))
+    return sorted(out, key=lambda i: i.line or 0)
+
+
+def merge_list_issues(root: yaml.Node, name: str) -> list[InputIssue]:
+    """Every merge key given a list of several mappings (``<<: [*a, *b]``): YAML says the
+    first mapping's value wins where they share a key, PyYAML takes the last."""
+    out: list[InputIssue] = []
+    stack: list[tuple[yaml.Node | None, tuple]] = [(root, ())]
+    seen: set[int] = set()
+    while stack:
+        node, path = stack.pop()
+        if node is None or id(node) in seen:
+            continue
+        seen.add(id(node))
+        if isinstance(node, yaml.MappingNode):
+            for k, v in node.value:
+                merge = k.tag == "tag:yaml.org,2002:merge"
+                if merge and isinstance(v, yaml.SequenceNode) and len(v.value) > 1:
+                    msg = (
+                        "a merge of several mappings (<<: [...]): YAML gives the first one's "
+                        "values precedence and PyYAML the last one's; merge one mapping "
+                        "(<<: *name) and write the values that differ"
+                    )
+                    out.append(InputIssue(name, k.start_mark.line + 1, _field(path), msg))
+                stack.append((v, (*path, k.value if isinstance(k, yaml.ScalarNode) else None)))
         elif isinstance(node, yaml.SequenceNode):
             stack.extend((v, (*path, i)) for i, v in enumerate(node.value))
     return sorted(out, key=lambda i: i.line or 0)

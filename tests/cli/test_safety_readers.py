@@ -42,6 +42,17 @@ def refused(res, where: str, message: str) -> None:
         ("name: x\nrate_hz: " + "9" * 5000 + "\nsteps: []\n", 2, "a number with 5000 digits"),
         (HOLD.format("1:30"), 6, "'1:30' is a base-60 number"),
         (HOLD.format("-1:30:00.5"), 6, "base-60 number"),
+        (HOLD.format("017"), 6, "'017' is an octal number in YAML 1.1 (read as 15)"),
+        (HOLD.format("-0_17"), 6, "octal number in YAML 1.1 (read as -15)"),
+        (HOLD.format("00"), 6, "octal number"),
+        (HOLD.format("0x10"), 6, "'0x10' is a hexadecimal number in YAML 1.1 (read as 16)"),
+        (HOLD.format("0b11"), 6, "'0b11' is a binary number in YAML 1.1 (read as 3)"),
+        (
+            "name: x\nrate_hz: 500\nsteps:\n  - &s {kind: hold, voltage_V: 10, duration_s: 1}\n"
+            "  - {<<: [*s, {voltage_V: 5}], duration_s: 2}\n",
+            5,
+            "a merge of several mappings (<<: [...])",
+        ),
         ('name: "\\U' + "9" * 400 + '"\nsteps: []\n', 1, "YAML error: cannot read this"),
     ],
 )
@@ -60,6 +71,20 @@ def test_quoted_base_60_is_text_and_a_plain_number_is_read(tmp_path: Path):
                  "    duration_s: 90\n")  # fmt: skip
     data, _, _ = read_yaml(p)
     assert data["name"] == "1:30" and data["steps"][0]["duration_s"] == 90
+
+
+def test_decimal_numbers_and_one_merged_mapping_are_read(tmp_path: Path):
+    """Just inside the refusals above: a zero, a decimal with underscores, a float with a
+    leading zero, an octal-looking quoted text, and a merge of one mapping (as a list too)."""
+    p = tmp_path / "p.yaml"
+    p.write_text(
+        "a: 0\nb: -0\nc: 1_000\nd: 0.5\ne: 00.5\nf: '017'\ng: 10\n"
+        "base: &s {v: 10, t: 1}\nm: {<<: *s, t: 2}\nn: {<<: [*s], t: 3}\n"
+    )
+    data, _, _ = read_yaml(p)
+    assert (data["a"], data["b"], data["c"], data["g"]) == (0, 0, 1000, 10)
+    assert (data["d"], data["e"], data["f"]) == (0.5, 0.5, "017")
+    assert data["m"] == {"v": 10, "t": 2} and data["n"] == {"v": 10, "t": 3}
 
 
 @pytest.mark.parametrize(("depth", "ok"), [(MAX_DEPTH, True), (MAX_DEPTH + 1, False)])
