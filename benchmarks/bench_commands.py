@@ -17,8 +17,9 @@ The datasets: ``experiments/paper.yaml`` run on the simulated rig with seed 1 (1
 real micromanipulator record ``tests/data/real/yan9a-micromanipulator/Model_Vi_Do.dat`` imported as
 the README says. Commands: ``labrig --help``, ``fit --json``, ``report --json`` (every peer),
 ``diagnose --json``, and on the run side ``check experiments/paper.yaml`` and ``run
-experiments/sweep.yaml`` (seed 1, 10 entries, 42 s of samples at 1 kHz, on the simulated rig). The JSON documents of both implementations are compared: the
-largest relative difference of every NRMSE, the effects added and the verdict's class.
+experiments/sweep.yaml`` (seed 1, 10 entries, 42 s of samples at 1 kHz, on the simulated rig). The
+JSON documents of both implementations are compared: the largest relative difference of every NRMSE,
+the effects added and the verdict's class.
 
 ``--floor`` measures instead what a command cannot go below in a fresh process: the CPU of a
 bare interpreter, then of importing what ``labrig fit`` must use (numpy, scipy.optimize, h5py,

@@ -81,6 +81,9 @@ class NIDAQmxSettings(BaseModel):
         description="AI channel name -> physical channel",
     )
     ao_range_V: float = Field(10.0, gt=0)
+    ao_bits: int = Field(
+        16, ge=8, le=32, description="AO converter resolution (a sample at a limit stays in)"
+    )
     ai_range_V: float = Field(10.0, gt=0)
     terminal_config: str = Field("DIFF", pattern="^(DIFF|RSE|NRSE|PSEUDO_DIFF|DEFAULT)$")
     timeout_margin_s: float = Field(2.0, gt=0)
@@ -126,6 +129,10 @@ class NIDAQmx:
 
     def ai_channel_names(self) -> list[str]:
         return list(self.s.ai)
+
+    def ao_step_V(self) -> float:
+        """Volts of one code of the AO converter over its range (``ao_range_V``, ``ao_bits``)."""
+        return 2.0 * self.s.ao_range_V / 2**self.s.ao_bits
 
     def configure(self, rate_hz: float, ai_channels: list[str]) -> None:
         unknown = [c for c in ai_channels if c not in self.s.ai]

@@ -68,6 +68,11 @@ class SimDAQ:
         r = self.bench.config.daq.ao_range_V
         return (-r, r)
 
+    def ao_step_V(self) -> float | None:
+        """Volts of one code of the AO converter (``None``: the bench's AO is not quantised)."""
+        d = self.bench.config.daq
+        return 2.0 * d.ao_range_V / 2**d.ao_bits if d.ao_bits else None
+
     def ai_range_V(self) -> tuple[float, float]:
         r = self.bench.config.daq.ai_range_V
         return (-r, r)

@@ -119,7 +119,8 @@ class DAQ(Protocol):
 
     Optional: ``abort_playback()`` ends a playback with the AO holding its present value (the
     ramp to 0 V starts from there), ``ao_level()`` the AO volts last output (used when the
-    amplifier cannot report its output voltage).
+    amplifier cannot report its output voltage), ``ao_step_V()`` the volts of one code of the
+    AO converter (``None``: unknown; see :meth:`Rig.volts_to_ao`).
     """
 
     def identify(self) -> str: ...
@@ -266,8 +267,22 @@ class Rig:
 
     # -- calibrations --------------------------------------------------------------------------
     def volts_to_ao(self, v_actuator: ArrayLike) -> NDArray[np.float64]:
-        """DAQ analog-output volts for the actuator voltage ``v_actuator`` (V): divide by gain."""
-        return np.asarray(v_actuator, dtype=float) / float(self.amplifier.gain)
+        """DAQ analog-output volts for the actuator voltage ``v_actuator`` (V): divide by the
+        gain. The converter rounds each sample to one of its codes, by up to half a code: a
+        sample asked for at the rig's limit (``limits.v_min_V`` / ``v_max_V``, which the
+        amplifier is set to) could come out just past it, and the amplifier would clamp and
+        report an overflow. Samples within one code (``ao_step_V()`` of the DAQ, when it says)
+        of a limit are drawn in to one code inside it; every other sample is as asked."""
+        gain = float(self.amplifier.gain)
+        ao = np.asarray(v_actuator, dtype=float) / gain
+        step_fn = getattr(self.daq, "ao_step_V", None)
+        step = step_fn() if callable(step_fn) else None
+        if step:
+            lo = self.limits.v_min_V / gain + step
+            hi = self.limits.v_max_V / gain - step
+            if lo < hi:
+                ao = np.clip(ao, lo, hi)
+        return ao
 
     def ao_to_volts(self, ao: ArrayLike) -> NDArray[np.float64]:
         return np.asarray(ao, dtype=float) * float(self.amplifier.gain)

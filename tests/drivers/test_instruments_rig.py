@@ -78,7 +78,10 @@ def test_open_default_rig_is_fast_and_complete():
 
 def test_calibration_helpers():
     with open_rig(None, seed=0) as rig:
-        assert rig.volts_to_ao([100.0, -20.0]) == pytest.approx([10.0, -2.0])
+        assert rig.volts_to_ao([50.0, -10.0]) == pytest.approx([5.0, -1.0])
+        # at the limits: one code (20 V / 2**16 at the DAQ) inside them (test_hold_at_the_limits)
+        code = 20.0 / 2**16
+        assert rig.volts_to_ao([100.0, -20.0]) == pytest.approx([10.0 - code, -2.0 + code])
         assert rig.gauge_to_strain(1.085) == pytest.approx(1000.0)
         assert rig.monitor_to_volts(5.0) == pytest.approx(100.0)
         assert rig.temperature_to_degC(0.25) == pytest.approx(25.0)
