@@ -193,6 +193,43 @@ def _outline() -> type[BaseModel]:
     )
 
 
+def reach_issues(resolved: Any, name: str, lines: dict) -> list[InputIssue]:
+    """The rig's voltage limits against what its instruments can drive: the DAQ's AO range
+    (its section's ``ao_range_V``, or the simulated bench's ``bench.daq.ao_range_V``) times the
+    amplifier's ``gain_V_per_V``, and the simulated amplifier's output range
+    (``bench.amplifier.out_min_V`` / ``out_max_V``), where the rig file gives them. A limit
+    beyond them passed the preflight and failed at the run's start (the amplifier refusing
+    the limit, or the DAQ the waveform)."""
+    bench = resolved.bench
+    gain = getattr(resolved.amplifier, "gain_V_per_V", None)
+    ao_range = getattr(resolved.daq, "ao_range_V", None)
+    if ao_range is None and bench is not None:
+        ao_range = getattr(getattr(bench, "daq", None), "ao_range_V", None)
+    spans: list[tuple[float, float, str]] = []
+    if isinstance(gain, float) and isinstance(ao_range, float):
+        what = f"the DAQ's +-{ao_range:g} V output times the amplifier's gain of {gain:g}"
+        spans.append((-ao_range * gain, ao_range * gain, what))
+    amp = getattr(bench, "amplifier", None) if bench is not None else None
+    if amp is not None and isinstance(getattr(amp, "out_max_V", None), float):
+        what = "the simulated amplifier's output range (bench.amplifier.out_min_V..out_max_V)"
+        spans.append((amp.out_min_V, amp.out_max_V, what))
+    limits = resolved.limits
+    issues = []
+    for lo, hi, what in spans:
+        for key, value, ok in (
+            ("v_min_V", limits.v_min_V, limits.v_min_V >= lo),
+            ("v_max_V", limits.v_max_V, limits.v_max_V <= hi),
+        ):
+            if not ok:
+                line = lines.get(("limits", key), lines.get(("limits",)))
+                msg = (
+                    f"{value:g} V is beyond what the rig can drive: {what} is {lo:g} to "
+                    f"{hi:g} V; give a limit within it"
+                )
+                issues.append(InputIssue(name, line, f"limits.{key}", msg))
+    return issues
+
+
 # -- driver registry ------------------------------------------------------------------------
 
 
@@ -370,6 +407,9 @@ def load_rig(path: Path | str | None = None) -> RigSpec:
         resolved: Any = full.model_validate(data)
     except ValidationError as e:
         raise InputFileError(issues_from_validation(name, e, lines)) from e
+    reach = reach_issues(resolved, name, lines)
+    if reach:
+        raise InputFileError(reach)
     return RigSpec(
         name=resolved.name,
         source=name,

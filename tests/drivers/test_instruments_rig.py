@@ -219,6 +219,40 @@ def test_rig_file_errors_name_file_line_and_field(tmp_path, edit, line_field, me
     assert message in text
 
 
+@pytest.mark.parametrize(
+    ("edit", "refused"),
+    [
+        # the DAQ's +-10 V times the gain of 10: +-100 V, the default v_max_V at the edge
+        ({"limits": {"v_max_V": 100.0}}, None),
+        ({"limits": {"v_max_V": 100.001}}, ("v_max_V", "the DAQ's +-10 V output times")),
+        ({"limits": {"v_max_V": 1.0e300}}, ("v_max_V", "the DAQ's +-10 V output times")),
+        # the gain raised: the simulated amplifier's -30..130 V bounds instead
+        ({"amplifier": {"gain_V_per_V": 15.0}, "limits": {"v_max_V": 130.0}}, None),
+        (
+            {"amplifier": {"gain_V_per_V": 15.0}, "limits": {"v_max_V": 130.5}},
+            ("v_max_V", "the simulated amplifier's output range"),
+        ),
+        ({"limits": {"v_min_V": -30.0}}, None),
+        ({"limits": {"v_min_V": -30.01}}, ("v_min_V", "is -30 to 130 V")),
+        # a wider AO range on the bench: its +-12 V times 10
+        ({"bench": {"daq": {"ao_range_V": 12.0}}, "limits": {"v_max_V": 120.0}}, None),
+    ],
+)
+def test_limits_beyond_what_the_instruments_can_drive(tmp_path, edit, refused):
+    """A limit beyond the DAQ's AO range times the gain, or the simulated amplifier's output
+    range, passed the preflight and failed at the run's start (exit 3): refused with the rig."""
+    p = rig_path(tmp_path, **edit)
+    if refused is None:
+        assert load_rig(p).limits.v_max_V == edit["limits"].get("v_max_V", 100.0)
+        return
+    key, message = refused
+    with pytest.raises(InputFileError) as ei:
+        load_rig(p)
+    issue = ei.value.issues[0]
+    assert issue.field == f"limits.{key}" and issue.line, str(ei.value)
+    assert message in str(ei.value)
+
+
 def test_rig_file_yaml_syntax_error(tmp_path):
     p = tmp_path / "bad.yaml"
     p.write_text("name: x\ndaq: [unclosed\n")
