@@ -5,7 +5,8 @@ JSON has no NaN or infinity, so a non-finite float (an undefined metric, a param
 uncertainty) becomes ``null``; tuples become lists and mapping keys strings, as ``json.dumps``
 would write them. Reading, :func:`loads_bounded` refuses text longer or nested deeper than its
 limits before parsing it (the standard parser recurses: 100 000 nested ``[`` raise
-``RecursionError``) and numbers with thousands of digits.
+``RecursionError``), numbers with thousands of digits, and a key given twice in one object
+(the standard parser silently keeps the last one).
 """
 
 from __future__ import annotations
@@ -61,11 +62,20 @@ def loads_bounded(
     text: str, max_bytes: int = MAX_JSON_BYTES, max_depth: int = MAX_JSON_DEPTH
 ) -> Any:
     """``json.loads(text)`` within limits: raises :class:`ValueError` saying which limit
-    (length, nesting, digits of an integer) or what is wrong with the JSON
+    (length, nesting, digits of an integer, a key given twice) or what is wrong with the JSON
     (:class:`json.JSONDecodeError`, a subclass, with its line and column)."""
     if len(text) > max_bytes:
         raise ValueError(f"longer than {max_bytes} characters")
     depth = json_depth(text)
     if depth > max_depth:
         raise ValueError(f"nested {depth} deep; at most {max_depth} levels are read")
-    return json.loads(text, parse_int=_parse_int)
+    return json.loads(text, parse_int=_parse_int, object_pairs_hook=_unique_keys)
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise ValueError(f"the key {key!r} is given twice in one object")
+        out[key] = value
+    return out

@@ -42,7 +42,7 @@ class ModelParams(BaseModel):
     1.55e-05
     """
 
-    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True, allow_inf_nan=False)
 
     alpha0_ue_per_V: float = Field(gt=0, description="small-signal coefficient (the paper's Eq. 2)")
     gamma_ue_per_V: float = Field(description="maximal variation of the slope (the paper's Eq. 10)")

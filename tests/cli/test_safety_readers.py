@@ -131,6 +131,9 @@ def run_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
         ('{"params": {"alpha0_ue_per_V": ' + "9" * 5000 + "}}", "an integer with 5000 digits"),
         ('{"params": ' * 70 + "{}" + "}" * 70, "nested 71 deep"),
         ('{"params": {"alpha0_ue_per_V": 1e999}}', "invalid model parameters"),
+        ('{"params": {"alpha0_ue_per_V": NaN}}', "alpha0_ue_per_V: Input should be a finite"),
+        ('{"params": {"tau_d_s": Infinity}}', "tau_d_s: Input should be a finite number"),
+        ('{"params": {"vc_V": 70, "vc_V": 0}}', "the key 'vc_V' is given twice in one object"),
     ],
 )
 @pytest.mark.parametrize("command", ["report", "diagnose"])
@@ -164,6 +167,14 @@ def test_loads_bounded_at_its_edges():
         loads_bounded("9" * 101)
     with pytest.raises(json.JSONDecodeError):
         loads_bounded("{")
+    # a key twice in one object, at any depth, is refused; the same key in two objects is not
+    assert loads_bounded('[{"a": 1}, {"a": 2, "b": {"a": 3}}]') == [
+        {"a": 1},
+        {"a": 2, "b": {"a": 3}},
+    ]
+    for text in ('{"a": 1, "a": 1}', '[{"b": {"a": 1, "a": 2}}]'):
+        with pytest.raises(ValueError, match="the key 'a' is given twice in one object"):
+            loads_bounded(text)
 
 
 def test_json_depth_ignores_brackets_in_strings():
