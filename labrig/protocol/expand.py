@@ -29,7 +29,7 @@ from labrig.protocol import broadband as bb
 from labrig.protocol import waveforms as wf
 from labrig.protocol.concrete import Concrete, intervals, num_tag, sanitize
 from labrig.protocol.csvsource import CsvError, load_csv, resolve_csv_path
-from labrig.protocol.numbers import fixed
+from labrig.protocol.numbers import beyond, fixed
 from labrig.protocol.offset_sine import offset_sine_name, offset_sine_parts
 from labrig.protocol.plan import Plan, PlannedStep, Where, field_name, line_of
 from labrig.protocol.schema import (
@@ -527,13 +527,22 @@ class _Builder:
                         steps.append(planned)
         if steps:
             steps[-1].rest_after_s = 0.0
-        total = sum(s.duration_s + s.rest_after_s for s in steps)
+        recorded = sum(s.duration_s for s in steps)
+        rests = sum(s.rest_after_s for s in steps)
+        total = recorded + rests
         if total > MAX_TOTAL_S:
+            # the rests (rest_s) count: name where the time is
+            where = (
+                ("rest_s",)
+                if rests > recorded and "rest_s" in self.p.model_fields_set
+                else ("steps",)
+            )
             self.issue(
-                self.where(("steps",)),
-                f"the protocol lasts {fixed(total / 3600, 1)} h; at most "
-                f"{MAX_TOTAL_S / 3600:.0f} h are allowed in one run (split it into several "
-                "protocols)",
+                self.where(where),
+                f"the protocol lasts {beyond(total / 3600, MAX_TOTAL_S / 3600)} h "
+                f"({fixed(recorded / 3600, 1)} h of entries, {fixed(rests / 3600, 1)} h of "
+                f"rests); at most {MAX_TOTAL_S / 3600:.0f} h are allowed in one run (split it "
+                "into several protocols, or shorten the rests)",
             )
         if self.issues:
             raise _PlanError(self.issues)

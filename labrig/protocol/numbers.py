@@ -69,6 +69,17 @@ def fixed(x: float, decimals: int) -> str:
     return f"{x:.{decimals}f}"
 
 
+def fixed_down(x: float, decimals: int) -> str:
+    """``x`` rounded down to ``decimals`` decimals (a highest value to recommend: rounding to
+    the nearest could name one just past the limit); as :func:`fixed` otherwise."""
+    if not math.isfinite(x) or abs(x) >= _FIXED_BELOW:
+        return fixed(x, decimals)
+    scale = 10.0**decimals
+    # a limit computed a hair below a round value (199.99999999997 for 200) is that value: the
+    # preflight's comparisons allow the same relative 1e-9
+    return f"{math.floor(x * scale * (1 + 1e-9)) / scale:.{decimals}f}"
+
+
 def _amps_text(x: float, digits: int) -> str:
     if 0.1 <= abs(x) < _FIXED_BELOW:
         return f"{x:.{digits}f}"

@@ -18,7 +18,7 @@ current ``i = C_eff dV/dt`` on a grid :data:`OVERSAMPLE` times finer than the ou
 (waveforms are functions of continuous time, so the preflight evaluates them there). For a
 unipolar sine of amplitude A and frequency f this gives ``i_peak = pi C_eff A f`` and a
 cycle-mean ``2 C_eff A f``, so the highest frequency at amplitude A is ``min(i_peak_A / (pi C_eff
-A), i_avg_A / (2 C_eff A))`` (56.2 Hz at 100 V on the default rig). A sine of amplitude A
+A), i_avg_A / (2 C_eff A))`` (56.17 Hz at 100 V on the default rig). A sine of amplitude A
 around a bias (``offset_sine``) gives ``i_peak = 2 pi C_eff A f`` and a cycle-mean ``4 C_eff A
 f`` (:func:`max_offset_sine_frequency_hz`); its raised-cosine ramps are measured with the rest,
 and their current scales as ``1 / ramp_s``.
@@ -37,7 +37,7 @@ import math
 import numpy as np
 
 from labrig.core.errors import InputFileError, InputIssue
-from labrig.protocol.numbers import amps, at_least, at_most, beyond, exact, fixed
+from labrig.protocol.numbers import amps, at_least, at_most, beyond, exact, fixed_down
 from labrig.protocol.plan import Plan, PlannedStep, Where
 from labrig.protocol.schema import STRAIN_KINDS
 from labrig.rig.drive_load import (
@@ -131,16 +131,25 @@ def _blame_segment(step: PlannedStep, t_s: float) -> tuple[Where, str]:
     return step.blame(seg.field or "step"), seg.kind
 
 
-def _samples_per_cycle_issue(step: PlannedStep, f: float | None) -> tuple[Where, str] | None:
-    """Too few samples per cycle of a carrier at ``f`` (Hz; ``None``: not periodic)."""
+def _samples_per_cycle_issue(
+    step: PlannedStep, f: float | None, lim: RigLimits | None = None
+) -> tuple[Where, str] | None:
+    """Too few samples per cycle of a carrier at ``f`` (Hz; ``None``: not periodic); the
+    remedy offered is a rate the rig's DAQ can take (``lim``), or else a lower frequency."""
     if not (f and step.rate_hz / f < MIN_SAMPLES_PER_CYCLE - _TOL):
         return None
+    per_cycle = beyond(step.rate_hz / f, MIN_SAMPLES_PER_CYCLE)
+    needed = MIN_SAMPLES_PER_CYCLE * f
+    lower = f"lower frequency_hz to <= {at_most(step.rate_hz / MIN_SAMPLES_PER_CYCLE)}"
+    if lim is not None and needed > lim.rate_max_hz:
+        remedy = f"{lower} (the rig's DAQ runs at most {lim.rate_max_hz:g} Hz)"
+    else:
+        remedy = f"raise rate_hz to >= {at_least(needed)} or {lower}"
     return (
         step.blame("frequency_hz"),
-        f"{f:g} Hz sampled at rate_hz {step.rate_hz:g} gives "
-        f"{step.rate_hz / f:.3g} samples per cycle; at least {MIN_SAMPLES_PER_CYCLE} "
-        f"are needed: raise rate_hz to >= {MIN_SAMPLES_PER_CYCLE * f:g} or lower the "
-        "frequency",
+        f"{beyond(f, step.rate_hz / MIN_SAMPLES_PER_CYCLE)} Hz sampled at rate_hz "
+        f"{step.rate_hz:g} gives {per_cycle} samples per cycle; "
+        f"at least {MIN_SAMPLES_PER_CYCLE} are needed: {remedy}",
     )
 
 
@@ -182,7 +191,7 @@ def _strain_issues(step: PlannedStep, chk: DriveLoad, lim: RigLimits) -> list[tu
             )
         )
     f = step.frequency_hz
-    cycles = _samples_per_cycle_issue(step, f)
+    cycles = _samples_per_cycle_issue(step, f, lim)
     if cycles is not None:
         out.append(cycles)
     if chk.over_peak(lim):
@@ -264,8 +273,8 @@ def _peak_current_issue(
     elif periodic:
         msg = (
             f"{what} needs {need} peak; {gives}; max frequency at {a:g} V is "
-            f"{fixed(max_sine_frequency_hz(a, lim), 1)} Hz (max amplitude at {f:g} Hz is "
-            f"{fixed(max_sine_amplitude_V(f, lim), 1)} V)"
+            f"{fixed_down(max_sine_frequency_hz(a, lim), 1)} Hz (max amplitude at {f:g} Hz is "
+            f"{fixed_down(max_sine_amplitude_V(f, lim), 1)} V)"
         )
     elif step.kind == "ramp":
         d = step.definition
@@ -294,7 +303,7 @@ def _mean_current_issue(
         msg = (
             f"{what} {draws} a cycle; the "
             f"amplifier's average limit is {amps(lim.i_avg_A)}; max frequency at {a:g} V "
-            f"is {fixed(max_sine_frequency_hz(a, lim), 1)} Hz"
+            f"is {fixed_down(max_sine_frequency_hz(a, lim), 1)} Hz"
         )
     else:
         msg = (
@@ -332,7 +341,7 @@ def _offset_sine_current_issues(
     sine itself (frequency_hz, with the highest frequency at its amplitude)."""
     out: list[tuple[Where, str]] = []
     a, ramp_s = step.amplitude_V, step.definition["ramp_s"]
-    f_max = fixed(max_offset_sine_frequency_hz(a, lim), 1)
+    f_max = fixed_down(max_offset_sine_frequency_hz(a, lim), 1)
     gives = f"the amplifier gives {amps(lim.i_peak_A)}"
     if chk.over_peak(lim):
         where, seg = _blame_segment(step, chk.peak_time_s)
@@ -368,7 +377,7 @@ def _offset_sine_issues(
     what = f"{step.amplitude_V:g} V at {step.frequency_hz:g} Hz around {d['offset_V']:g} V"
     found = [
         _offset_sine_range_issue(step, chk, lim, what),
-        _samples_per_cycle_issue(step, step.frequency_hz),
+        _samples_per_cycle_issue(step, step.frequency_hz, lim),
     ]
     return [x for x in found if x is not None] + _offset_sine_current_issues(step, chk, lim, what)
 
@@ -409,7 +418,7 @@ def _broadband_peak_issue(
             f"edge_slew_V_per_s <= {at_most(lim.i_peak_A / c)}"
         )
     if step.kind == "triangle":
-        f_max = fixed(max_triangle_frequency_hz(a, lim), 1)
+        f_max = fixed_down(max_triangle_frequency_hz(a, lim), 1)
         return step.blame("frequency_hz"), (
             f"{what} needs {need} peak (4 C_eff A f); {gives}; max frequency at {a:g} V is "
             f"{f_max} Hz"
@@ -435,7 +444,7 @@ def _broadband_mean_issue(
     draws = f"{what} draws {amps(chk.mean_current_A, lim.i_avg_A)} on average over {window}"
     limit = f"the amplifier's average limit is {amps(lim.i_avg_A)}"
     if step.kind == "triangle":
-        f_max = fixed(max_triangle_frequency_hz(a, lim), 1)
+        f_max = fixed_down(max_triangle_frequency_hz(a, lim), 1)
         return step.blame("frequency_hz"), (
             f"{draws}; {limit}; max frequency at {a:g} V is {f_max} Hz"
         )
@@ -455,10 +464,10 @@ def _broadband_issues(step: PlannedStep, chk: DriveLoad, lim: RigLimits) -> list
     what = _broadband_what(step)
     found = [_offset_sine_range_issue(step, chk, lim, what)]
     if step.kind == "triangle":
-        found.append(_samples_per_cycle_issue(step, step.frequency_hz))
+        found.append(_samples_per_cycle_issue(step, step.frequency_hz, lim))
     elif step.kind == "multisine":
         f_hi = max(step.definition["frequencies_hz"])
-        cycles = _samples_per_cycle_issue(step, f_hi)
+        cycles = _samples_per_cycle_issue(step, f_hi, lim)
         if cycles is not None:
             found.append((step.blame("frequencies_hz"), cycles[1]))
     if chk.over_peak(lim):
@@ -482,7 +491,7 @@ def _step_issues(step: PlannedStep, chk: DriveLoad, lim: RigLimits) -> list[tupl
     what = f"{a:g} V at {f:g} Hz" if periodic else f"entry {step.name}"
     found = [
         _voltage_range_issue(step, chk, lim, what if periodic else None),
-        _samples_per_cycle_issue(step, f if periodic else None),
+        _samples_per_cycle_issue(step, f if periodic else None, lim),
         _peak_current_issue(step, chk, lim, periodic, what) if chk.over_peak(lim) else None,
         _mean_current_issue(step, chk, lim, periodic, what) if chk.over_mean(lim) else None,
     ]
@@ -498,10 +507,12 @@ def preflight_checks(plan: Plan, limits: RigLimits) -> list[DriveLoad]:
     found: list[tuple[Where, str]] = []
     rate = plan.rate_hz
     if not limits.rate_min_hz <= rate <= limits.rate_max_hz:
+        nearest = limits.rate_min_hz if rate < limits.rate_min_hz else limits.rate_max_hz
         found.append(
             (
                 plan.where(("rate_hz",)),
-                f"rate_hz {rate:g} is outside the rig's DAQ range {limits.rate_min_hz:g} to "
+                f"rate_hz {beyond(rate, nearest)} is outside the rig's DAQ range "
+                f"{limits.rate_min_hz:g} to "
                 f"{limits.rate_max_hz:g} Hz",
             )
         )

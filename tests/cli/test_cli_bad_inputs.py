@@ -166,7 +166,7 @@ def test_sine_too_fast_for_the_current_limit_is_refused_by_check_and_run(tmp_pat
         # and what would be valid
         assert f"{proto}:6: [steps[0].frequency_hz] 100 V at 80 Hz needs 0.26 A peak" in text
         assert "the amplifier gives 0.18 A" in text
-        assert "max frequency at 100 V is 56.2 Hz" in text
+        assert "max frequency at 100 V is 56.1 Hz" in text
         assert "max amplitude at 80 Hz is 70.2 V" in text
         assert "average limit is 0.12 A" in text
     assert not (tmp_path / "r.h5").exists()

@@ -287,7 +287,12 @@ def test_current_limit_frequency_at_100V(tmp_path):
     with pytest.raises(InputFileError) as e:
         check_protocol(plan_at(round(fmax * 1.005, 3)))
     msg = str(e.value)
-    assert f"max frequency at 100 V is {fmax:.1f} Hz" in msg
+    # the highest frequency offered is rounded down (56.17 -> 56.1), and it passes; the value
+    # rounded to the nearest (56.2) would not
+    assert "max frequency at 100 V is 56.1 Hz" in msg
+    check_protocol(plan_at(56.1))
+    with pytest.raises(InputFileError):
+        check_protocol(plan_at(56.2))
     assert e.value.issues[0].line == 4 and e.value.issues[0].field == "steps[0].frequency_hz"
 
 

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from labrig.core.errors import InputFileError
 from labrig.protocol.check import check_protocol
-from labrig.protocol.numbers import amps, at_least, at_most, beyond, exact, fixed
+from labrig.protocol.numbers import amps, at_least, at_most, beyond, exact, fixed, fixed_down
 
 finite = st.floats(allow_nan=False, allow_infinity=False, min_value=-1e300, max_value=1e300)
 
@@ -47,6 +47,10 @@ def test_short_forms():
     assert at_most(60.0) == "60" and at_most(17647.06) == "17600"
     assert at_least(0.0030612345) == "0.00307" and at_least(0.003061) == "0.003061"
     assert fixed(1e300, 1) == "1e+300" and fixed(56.17, 1) == "56.2"
+    # rounded down, never past the value; a value a hair (1e-9 relative) below a round one is it
+    assert fixed_down(56.17, 1) == "56.1" and fixed_down(56.1, 1) == "56.1"
+    assert fixed_down(199.99999999997, 1) == "200.0" and fixed_down(199.9999, 1) == "199.9"
+    assert fixed_down(-0.05, 1) == "-0.1" and fixed_down(1e300, 1) == "1e+300"
     assert amps(0.26, 0.18) == "0.26 A"
     assert amps(0.18000018, 0.18) == "0.1800002 A"  # tolerance is 1e-6 relative
     assert amps(1e300, 0.18) == "1e+300 A"

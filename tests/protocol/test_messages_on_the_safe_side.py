@@ -1,0 +1,62 @@
+"""What a refusal offers is on the safe side of the limit it names: a value just past a limit
+never prints as the limit, a remedy is one the rig can take, and the total length names the
+rests when they make it (labrig.protocol.preflight, labrig.protocol.expand)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from labrig.core.errors import InputFileError
+from labrig.protocol.check import check_protocol
+
+SINE = "  - {{kind: sine, amplitude_V: 1, frequency_hz: {f!r}, cycles: 2}}\n"
+
+
+def refusal(tmp_path: Path, text: str) -> InputFileError:
+    p = tmp_path / "p.yaml"
+    p.write_text(text)
+    with pytest.raises(InputFileError) as e:
+        check_protocol(p)
+    return e.value
+
+
+def passes(tmp_path: Path, text: str) -> None:
+    p = tmp_path / "ok.yaml"
+    p.write_text(text)
+    check_protocol(p)
+
+
+@pytest.mark.parametrize(("rate", "shown"), [(9.999999999999998, "9.999999999999998"),
+                                             (100000.00000001, "100000.00000001")])  # fmt: skip
+def test_a_rate_just_outside_the_daqs_range_does_not_print_as_its_edge(tmp_path, rate, shown):
+    e = refusal(tmp_path, f"name: r\nrate_hz: {rate!r}\nsteps:\n" + SINE.format(f=0.2))
+    assert f"rate_hz {shown} is outside the rig's DAQ range 10 to 100000 Hz" in str(e)
+    passes(tmp_path, "name: r\nrate_hz: 10.0\nsteps:\n" + SINE.format(f=0.2))
+
+
+def test_too_few_samples_per_cycle_at_the_highest_rate_offers_a_lower_frequency(tmp_path):
+    e = refusal(tmp_path, "name: r\nrate_hz: 100000\nsteps:\n" + SINE.format(f=5000.000001))
+    msg = str(e)
+    assert "5000.000001 Hz sampled at rate_hz 100000 gives 19.999999996 samples per cycle" in msg
+    assert "lower frequency_hz to <= 5000 (the rig's DAQ runs at most 100000 Hz)" in msg
+    assert "raise rate_hz" not in msg
+    passes(tmp_path, "name: r\nrate_hz: 100000\nsteps:\n" + SINE.format(f=5000.0))
+
+
+def test_below_the_highest_rate_both_remedies_are_offered_and_work(tmp_path):
+    e = refusal(tmp_path, "name: r\nrate_hz: 1000\nsteps:\n" + SINE.format(f=60.0))
+    assert "16.67 samples per cycle" in str(e)
+    assert "raise rate_hz to >= 1200 or lower frequency_hz to <= 50" in str(e)
+    passes(tmp_path, "name: r\nrate_hz: 1200\nsteps:\n" + SINE.format(f=60.0))
+    passes(tmp_path, "name: r\nrate_hz: 1000\nsteps:\n" + SINE.format(f=50.0))
+
+
+def test_a_protocol_too_long_by_its_rests_names_rest_s(tmp_path):
+    hold = "  - {kind: hold, voltage_V: 5, duration_s: 0.1}\n"
+    e = refusal(tmp_path, "name: r\nrate_hz: 500\nrest_s: 604800\nsteps:\n" + hold * 2)
+    (issue,) = e.issues
+    assert (issue.line, issue.field) == (3, "rest_s")
+    assert "lasts 168.0001 h (0.0 h of entries, 168.0 h of rests); at most 168 h" in issue.message
+    passes(tmp_path, "name: r\nrate_hz: 500\nrest_s: 604799\nsteps:\n" + hold * 2)
