@@ -55,6 +55,10 @@ MAX_STEP_SAMPLES = 50_000_000
 MAX_ENTRIES = 10_000
 #: refuse plans lasting longer than this (s), rests included
 MAX_TOTAL_S = 7 * 86400.0
+#: a voltage beyond this is a mistake in the file, not a drive (piezo amplifiers give at most
+#: about a kilovolt): an entry too long to sample because of its edge ramp to such a voltage
+#: is blamed on the key that sets the voltage, not on edge_slew_V_per_s
+MAX_SANE_VOLTAGE_V = 1e6
 #: refuse strain commands longer than this many samples (the drive is computed when planning)
 MAX_STRAIN_SAMPLES = 2_000_000
 
@@ -562,10 +566,22 @@ class _Builder:
                 c.pieces, self.rate, self.p.edge_slew_V_per_s, "edge_slew_V_per_s", MAX_STEP_SAMPLES
             )
         except wf.TooLongError as e:
+            # the count saturates at 2**62 (labrig.protocol.waveforms.edge_samples): not shown
+            count = f"{e.n} samples, more" if e.n < 2**62 else "more samples"
+            blame, why = where["length"], ""
+            if e.edge:
+                volts = max(abs(e.from_V), abs(e.to_V))
+                why = (
+                    f" (its edge ramp from {e.from_V:.4g} V to {e.to_V:.4g} V at "
+                    f"edge_slew_V_per_s {self.p.edge_slew_V_per_s:g} V/s is too long)"
+                )
+                # a voltage no amplifier gives is what to fix, not the slew rate
+                absurd = volts > MAX_SANE_VOLTAGE_V and e.field in where
+                blame = where[e.field] if absurd else edge_where
             self.issue(
-                edge_where if e.edge else where["length"],
-                f"{name} would have {e.n} samples, more than the {MAX_STEP_SAMPLES} "
-                "allowed in one entry" + (" (the edge ramps are too slow)" if e.edge else ""),
+                blame,
+                f"{name} would have {count} than the {MAX_STEP_SAMPLES} "
+                f"allowed in one entry{why}",
             )
             return None
         aux = {}

@@ -235,11 +235,16 @@ class Waveform:
 
 
 class TooLongError(ValueError):
-    """A composed waveform would exceed the allowed number of samples."""
+    """A composed waveform would exceed the allowed number of samples. For an edge ramp
+    (``edge``): the volts it spans (``from_V`` to ``to_V``) and the protocol key that sets the
+    piece it joins (``field``)."""
 
-    def __init__(self, n: int, edge: bool):
+    def __init__(
+        self, n: int, edge: bool, from_V: float = 0.0, to_V: float = 0.0, field: str = ""
+    ):
         super().__init__(f"{n} samples")
         self.n, self.edge = n, edge
+        self.from_V, self.to_V, self.field = from_V, to_V, field
 
 
 def compose(
@@ -256,12 +261,13 @@ def compose(
     out: list[Segment] = []
     level = 0.0
     total = 0
+    last_field = ""
 
-    def add(seg: Segment) -> None:
+    def add(seg: Segment, span: tuple[float, float] = (0.0, 0.0), joins: str = "") -> None:
         nonlocal total
         total += seg.n
         if max_samples is not None and total > max_samples:
-            raise TooLongError(total, seg.role == "edge")
+            raise TooLongError(total, seg.role == "edge", *span, joins)
         out.append(seg)
 
     for p in pieces:
@@ -270,10 +276,12 @@ def compose(
         a, b = p.start_end(rate_hz)
         if abs(a - level) > JOIN_TOL_V:
             n = edge_samples(a - level, rate_hz, slew_V_per_s)
-            add(ramp_segment(level, a, n, rate_hz, edge_field, role="edge"))
+            add(ramp_segment(level, a, n, rate_hz, edge_field, role="edge"), (level, a), p.field)
         add(p)
         level = b
+        last_field = p.field
     if abs(level) > JOIN_TOL_V:
         n = edge_samples(level, rate_hz, slew_V_per_s)
-        add(ramp_segment(level, 0.0, n, rate_hz, edge_field, role="edge"))
+        edge = ramp_segment(level, 0.0, n, rate_hz, edge_field, role="edge")
+        add(edge, (level, 0.0), last_field)
     return Waveform(out, rate_hz)

@@ -60,3 +60,29 @@ def test_a_protocol_too_long_by_its_rests_names_rest_s(tmp_path):
     assert (issue.line, issue.field) == (3, "rest_s")
     assert "lasts 168.0001 h (0.0 h of entries, 168.0 h of rests); at most 168 h" in issue.message
     passes(tmp_path, "name: r\nrate_hz: 500\nrest_s: 604799\nsteps:\n" + hold * 2)
+
+
+def test_an_absurd_voltage_is_blamed_not_the_edge_slew(tmp_path):
+    """A hold at 1e300 V cannot be sampled (its edge ramp from 0 V would be endless): the key
+    to fix is voltage_V, and no saturated sample count (2**62) is printed."""
+    e = refusal(
+        tmp_path,
+        "name: r\nrate_hz: 500\nsteps:\n  - {kind: hold, voltage_V: 1.0e+300, duration_s: 0.1}\n",
+    )
+    (issue,) = e.issues
+    assert (issue.line, issue.field) == (4, "steps[0].voltage_V")
+    assert "would have more samples than the 50000000 allowed" in issue.message
+    assert "edge ramp from 0 V to 1e+300 V" in issue.message and str(2**62) not in str(e)
+
+
+@pytest.mark.parametrize(("volts", "blamed"), [(1e6, "edge_slew_V_per_s"),
+                                               (1.000001e6, "steps[0].voltage_V")])  # fmt: skip
+def test_a_slow_edge_to_a_sane_voltage_is_blamed_on_the_slew(tmp_path, volts, blamed):
+    """At and below 1e6 V the slew rate is what to change; just above it, the voltage."""
+    e = refusal(
+        tmp_path,
+        "name: r\nrate_hz: 500\nedge_slew_V_per_s: 0.001\nsteps:\n"
+        f"  - {{kind: hold, voltage_V: {volts!r}, duration_s: 0.1}}\n",
+    )
+    assert e.issues[0].field == blamed, str(e)
+    assert "samples, more than the 50000000 allowed in one entry (its edge ramp" in str(e)
