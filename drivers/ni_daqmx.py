@@ -130,6 +130,9 @@ class NIDAQmx:
     def ai_channel_names(self) -> list[str]:
         return list(self.s.ai)
 
+    def ai_range_V(self) -> tuple[float, float]:
+        return (-self.s.ai_range_V, self.s.ai_range_V)
+
     def ao_step_V(self) -> float:
         """Volts of one code of the AO converter over its range (``ao_range_V``, ``ao_bits``)."""
         return 2.0 * self.s.ao_range_V / 2**self.s.ao_bits

@@ -580,8 +580,7 @@ class _Builder:
                 blame = where[e.field] if absurd else edge_where
             self.issue(
                 blame,
-                f"{name} would have {count} than the {MAX_STEP_SAMPLES} "
-                f"allowed in one entry{why}",
+                f"{name} would have {count} than the {MAX_STEP_SAMPLES} allowed in one entry{why}",
             )
             return None
         aux = {}

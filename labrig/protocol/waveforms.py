@@ -239,9 +239,7 @@ class TooLongError(ValueError):
     (``edge``): the volts it spans (``from_V`` to ``to_V``) and the protocol key that sets the
     piece it joins (``field``)."""
 
-    def __init__(
-        self, n: int, edge: bool, from_V: float = 0.0, to_V: float = 0.0, field: str = ""
-    ):
+    def __init__(self, n: int, edge: bool, from_V: float = 0.0, to_V: float = 0.0, field: str = ""):
         super().__init__(f"{n} samples")
         self.n, self.edge = n, edge
         self.from_V, self.to_V, self.field = from_V, to_V, field

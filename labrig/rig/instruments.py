@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Literal, Protocol, runtime_checkable
@@ -43,6 +43,9 @@ Role = Literal["daq", "amplifier", "conditioner"]
 #: conversion of the optional ``temperature`` AI channel: degC = volts / TEMPERATURE_V_PER_DEGC
 #: (an LM35-style sensor, 10 mV/degC, 0 V at 0 degC)
 TEMPERATURE_V_PER_DEGC = 0.01
+#: an input sample at this fraction of the DAQ's input range or beyond is taken as clipped (a
+#: 16-bit converter's last codes are 0.99997 of its range)
+CLIP_FRACTION = 0.9999
 
 
 @dataclass
@@ -283,6 +286,28 @@ class Rig:
             if lo < hi:
                 ao = np.clip(ao, lo, hi)
         return ao
+
+    def clipped_input(self, channels: Mapping[str, NDArray[np.float64]]) -> str | None:
+        """Why the block ``channels`` (AI channel -> raw volts) is clipped, or None: a sample
+        of a channel at the end of the DAQ's input range (``ai_range_V()`` of the DAQ, when it
+        says), within :data:`CLIP_FRACTION` of it. A converter driven past its range returns
+        its last code: the record would show a flat top where the signal went on."""
+        range_fn = getattr(self.daq, "ai_range_V", None)
+        if not callable(range_fn):
+            return None
+        lo, hi = range_fn()
+        for name, raw in channels.items():
+            values = np.asarray(raw, dtype=float)
+            at_end = (values <= lo * CLIP_FRACTION) | (values >= hi * CLIP_FRACTION)
+            if at_end.any():
+                i = int(np.argmax(at_end))
+                return (
+                    f"the {name} input reached {values[i]:.6g} V, the end of the DAQ's input "
+                    f"range ({lo:g} to {hi:g} V), {int(at_end.sum())} times in a block: the "
+                    "signal is clipped and the record would be wrong (lower the conditioner's "
+                    "gain or the drive, or widen the DAQ's input range)"
+                )
+        return None
 
     def ao_to_volts(self, ao: ArrayLike) -> NDArray[np.float64]:
         return np.asarray(ao, dtype=float) * float(self.amplifier.gain)

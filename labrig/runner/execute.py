@@ -244,7 +244,10 @@ def _run_step(
             for c in ai:
                 values, _ = rig.convert(c, blk.channels[c])
                 data[_CHANNEL_MAP[c][0]] = values
-            entry.append(data)
+            entry.append(data)  # logged first: the file shows what was clipped
+            clipped = rig.clipped_input(blk.channels)
+            if clipped is not None:
+                raise DeviceError("daq", f"acquisition during {step.name}", clipped)
             if progress:
                 frac = (blk.start + n) / max(1, step.n_samples)
                 progress(k, n_steps, step.name, frac, left - frac * step.duration_s)
