@@ -439,6 +439,17 @@ class Protocol(_Base):
         description="default model parameters of the strain-command steps (JSON from "
         "`labrig fit --out`), relative to this file",
     )
+
+    @field_validator("name", "description")
+    @classmethod
+    def _printable(cls, v: str | None) -> str | None:
+        """No control or format characters (a bell, a right-to-left override): the name is
+        printed on terminals and pages; a description may hold line breaks and tabs."""
+        if v is not None and not all(c.isprintable() or c in "\n\t" for c in v):
+            bad = next(c for c in v if not (c.isprintable() or c in "\n\t"))
+            raise ValueError(f"must be printable text (found the control character {bad!r})")
+        return v
+
     metadata: dict[MetaKey, MetaValue] | None = Field(
         None,
         max_length=100,

@@ -1,0 +1,36 @@
+"""A protocol's name and description are printable text (they are printed on terminals and
+pages): control and format characters are refused with their line; line breaks and tabs are
+allowed in a description."""
+
+from __future__ import annotations
+
+import pytest
+
+from labrig.core.errors import InputFileError
+from labrig.protocol.check import check_protocol
+
+HOLD = "rate_hz: 500\nsteps:\n  - {kind: hold, voltage_V: 5, duration_s: 0.1}\n"
+
+
+@pytest.mark.parametrize(
+    ("head", "field", "shown"),
+    [
+        ('name: "a \\x07 bell"\n', "name", "'\\x07'"),
+        ('name: "a \\u202e override"\n', "name", "'\\u202e'"),
+        ('name: ok\ndescription: "an \\x1b[31m escape"\n', "description", "'\\x1b'"),
+    ],
+)
+def test_control_characters_are_refused(tmp_path, head, field, shown):
+    p = tmp_path / "p.yaml"
+    p.write_text(head + HOLD)
+    with pytest.raises(InputFileError) as e:
+        check_protocol(p)
+    (issue,) = e.value.issues
+    assert issue.field == field and issue.line == head.count("\n")
+    assert f"must be printable text (found the control character {shown})" in issue.message
+
+
+def test_line_breaks_tabs_and_other_scripts_are_text(tmp_path):
+    p = tmp_path / "p.yaml"
+    p.write_text('name: "Größe µε 测试"\ndescription: "two\\nlines\\tand a tab"\n' + HOLD)
+    assert check_protocol(p).name == "Größe µε 测试"
