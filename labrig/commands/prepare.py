@@ -152,13 +152,15 @@ def prepare(
         unusable = [n for n in entries if n not in by_name]
         if unusable:
             raise _issue(
-                path, f"entry {unusable[0]!r} has no voltage and strain to fit", "--entries"
+                path,
+                f"entry {unusable[0]!r} has no voltage and strain (to fit or to score)",
+                "--entries",
             )
         scored = [n for n in names if n in set(entries)]
     else:
         scored = [n for n in names if n in by_name and n in set(complete)]
     if not scored:
-        raise _issue(path, "no complete entry with voltage and strain to fit")
+        raise _issue(path, "no complete entry with voltage and strain (to fit or to score)")
     notes: list[str] = []
     skipped = [n for n in names if n not in complete and n not in scored]
     if skipped:

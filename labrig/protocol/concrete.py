@@ -19,8 +19,8 @@ __all__ = ["Concrete", "intervals", "num_tag", "sanitize"]
 
 
 def num_tag(x: float) -> str:
-    """Number for an entry name: 100 -> '100', 2.5 -> '2p5', -10 -> 'm10'."""
-    s = f"{x:.6g}"
+    """Number for an entry name: 100 -> '100', 2.5 -> '2p5', -10 -> 'm10' (-0 -> '0')."""
+    s = f"{x + 0.0:.6g}"  # + 0.0: -0.0 becomes 0.0
     return s.replace("-", "m").replace("+", "").replace(".", "p")
 
 

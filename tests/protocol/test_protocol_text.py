@@ -34,3 +34,12 @@ def test_line_breaks_tabs_and_other_scripts_are_text(tmp_path):
     p = tmp_path / "p.yaml"
     p.write_text('name: "Größe µε 测试"\ndescription: "two\\nlines\\tand a tab"\n' + HOLD)
     assert check_protocol(p).name == "Größe µε 测试"
+
+
+@pytest.mark.parametrize(("volts", "name"), [(-0.0, "hold_0V_0p1s"), (0.0, "hold_0V_0p1s"),
+                                             (-10.0, "hold_m10V_0p1s")])  # fmt: skip
+def test_minus_zero_is_named_as_zero(tmp_path, volts, name):
+    p = tmp_path / "p.yaml"
+    p.write_text(f"name: z\nrate_hz: 500\nsteps:\n  - {{kind: hold, voltage_V: {volts!r}, "
+                 "duration_s: 0.1}\n")  # fmt: skip
+    assert [s.name for s in check_protocol(p).steps] == [name]
