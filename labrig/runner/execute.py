@@ -247,6 +247,7 @@ def _run_step(
             entry.append(data)  # logged first: the file shows what was clipped
             clipped = rig.clipped_input(blk.channels)
             if clipped is not None:
+                _check_health(rig, step.name)  # a device's own fault is the cause to name
                 raise DeviceError("daq", f"acquisition during {step.name}", clipped)
             if progress:
                 frac = (blk.start + n) / max(1, step.n_samples)

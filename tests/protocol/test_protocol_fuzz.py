@@ -215,13 +215,21 @@ valid_step = st.one_of(
         },
     ),
 )
+#: printable text (Python's ``str.isprintable``: no "Other" or "Separator" character but the
+#: space); a description may also break lines and hold tabs
+PRINTABLE = st.characters(
+    exclude_categories=("Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp", "Zs"), include_characters=" "
+)
 valid_protocol = st.fixed_dictionaries(
     {
-        "name": st.text(min_size=1, max_size=20),
+        "name": st.text(PRINTABLE, min_size=1, max_size=20),
         "rate_hz": st.sampled_from([1000, 2000, 2500]),
         "steps": st.lists(valid_step, min_size=1, max_size=4),
     },
-    optional={"rest_s": st.floats(0, 10), "description": st.text(max_size=30)},
+    optional={
+        "rest_s": st.floats(0, 10),
+        "description": st.text(st.one_of(PRINTABLE, st.sampled_from("\n\t")), max_size=30),
+    },
 )
 
 
