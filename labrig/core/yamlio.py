@@ -15,6 +15,7 @@ instead of the first): merge one mapping, or write the values.
 
 from __future__ import annotations
 
+import datetime
 from pathlib import Path
 from typing import TypeVar
 
@@ -299,6 +300,15 @@ def _parse(text: str, name: str) -> tuple[yaml.Node | None, object]:
         raise InputFileError([InputIssue(name, None, "", msg)]) from None
 
 
+def what_was_given(value: object) -> str:
+    """`` (got ...)`` for a refused value in a message: its repr when short, a date as YAML
+    read it (``2026-01-01`` unquoted is a date, not text); empty for a long value."""
+    if isinstance(value, datetime.date):
+        return f" (got {value.isoformat()}, which YAML reads as a date: quote it if it is text)"
+    shown = repr(value)
+    return f" (got {shown})" if len(shown) < 60 else ""
+
+
 def issues_from_validation(name: str, err: ValidationError, lines: dict) -> list[InputIssue]:
     """Turn pydantic errors into file:line issues with a readable field path."""
     issues = []
@@ -311,9 +321,7 @@ def issues_from_validation(name: str, err: ValidationError, lines: dict) -> list
         elif e["type"] == "missing":
             msg = "required key is missing"
         if "input" in e and e["type"] not in ("missing", "extra_forbidden"):
-            shown = repr(e["input"])
-            if len(shown) < 60:
-                msg += f" (got {shown})"
+            msg += what_was_given(e["input"])
         issues.append(InputIssue(name, _line_for(loc, lines), field, msg))
     return issues
 

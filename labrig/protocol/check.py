@@ -15,7 +15,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from labrig.core.errors import InputFileError, InputIssue
-from labrig.core.yamlio import read_yaml
+from labrig.core.yamlio import read_yaml, what_was_given
 from labrig.protocol.expand import build_plan
 from labrig.protocol.plan import Plan, PlannedStep, field_name, line_of
 from labrig.protocol.preflight import preflight_checks
@@ -68,9 +68,7 @@ def validation_issues(file: str, err: ValidationError, lines: dict) -> list[Inpu
         if "input" in e and typ not in ("missing", "extra_forbidden", "union_tag_not_found"):
             inp = e["input"]
             if not isinstance(inp, dict | list):
-                shown = repr(inp)
-                if len(shown) < 60:
-                    msg += f" (got {shown})"
+                msg += what_was_given(inp)
             if _looks_numeric(inp):
                 msg += "; write numbers without quotes"
                 if "e" in inp.lower():

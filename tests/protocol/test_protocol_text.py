@@ -8,6 +8,8 @@ import pytest
 
 from labrig.core.errors import InputFileError
 from labrig.protocol.check import check_protocol
+from labrig.rig.rigspec import DEFAULT_RIG_YAML
+from labrig.runner.rigfile import load_rig
 
 HOLD = "rate_hz: 500\nsteps:\n  - {kind: hold, voltage_V: 5, duration_s: 0.1}\n"
 
@@ -43,3 +45,21 @@ def test_minus_zero_is_named_as_zero(tmp_path, volts, name):
     p.write_text(f"name: z\nrate_hz: 500\nsteps:\n  - {{kind: hold, voltage_V: {volts!r}, "
                  "duration_s: 0.1}\n")  # fmt: skip
     assert [s.name for s in check_protocol(p).steps] == [name]
+
+
+def test_an_unquoted_date_is_named_as_a_date(tmp_path):
+    """YAML reads ``2026-01-01`` as a date: the refusal says so (it printed Python's
+    ``datetime.date(2026, 1, 1)``), in protocol and rig files alike."""
+    p = tmp_path / "p.yaml"
+    p.write_text("name: 2026-01-01\n" + HOLD)
+    with pytest.raises(InputFileError) as e:
+        check_protocol(p)
+    said = "(got 2026-01-01, which YAML reads as a date: quote it if it is text)"
+    assert said in str(e.value) and "datetime" not in str(e.value)
+    rig = tmp_path / "rig.yaml"
+    rig.write_text(DEFAULT_RIG_YAML.replace("\nname: sim\n", "\nname: 2026-01-01\n"))
+    with pytest.raises(InputFileError) as e:
+        load_rig(rig)
+    assert said in str(e.value)
+    p.write_text('name: "2026-01-01"\n' + HOLD)
+    assert check_protocol(p).name == "2026-01-01"
