@@ -115,15 +115,25 @@ def _entry_info(name: str, g: h5py.Group, known: dict[str, StepFacts]) -> EntryI
     )
 
 
-def read_frame_here(path: str, entry: str | None, start: int, known: dict[str, StepFacts]) -> Frame:
+def read_frame_here(
+    path: str,
+    entry: str | None,
+    start: int,
+    known: dict[str, StepFacts],
+    ended: dict[str, EntryInfo] | None = None,
+) -> Frame:
     """Read a frame (module docstring): the current entry's samples from ``start`` on if it is
     ``entry``, else from its beginning. ``known``: the step facts (planned samples, frequency)
-    of entries seen before (their step definitions are not read again)."""
+    of entries seen before (their step definitions are not read again); ``ended``: the entries
+    of this file seen ended (a final status) before, taken as they were: an ended entry does
+    not change, and reading each one's facts again (with their seals) was most of a frame's
+    reading in a campaign of many entries."""
     with h5py.File(path, "r", locking=False) as f:
         allow_cpu()
         run = f["run"]
+        ended = ended or {}
         entries = [
-            _entry_info(n, g, known)
+            ended[n] if n in ended else _entry_info(n, g, known)
             for n, g in f.items()
             if n != "run" and isinstance(g, h5py.Group)
         ]
@@ -182,13 +192,24 @@ def _float(v: object) -> float | None:
 
 
 def read_frame(
-    path: Path | str, entry: str | None, start: int, known: dict[str, StepFacts]
+    path: Path | str,
+    entry: str | None,
+    start: int,
+    known: dict[str, StepFacts],
+    ended: dict[str, EntryInfo] | None = None,
 ) -> Frame:
     """:func:`read_frame_here` in a child process limited to :data:`FRAME_WALL_S`; raises
     whatever stopped it (the caller skips the frame)."""
     size = min(Path(path).stat().st_size, 64 << 20)
     return call_isolated(
-        read_frame_here, str(path), entry, start, known, size_bytes=size, wall_s=FRAME_WALL_S
+        read_frame_here,
+        str(path),
+        entry,
+        start,
+        known,
+        ended,
+        size_bytes=size,
+        wall_s=FRAME_WALL_S,
     )
 
 

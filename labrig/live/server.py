@@ -190,13 +190,20 @@ class LiveServer:
         """One read of the file into the state (a failed read is counted and skipped)."""
         with self.lock:
             path = self.path
+        try:
+            st = path.stat() if path is not None else None
+        except OSError:
+            return
+        if path is None or st is None:
+            return
+        with self.lock:
+            self.state.same_file((st.st_dev, st.st_ino))
             entry, start = self.state.next_request()
             known = dict(self.state.step_facts)
-        if path is None or not path.exists():
-            return
+            ended = dict(self.state.ended)
         t0 = time.perf_counter()
         try:
-            frame = read_frame(path, entry, start, known)
+            frame = read_frame(path, entry, start, known, ended)
         except Exception as e:  # a torn read, a damaged file: skip this frame
             with self.lock:
                 self.state.skipped += 1

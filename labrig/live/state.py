@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from labrig.live.frames import EntryData, Frame, StepFacts
+from labrig.live.frames import EntryData, EntryInfo, Frame, StepFacts
 from labrig.store.writing import writer_of
 
 #: the time series shows this many seconds of the current entry (its last ones)
@@ -121,6 +121,11 @@ class LiveState:
         self.frame: Frame | None = None
         self.entry: EntrySamples | None = None
         self.step_facts: dict[str, StepFacts] = {}
+        #: entries seen ended (a final status), not read again (:func:`read_frame_here`)
+        self.ended: dict[str, EntryInfo] = {}
+        #: the file these facts are of: (device, inode); another file at the path (a run
+        #: replaced with --overwrite) forgets them
+        self.file_id: tuple[int, int] | None = None
         self.seq = 0
         self.reads = 0
         self.skipped = 0
@@ -137,6 +142,14 @@ class LiveState:
         self.refused = 0
 
     # -- reading ----------------------------------------------------------------------------
+    def same_file(self, file_id: tuple[int, int]) -> None:
+        """The file to read is ``file_id`` (device, inode): another file than the facts were
+        read from forgets them."""
+        if file_id != self.file_id:
+            self.step_facts.clear()
+            self.ended.clear()
+            self.file_id = file_id
+
     def next_request(self) -> tuple[str | None, int]:
         """The entry and the first sample the next read should fetch."""
         if self.entry is None:
@@ -149,6 +162,8 @@ class LiveState:
         self.read_ms = read_ms
         for e in frame.entries:
             self.step_facts.setdefault(e.name, (e.planned_samples, e.frequency_hz))
+            if e.status in FINAL:
+                self.ended.setdefault(e.name, e)
         changed = self.frame is None or _summary(frame) != _summary(self.frame)
         if frame.current is not None:
             # a new entry, or a gap (a viewer that joined late or could not keep up)

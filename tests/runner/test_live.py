@@ -908,3 +908,40 @@ def test_closing_waits_at_most_linger_s_and_not_for_a_page_that_has_gone(finishe
     t0 = time.monotonic()
     quiet.close()
     assert time.monotonic() - t0 < 1.0
+
+
+def test_ended_entries_are_taken_as_they_were_not_read_again(finished_run: Path):
+    """A frame takes the entries seen ended before as given (their facts and seals were most
+    of a frame's reading in a campaign of many entries): a changed copy passed in comes back
+    as is; the others are read, and a frame with the read ones equals a frame read whole."""
+    whole = read_frame(finished_run, None, 0, {})
+    first = whole.entries[0]
+    marked = EntryInfo(**{**first.__dict__, "title": "taken as given"})
+    frame = read_frame(finished_run, None, 0, {}, {first.name: marked})
+    assert frame.entries[0] is not first and frame.entries[0].title == "taken as given"
+    assert frame.entries[1:] == whole.entries[1:]
+    again = read_frame(finished_run, None, 0, {}, {e.name: e for e in whole.entries})
+    assert again.entries == whole.entries and again.status == whole.status
+    for c in whole.samples:
+        assert np.array_equal(again.samples[c], whole.samples[c])
+
+
+def test_the_view_forgets_what_it_knew_of_a_replaced_file(tmp_path: Path, finished_run: Path):
+    """The server keeps the ended entries and step facts of the file it reads; another file
+    at the path (a run replaced with --overwrite: written beside, renamed) is read anew."""
+    path = tmp_path / "run.h5"
+    path.write_bytes(finished_run.read_bytes())
+    server = LiveServer(path)
+    try:
+        server.read_once()
+        names = [e[0] for e in ENTRIES] + [VANISHING[0]]
+        assert sorted(server.state.ended) == sorted(names)
+        other = tmp_path / "other.h5"
+        with RunWriter(other, "", "", {}, seed=1) as w:
+            w.begin_entry("only", {}, 100.0, ["strain"]).append({"strain": [1.0, 2.0, 3.0]})
+        os.replace(other, path)
+        server.read_once()
+        assert list(server.state.ended) == ["only"] and list(server.state.step_facts) == ["only"]
+        assert [e.name for e in server.state.frame.entries] == ["only"]
+    finally:
+        server.httpd.server_close()
