@@ -16,6 +16,7 @@ instead of the first): merge one mapping, or write the values.
 from __future__ import annotations
 
 import datetime
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TypeVar
 
@@ -120,10 +121,13 @@ def _compose(text: str, name: str) -> tuple[yaml.Node | None, object]:
         bomb = _expanded_size_issue(node, name) if node is not None else None
         if bomb is not None:
             raise InputFileError([bomb])
-        dups = duplicate_key_issues(node, name) if node is not None else []
-        dups += merge_list_issues(node, name) if node is not None else []
-        if dups:
-            raise InputFileError(dups)
+        refused = (
+            duplicate_key_issues(node, name) + merge_list_issues(node, name)
+            if node is not None
+            else []
+        )
+        if refused:
+            raise InputFileError(refused)
         data = loader.construct_document(node) if node is not None else None
     except (ValueError, OverflowError) as e:
         raise _unreadable(name, loader, e) from None
@@ -172,9 +176,9 @@ def _field(path: tuple) -> str:
     return ".".join(str(x) if isinstance(x, str) else f"[{x}]" for x in path).replace(".[", "[")
 
 
-def duplicate_key_issues(root: yaml.Node, name: str) -> list[InputIssue]:
-    """Every key repeated within one mapping (YAML loaders silently keep the last one)."""
-    out: list[InputIssue] = []
+def _mappings(root: yaml.Node) -> Iterator[tuple[yaml.MappingNode, tuple]]:
+    """Every mapping of the composed document once (a node an alias shares is visited once),
+    with its key path; no recursion."""
     stack: list[tuple[yaml.Node | None, tuple]] = [(root, ())]
     seen: set[int] = set()
     while stack:
@@ -183,43 +187,43 @@ def duplicate_key_issues(root: yaml.Node, name: str) -> list[InputIssue]:
             continue
         seen.add(id(node))
         if isinstance(node, yaml.MappingNode):
-            keys = set()
+            yield node, path
             for k, v in node.value:
-                key = k.value if isinstance(k, yaml.ScalarNode) else None
-                if key is not None and key in keys:
-                    msg = "this key is given twice in the same mapping"
-                    out.append(InputIssue(name, k.start_mark.line + 1, _field((*path, key)), msg))
-                keys.add(key)
-                stack.append((v, (*path, key)))
+                stack.append((v, (*path, k.value if isinstance(k, yaml.ScalarNode) else None)))
         elif isinstance(node, yaml.SequenceNode):
             stack.extend((v, (*path, i)) for i, v in enumerate(node.value))
+
+
+def duplicate_key_issues(root: yaml.Node, name: str) -> list[InputIssue]:
+    """Every key repeated within one mapping (YAML loaders silently keep the last one)."""
+    out: list[InputIssue] = []
+    for node, path in _mappings(root):
+        keys = set()
+        for k, _v in node.value:
+            key = k.value if isinstance(k, yaml.ScalarNode) else None
+            if key is not None and key in keys:
+                msg = "this key is given twice in the same mapping"
+                out.append(InputIssue(name, k.start_mark.line + 1, _field((*path, key)), msg))
+            keys.add(key)
     return sorted(out, key=lambda i: i.line or 0)
 
 
 def merge_list_issues(root: yaml.Node, name: str) -> list[InputIssue]:
     """Every merge key given a list of several mappings (``<<: [*a, *b]``): YAML says the
     first mapping's value wins where they share a key, PyYAML takes the last."""
-    out: list[InputIssue] = []
-    stack: list[tuple[yaml.Node | None, tuple]] = [(root, ())]
-    seen: set[int] = set()
-    while stack:
-        node, path = stack.pop()
-        if node is None or id(node) in seen:
-            continue
-        seen.add(id(node))
-        if isinstance(node, yaml.MappingNode):
-            for k, v in node.value:
-                merge = k.tag == "tag:yaml.org,2002:merge"
-                if merge and isinstance(v, yaml.SequenceNode) and len(v.value) > 1:
-                    msg = (
-                        "a merge of several mappings (<<: [...]): YAML gives the first one's "
-                        "values precedence and PyYAML the last one's; merge one mapping "
-                        "(<<: *name) and write the values that differ"
-                    )
-                    out.append(InputIssue(name, k.start_mark.line + 1, _field(path), msg))
-                stack.append((v, (*path, k.value if isinstance(k, yaml.ScalarNode) else None)))
-        elif isinstance(node, yaml.SequenceNode):
-            stack.extend((v, (*path, i)) for i, v in enumerate(node.value))
+    msg = (
+        "a merge of several mappings (<<: [...]): YAML gives the first one's values precedence "
+        "and PyYAML the last one's; merge one mapping (<<: *name) and write the values that "
+        "differ"
+    )
+    out = [
+        InputIssue(name, k.start_mark.line + 1, _field(path), msg)
+        for node, path in _mappings(root)
+        for k, v in node.value
+        if k.tag == "tag:yaml.org,2002:merge"
+        and isinstance(v, yaml.SequenceNode)
+        and len(v.value) > 1
+    ]
     return sorted(out, key=lambda i: i.line or 0)
 
 

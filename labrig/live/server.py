@@ -190,11 +190,11 @@ class LiveServer:
         """One read of the file into the state (a failed read is counted and skipped)."""
         with self.lock:
             path = self.path
-        try:
-            st = path.stat() if path is not None else None
-        except OSError:
+        if path is None:
             return
-        if path is None or st is None:
+        try:
+            st = path.stat()
+        except OSError:
             return
         with self.lock:
             self.state.same_file((st.st_dev, st.st_ino))

@@ -445,8 +445,8 @@ class Protocol(_Base):
     def _printable(cls, v: str | None) -> str | None:
         """No control or format characters (a bell, a right-to-left override): the name is
         printed on terminals and pages; a description may hold line breaks and tabs."""
-        if v is not None and not all(c.isprintable() or c in "\n\t" for c in v):
-            bad = next(c for c in v if not (c.isprintable() or c in "\n\t"))
+        bad = next((c for c in v or "" if not (c.isprintable() or c in "\n\t")), None)
+        if bad is not None:
             raise ValueError(f"must be printable text (found the control character {bad!r})")
         return v
 

@@ -203,13 +203,13 @@ def reach_issues(resolved: Any, name: str, lines: dict) -> list[InputIssue]:
     bench = resolved.bench
     gain = getattr(resolved.amplifier, "gain_V_per_V", None)
     ao_range = getattr(resolved.daq, "ao_range_V", None)
-    if ao_range is None and bench is not None:
+    if ao_range is None:  # the simulated DAQ's range is the bench's (None: no bench)
         ao_range = getattr(getattr(bench, "daq", None), "ao_range_V", None)
     spans: list[tuple[float, float, str]] = []
     if isinstance(gain, float) and isinstance(ao_range, float):
         what = f"the DAQ's +-{ao_range:g} V output times the amplifier's gain of {gain:g}"
         spans.append((-ao_range * gain, ao_range * gain, what))
-    amp = getattr(bench, "amplifier", None) if bench is not None else None
+    amp = getattr(bench, "amplifier", None)
     if amp is not None and isinstance(getattr(amp, "out_max_V", None), float):
         what = "the simulated amplifier's output range (bench.amplifier.out_min_V..out_max_V)"
         spans.append((amp.out_min_V, amp.out_max_V, what))

@@ -217,7 +217,7 @@ class EntryWriter:
         """After a failed block: every channel back to ``n`` samples (the complete blocks)."""
         for c in self.channels:
             try:
-                self._data[c.name].resize((n,))
+                self._datasets[c.name].resize((n,))
             except Exception as e:
                 log.error("cutting %s/%s back to %d samples failed: %s", self.name, c.name, n, e)
 

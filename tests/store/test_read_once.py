@@ -63,7 +63,8 @@ def test_a_checked_read_reads_each_attribute_and_scalar_once(tiny_run: Path, mon
         assert all(np.array_equal(entry.data[c], old.data[c]) for c in entry.data)
 
 
-def test_the_benchs_entry_point_is_looked_up_once(monkeypatch):
+def counting_entry_points(monkeypatch: pytest.MonkeyPatch) -> list[dict]:
+    """Wrap ``importlib.metadata.entry_points``; the list of the calls' keyword arguments."""
     calls: list[dict] = []
     look_up = metadata.entry_points
 
@@ -72,6 +73,11 @@ def test_the_benchs_entry_point_is_looked_up_once(monkeypatch):
         return look_up(**kw)
 
     monkeypatch.setattr(metadata, "entry_points", counted)
+    return calls
+
+
+def test_the_benchs_entry_point_is_looked_up_once(monkeypatch):
+    calls = counting_entry_points(monkeypatch)
     rigspec._simulator.cache_clear()
     try:
         first = rigspec.simulator()
@@ -86,14 +92,8 @@ def test_the_benchs_entry_point_is_looked_up_once(monkeypatch):
 
 
 def test_the_drivers_entry_points_are_read_once(monkeypatch, caplog):
-    calls: list[dict] = []
     look_up = metadata.entry_points
-
-    def counted(**kw):
-        calls.append(kw)
-        return look_up(**kw)
-
-    monkeypatch.setattr(metadata, "entry_points", counted)
+    calls = counting_entry_points(monkeypatch)
     rigspec._driver_entries.cache_clear()
     try:
         names = rigspec.driver_names()
