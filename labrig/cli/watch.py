@@ -41,8 +41,18 @@ def watch(
     # serve until a stop signal (Ctrl-C, SIGTERM, SIGHUP): stopping the view is how it ends
     with interrupt_once() as guard:
         try:
+            there = True
             while True:
                 time.sleep(0.5)
+                if run_file.exists() != there:  # said once each time it goes or comes back
+                    there = not there
+                    typer.echo(
+                        f"live view: {run_file} is back; reading it again"
+                        if there
+                        else f"live view: {run_file} is gone (deleted or renamed); the page "
+                        "keeps the last state read",
+                        err=True,
+                    )
         except Interrupted:
             pass
         finally:

@@ -22,6 +22,7 @@ import numpy as np
 
 from labrig.store.format import SEAL_ATTR, seal_of
 from labrig.store.isolated import allow_cpu, call_isolated
+from labrig.store.writing import FileId, file_identity
 
 #: the channels a frame reads (those an entry lacks are left out)
 CHANNELS = ("time", "command_voltage", "strain", "amplifier_voltage")
@@ -66,6 +67,8 @@ class Frame:
     final_voltage_V: float | None = None
     writer_pid: int | None = None
     writer_host: str = ""
+    #: the file read (:func:`~labrig.store.writing.file_identity`)
+    file_id: FileId | None = None
 
 
 def _value(ds: h5py.Dataset) -> object:
@@ -121,15 +124,20 @@ def read_frame_here(
     start: int,
     known: dict[str, StepFacts],
     ended: dict[str, EntryInfo] | None = None,
+    file_id: FileId | None = None,
 ) -> Frame:
     """Read a frame (module docstring): the current entry's samples from ``start`` on if it is
     ``entry``, else from its beginning. ``known``: the step facts (planned samples, frequency)
     of entries seen before (their step definitions are not read again); ``ended``: the entries
     of this file seen ended (a final status) before, taken as they were: an ended entry does
     not change, and reading each one's facts again (with their seals) was most of a frame's
-    reading in a campaign of many entries."""
+    reading in a campaign of many entries. ``entry``, ``known`` and ``ended`` are of the file
+    ``file_id``: another file found at the path (replaced since) is read from scratch."""
     with h5py.File(path, "r", locking=False) as f:
         allow_cpu()
+        fid = file_identity(f)
+        if fid != file_id:
+            entry, known, ended = None, {}, {}
         run = f["run"]
         ended = ended or {}
         entries = [
@@ -150,6 +158,7 @@ def read_frame_here(
             final_voltage_V=_float(_get(run, "final_amplifier_voltage_V")),
             writer_pid=_int(f.attrs.get("writer_pid")),
             writer_host=str(f.attrs.get("writer_host", "")),
+            file_id=fid,
         )
         if frame.current is not None:
             _read_samples(f[frame.current]["data"], frame, entry, start, entries[-1].samples)
@@ -197,6 +206,7 @@ def read_frame(
     start: int,
     known: dict[str, StepFacts],
     ended: dict[str, EntryInfo] | None = None,
+    file_id: FileId | None = None,
 ) -> Frame:
     """:func:`read_frame_here` in a child process limited to :data:`FRAME_WALL_S`; raises
     whatever stopped it (the caller skips the frame)."""
@@ -208,6 +218,7 @@ def read_frame(
         start,
         known,
         ended,
+        file_id,
         size_bytes=size,
         wall_s=FRAME_WALL_S,
     )
@@ -221,6 +232,8 @@ class EntryData:
     info: EntryInfo
     start: int
     samples: dict[str, np.ndarray]
+    #: the file read (:func:`~labrig.store.writing.file_identity`)
+    file_id: FileId | None = None
 
 
 #: an ended entry is read whole up to this many samples (longer: its last ones)
@@ -240,7 +253,7 @@ def read_entry_here(path: str, name: str) -> EntryData:
         info = _entry_info(name, g, {})
         frame = Frame("", "", "", [], [info], name, 0)
         _read_samples(g["data"], frame, None, 0, info.samples, MAX_ENTRY_SAMPLES)
-        return EntryData(info, frame.start, frame.samples)
+        return EntryData(info, frame.start, frame.samples, file_identity(f))
 
 
 def read_entry(path: Path | str, name: str) -> EntryData:

@@ -40,6 +40,7 @@ from urllib.parse import parse_qs
 
 from labrig.live.frames import read_entry, read_frame
 from labrig.live.state import FINAL, LiveState, entry_view, overlay_points
+from labrig.store.writing import FileId
 
 log = logging.getLogger(__name__)
 
@@ -67,6 +68,8 @@ REQUEST_TIMEOUT_S = 10.0
 REFUSALS_LOGGED = 20
 #: ended entries whose page view (``/entry``) is kept; others are read again when asked for
 ENTRY_CACHE = 16
+#: a kept entry view's key: the file, the entry's name, samples and status when read
+EntryKey = tuple[FileId | None, str, int, str]
 #: after a failed read of an ended entry, wait this long (s) before trying again
 ENTRY_RETRY_S = 1.0
 
@@ -114,7 +117,7 @@ class LiveServer:
         self._final_parts: set[str] = set()
         self.clients = 0
         self.last_ask = 0.0  # time.monotonic() of the last /frame request
-        self._entries: OrderedDict[tuple[str, int, str], bytes] = OrderedDict()
+        self._entries: OrderedDict[EntryKey, bytes] = OrderedDict()
         self.httpd = ThreadingHTTPServer((HOST, port), _handler(self))
         self.httpd.daemon_threads = True
         self._threads: list[threading.Thread] = []
@@ -192,22 +195,22 @@ class LiveServer:
             path = self.path
         if path is None:
             return
-        try:
-            st = path.stat()
-        except OSError:
-            return
         with self.lock:
-            self.state.same_file((st.st_dev, st.st_ino))
             entry, start = self.state.next_request()
             known = dict(self.state.step_facts)
             ended = dict(self.state.ended)
+            file_id = self.state.file_id
         t0 = time.perf_counter()
         try:
-            frame = read_frame(path, entry, start, known, ended)
-        except Exception as e:  # a torn read, a damaged file: skip this frame
+            frame = read_frame(path, entry, start, known, ended, file_id)
+        except Exception as e:  # a torn read, a damaged file, no file: skip this frame
+            if isinstance(e, FileNotFoundError):
+                why = f"{path}: no such file now (deleted or renamed); showing the last state read"
+            else:
+                why = (str(e).splitlines() or [type(e).__name__])[0][:200]
             with self.lock:
                 self.state.skipped += 1
-                self.state.last_error = (str(e).splitlines() or [type(e).__name__])[0][:200]
+                self.state.last_error = why
             return
         with self.lock:
             self.state.path = str(path)
@@ -230,7 +233,8 @@ class LiveServer:
             return None
         name, key = todo[0]
         try:
-            overlay, detail = entry_view(read_entry(path, name), self.params, points)
+            data = read_entry(path, name)
+            overlay, detail = entry_view(data, self.params, points)
         except Exception as e:  # a damaged entry: say so in the footer, try again later
             with self.lock:
                 self.state.skipped += 1
@@ -238,11 +242,12 @@ class LiveServer:
             return False
         body = _json(detail)
         with self.lock:
-            self.state.take_entry((detail["samples"], detail["status"]), overlay)
-            self._cache((name, *key), body)
+            # an entry of another file (the path replaced meanwhile) is not this run's
+            if self.state.take_entry((detail["samples"], detail["status"]), overlay, data.file_id):
+                self._cache((data.file_id, name, *key), body)
         return True
 
-    def _cache(self, key: tuple[str, int, str], body: bytes) -> None:
+    def _cache(self, key: EntryKey, body: bytes) -> None:
         self._entries[key] = body
         self._entries.move_to_end(key)
         while len(self._entries) > ENTRY_CACHE:
@@ -276,16 +281,18 @@ class LiveServer:
             if not self.state.known_entry(name) or self.state.frame is None:
                 return None
             info = next(e for e in self.state.frame.entries if e.name == name)
-            key = (name, info.samples, info.status)
+            key = (self.state.file_id, name, info.samples, info.status)
             body = self._entries.get(key)
             path, final = self.path, self.state.is_final()
         if body is None:
             if path is None:
                 return None
-            _, detail = entry_view(read_entry(path, name), self.params)
+            data = read_entry(path, name)
+            _, detail = entry_view(data, self.params)
             body = _json(detail)
-            with self.lock:
-                self._cache(key, body)
+            if data.file_id == key[0]:  # kept only under the file it was read from
+                with self.lock:
+                    self._cache(key, body)
         self._served("entry", final)
         return body
 

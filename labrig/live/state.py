@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from labrig.live.frames import EntryData, EntryInfo, Frame, StepFacts
-from labrig.store.writing import writer_of
+from labrig.store.writing import FileId, writer_of
 
 #: the time series shows this many seconds of the current entry (its last ones)
 SERIES_WINDOW_S = 5.0
@@ -123,9 +123,9 @@ class LiveState:
         self.step_facts: dict[str, StepFacts] = {}
         #: entries seen ended (a final status), not read again (:func:`read_frame_here`)
         self.ended: dict[str, EntryInfo] = {}
-        #: the file these facts are of: (device, inode); another file at the path (a run
-        #: replaced with --overwrite) forgets them
-        self.file_id: tuple[int, int] | None = None
+        #: the file these facts are of (:func:`~labrig.store.writing.file_identity`); a frame
+        #: of another file at the path (a run replaced with --overwrite) forgets them
+        self.file_id: FileId | None = None
         self.seq = 0
         self.reads = 0
         self.skipped = 0
@@ -142,13 +142,19 @@ class LiveState:
         self.refused = 0
 
     # -- reading ----------------------------------------------------------------------------
-    def same_file(self, file_id: tuple[int, int]) -> None:
-        """The file to read is ``file_id`` (device, inode): another file than the facts were
-        read from forgets them."""
-        if file_id != self.file_id:
-            self.step_facts.clear()
-            self.ended.clear()
-            self.file_id = file_id
+    def _another_file(self, file_id: FileId | None) -> None:
+        """What was read of another file is forgotten: its step facts, ended entries, current
+        entry and loops (a run replaced at the path, even with the same entry names)."""
+        self.step_facts.clear()
+        self.ended.clear()
+        self.entry = None
+        self._stream = None
+        self.frame = None
+        if self.loops:
+            self.loops.clear()
+            self.loop_keys.clear()
+            self.loops_seq += 1
+        self.file_id = file_id
 
     def next_request(self) -> tuple[str | None, int]:
         """The entry and the first sample the next read should fetch."""
@@ -157,9 +163,12 @@ class LiveState:
         return self.entry.name, self.entry.n
 
     def take(self, frame: Frame, read_ms: float) -> bool:
-        """Apply a frame; True when something the page shows changed."""
+        """Apply a frame; True when something the page shows changed. A frame of another
+        file than the last (``frame.file_id``) starts afresh (:meth:`_another_file`)."""
         self.reads += 1
         self.read_ms = read_ms
+        if frame.file_id != self.file_id:
+            self._another_file(frame.file_id)
         for e in frame.entries:
             self.step_facts.setdefault(e.name, (e.planned_samples, e.frequency_hz))
             if e.status in FINAL:
@@ -208,12 +217,18 @@ class LiveState:
             and self.loop_keys.get(e.name) != (e.samples, e.status)
         ]
 
-    def take_entry(self, key: tuple[int, str], view: dict[str, Any]) -> None:
-        """Keep an ended entry's loop (:func:`entry_view`'s ``overlay``) for the overlay."""
+    def take_entry(
+        self, key: tuple[int, str], view: dict[str, Any], file_id: FileId | None = None
+    ) -> bool:
+        """Keep an ended entry's loop (:func:`entry_view`'s ``overlay``) for the overlay, if
+        it was read from the file the frames are of (``file_id``; None: not checked)."""
+        if file_id is not None and file_id != self.file_id:
+            return False
         self.loops[view["name"]] = view
         self.loop_keys[view["name"]] = key
         self.loops_seq += 1
         self.seq += 1
+        return True
 
     def loops_document(self) -> dict[str, Any]:
         """Every ended entry's loop, in the run's order: ``{"seq", "entries": [{"name",

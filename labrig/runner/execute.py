@@ -52,6 +52,7 @@ from labrig.store import Channel, RunWriter, estimate_run_bytes, free_bytes
 from labrig.store.reader import being_written
 from labrig.store.resume import ResumePlan, check_resume, check_same_rig, record_resume
 from labrig.store.space import DISK_FULL, RESERVE_BYTES, is_disk_full
+from labrig.store.writer import GONE
 
 #: acquisition block length (s): the most a crash can lose
 BLOCK_S = 0.1
@@ -609,6 +610,9 @@ def _record(
         problems = record_end(writer, rig, ramp, status, reason, code)
     if writer.close_error:
         problems.append(writer.close_error)
+    if status == "complete" and not writer.in_place():  # gone after its last block's check
+        gone = StorageError(str(writer.path), "closing the run file", GONE)
+        status, reason, code = "failed", str(gone), gone.exit_code
     outcome.status, outcome.reason, outcome.exit_code = status, reason, code
     if problems:
         outcome.reason += "; the run file could not record its end: " + "; ".join(problems)

@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from labrig.core.errors import InputFileError, InputIssue
+from labrig.core.words import shown
 from labrig.store.isolated import IsolatedReadError, call_isolated
 from labrig.store.parse import RunEntry, RunFile, read_run_here
 from labrig.store.writing import writer_of
@@ -221,15 +222,15 @@ def run_info(path: Path | str) -> RenderableType:
         counts += f" ({complete} complete)"
     head = Text.assemble(
         ("run file ", "bold"),
-        s["path"],
+        shown(s["path"]),
         "\nprotocol: ",
-        s["protocol"] or "-",
+        shown(s["protocol"] or "-"),
         "\nstatus: ",
-        (status, "green" if s["status"] == "complete" else "red"),
+        (shown(status), "green" if s["status"] == "complete" else "red"),
         counts,
-        f"\nstarted {s['start_time'] or '-'}, ended {s['end_time'] or '-'}",
+        f"\nstarted {shown(s['start_time'] or '-')}, ended {shown(s['end_time'] or '-')}",
         f"\nseed {s['seed'] if s['seed'] is not None else '-'}, "
-        f"labrig {s['software_version'] or '-'}",
+        f"labrig {shown(s['software_version'] or '-')}",
         *_metadata_lines(s),
         *_resume_lines(s),
         *_addition_lines(s),
@@ -252,9 +253,9 @@ def run_info(path: Path | str) -> RenderableType:
 
     for e in s["entries"]:
         st = e["status"] + (f": {e['reason']}" if e["reason"] else "")
-        t.add_row(
-            e["name"],
-            st,
+        t.add_row(  # Text: a name is not read as rich markup
+            Text(shown(e["name"])),
+            Text(shown(st)),
             str(e["samples"]),
             g(e["duration_s"], ".3f"),
             g(e["rate_hz"], "g"),
@@ -267,7 +268,8 @@ def run_info(path: Path | str) -> RenderableType:
 def _metadata_lines(s: dict) -> list[str]:
     """``metadata: operator=alice sample=P-888 #3 ...`` (none when the run has none)."""
     meta = s.get("metadata") or {}
-    return ["\nmetadata: " + " ".join(f"{k}={v}" for k, v in meta.items())] if meta else []
+    pairs = " ".join(f"{shown(k)}={shown(v)}" for k, v in meta.items())
+    return [f"\nmetadata: {pairs}"] if meta else []
 
 
 #: the most additions ``labrig info`` names one by one
@@ -279,7 +281,7 @@ def _addition_lines(s: dict) -> list[str]:
     added = s.get("additions") or []
     if not added:
         return []
-    names = ", ".join(added[:SHOWN_ADDITIONS])
+    names = ", ".join(shown(a) for a in added[:SHOWN_ADDITIONS])
     more = f" and {len(added) - SHOWN_ADDITIONS} more" if len(added) > SHOWN_ADDITIONS else ""
     return [f"\nadded by another program (not labrig's, not checked): {names}{more}"]
 
@@ -294,8 +296,8 @@ def _resume_lines(s: dict) -> list[str]:
             before += f": {r['previous_reason']}"
         lines.append(
             f"\nresumed {r.get('time', '?')} (resume {r.get('number', '?')}): "
-            f"{', '.join(r.get('entries') or [])}; seed {seed if seed >= 0 else '-'}; "
-            f"the run had ended {before}"
+            f"{shown(', '.join(r.get('entries') or []))}; seed {seed if seed >= 0 else '-'}; "
+            f"the run had ended {shown(before)}"
         )
     return lines
 

@@ -66,7 +66,7 @@ from labrig.store.space import (
     is_disk_full,
 )
 from labrig.store.summary import SUMMARY_NAME, write_summary
-from labrig.store.writing import mark_writer, unmark_writer
+from labrig.store.writing import file_identity, mark_writer, path_identity, unmark_writer
 
 log = logging.getLogger("labrig.store")
 _STR = STRING_DTYPE
@@ -140,6 +140,13 @@ def extend(ds: h5py.Dataset, n0: int, values: np.ndarray) -> None:
     file_space.select_hyperslab((n0,), (m,))
     block = np.ascontiguousarray(values, dtype=np.float64)
     ds.id.write(h5py.h5s.create_simple((m,)), file_space, block)
+
+
+#: why a run stops when its file is deleted or replaced at its path by another program
+GONE = (
+    "the file was deleted or replaced at its path by another program during the run; the "
+    "samples written are not in the file now at that path"
+)
 
 
 class EntryWriter:
@@ -327,6 +334,7 @@ class RunWriter:
             # disk refuses fails there and then, and no unwritable chunk waits in a cache (with
             # a cache, cutting a channel back after a refused flush read back zeros)
             self._f = h5py.File(self.path, mode, track_order=True, rdcc_nbytes=0)
+            self.file_id = file_identity(self._f)
         except BaseException:
             self._reserve.release()
             raise
@@ -393,9 +401,22 @@ class RunWriter:
 
     def heartbeat(self) -> None:
         """Say the run file is still being written when nothing is written to it (a rest
-        between entries): its modification time is set to now (:mod:`labrig.store.writing`)."""
+        between entries): its modification time is set to now (:mod:`labrig.store.writing`).
+        Raises :class:`StorageError` when the file is no longer at its path
+        (:meth:`check_in_place`)."""
+        self.check_in_place("keeping the run file")
         with contextlib.suppress(OSError):
             os.utime(self.path)
+
+    def in_place(self) -> bool:
+        """Whether the path still names the file being written (not deleted, not replaced by
+        another program: what is written then would be lost with the file)."""
+        return path_identity(self.path) == self.file_id
+
+    def check_in_place(self, operation: str) -> None:
+        """Raise :class:`StorageError` unless :meth:`in_place`."""
+        if not self.in_place():
+            raise StorageError(str(self.path), operation, GONE)
 
     def seal_and_flush(self, *changed: h5py.Group) -> None:
         """After metadata changed in the groups ``changed`` (and the datasets directly in
@@ -409,7 +430,9 @@ class RunWriter:
 
     def check_space(self, needed_bytes: int, operation: str) -> None:
         """Raise :class:`StorageError` (disk full) unless ``needed_bytes`` plus a margin are
-        free on the run file's filesystem."""
+        free on the run file's filesystem, or the file is no longer at its path
+        (:meth:`check_in_place`; checked with every block: a stat, microseconds)."""
+        self.check_in_place(operation)
         free = free_bytes(self.path)
         if free < needed_bytes + BLOCK_MARGIN_BYTES:
             raise StorageError(

@@ -29,6 +29,26 @@ def this_host() -> str:
     return socket.gethostname()
 
 
+#: a file's identity: (device, inode) of the file opened, whatever name it has now
+FileId = tuple[int, int]
+
+
+def file_identity(f: h5py.File) -> FileId:
+    """The identity of the file ``f`` has open (not of whatever its path names now: a file
+    replaced at its path, a run rewritten with ``--overwrite``, is another file)."""
+    st = os.fstat(f.id.get_vfd_handle())
+    return st.st_dev, st.st_ino
+
+
+def path_identity(path: Path | str) -> FileId | None:
+    """The identity of the file at ``path`` now; None when there is none."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return None
+    return st.st_dev, st.st_ino
+
+
 def mark_writer(f: h5py.File) -> None:
     """Record this process as the file's writer (root attributes; sealed with the root)."""
     f.attrs["writer_pid"] = os.getpid()

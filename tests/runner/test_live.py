@@ -676,9 +676,12 @@ def test_ctrl_c_during_a_live_run_stops_it_and_is_not_held(tmp_path: Path):
         assert f["run/final_amplifier_voltage_V"][()] == 0.0
 
 
-def test_watch_serves_a_finished_run_until_ctrl_c(finished_run: Path):
+def test_watch_serves_a_finished_run_until_ctrl_c(finished_run: Path, tmp_path: Path):
+    """... and says on its terminal when the file is deleted (and in the page's footer)."""
+    path = tmp_path / "run.h5"
+    path.write_bytes(finished_run.read_bytes())
     watch = subprocess.Popen(
-        [sys.executable, "-m", "labrig.cli", "watch", str(finished_run)],
+        [sys.executable, "-m", "labrig.cli", "watch", str(path)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -696,6 +699,17 @@ def test_watch_serves_a_finished_run_until_ctrl_c(finished_run: Path):
             time.sleep(0.1)
         assert doc["status"] == "complete" and doc["final"]
         assert len(get(url + "loops")["entries"]) == 3
+        path.unlink()
+        assert watch.stderr is not None
+        ready, _, _ = select.select([watch.stderr], [], [], 10)
+        said = watch.stderr.readline() if ready else ""
+        assert f"{path} is gone (deleted or renamed)" in said, said
+        for _ in range(50):
+            doc = get(url + "frame")
+            if doc["error"]:
+                break
+            time.sleep(0.1)
+        assert "no such file now" in doc["error"] and doc["status"] == "complete"
         watch.send_signal(signal.SIGINT)
         assert watch.wait(timeout=10) == 0
     finally:
@@ -917,10 +931,14 @@ def test_ended_entries_are_taken_as_they_were_not_read_again(finished_run: Path)
     whole = read_frame(finished_run, None, 0, {})
     first = whole.entries[0]
     marked = EntryInfo(**{**first.__dict__, "title": "taken as given"})
-    frame = read_frame(finished_run, None, 0, {}, {first.name: marked})
+    fid = whole.file_id
+    frame = read_frame(finished_run, None, 0, {}, {first.name: marked}, fid)
     assert frame.entries[0] is not first and frame.entries[0].title == "taken as given"
     assert frame.entries[1:] == whole.entries[1:]
-    again = read_frame(finished_run, None, 0, {}, {e.name: e for e in whole.entries})
+    # facts said to be of another file (the path replaced since) are not taken
+    other = (fid[0], fid[1] + 1)
+    assert read_frame(finished_run, None, 0, {}, {first.name: marked}, other).entries[0] == first
+    again = read_frame(finished_run, None, 0, {}, {e.name: e for e in whole.entries}, fid)
     assert again.entries == whole.entries and again.status == whole.status
     for c in whole.samples:
         assert np.array_equal(again.samples[c], whole.samples[c])
@@ -943,5 +961,61 @@ def test_the_view_forgets_what_it_knew_of_a_replaced_file(tmp_path: Path, finish
         server.read_once()
         assert list(server.state.ended) == ["only"] and list(server.state.step_facts) == ["only"]
         assert [e.name for e in server.state.frame.entries] == ["only"]
+    finally:
+        server.httpd.server_close()
+
+
+def test_a_run_replaced_by_one_of_the_same_entries_is_shown_as_it_is_now(
+    tmp_path: Path, finished_run: Path
+):
+    """``labrig run --overwrite`` of the same protocol: the new file has the old one's entry
+    names, lengths and statuses and other samples. The view drops the old file's loops at
+    the first frame of the new one and serves the new samples for every entry (the loops of
+    the overlay and ``/entry``), not what it kept of the old file."""
+    path = tmp_path / "run.h5"
+    path.write_bytes(finished_run.read_bytes())
+    name = ENTRIES[0][0]
+    server = LiveServer(path)
+    try:
+        server.read_once()
+        while server.read_ended_entry():
+            pass
+        old_strain = server.state.loops[name]["loop"]["strain"]
+        assert json.loads(server.entry_document(name) or b"")["loop"]["strain"] == old_strain
+        other = tmp_path / "other.h5"
+        other.write_bytes(finished_run.read_bytes())
+        with h5py.File(other, "r+") as f:
+            f[name]["data"]["strain"][...] = -2.0 * f[name]["data"]["strain"][...]
+        os.replace(other, path)
+        server.read_once()
+        assert server.state.loops == {} and server.state.ended_entries()
+        while server.read_ended_entry():
+            pass
+        # the page's numbers have 5 significant digits: both sides rounded once
+        new_strain = [-2.0 * x for x in old_strain]
+        loop = server.state.loops[name]["loop"]["strain"]
+        np.testing.assert_allclose(loop, new_strain, rtol=1e-4)
+        served = json.loads(server.entry_document(name) or b"")["loop"]["strain"]
+        np.testing.assert_allclose(served, new_strain, rtol=1e-4)
+    finally:
+        server.httpd.server_close()
+
+
+def test_a_deleted_run_file_is_said_to_be_gone(tmp_path: Path, finished_run: Path):
+    """The file watched is deleted: the frame says so (not a silent "running" forever), and
+    the view reads it again once a file is back at the path."""
+    path = tmp_path / "run.h5"
+    path.write_bytes(finished_run.read_bytes())
+    server = LiveServer(path)
+    try:
+        server.read_once()
+        assert server.state.last_error == ""
+        path.unlink()
+        server.read_once()
+        doc = json.loads(server.document())
+        assert "no such file now" in doc["error"] and str(path) in doc["error"]
+        path.write_bytes(finished_run.read_bytes())
+        server.read_once()
+        assert json.loads(server.document())["error"] == ""
     finally:
         server.httpd.server_close()

@@ -95,6 +95,20 @@ def test_additions_with_h5py_are_listed_and_the_file_reads(run: Path):
     assert invoke("export", run, "--out", run.parent / "csv").exit_code == 0
 
 
+def test_names_added_by_another_program_are_printed_escaped(run: Path):
+    """A name with a newline cannot forge a line of ``labrig info``; an escape sequence does not
+    reach the terminal; rich markup in a name is printed as written, not applied."""
+    with h5py.File(run, "a") as f:
+        f[E].create_group("a\nstatus: forged")
+        f[E].create_group("\x1b[2Jwiped")
+        f[E].attrs["[/red]"] = 1
+    info = invoke("info", run)
+    assert info.exit_code == 0, info.output
+    assert "\x1b" not in info.stdout and "\nstatus: forged" not in info.stdout
+    assert f"{E}/a\\nstatus: forged" in info.stdout
+    assert f"{E}/\\x1b[2Jwiped" in info.stdout and f"{E}/@[/red]" in info.stdout
+
+
 def test_an_annotated_file_fits(run: Path):
     with h5py.File(run, "a") as f:
         add_with_h5py(f)

@@ -1,0 +1,133 @@
+"""A run file deleted or replaced at its path by another program while the run writes it: the
+run stops (exit 3, a storage fault), ramps to 0 V and says so; it never reports "run complete"
+for samples that are not in the file at the path it prints. Another program's file put there is
+left as it was; with ``--overwrite`` the old run file is kept."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from labrig.cli import app
+from labrig.runner import execute as runner
+from labrig.store import read_run
+
+from helpers import TINY
+
+#: TINY's entries: 2 cycles at 2 Hz, 500 samples a second: 500 samples each
+PER_ENTRY = 500
+
+
+def arm(monkeypatch: pytest.MonkeyPatch, after: int, act: Callable[[], None]) -> list:
+    """Open the simulated rig as usual, but call ``act`` once ``after`` samples were played."""
+    real_open = runner.open_rig
+    rigs: list = []
+
+    def open_and_arm(path=None, seed=None):
+        rig = real_open(path, seed)
+        rigs.append(rig)
+        bench, real_step = rig.sim.bench, rig.sim.bench.step
+        played = [0]
+
+        def step(ao):
+            out = real_step(ao)
+            if bench.playing:
+                played[0] += len(ao)
+                if played[0] >= after and played[0] - len(ao) < after:
+                    act()
+            return out
+
+        bench.step = step
+        return rig
+
+    monkeypatch.setattr(runner, "open_rig", open_and_arm)
+    return rigs
+
+
+def run(tmp_path: Path, out: Path, *extra: str):
+    proto = tmp_path / "tiny.yaml"
+    proto.write_text(TINY)
+    return CliRunner().invoke(app, ["run", str(proto), "--out", str(out), "--seed", "1", *extra])
+
+
+def stopped_for_the_file(res, rigs: list) -> None:
+    assert res.exit_code == 3, res.output
+    assert "Traceback" not in res.output and "run complete" not in res.output
+    assert "deleted or replaced at its path" in " ".join(res.output.split())
+    assert rigs[0].sim.bench.amp.v_out == 0.0
+
+
+def test_a_run_file_deleted_during_an_entry_stops_the_run(tmp_path: Path, monkeypatch):
+    out = tmp_path / "run.h5"
+    rigs = arm(monkeypatch, PER_ENTRY + 100, out.unlink)  # in the second entry
+    res = run(tmp_path, out)
+    stopped_for_the_file(res, rigs)
+    assert not out.exists()
+
+
+def test_a_run_file_replaced_by_another_programs_file_is_left_alone(
+    tmp_path: Path, monkeypatch
+):
+    out = tmp_path / "run.h5"
+    theirs = b"another program's file"
+
+    def replace() -> None:
+        other = tmp_path / "theirs.tmp"
+        other.write_bytes(theirs)
+        other.replace(out)
+
+    rigs = arm(monkeypatch, 100, replace)  # in the first entry
+    res = run(tmp_path, out)
+    stopped_for_the_file(res, rigs)
+    assert out.read_bytes() == theirs
+
+
+def test_a_run_file_deleted_after_its_last_block_is_not_a_complete_run(
+    tmp_path: Path, monkeypatch
+):
+    """Deleted while the output ramps down (after every block was checked): the run's end
+    still finds it gone."""
+    out = tmp_path / "run.h5"
+    real_open = runner.open_rig
+    rigs: list = []
+
+    def open_and_arm(path=None, seed=None):
+        rig = real_open(path, seed)
+        rigs.append(rig)
+        real_ramp = rig.ramp_to_zero
+
+        def ramp():
+            out.unlink(missing_ok=True)  # (the rig's close ramps again)
+            return real_ramp()
+
+        rig.ramp_to_zero = ramp
+        return rig
+
+    monkeypatch.setattr(runner, "open_rig", open_and_arm)
+    res = run(tmp_path, out)
+    stopped_for_the_file(res, rigs)
+
+
+def test_with_overwrite_the_old_file_stays_when_the_new_one_is_deleted(
+    tmp_path: Path, monkeypatch
+):
+    """``--overwrite`` writes the new file beside the old one (a hidden partial folder): that
+    file deleted, the run stops and the old run file is untouched."""
+    out = tmp_path / "run.h5"
+    first = run(tmp_path, out)
+    assert first.exit_code == 0, first.output
+    before = out.read_bytes()
+
+    def delete_the_new_one() -> None:
+        (staged,) = tmp_path.glob(".run.h5.*.partial/run.h5")
+        staged.unlink()
+
+    rigs = arm(monkeypatch, PER_ENTRY + 100, delete_the_new_one)
+    res = run(tmp_path, out, "--overwrite")
+    stopped_for_the_file(res, rigs)
+    assert out.read_bytes() == before
+    assert read_run(out).status == "complete"
+    assert not list(tmp_path.glob(".run.h5.*.partial"))
