@@ -68,9 +68,7 @@ def test_a_run_file_deleted_during_an_entry_stops_the_run(tmp_path: Path, monkey
     assert not out.exists()
 
 
-def test_a_run_file_replaced_by_another_programs_file_is_left_alone(
-    tmp_path: Path, monkeypatch
-):
+def test_a_run_file_replaced_by_another_programs_file_is_left_alone(tmp_path: Path, monkeypatch):
     out = tmp_path / "run.h5"
     theirs = b"another program's file"
 
@@ -85,9 +83,7 @@ def test_a_run_file_replaced_by_another_programs_file_is_left_alone(
     assert out.read_bytes() == theirs
 
 
-def test_a_run_file_deleted_after_its_last_block_is_not_a_complete_run(
-    tmp_path: Path, monkeypatch
-):
+def test_a_run_file_deleted_after_its_last_block_is_not_a_complete_run(tmp_path: Path, monkeypatch):
     """Deleted while the output ramps down (after every block was checked): the run's end
     still finds it gone."""
     out = tmp_path / "run.h5"
@@ -111,9 +107,7 @@ def test_a_run_file_deleted_after_its_last_block_is_not_a_complete_run(
     stopped_for_the_file(res, rigs)
 
 
-def test_with_overwrite_the_old_file_stays_when_the_new_one_is_deleted(
-    tmp_path: Path, monkeypatch
-):
+def test_with_overwrite_the_old_file_stays_when_the_new_one_is_deleted(tmp_path: Path, monkeypatch):
     """``--overwrite`` writes the new file beside the old one (a hidden partial folder): that
     file deleted, the run stops and the old run file is untouched."""
     out = tmp_path / "run.h5"
