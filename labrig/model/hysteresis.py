@@ -61,7 +61,6 @@ from types import ModuleType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import special
 
 from labrig.model.accel import kernels
 
@@ -171,6 +170,14 @@ class Shape:
         return dg, dv
 
 
+def _erf(x: NDArray) -> NDArray:
+    """scipy's erf, imported when first needed: scipy.special costs about half a second of
+    CPU to import, and most commands (a simulated run: the compiled operator) never ask."""
+    from scipy.special import erf
+
+    return erf(x)
+
+
 def _exp_H(x: NDArray, g: float, vc: float) -> NDArray:
     return g * (x + vc * np.expm1(-x / vc))
 
@@ -181,12 +188,12 @@ def _exp_dH_dvc(x: NDArray, g: float, vc: float) -> NDArray:
 
 
 def _gauss_H(x: NDArray, g: float, vc: float) -> NDArray:
-    return g * (x - vc * np.sqrt(np.pi) / 2 * special.erf(x / vc))
+    return g * (x - vc * np.sqrt(np.pi) / 2 * _erf(x / vc))
 
 
 def _gauss_dH_dvc(x: NDArray, g: float, vc: float) -> NDArray:
     z = x / vc
-    return g * (z * np.exp(-z * z) - np.sqrt(np.pi) / 2 * special.erf(z))
+    return g * (z * np.exp(-z * z) - np.sqrt(np.pi) / 2 * _erf(z))
 
 
 BUILTIN_SHAPES: dict[str, Shape] = {
@@ -208,7 +215,7 @@ BUILTIN_SHAPES: dict[str, Shape] = {
         "gaussian",
         lambda x, g, vc: -g * np.expm1(-((x / vc) ** 2)),
         _gauss_H,
-        lambda x, g, vc: x - vc * np.sqrt(np.pi) / 2 * special.erf(x / vc),
+        lambda x, g, vc: x - vc * np.sqrt(np.pi) / 2 * _erf(x / vc),
         _gauss_dH_dvc,
     ),
 }
@@ -359,7 +366,9 @@ class QuasiStaticHysteresis:
         if name == "exponential" and a0 + g > 0 and g >= 0:
             a, b = a0 + g, g * vc
             arg = -(g / a) * np.exp(-(y + b) / (a * vc))
-            x = (y + b) / a + vc * special.lambertw(arg, 0).real
+            from scipy.special import lambertw
+
+            x = (y + b) / a + vc * lambertw(arg, 0).real
         elif name == "linear" and g > 0:
             x = (-a0 + np.sqrt(a0 * a0 + 2.0 * g * y)) / g
         else:

@@ -186,7 +186,8 @@ def test_a_bad_warmup_is_a_usage_error_naming_the_option(small_run: Path, value:
     assert res.exit_code == 64, (res.stdout, res.stderr)
     assert res.stderr.startswith("error: --warmup-s: ") and "expected seconds >= 0" in res.stderr
     assert str(small_run) not in res.stderr  # the run file is not what is wrong
-    assert invoke("fit", small_run, "--warmup-s", "0", "--no-heldout").exit_code == 0
+    if value == "-1":  # just inside the bound, once: 0 s is accepted
+        assert invoke("fit", small_run, "--warmup-s", "0", "--no-heldout").exit_code == 0
 
 
 def test_paper_campaign_on_the_simulated_rig(tmp_path: Path) -> None:

@@ -10,6 +10,7 @@ same file without the defect fits. The minimums are checked at their boundaries.
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 
@@ -127,13 +128,27 @@ def no_fitting(monkeypatch) -> list:
     return called
 
 
+@pytest.fixture(scope="module")
+def degenerate_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Each case's file, made once for the three commands (on first use) and copied."""
+    return {"": tmp_path_factory.mktemp("degenerate")}
+
+
+def degenerate_file(made: dict[str, Path], case: str, where: Path) -> Path:
+    if case not in made:
+        folder = made[""] / case
+        folder.mkdir()
+        made[case] = CASES[case][0](folder / f"{case}.h5")
+    return Path(shutil.copyfile(made[case], where / f"{case}.h5"))
+
+
 @pytest.mark.parametrize("command", ["fit", "report", "diagnose"])
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_degenerate_data_is_refused_before_any_fit(
-    tmp_path: Path, no_fitting: list, case: str, command: str
+    tmp_path: Path, degenerate_files: dict[str, Path], no_fitting: list, case: str, command: str
 ):
-    make, words = CASES[case]
-    path = make(tmp_path / f"{case}.h5")
+    words = CASES[case][1]
+    path = degenerate_file(degenerate_files, case, tmp_path)
     extra = {"report": ["--out", tmp_path / "r.html"], "fit": ["--no-heldout"]}.get(command, [])
     res = invoke(command, path, *extra)
     assert res.exit_code == 2, res.output

@@ -43,3 +43,5 @@ def test_attribution_on_the_paper_truth(case: str):
     assert d.classification == verdict, d.verdict
     assert d.before["heldout_nrmse_pct"] == pytest.approx(before, rel=0.05)
     assert d.after["heldout_nrmse_pct"] == pytest.approx(after, rel=0.05)
+    if not added:  # the null: nothing changed, and the verdict says why
+        assert d.after == d.before and "consistent with noise" in d.verdict

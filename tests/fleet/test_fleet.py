@@ -84,7 +84,17 @@ def check_equals_cli(rows: list[dict], out: Path, names: list[str], runs: Path) 
         assert page.lower().startswith("<!doctype html>") and name in page
 
 
-def test_batch_diagnose_equals_the_one_by_one_commands(fleet, tmp_path):
+def without_fleet_page(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Leave the fleet page (``fleet.html``: a dozen figures, drawn again by each batch) out of
+    a test that does not read it; the page has its own tests (here and
+    tests/api/test_day_one.py)."""
+    import labrig.fleet.fleet_report as fleet_report
+
+    monkeypatch.setattr(fleet_report, "write_fleet_report", lambda path, *args: path)
+
+
+def test_batch_diagnose_equals_the_one_by_one_commands(fleet, tmp_path, monkeypatch):
+    without_fleet_page(monkeypatch)
     out = tmp_path / "out"
     run = sorted(fleet.glob("*.h5"))[1]
     res = invoke("batch", "diagnose", run, "--out", out, "--serial", "--json")
@@ -218,10 +228,8 @@ def test_rerun_skips_an_unchanged_run_and_refits_a_changed_one(fleet, tmp_path, 
     """The default tier's twin of the test above: one run, fitted, skipped, then its content
     replaced by another actuator's run and fitted again. The fleet page (``fleet.html``, drawn
     again by each batch and about two thirds of its CPU here) is left out: the skips are read
-    from the JSON summary, and the page has its own tests (above and tests/api/test_day_one.py)."""
-    import labrig.fleet.fleet_report as fleet_report
-
-    monkeypatch.setattr(fleet_report, "write_fleet_report", lambda path, *args: path)
+    from the JSON summary."""
+    without_fleet_page(monkeypatch)
     runs = tmp_path / "runs"
     shutil.copytree(fleet, runs, ignore=shutil.ignore_patterns("setup", "truth.json"))
     first, other = sorted(runs.glob("*.h5"))[:2]
@@ -353,7 +361,8 @@ def test_sim_fleet_refuses_to_overwrite(tmp_path):
     assert (out / "A0001.h5").read_bytes() == before
 
 
-def test_batch_report_equals_labrig_report(fleet, tmp_path):
+def test_batch_report_equals_labrig_report(fleet, tmp_path, monkeypatch):
+    without_fleet_page(monkeypatch)
     run = sorted(fleet.glob("*.h5"))[0]
     out = tmp_path / "out"
     res = invoke("batch", "report", run, "--out", out, "--serial", "--no-heldout")

@@ -14,10 +14,12 @@
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import h5py
@@ -205,7 +207,30 @@ def test_results_and_errors_come_back():
 # -- seals -----------------------------------------------------------------------------------
 
 
+#: the run files :func:`write_run` copies: written once per sample count in this module
+_ORIGINALS: dict[int, Path] = {}
+_ORIGINALS_DIR: list[Path] = []
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _originals(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    _ORIGINALS_DIR[:] = [tmp_path_factory.mktemp("originals")]
+    yield
+    _ORIGINALS.clear()
+
+
 def write_run(path: Path, n: int = 300) -> Path:
+    """A run file of 3 entries of ``n`` samples at ``path``: labrig's writer's bytes, written
+    once per ``n`` (about 0.2 s of CPU each) and copied; each test edits its own copy."""
+    if n not in _ORIGINALS:
+        folder = _ORIGINALS_DIR[0] / str(n)
+        folder.mkdir()
+        _ORIGINALS[n] = _write_run(folder / "run.h5", n)
+    shutil.copyfile(_ORIGINALS[n], path)
+    return path
+
+
+def _write_run(path: Path, n: int) -> Path:
     with RunWriter(path, "name: p\n", "", {"daq": {"rate_hz": 1000}}, 1, protocol_name="p") as w:
         for k in range(3):
             e = w.begin_entry(f"e{k}", {"kind": "sine"}, 1000.0, ["command_voltage", "strain"])
