@@ -172,7 +172,17 @@ def _targets(paths: Sequence[Path]) -> dict[Path, _Wanted]:
     if missing:
         raise InputFileError(
             [
-                InputIssue(str(p), None, "", "not found: give folders of run files or run files")
+                InputIssue(
+                    str(p),
+                    None,
+                    "",
+                    (
+                        "not found"
+                        if not p.exists()
+                        else "not a file nor a folder (a pipe, socket or device)"
+                    )
+                    + ": give folders of run files or run files",
+                )
                 for p in missing
             ]
         )

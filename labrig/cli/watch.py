@@ -35,7 +35,7 @@ def watch(
     try:
         server = LiveServer(run_file, model, port)
     except OSError as e:
-        raise port_error(port, e) from None
+        raise port_error(port, e, "--port") from None
     server.start()
     typer.echo(f"live view of {run_file}: {server.url} (Ctrl-C to stop)")
     # serve until a stop signal (Ctrl-C, SIGTERM, SIGHUP): stopping the view is how it ends

@@ -25,9 +25,10 @@ def load_params(path: Path | None) -> Any:
     return read_params_file(path, "the live view").params
 
 
-def port_error(port: int, e: OSError) -> InputFileError:
-    """A port that cannot be served on, as bad input (exit 2)."""
+def port_error(port: int, e: OSError, option: str = "--live-port") -> InputFileError:
+    """A port that cannot be served on, as bad input (exit 2) naming the ``option`` that gave
+    it (``run --live-port``, ``watch --port``)."""
     why = e.strerror or str(e)
     return InputFileError(
-        [InputIssue(f"127.0.0.1:{port}", None, "--live-port", f"cannot serve there: {why}")]
+        [InputIssue(f"127.0.0.1:{port}", None, option, f"cannot serve there: {why}")]
     )

@@ -28,6 +28,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import socket
 import threading
 import time
 from collections import OrderedDict
@@ -62,8 +63,12 @@ LINGER_S = 3.0
 PAGE_GONE_S = 1.5
 #: the longest request target (path and query) answered (characters; longer: 414)
 MAX_TARGET = 1024
-#: a connection that sends no complete request within this time (s) is closed
+#: a connection that sends no complete request within this time (s) is closed, however it
+#: trickles its bytes (the same bound applies to each wait for data)
 REQUEST_TIMEOUT_S = 10.0
+#: ended entries read at once for ``/entry`` (each in a child process); more asks at once are
+#: answered 503 with ``Retry-After`` (a page asks for one entry at a time)
+ENTRY_READS_AT_ONCE = 2
 #: refused requests logged one by one (after that only counted, shown in the page's footer)
 REFUSALS_LOGGED = 20
 #: ended entries whose page view (``/entry``) is kept; others are read again when asked for
@@ -100,6 +105,10 @@ def static_file(name: str) -> bytes:
     return resources.files("labrig.live").joinpath("static", *name.split("/")).read_bytes()
 
 
+class EntryReadsBusyError(Exception):
+    """As many ``/entry`` reads as :data:`ENTRY_READS_AT_ONCE` are going on: ask again."""
+
+
 class LiveServer:
     """Serves the live view of one run file (module docstring)."""
 
@@ -118,6 +127,7 @@ class LiveServer:
         self.clients = 0
         self.last_ask = 0.0  # time.monotonic() of the last /frame request
         self._entries: OrderedDict[EntryKey, bytes] = OrderedDict()
+        self.entry_reads = threading.BoundedSemaphore(ENTRY_READS_AT_ONCE)
         self.httpd = ThreadingHTTPServer((HOST, port), _handler(self))
         self.httpd.daemon_threads = True
         self._threads: list[threading.Thread] = []
@@ -287,8 +297,13 @@ class LiveServer:
         if body is None:
             if path is None:
                 return None
-            data = read_entry(path, name)
-            _, detail = entry_view(data, self.params)
+            if not self.entry_reads.acquire(blocking=False):
+                raise EntryReadsBusyError(f"{ENTRY_READS_AT_ONCE} entries are being read now")
+            try:
+                data = read_entry(path, name)
+                _, detail = entry_view(data, self.params)
+            finally:
+                self.entry_reads.release()
             body = _json(detail)
             if data.file_id == key[0]:  # kept only under the file it was read from
                 with self.lock:
@@ -331,6 +346,32 @@ def _handler(server: LiveServer) -> type[BaseHTTPRequestHandler]:
         error_content_type = "text/plain; charset=utf-8"
         error_message_format = "%(code)d %(message)s: %(explain)s\n"
 
+        def setup(self) -> None:
+            super().setup()
+            # the whole request, not only each wait for data, within REQUEST_TIMEOUT_S: a
+            # client trickling a byte at a time is cut off (:meth:`parse_request` ends it)
+            self._cut_off = False
+            self._deadline = threading.Timer(REQUEST_TIMEOUT_S, self._cut)
+            self._deadline.daemon = True
+            self._deadline.start()
+
+        def _cut(self) -> None:
+            self._cut_off = True
+            with contextlib.suppress(OSError):
+                self.connection.shutdown(socket.SHUT_RDWR)
+
+        def parse_request(self) -> bool:
+            self._deadline.cancel()
+            if self._cut_off:  # what arrived before the cut is not a request to answer
+                self.close_connection = True
+                return False
+            return super().parse_request()
+
+        def finish(self) -> None:
+            self._deadline.cancel()
+            with contextlib.suppress(OSError):
+                super().finish()
+
         def do_GET(self) -> None:
             self._answer(with_body=True)
 
@@ -348,10 +389,14 @@ def _handler(server: LiveServer) -> type[BaseHTTPRequestHandler]:
         do_POST = do_PUT = do_DELETE = do_PATCH = do_OPTIONS = do_TRACE = do_CONNECT = _other_method
 
         def _host_checked(self) -> bool:
-            host = self.headers.get("Host")
+            hosts = self.headers.get_all("Host") or []
+            host = hosts[0] if len(hosts) == 1 else None
             if server.host_allowed(host):
                 return True
-            shown = "no Host header" if host is None else f"Host {host[:100]!r}"
+            if len(hosts) > 1:
+                shown = f"{len(hosts)} Host headers"
+            else:
+                shown = "no Host header" if host is None else f"Host {host[:100]!r}"
             server.refused(f"{self.command} {self.path[:100]!r} with {shown}")
             self._text(
                 HTTPStatus.MISDIRECTED_REQUEST,
@@ -392,6 +437,13 @@ def _handler(server: LiveServer) -> type[BaseHTTPRequestHandler]:
                 return
             try:
                 body = server.entry_document(names[0])
+            except EntryReadsBusyError as e:
+                self._text(
+                    HTTPStatus.SERVICE_UNAVAILABLE,
+                    f"busy: {e}; ask again in a second",
+                    {"Retry-After": "1"},
+                )
+                return
             except Exception as e:  # a damaged entry (the page says so)
                 why = (str(e).splitlines() or [type(e).__name__])[0][:200]
                 self._text(HTTPStatus.SERVICE_UNAVAILABLE, f"cannot read it now: {why}")

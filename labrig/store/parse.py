@@ -17,6 +17,7 @@ import numpy as np
 
 from labrig.core.errors import InputFileError, InputIssue
 from labrig.core.jsonsafe import loads_bounded
+from labrig.core.words import shown
 from labrig.store.format import (
     LEGACY_SEAL_ATTR,
     SEAL_ATTR,
@@ -463,7 +464,15 @@ class _Reader:
         f = self.f
         if seals or LEGACY_SEAL_ATTR in f.attrs:  # an older file: its additions are found so
             self.check_seals()
-        if self.attr(f, "creator") != "labrig" or not isinstance(f.get("run"), h5py.Group):
+        creator = self.attr(f, "creator", None)
+        if creator != "labrig":
+            said = (
+                "no creator attribute"
+                if creator is None
+                else f"its creator is '{shown(creator)[:60]}'"
+            )
+            raise self.error(f"not a labrig run file ({said}, not 'labrig')", "")
+        if not isinstance(f.get("run"), h5py.Group):
             raise self.error("not a labrig run file (no /run group)", "")
         run = f["run"]
         inst = run.get("instrument")

@@ -30,9 +30,11 @@ from rich.console import Console
 
 from labrig.cli.run_execute import serve_finished_run
 from labrig.live import load_params
+from labrig.live import server as live_server
 from labrig.live.frames import EntryInfo, Frame, read_entry, read_frame
 from labrig.live.launch import LiveProcess
 from labrig.live.server import (
+    ENTRY_READS_AT_ONCE,
     LINGER_S,
     MAX_TARGET,
     PAGE_GONE_S,
@@ -319,6 +321,64 @@ def test_only_this_servers_host_is_answered(served: LiveServer, caplog):
     # logged one by one up to a bound, then counted only
     assert caplog.text.count("live view: refused") == REFUSALS_LOGGED
     assert served.state.document()["refused"] == 3 * len(refused)
+
+
+def test_two_host_headers_are_refused_even_when_one_names_this_server(served: LiveServer):
+    port = served.port
+    good, bad = f"127.0.0.1:{port}", f"evil.example:{port}"
+    for first, second in ((good, bad), (bad, good), (good, good)):
+        code, _, body = request(port, "/frame", first, extra=f"Host: {second}\r\n")
+        assert code == 421 and b"2 Host headers" in body and b"seq" not in body
+
+
+def test_a_request_trickled_a_byte_at_a_time_is_cut_off(finished_run: Path, monkeypatch):
+    """Each wait for data is bounded (REQUEST_TIMEOUT_S) and so is the whole request: a client
+    sending a byte every 0.2 s with a 0.6 s bound is disconnected within about 0.6 s, without an
+    answer; a request sent whole within the bound is answered."""
+    monkeypatch.setattr(live_server, "REQUEST_TIMEOUT_S", 0.6)
+    server = LiveServer(finished_run)
+    server.start()
+    try:
+        host = f"127.0.0.1:{server.port}"
+        assert request(server.port, "/frame", host)[0] == 200
+        text = f"GET /frame HTTP/1.1\r\nHost: {host}\r\n" + "X-Slow: " + "x" * 40
+        t0 = time.monotonic()
+        got = b"?"
+        with socket.create_connection(("127.0.0.1", server.port), timeout=5) as c:
+            try:
+                for ch in text:
+                    c.sendall(ch.encode())
+                    time.sleep(0.2)
+                    ready, _, _ = select.select([c], [], [], 0)
+                    if ready:
+                        got = c.recv(100)
+                        break
+            except OSError:  # the server closed it while a byte was being sent
+                got = b""
+        assert got == b"" and time.monotonic() - t0 < 0.6 + 1.0
+    finally:
+        server.stop()
+
+
+def test_entry_reads_beyond_the_bound_are_told_to_ask_again(finished_run: Path):
+    """At most ENTRY_READS_AT_ONCE entries are read at once (each in a child process): one more
+    ask is answered 503 with Retry-After; an entry already read is served all the same."""
+    server = LiveServer(finished_run)
+    server.start()
+    try:
+        host = f"127.0.0.1:{server.port}"
+        server.read_once()
+        first, second = ENTRIES[0][0], ENTRIES[1][0]
+        assert request(server.port, f"/entry?name={first}", host)[0] == 200
+        for _ in range(ENTRY_READS_AT_ONCE):
+            server.entry_reads.acquire()
+        code, headers, body = request(server.port, f"/entry?name={second}", host)
+        assert code == 503 and headers["retry-after"] == "1" and b"ask again" in body
+        assert request(server.port, f"/entry?name={first}", host)[0] == 200  # kept
+        server.entry_reads.release()  # one read free: the entry is read
+        assert request(server.port, f"/entry?name={second}", host)[0] == 200
+    finally:
+        server.stop()
 
 
 def test_unlisted_paths_methods_and_sizes_are_refused(served: LiveServer):

@@ -228,7 +228,12 @@ async function update(doc) {
   } else {
     const known = L.loops.entries.find((e) => e.name === name);
     if (!L.entry || L.entry.name !== name || (known && L.entry.samples !== known.samples)) {
-      L.entry = await getJSON("/entry?name=" + encodeURIComponent(name));
+      try {
+        L.entry = await getJSON("/entry?name=" + encodeURIComponent(name));
+      } catch (err) {
+        err.entryAsk = true;  // the server is there: the entry is not readable now
+        throw err;
+      }
     }
     view = { name, live: false, loop: L.entry.loop, series: L.entry.series };
   }
@@ -263,7 +268,9 @@ async function poll() {
   } catch (err) {
     // the server stopped (the run ended): keep the last picture, say so, stop asking
     L.fetchErrors += 1;
-    if (L.doc && FINAL.includes(L.doc.status)) {
+    if (err.entryAsk) {
+      lastSeq = null;  // an entry not read now (busy, damaged): asked for again next time
+    } else if (L.doc && FINAL.includes(L.doc.status)) {
       text("footer", document.getElementById("footer").textContent + " - the live view has stopped");
       return;
     }
