@@ -15,7 +15,10 @@ over an 18 mm stack, with a units row.
   (``check``, ``run``, ``info``, ``runs``, ``export``, ``import``, ``sim fleet``), without the
   analysis ones (:data:`ANALYSIS`: ``fit``, ``report``, ``diagnose``, ``batch`` and the Python
   block, each tested on its own elsewhere), with a fleet of 1 (:data:`FILES_ONLY`: no batch
-  reads the fleet here; the fleets of several actuators are tests/fleet/'s).
+  reads the fleet here; the fleets of several actuators are tests/fleet/'s). The ``run
+  --live`` command goes through the installed entry point (a Ctrl-C ends it); the others run
+  in this process (typer's runner, in the tour's folder), each new process costing a second or
+  two of CPU in imports and the compiled kernels' loading, the slow tier's business.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import ROOT, TINY
+from helpers import ROOT, TINY, invoke
 
 README = ROOT / "README.md"
 EXE = Path(sys.executable).parent / "labrig"
@@ -104,7 +107,15 @@ def run_live(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
     return subprocess.CompletedProcess(proc.args, proc.returncode, out, "".join(said) + rest)
 
 
-def run_tour(tmp_path: Path, fast: bool, analysis: bool = True) -> None:
+def in_this_process(args: list[str]) -> subprocess.CompletedProcess:
+    """``labrig ARGS`` through typer's runner in this process (the current folder the tour's)."""
+    res = invoke(*args[1:])
+    return subprocess.CompletedProcess(args, res.exit_code, res.stdout, res.stderr)
+
+
+def run_tour(tmp_path: Path, fast: bool, analysis: bool = True, in_process: bool = False) -> None:
+    """The tour in ``tmp_path``; ``in_process``: the commands but ``run --live`` in this process
+    (the caller has made ``tmp_path`` the current folder)."""
     commands, python = tour()
     if not analysis:
         commands = [c for c in commands if not c.startswith(ANALYSIS)]
@@ -126,6 +137,8 @@ def run_tour(tmp_path: Path, fast: bool, analysis: bool = True) -> None:
         args = shlex.split(command, comments=True)
         if "--live" in args:
             res = run_live(args, tmp_path)
+        elif in_process:
+            res = in_this_process(args)
         else:
             res = subprocess.run(
                 [str(EXE), *args[1:]], cwd=tmp_path, capture_output=True, text=True, timeout=7200
@@ -165,8 +178,9 @@ def test_the_tour_parses():
 
 @pytest.mark.skipif(not EXE.exists(), reason="needs the labrig entry point")
 @pytest.mark.timeout(600)
-def test_the_quick_tours_files_on_a_three_entry_protocol(tmp_path: Path):
-    run_tour(tmp_path, fast=True, analysis=False)
+def test_the_quick_tours_files_on_a_three_entry_protocol(tmp_path: Path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    run_tour(tmp_path, fast=True, analysis=False, in_process=True)
 
 
 @pytest.mark.slow
