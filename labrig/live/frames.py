@@ -6,8 +6,9 @@ needs: the run's status, the entries' names, statuses and lengths, and the curre
 samples from a given index on. It verifies what it reads: the seal of every scalar it takes
 (:func:`labrig.store.format.seal_of`) and the Fletcher32 checksums of the samples (HDF5 checks
 them on reading). A file caught between two of its writer's writes fails a check or raises:
-:func:`read_frame` runs the reading in a child process with a short time limit
-(:func:`labrig.store.isolated.call_isolated`) and the caller skips that frame.
+:func:`read_frame` runs the reading in a child process with a short time limit (one
+long-lived :class:`~labrig.store.isolated.IsolatedWorker` for this process's frames, not a
+fork per frame) and the caller skips that frame.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import h5py
 import numpy as np
 
 from labrig.store.format import SEAL_ATTR, seal_of
-from labrig.store.isolated import allow_cpu, call_isolated
+from labrig.store.isolated import IsolatedWorker, allow_cpu, call_isolated
 from labrig.store.writing import FileId, file_identity
 
 #: the channels a frame reads (those an entry lacks are left out)
@@ -31,6 +32,8 @@ CHANNELS = ("time", "command_voltage", "strain", "amplifier_voltage")
 MAX_NEW_SAMPLES = 200_000
 #: a frame's read may take this long (s) before it is given up (the frame is skipped)
 FRAME_WALL_S = 2.0
+#: the child process that reads this process's frames (started at the first frame)
+FRAME_READER = IsolatedWorker()
 
 
 class FrameError(Exception):
@@ -208,10 +211,10 @@ def read_frame(
     ended: dict[str, EntryInfo] | None = None,
     file_id: FileId | None = None,
 ) -> Frame:
-    """:func:`read_frame_here` in a child process limited to :data:`FRAME_WALL_S`; raises
-    whatever stopped it (the caller skips the frame)."""
+    """:func:`read_frame_here` in :data:`FRAME_READER`, limited to :data:`FRAME_WALL_S`;
+    raises whatever stopped it (the caller skips the frame)."""
     size = min(Path(path).stat().st_size, 64 << 20)
-    return call_isolated(
+    return FRAME_READER.call(
         read_frame_here,
         str(path),
         entry,

@@ -17,6 +17,14 @@ forked child:
 The result comes back pickled through a pipe; the parent keeps answering Ctrl-C while it waits
 (and kills the child). Where ``os.fork`` or the POSIX module ``resource`` does not exist
 (Windows) the function is called in-process, without limits.
+
+A read repeated many times a second (the live view's frames, :mod:`labrig.live.frames`) goes
+to an :class:`IsolatedWorker` instead: one long-lived child, started as a new interpreter
+(``python -c ...``: never a fork of a process whose other threads may hold h5py's lock), that
+makes each call under the same limits and answers through a pipe. A fork of a process with
+numpy, h5py and the model loaded costs tens of milliseconds of CPU, most of a frame's cost; a
+child that runs out of time, crashes or stops answering is killed and the next call starts
+another.
 """
 
 from __future__ import annotations
@@ -28,10 +36,14 @@ import os
 import pickle
 import select
 import signal
+import struct
+import subprocess
+import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable
-from typing import Any
+from typing import IO, Any
 
 try:  # POSIX only: without it (Windows) reads are made in-process, without CPU limits
     import resource
@@ -172,3 +184,163 @@ def _death(status: int) -> str:
         name = signal.Signals(sig).name if sig in signal.valid_signals() else str(sig)
         return f"the HDF5 library crashed reading it ({name})"
     return f"the reading process stopped without a result (exit code {os.WEXITSTATUS(status)})"
+
+
+#: the first call waits this long (s) for a worker to start (a new interpreter importing numpy
+#: and h5py, on a loaded machine), besides the call's own wall-clock limit
+WORKER_START_S = 60.0
+#: a message between a worker and its parent: its length, then that many bytes of pickle
+_LENGTH = struct.Struct("<Q")
+#: the byte a worker writes once it is ready for calls
+_READY = b"R"
+
+
+class IsolatedWorker:
+    """A long-lived child process that makes calls with the limits of :func:`call_isolated`
+    (module docstring): :meth:`call` sends ``fn`` (by reference: a module-level function) and
+    its arguments, the child calls it with the CPU limit renewed at each step (:func:`allow_cpu`)
+    and answers with the result or the exception. Calls are made one at a time (a lock). A
+    child that does not answer within the wall-clock limit, or dies, is killed; the next call
+    starts another. Where ``resource`` does not exist (Windows) calls are made in-process."""
+
+    def __init__(self) -> None:
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._lock = threading.Lock()
+
+    @property
+    def pid(self) -> int | None:
+        """The child's process id (None before the first call, or after a failure)."""
+        return self._proc.pid if self._proc is not None else None
+
+    def call(
+        self, fn: Callable[..., Any], *args: Any, size_bytes: int, wall_s: float | None = None
+    ) -> Any:
+        """``fn(*args)`` in the worker; returns and raises as :func:`call_isolated` does."""
+        if resource is None:
+            return fn(*args)
+        wall = wall_limit_s(size_bytes) if wall_s is None else wall_s
+        with self._lock:
+            proc = self._started()
+            request = pickle.dumps((fn, args, size_bytes), protocol=pickle.HIGHEST_PROTOCOL)
+            try:
+                _send(proc.stdin, request)
+                payload = _message(proc.stdout, time.monotonic() + wall)
+            except (OSError, ValueError):
+                payload = b""
+            if not payload:
+                code = self._stop()
+                if payload is None:
+                    raise IsolatedReadError(f"reading did not finish within {wall:.3g} s (stopped)")
+                raise IsolatedReadError(_ended(code))
+        kind, value = pickle.loads(payload)
+        if kind == "ok":
+            return value
+        if kind == "raised":
+            raise value
+        raise IsolatedCallError(value)
+
+    def _started(self) -> subprocess.Popen[bytes]:
+        if self._proc is not None and self._proc.poll() is None:
+            return self._proc
+        self._proc = proc = subprocess.Popen(
+            [sys.executable, "-c", "from labrig.store.isolated import serve; serve()"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            close_fds=True,
+        )
+        assert proc.stdout is not None
+        if _read_exactly(proc.stdout.fileno(), 1, time.monotonic() + WORKER_START_S) != _READY:
+            code = self._stop()
+            raise IsolatedReadError(f"the reading process did not start: {_ended(code)}")
+        return proc
+
+    def _stop(self) -> int | None:
+        """Kill the child if it runs; its return code (None: there was none)."""
+        proc, self._proc = self._proc, None
+        if proc is None:
+            return None
+        if proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                proc.kill()
+        for stream in (proc.stdin, proc.stdout):
+            with contextlib.suppress(OSError):
+                stream.close()  # type: ignore[union-attr]
+        return proc.wait()
+
+    def close(self) -> None:
+        """Stop the child (a new one starts at the next call)."""
+        with self._lock:
+            self._stop()
+
+
+def serve() -> None:
+    """The worker's side of :class:`IsolatedWorker`: read calls from stdin, answer on stdout,
+    until stdin closes (the parent ended). Ctrl-C is the parent's to handle."""
+    global _in_child
+    _in_child = True
+    faulthandler.disable()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    assert resource is not None
+    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    inp = sys.stdin.buffer
+    out = os.fdopen(os.dup(1), "wb")  # the answers' own descriptor: a stray print goes to
+    os.dup2(2, 1)  # stderr, not into the answers
+    out.write(_READY)
+    out.flush()
+    while (request := _message(inp, None)) is not None and request:
+        size_bytes = 0
+        allow_cpu()
+        try:
+            fn, args, size_bytes = pickle.loads(request)
+            result: tuple[str, Any] = ("ok", fn(*args))
+        except Exception as e:  # what the function raised, or a function not found here
+            result = ("raised", e)
+        allow_cpu(size_bytes=size_bytes)  # pickling what was read
+        try:
+            data = pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception as e:
+            what = result[1] if result[0] == "raised" else e
+            data = pickle.dumps(("bug", "".join(traceback.format_exception(what))))
+        _send(out, data)
+
+
+def _ended(code: int | None) -> str:
+    """Why a worker gave no answer, from its return code (negative: the signal)."""
+    if code is None or code >= 0:
+        return f"the reading process stopped without a result (exit code {code})"
+    return _death(-code)  # a signal number is the wait status of a process it killed
+
+
+def _send(stream: IO[bytes] | None, data: bytes) -> None:
+    assert stream is not None
+    stream.write(_LENGTH.pack(len(data)) + data)
+    stream.flush()
+
+
+def _message(stream: IO[bytes] | None, deadline: float | None) -> bytes | None:
+    """One message from ``stream``: its bytes; ``b""`` when the stream ended; ``None`` past
+    ``deadline`` (``None``: no deadline)."""
+    assert stream is not None
+    fd = stream.fileno()
+    head = _read_exactly(fd, _LENGTH.size, deadline)
+    if not head:
+        return head
+    return _read_exactly(fd, _LENGTH.unpack(head)[0], deadline)
+
+
+def _read_exactly(fd: int, n: int, deadline: float | None) -> bytes | None:
+    chunks: list[bytes] = []
+    while n > 0:
+        if deadline is not None:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            ready, _, _ = select.select([fd], [], [], left)
+            if not ready:
+                continue
+        chunk = os.read(fd, min(n, 1 << 20))
+        if not chunk:
+            return b""
+        chunks.append(chunk)
+        n -= len(chunk)
+    return b"".join(chunks)

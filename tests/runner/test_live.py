@@ -770,8 +770,16 @@ def test_watch_serves_a_finished_run_until_ctrl_c(finished_run: Path, tmp_path: 
                 break
             time.sleep(0.1)
         assert "no such file now" in doc["error"] and doc["status"] == "complete"
+        # the view's reading process (one, long-lived) ends with the view
+        tasks = Path(f"/proc/{watch.pid}/task").glob("*/children")  # (a thread started it)
+        children = [c for t in tasks for c in t.read_text().split()]
+        assert len(children) == 1, children
         watch.send_signal(signal.SIGINT)
         assert watch.wait(timeout=10) == 0
+        deadline = time.monotonic() + 5
+        while Path(f"/proc/{children[0]}").exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not Path(f"/proc/{children[0]}").exists(), "the reading process outlived watch"
     finally:
         if watch.poll() is None:
             watch.kill()

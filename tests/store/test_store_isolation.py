@@ -31,7 +31,12 @@ from labrig.store import RunWriter, read_run
 from labrig.store import isolated as store_isolated
 from labrig.store import reader as store_reader
 from labrig.store.format import SEAL_ATTR
-from labrig.store.isolated import IsolatedReadError, call_isolated
+from labrig.store.isolated import (
+    IsolatedCallError,
+    IsolatedReadError,
+    IsolatedWorker,
+    call_isolated,
+)
 from labrig.store.writer import seal_all
 
 from helpers import children_cpu_s, invoke
@@ -172,15 +177,46 @@ def _value(n: int) -> dict:
     return {"x": np.arange(n)}
 
 
-def test_a_crashing_reader_is_reported_not_fatal():
+def _pid() -> int:
+    print("a stray print in the reader")  # must not garble its answers
+    return os.getpid()
+
+
+def _unpicklable() -> None:
+    raise ValueError(lambda: 0)
+
+
+@pytest.fixture
+def worker_call(monkeypatch) -> Iterator:
+    """A long-lived :class:`IsolatedWorker`'s ``call`` (a new interpreter that finds this
+    module's functions by name: this folder and tests/ on its path)."""
+    here = Path(__file__).parent
+    path = [str(here), str(here.parent), os.environ.get("PYTHONPATH", "")]
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(path))
+    worker = IsolatedWorker()
+    try:
+        yield worker.call
+    finally:
+        worker.close()
+
+
+@pytest.fixture(params=["fork", "worker"])
+def isolated(request) -> Iterator:
+    """Both ways of reading in a child: a fork per call (:func:`call_isolated`) and the
+    long-lived worker (:func:`worker_call`)."""
+    yield call_isolated if request.param == "fork" else request.getfixturevalue("worker_call")
+
+
+def test_a_crashing_reader_is_reported_not_fatal(isolated):
     with pytest.raises(IsolatedReadError, match="crashed reading it \\(SIGSEGV\\)"):
-        call_isolated(_crash, size_bytes=0)
+        isolated(_crash, size_bytes=0)
 
 
-def test_a_looping_reader_is_stopped_by_its_cpu_time():
+def test_a_looping_reader_is_stopped_by_its_cpu_time(isolated):
+    isolated(_value, 1, size_bytes=0)  # (a worker started: its start is not the read's CPU)
     t0 = time.process_time(), children_cpu_s()
     with pytest.raises(IsolatedReadError, match="looped on it"):
-        call_isolated(_spin, size_bytes=0)
+        isolated(_spin, size_bytes=0)
     # the parent waited without spending CPU; the child was stopped after about STEP_CPU_S of
     # its own CPU (CPU seconds, not the wall clock: a loaded machine stretches the wall time)
     assert time.process_time() - t0[0] < 0.5
@@ -188,20 +224,35 @@ def test_a_looping_reader_is_stopped_by_its_cpu_time():
     assert 0.5 * store_isolated.STEP_CPU_S <= child <= 2 * store_isolated.STEP_CPU_S + 0.5
 
 
-def test_a_waiting_reader_is_stopped_by_the_wall_clock(monkeypatch):
+def test_a_waiting_reader_is_stopped_by_the_wall_clock(isolated, monkeypatch):
+    isolated(_value, 1, size_bytes=0)
     monkeypatch.setattr(store_isolated, "BASE_WALL_S", 0.5)
     t0 = time.monotonic()
     with pytest.raises(IsolatedReadError, match="did not finish within"):
-        call_isolated(_sleep, size_bytes=0)
+        isolated(_sleep, size_bytes=0)
     assert time.monotonic() - t0 < 5
 
 
-def test_results_and_errors_come_back():
-    np.testing.assert_array_equal(call_isolated(_value, 5, size_bytes=0)["x"], np.arange(5))
+def test_results_and_errors_come_back(isolated):
+    np.testing.assert_array_equal(isolated(_value, 5, size_bytes=0)["x"], np.arange(5))
     with pytest.raises(InputFileError) as e:
-        call_isolated(_refuse, size_bytes=0)
+        isolated(_refuse, size_bytes=0)
     assert e.value.issues == [InputIssue("f.h5", 3, "entry/data", "why")]
     assert e.value.exit_code == 2
+    with pytest.raises(IsolatedCallError, match="ValueError"):
+        isolated(_unpicklable, size_bytes=0)
+
+
+def test_the_worker_is_one_process_started_again_after_a_failure(worker_call):
+    """The worker answers every call from the same process (no fork per call), and after a
+    failure (a crash) the next call is answered by a new one."""
+    isolated = worker_call
+    first = isolated(_pid, size_bytes=0)
+    assert first != os.getpid() and isolated(_pid, size_bytes=0) == first
+    with pytest.raises(IsolatedReadError):
+        isolated(_crash, size_bytes=0)
+    again = isolated(_pid, size_bytes=0)
+    assert again not in (first, os.getpid()) and isolated(_pid, size_bytes=0) == again
 
 
 # -- seals -----------------------------------------------------------------------------------
