@@ -4,9 +4,10 @@ long-lived reading process (:class:`labrig.store.isolated.IsolatedWorker`), the 
 The file: the paper campaign's shape (11 entries of 5 000 samples at 1 kHz, 5 channels), the
 last entry still running (the file closed unfinished, so that this process may read it); each
 frame reads the run's status and entries (the ten ended ones taken as known, as the view does)
-and the current entry's last 100 samples, as a view that keeps up does at 12 frames a second. CPU: this process's plus the reading child's (for the
-fork, the reaped children; for the worker, its own counters from /proc, its start reported
-apart). Run: ``python -m benchmarks.bench_live`` (``--frames N``).
+and the current entry's last 100 samples, as a view that keeps up does at 12 frames a second.
+CPU: this process's plus the reading child's (for the fork, the reaped children; for the
+worker, its own counters from /proc, its start reported apart).
+Run: ``python -m benchmarks.bench_live`` (``--frames N``).
 """
 
 from __future__ import annotations
