@@ -144,8 +144,8 @@ def extend(ds: h5py.Dataset, n0: int, values: np.ndarray) -> None:
 
 #: why a run stops when its file is deleted or replaced at its path by another program
 GONE = (
-    "the file was deleted or replaced at its path by another program during the run; the "
-    "samples written are not in the file now at that path"
+    "the file was deleted, moved or replaced at its path by another program during the run; "
+    "the samples written are not in the file now at that path"
 )
 
 
@@ -410,8 +410,13 @@ class RunWriter:
 
     def in_place(self) -> bool:
         """Whether the path still names the file being written (not deleted, not replaced by
-        another program: what is written then would be lost with the file)."""
-        return path_identity(self.path) == self.file_id
+        another program: what is written then would be lost with the file). A path that
+        cannot be looked up now (a folder's permissions changed) counts as in place: the
+        open file is still written."""
+        try:
+            return path_identity(self.path) == self.file_id
+        except OSError:
+            return True
 
     def check_in_place(self, operation: str) -> None:
         """Raise :class:`StorageError` unless :meth:`in_place`."""

@@ -41,10 +41,11 @@ def file_identity(f: h5py.File) -> FileId:
 
 
 def path_identity(path: Path | str) -> FileId | None:
-    """The identity of the file at ``path`` now; None when there is none."""
+    """The identity of the file at ``path`` now; None when there is none (raises the other
+    errors of ``stat``: a folder made unreadable says nothing about the file)."""
     try:
         st = os.stat(path)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):
         return None
     return st.st_dev, st.st_ino
 

@@ -5,6 +5,8 @@ left as it was; with ``--overwrite`` the old run file is kept."""
 
 from __future__ import annotations
 
+import os
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 
@@ -56,7 +58,7 @@ def run(tmp_path: Path, out: Path, *extra: str):
 def stopped_for_the_file(res, rigs: list) -> None:
     assert res.exit_code == 3, res.output
     assert "Traceback" not in res.output and "run complete" not in res.output
-    assert "deleted or replaced at its path" in " ".join(res.output.split())
+    assert "deleted, moved or replaced at its path" in " ".join(res.output.split())
     assert rigs[0].sim.bench.amp.v_out == 0.0
 
 
@@ -125,3 +127,18 @@ def test_with_overwrite_the_old_file_stays_when_the_new_one_is_deleted(tmp_path:
     assert out.read_bytes() == before
     assert read_run(out).status == "complete"
     assert not list(tmp_path.glob(".run.h5.*.partial"))
+
+
+def test_touching_copying_or_reading_the_file_does_not_stop_the_run(tmp_path: Path, monkeypatch):
+    """What a person does to a file being written without taking it away changes nothing."""
+    out = tmp_path / "run.h5"
+
+    def look() -> None:
+        out.touch()
+        shutil.copyfile(out, tmp_path / "copy.h5")
+        os.chmod(out, 0o444)
+
+    arm(monkeypatch, PER_ENTRY + 100, look)
+    res = run(tmp_path, out)
+    assert res.exit_code == 0, res.output
+    assert "run complete" in res.output and read_run(out).status == "complete"
