@@ -23,7 +23,7 @@ import numpy as np
 
 from labrig.store.format import SEAL_ATTR, seal_of
 from labrig.store.isolated import IsolatedWorker, allow_cpu, call_isolated
-from labrig.store.writing import FileId, file_identity
+from labrig.store.writing import file_identity
 
 #: the channels a frame reads (those an entry lacks are left out)
 CHANNELS = ("time", "command_voltage", "strain", "amplifier_voltage")
@@ -32,6 +32,10 @@ CHANNELS = ("time", "command_voltage", "strain", "amplifier_voltage")
 MAX_NEW_SAMPLES = 200_000
 #: a frame's read may take this long (s) before it is given up (the frame is skipped)
 FRAME_WALL_S = 2.0
+#: which file a frame was read from: the identity of the file opened (device, inode) and the
+#: time the run file was created (``@file_time``): another file at the path, or another file
+#: copied over it in place (same inode), is another key
+FileKey = tuple[int, int, str]
 #: the child process that reads this process's frames (started at the first frame)
 FRAME_READER = IsolatedWorker()
 
@@ -70,8 +74,14 @@ class Frame:
     final_voltage_V: float | None = None
     writer_pid: int | None = None
     writer_host: str = ""
-    #: the file read (:func:`~labrig.store.writing.file_identity`)
-    file_id: FileId | None = None
+    #: the file read (:func:`file_key`)
+    file_id: FileKey | None = None
+
+
+def file_key(f: h5py.File) -> FileKey:
+    """The :data:`FileKey` of the open run file ``f``."""
+    created = f.attrs.get("file_time", "")
+    return (*file_identity(f), created.decode() if isinstance(created, bytes) else str(created))
 
 
 def _value(ds: h5py.Dataset) -> object:
@@ -127,7 +137,7 @@ def read_frame_here(
     start: int,
     known: dict[str, StepFacts],
     ended: dict[str, EntryInfo] | None = None,
-    file_id: FileId | None = None,
+    file_id: FileKey | None = None,
 ) -> Frame:
     """Read a frame (module docstring): the current entry's samples from ``start`` on if it is
     ``entry``, else from its beginning. ``known``: the step facts (planned samples, frequency)
@@ -138,7 +148,7 @@ def read_frame_here(
     ``file_id``: another file found at the path (replaced since) is read from scratch."""
     with h5py.File(path, "r", locking=False) as f:
         allow_cpu()
-        fid = file_identity(f)
+        fid = file_key(f)
         if fid != file_id:
             entry, known, ended = None, {}, {}
         run = f["run"]
@@ -209,7 +219,7 @@ def read_frame(
     start: int,
     known: dict[str, StepFacts],
     ended: dict[str, EntryInfo] | None = None,
-    file_id: FileId | None = None,
+    file_id: FileKey | None = None,
 ) -> Frame:
     """:func:`read_frame_here` in :data:`FRAME_READER`, limited to :data:`FRAME_WALL_S`;
     raises whatever stopped it (the caller skips the frame)."""
@@ -235,8 +245,8 @@ class EntryData:
     info: EntryInfo
     start: int
     samples: dict[str, np.ndarray]
-    #: the file read (:func:`~labrig.store.writing.file_identity`)
-    file_id: FileId | None = None
+    #: the file read (:func:`file_key`)
+    file_id: FileKey | None = None
 
 
 #: an ended entry is read whole up to this many samples (longer: its last ones)
@@ -256,7 +266,7 @@ def read_entry_here(path: str, name: str) -> EntryData:
         info = _entry_info(name, g, {})
         frame = Frame("", "", "", [], [info], name, 0)
         _read_samples(g["data"], frame, None, 0, info.samples, MAX_ENTRY_SAMPLES)
-        return EntryData(info, frame.start, frame.samples, file_identity(f))
+        return EntryData(info, frame.start, frame.samples, file_key(f))
 
 
 def read_entry(path: Path | str, name: str) -> EntryData:

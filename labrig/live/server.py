@@ -39,9 +39,8 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs
 
-from labrig.live.frames import read_entry, read_frame
+from labrig.live.frames import FileKey, read_entry, read_frame
 from labrig.live.state import FINAL, LiveState, entry_view, overlay_points
-from labrig.store.writing import FileId
 
 log = logging.getLogger(__name__)
 
@@ -74,7 +73,7 @@ REFUSALS_LOGGED = 20
 #: ended entries whose page view (``/entry``) is kept; others are read again when asked for
 ENTRY_CACHE = 16
 #: a kept entry view's key: the file, the entry's name, samples and status when read
-EntryKey = tuple[FileId | None, str, int, str]
+EntryKey = tuple[FileKey | None, str, int, str]
 #: after a failed read of an ended entry, wait this long (s) before trying again
 ENTRY_RETRY_S = 1.0
 
@@ -105,6 +104,13 @@ def static_file(name: str) -> bytes:
     return resources.files("labrig.live").joinpath("static", *name.split("/")).read_bytes()
 
 
+class _Server(ThreadingHTTPServer):
+    daemon_threads = True
+    #: connections waiting to be accepted (the standard library's 5 made a burst of a few
+    #: hundred requests wait on TCP's retries, tens of seconds)
+    request_queue_size = 128
+
+
 class EntryReadsBusyError(Exception):
     """As many ``/entry`` reads as :data:`ENTRY_READS_AT_ONCE` are going on: ask again."""
 
@@ -128,8 +134,7 @@ class LiveServer:
         self.last_ask = 0.0  # time.monotonic() of the last /frame request
         self._entries: OrderedDict[EntryKey, bytes] = OrderedDict()
         self.entry_reads = threading.BoundedSemaphore(ENTRY_READS_AT_ONCE)
-        self.httpd = ThreadingHTTPServer((HOST, port), _handler(self))
-        self.httpd.daemon_threads = True
+        self.httpd = _Server((HOST, port), _handler(self))
         self._threads: list[threading.Thread] = []
 
     @property

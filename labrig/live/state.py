@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from labrig.live.frames import EntryData, EntryInfo, Frame, StepFacts
-from labrig.store.writing import FileId, writer_of
+from labrig.live.frames import EntryData, EntryInfo, FileKey, Frame, StepFacts
+from labrig.store.writing import writer_of
 
 #: the time series shows this many seconds of the current entry (its last ones)
 SERIES_WINDOW_S = 5.0
@@ -123,9 +123,9 @@ class LiveState:
         self.step_facts: dict[str, StepFacts] = {}
         #: entries seen ended (a final status), not read again (:func:`read_frame_here`)
         self.ended: dict[str, EntryInfo] = {}
-        #: the file these facts are of (:func:`~labrig.store.writing.file_identity`); a frame
+        #: the file these facts are of (:func:`~labrig.live.frames.file_key`); a frame
         #: of another file at the path (a run replaced with --overwrite) forgets them
-        self.file_id: FileId | None = None
+        self.file_id: FileKey | None = None
         self.seq = 0
         self.reads = 0
         self.skipped = 0
@@ -142,7 +142,7 @@ class LiveState:
         self.refused = 0
 
     # -- reading ----------------------------------------------------------------------------
-    def _another_file(self, file_id: FileId | None) -> None:
+    def _another_file(self, file_id: FileKey | None) -> None:
         """What was read of another file is forgotten: its step facts, ended entries, current
         entry and loops (a run replaced at the path, even with the same entry names)."""
         self.step_facts.clear()
@@ -218,7 +218,7 @@ class LiveState:
         ]
 
     def take_entry(
-        self, key: tuple[int, str], view: dict[str, Any], file_id: FileId | None = None
+        self, key: tuple[int, str], view: dict[str, Any], file_id: FileKey | None = None
     ) -> bool:
         """Keep an ended entry's loop (:func:`entry_view`'s ``overlay``) for the overlay, if
         it was read from the file the frames are of (``file_id``; None: not checked)."""

@@ -52,7 +52,6 @@ from labrig.store import Channel, RunWriter, estimate_run_bytes, free_bytes
 from labrig.store.reader import being_written
 from labrig.store.resume import ResumePlan, check_resume, check_same_rig, record_resume
 from labrig.store.space import DISK_FULL, RESERVE_BYTES, is_disk_full
-from labrig.store.writer import GONE
 
 #: acquisition block length (s): the most a crash can lose
 BLOCK_S = 0.1
@@ -554,7 +553,10 @@ def _run_on(rig: Rig, job: _Job, out: Path, guard: SignalGuard) -> RunOutcome:
         if staged is not None:
             staged.discard()
         raise
-    if staged is not None:
+    if staged is not None and writer.lost:  # the new file is not what was written: not put
+        staged.discard()  # in place of the old one
+        outcome.reason += f"; {out} is kept as it was"
+    elif staged is not None:
         _replace(staged, outcome)
     return outcome
 
@@ -610,8 +612,9 @@ def _record(
         problems = record_end(writer, rig, ramp, status, reason, code)
     if writer.close_error:
         problems.append(writer.close_error)
-    if status == "complete" and not writer.in_place():  # gone after its last block's check
-        gone = StorageError(str(writer.path), "closing the run file", GONE)
+    lost = writer.lost or writer.problem()  # (after its last block's check: the ramp, the close)
+    if status == "complete" and lost:
+        gone = StorageError(str(writer.path), "closing the run file", lost)
         status, reason, code = "failed", str(gone), gone.exit_code
     outcome.status, outcome.reason, outcome.exit_code = status, reason, code
     if problems:

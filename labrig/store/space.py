@@ -93,6 +93,7 @@ class Reserve:
         self.path = run_path.with_name(f".{run_path.name}.reserve")
         self.size = size
         self._held = False
+        self._folder: int | None = None
         if size <= 0:
             return
         fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
@@ -112,6 +113,10 @@ class Reserve:
             raise
         os.close(fd)
         self._held = True
+        # the folder held open: the reserve is deleted where it is, even if the folder has
+        # been renamed meanwhile
+        with contextlib.suppress(OSError, AttributeError):
+            self._folder = os.open(self.path.parent, os.O_RDONLY | os.O_DIRECTORY)
 
     @property
     def held(self) -> bool:
@@ -121,7 +126,14 @@ class Reserve:
         if not self._held:
             return
         self._held = False
+        folder, self._folder = self._folder, None
         try:
-            os.unlink(self.path)
+            if folder is not None and os.unlink in os.supports_dir_fd:
+                os.unlink(self.path.name, dir_fd=folder)
+            else:
+                os.unlink(self.path)
         except OSError as e:
             log.error("cannot delete the reserve file %s: %s", self.path, e)
+        finally:
+            if folder is not None:
+                os.close(folder)

@@ -147,6 +147,14 @@ GONE = (
     "the file was deleted, moved or replaced at its path by another program during the run; "
     "the samples written are not in the file now at that path"
 )
+#: why a run stops when another program truncates its file or writes over it in place
+CHANGED = (
+    "the file was truncated or written over by another program during the run; the file at "
+    "that path does not hold the samples written"
+)
+#: the bytes of the file's start kept after each flush (the HDF5 superblock: it records the
+#: end of the file, so a truncation or another file copied over this one changes them)
+MARK_BYTES = 128
 
 
 class EntryWriter:
@@ -328,6 +336,10 @@ class RunWriter:
     def _open(self, reserve_bytes: int, mode: str) -> None:
         """Open the HDF5 file in ``mode`` ("w": create, "r+": continue) with the reserve kept."""
         self.close_error = ""
+        #: what the file held after this writer's last flush (:meth:`flush`), and the first
+        #: problem found with the file at the path (:meth:`problem`; "" while there is none)
+        self._mark: tuple[int, bytes] | None = None
+        self.lost = ""
         self._reserve = Reserve(self.path, reserve_bytes)
         try:
             # no chunk cache: a block goes to the file in its own write call, so a write the
@@ -396,8 +408,19 @@ class RunWriter:
 
     # -- writing --------------------------------------------------------------------------
     def flush(self) -> None:
-        """Write everything to disk (``H5Fflush``)."""
+        """Write everything to disk (``H5Fflush``), then note what the file holds now
+        (:meth:`_marked_now`): until this writer writes again, nobody else should change it."""
         self._f.flush()
+        self._mark = self._marked_now()
+
+    def _marked_now(self) -> tuple[int, bytes] | None:
+        """The open file's size and first :data:`MARK_BYTES` bytes (the HDF5 superblock, which
+        records where the file ends): another program's truncation or rewrite changes them."""
+        try:
+            fd = self._f.id.get_vfd_handle()
+            return os.fstat(fd).st_size, os.pread(fd, MARK_BYTES, 0)
+        except (OSError, ValueError, TypeError):  # not a plain file descriptor: no mark
+            return None
 
     def heartbeat(self) -> None:
         """Say the run file is still being written when nothing is written to it (a rest
@@ -418,10 +441,27 @@ class RunWriter:
         except OSError:
             return True
 
-    def check_in_place(self, operation: str) -> None:
-        """Raise :class:`StorageError` unless :meth:`in_place`."""
+    def problem(self) -> str:
+        """Why the file at the path no longer holds what this writer wrote ("" when it does):
+        it was deleted, moved or replaced (:data:`GONE`), or truncated or written over in
+        place since this writer's last flush (:data:`CHANGED`). The first problem seen is kept
+        in :attr:`lost`."""
         if not self.in_place():
-            raise StorageError(str(self.path), operation, GONE)
+            why = GONE
+        elif self._f and self._mark is not None:
+            now = self._marked_now()
+            changed = now is not None and (now[0] < self._mark[0] or now[1] != self._mark[1])
+            why = CHANGED if changed else ""
+        else:
+            why = ""
+        self.lost = self.lost or why
+        return why
+
+    def check_in_place(self, operation: str) -> None:
+        """Raise :class:`StorageError` when :meth:`problem` finds one."""
+        why = self.problem()
+        if why:
+            raise StorageError(str(self.path), operation, why)
 
     def seal_and_flush(self, *changed: h5py.Group) -> None:
         """After metadata changed in the groups ``changed`` (and the datasets directly in
@@ -650,6 +690,7 @@ class RunWriter:
         self.release_reserve()
         if not self._f:
             return
+        self.problem()  # (kept in ``lost``: the caller says so)
         if self.status == "running":  # closed unfinished: no longer being written
             with contextlib.suppress(Exception):
                 unmark_writer(self._f)

@@ -12,6 +12,7 @@ import io
 import json
 import os
 import select
+import shutil
 import signal
 import socket
 import subprocess
@@ -1033,13 +1034,15 @@ def test_the_view_forgets_what_it_knew_of_a_replaced_file(tmp_path: Path, finish
         server.httpd.server_close()
 
 
+@pytest.mark.parametrize("how", ["renamed", "copied over"])
 def test_a_run_replaced_by_one_of_the_same_entries_is_shown_as_it_is_now(
-    tmp_path: Path, finished_run: Path
+    tmp_path: Path, finished_run: Path, how: str
 ):
-    """``labrig run --overwrite`` of the same protocol: the new file has the old one's entry
-    names, lengths and statuses and other samples. The view drops the old file's loops at
-    the first frame of the new one and serves the new samples for every entry (the loops of
-    the overlay and ``/entry``), not what it kept of the old file."""
+    """``labrig run --overwrite`` of the same protocol (the new file renamed into place), or
+    another run's file copied over this one (``cp``: the same inode): the new file has the old
+    one's entry names, lengths and statuses and other samples. The view drops the old file's
+    loops at the first frame of the new one and serves the new samples for every entry (the
+    loops of the overlay and ``/entry``), not what it kept of the old file."""
     path = tmp_path / "run.h5"
     path.write_bytes(finished_run.read_bytes())
     name = ENTRIES[0][0]
@@ -1054,7 +1057,11 @@ def test_a_run_replaced_by_one_of_the_same_entries_is_shown_as_it_is_now(
         other.write_bytes(finished_run.read_bytes())
         with h5py.File(other, "r+") as f:
             f[name]["data"]["strain"][...] = -2.0 * f[name]["data"]["strain"][...]
-        os.replace(other, path)
+            f.attrs["file_time"] = "2026-11-29T10:00:00.000+00:00"  # another run's file
+        if how == "renamed":
+            os.replace(other, path)
+        else:
+            shutil.copyfile(other, path)
         server.read_once()
         assert server.state.loops == {} and server.state.ended_entries()
         while server.read_ended_entry():

@@ -109,21 +109,54 @@ def test_a_run_file_deleted_after_its_last_block_is_not_a_complete_run(tmp_path:
     stopped_for_the_file(res, rigs)
 
 
-def test_with_overwrite_the_old_file_stays_when_the_new_one_is_deleted(tmp_path: Path, monkeypatch):
+def test_a_run_file_truncated_during_the_run_stops_it(tmp_path: Path, monkeypatch):
+    """The same file (same inode), cut short by another program (``truncate -s 0``)."""
+    out = tmp_path / "run.h5"
+    rigs = arm(monkeypatch, PER_ENTRY + 100, lambda: os.truncate(out, 0))
+    res = run(tmp_path, out)
+    assert res.exit_code == 3, res.output
+    assert "truncated or written over" in " ".join(res.output.split())
+    assert "run complete" not in res.output and rigs[0].sim.bench.amp.v_out == 0.0
+
+
+def test_another_file_copied_over_the_run_file_stops_it(tmp_path: Path, monkeypatch):
+    """``cp other.h5 run.h5`` during the run writes over the same inode: said as such, not as
+    HDF5's errors."""
+    out = tmp_path / "run.h5"
+    first = run(tmp_path, tmp_path / "other.h5")
+    assert first.exit_code == 0, first.output
+
+    def copy_over() -> None:
+        shutil.copyfile(tmp_path / "other.h5", out)  # (opens the same file, O_TRUNC)
+
+    arm(monkeypatch, PER_ENTRY + 100, copy_over)
+    res = run(tmp_path, out)
+    assert res.exit_code == 3, res.output
+    flat = " ".join(res.output.split())
+    assert "truncated or written over" in flat and "HDF5" not in flat
+
+
+@pytest.mark.parametrize("damage", ["delete", "truncate"])
+def test_with_overwrite_the_old_file_stays_when_the_new_one_is_damaged(
+    tmp_path: Path, monkeypatch, damage: str
+):
     """``--overwrite`` writes the new file beside the old one (a hidden partial folder): that
-    file deleted, the run stops and the old run file is untouched."""
+    file deleted or truncated, the run stops and the old run file is untouched (not replaced
+    by the damaged new one)."""
     out = tmp_path / "run.h5"
     first = run(tmp_path, out)
     assert first.exit_code == 0, first.output
     before = out.read_bytes()
 
-    def delete_the_new_one() -> None:
+    def damage_the_new_one() -> None:
         (staged,) = tmp_path.glob(".run.h5.*.partial/run.h5")
-        staged.unlink()
+        staged.unlink() if damage == "delete" else os.truncate(staged, 0)
 
-    rigs = arm(monkeypatch, PER_ENTRY + 100, delete_the_new_one)
+    rigs = arm(monkeypatch, PER_ENTRY + 100, damage_the_new_one)
     res = run(tmp_path, out, "--overwrite")
-    stopped_for_the_file(res, rigs)
+    assert res.exit_code == 3, res.output
+    assert "run complete" not in res.output and rigs[0].sim.bench.amp.v_out == 0.0
+    assert f"{out} is kept as it was" in " ".join(res.output.split())
     assert out.read_bytes() == before
     assert read_run(out).status == "complete"
     assert not list(tmp_path.glob(".run.h5.*.partial"))
@@ -142,3 +175,17 @@ def test_touching_copying_or_reading_the_file_does_not_stop_the_run(tmp_path: Pa
     res = run(tmp_path, out)
     assert res.exit_code == 0, res.output
     assert "run complete" in res.output and read_run(out).status == "complete"
+
+
+def test_a_folder_renamed_during_the_run_keeps_no_reserve_file(tmp_path: Path, monkeypatch):
+    """The run's folder renamed away (and back after): the run stops, and the reserve file
+    (room kept for the final records) is deleted where the folder went."""
+    folder = tmp_path / "runs"
+    folder.mkdir()
+    out = folder / "run.h5"
+    away = tmp_path / "elsewhere"
+    rigs = arm(monkeypatch, PER_ENTRY + 100, lambda: folder.rename(away))
+    res = run(tmp_path, out)
+    stopped_for_the_file(res, rigs)
+    away.rename(folder)
+    assert sorted(p.name for p in folder.iterdir()) == ["run.h5"]
