@@ -49,6 +49,15 @@ def arm(monkeypatch: pytest.MonkeyPatch, after: int, act: Callable[[], None]) ->
     return rigs
 
 
+@pytest.fixture(scope="module")
+def a_complete_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A complete run of the same protocol (written once; tests copy it)."""
+    folder = tmp_path_factory.mktemp("complete")
+    res = run(folder, folder / "run.h5")
+    assert res.exit_code == 0, res.output
+    return folder / "run.h5"
+
+
 def run(tmp_path: Path, out: Path, *extra: str):
     proto = tmp_path / "tiny.yaml"
     proto.write_text(TINY)
@@ -119,15 +128,15 @@ def test_a_run_file_truncated_during_the_run_stops_it(tmp_path: Path, monkeypatc
     assert "run complete" not in res.output and rigs[0].sim.bench.amp.v_out == 0.0
 
 
-def test_another_file_copied_over_the_run_file_stops_it(tmp_path: Path, monkeypatch):
+def test_another_file_copied_over_the_run_file_stops_it(
+    tmp_path: Path, monkeypatch, a_complete_run: Path
+):
     """``cp other.h5 run.h5`` during the run writes over the same inode: said as such, not as
     HDF5's errors."""
     out = tmp_path / "run.h5"
-    first = run(tmp_path, tmp_path / "other.h5")
-    assert first.exit_code == 0, first.output
 
     def copy_over() -> None:
-        shutil.copyfile(tmp_path / "other.h5", out)  # (opens the same file, O_TRUNC)
+        shutil.copyfile(a_complete_run, out)  # (opens the same file, O_TRUNC)
 
     arm(monkeypatch, PER_ENTRY + 100, copy_over)
     res = run(tmp_path, out)
@@ -138,14 +147,12 @@ def test_another_file_copied_over_the_run_file_stops_it(tmp_path: Path, monkeypa
 
 @pytest.mark.parametrize("damage", ["delete", "truncate"])
 def test_with_overwrite_the_old_file_stays_when_the_new_one_is_damaged(
-    tmp_path: Path, monkeypatch, damage: str
+    tmp_path: Path, monkeypatch, damage: str, a_complete_run: Path
 ):
     """``--overwrite`` writes the new file beside the old one (a hidden partial folder): that
     file deleted or truncated, the run stops and the old run file is untouched (not replaced
     by the damaged new one)."""
-    out = tmp_path / "run.h5"
-    first = run(tmp_path, out)
-    assert first.exit_code == 0, first.output
+    out = Path(shutil.copyfile(a_complete_run, tmp_path / "run.h5"))
     before = out.read_bytes()
 
     def damage_the_new_one() -> None:
