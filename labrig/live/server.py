@@ -110,6 +110,11 @@ class _Server(ThreadingHTTPServer):
     #: hundred requests wait on TCP's retries, tens of seconds)
     request_queue_size = 128
 
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        """A connection that failed (a client gone, one cut off at the deadline) is not a
+        traceback on the terminal."""
+        log.debug("live view: a connection from %s failed", client_address, exc_info=True)
+
 
 class EntryReadsBusyError(Exception):
     """As many ``/entry`` reads as :data:`ENTRY_READS_AT_ONCE` are going on: ask again."""
@@ -366,11 +371,12 @@ def _handler(server: LiveServer) -> type[BaseHTTPRequestHandler]:
                 self.connection.shutdown(socket.SHUT_RDWR)
 
         def parse_request(self) -> bool:
+            ok = super().parse_request()  # (reads the headers: still under the deadline)
             self._deadline.cancel()
             if self._cut_off:  # what arrived before the cut is not a request to answer
                 self.close_connection = True
                 return False
-            return super().parse_request()
+            return ok
 
         def finish(self) -> None:
             self._deadline.cancel()

@@ -140,6 +140,9 @@ class LiveState:
         self.loops_seq = 0
         #: requests refused by the server (a foreign Host header, a bad method or path)
         self.refused = 0
+        #: files read after the first (another file at the path): the page's cue to drop the
+        #: entry view it kept
+        self.files = 0
 
     # -- reading ----------------------------------------------------------------------------
     def _another_file(self, file_id: FileKey | None) -> None:
@@ -154,6 +157,8 @@ class LiveState:
             self.loops.clear()
             self.loop_keys.clear()
             self.loops_seq += 1
+        if self.file_id is not None:
+            self.files += 1  # the page drops what it kept of the previous file
         self.file_id = file_id
 
     def next_request(self) -> tuple[str | None, int]:
@@ -265,6 +270,7 @@ class LiveState:
             "server_time": time.time(),
             "loops_seq": self.loops_seq,
             "refused": self.refused,
+            "files": self.files,
         }
         if f is None:
             doc["status"] = "waiting"

@@ -614,7 +614,7 @@ def _record(
         problems.append(writer.close_error)
     lost = writer.lost or writer.problem()  # (after its last block's check: the ramp, the close)
     if status == "complete" and lost:
-        gone = StorageError(str(writer.path), "closing the run file", lost)
+        gone = StorageError(str(out), "closing the run file", lost)
         status, reason, code = "failed", str(gone), gone.exit_code
     outcome.status, outcome.reason, outcome.exit_code = status, reason, code
     if problems:

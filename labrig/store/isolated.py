@@ -124,12 +124,33 @@ def call_isolated(
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
             os.waitpid(pid, 0)
+    return _unpacked(payload)
+
+
+def _unpacked(payload: bytes) -> Any:
+    """The child's answer (:func:`_answer`): the value returned, or the exception raised."""
     kind, value = pickle.loads(payload)
     if kind == "ok":
         return value
     if kind == "raised":
         raise value
     raise IsolatedCallError(value)
+
+
+def _answer(fn: Callable[..., Any], args: tuple, size_bytes: int) -> bytes:
+    """In a child: ``fn(*args)`` under the CPU limit, its result or exception pickled as
+    ``(kind, value)``; an exception that cannot be pickled is sent as its traceback's text."""
+    allow_cpu()
+    try:
+        result: tuple[str, Any] = ("ok", fn(*args))
+    except Exception as e:
+        result = ("raised", e)
+    allow_cpu(size_bytes=size_bytes)  # pickling what was read
+    try:
+        return pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception as e:
+        what = result[1] if result[0] == "raised" else e
+        return pickle.dumps(("bug", "".join(traceback.format_exception(what))))
 
 
 def _child(write_fd: int, size_bytes: int, fn: Callable[..., Any], args: tuple) -> None:
@@ -141,17 +162,7 @@ def _child(write_fd: int, size_bytes: int, fn: Callable[..., Any], args: tuple) 
         faulthandler.disable()  # a crash is reported by the parent, without the child's stack
         signal.signal(signal.SIGINT, signal.SIG_DFL)  # Ctrl-C ends the child at once
         resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
-        allow_cpu()
-        try:
-            result: tuple[str, Any] = ("ok", fn(*args))
-        except Exception as e:
-            result = ("raised", e)
-        allow_cpu(size_bytes=size_bytes)  # pickling what was read
-        try:
-            data = pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL)
-        except Exception as e:
-            what = result[1] if result[0] == "raised" else e
-            data = pickle.dumps(("bug", "".join(traceback.format_exception(what))))
+        data = _answer(fn, args, size_bytes)
         with os.fdopen(write_fd, "wb") as out:
             out.write(data)
         code = 0
@@ -227,23 +238,24 @@ class IsolatedWorker:
                 payload = _message(proc.stdout, time.monotonic() + wall)
             except (OSError, ValueError):
                 payload = b""
+            except BaseException:  # (Ctrl-C): its answer must not be taken for the next call's
+                self._stop()
+                raise
             if not payload:
                 code = self._stop()
                 if payload is None:
                     raise IsolatedReadError(f"reading did not finish within {wall:.3g} s (stopped)")
                 raise IsolatedReadError(_ended(code))
-        kind, value = pickle.loads(payload)
-        if kind == "ok":
-            return value
-        if kind == "raised":
-            raise value
-        raise IsolatedCallError(value)
+        return _unpacked(payload)
 
     def _started(self) -> subprocess.Popen[bytes]:
         if self._proc is not None and self._proc.poll() is None:
             return self._proc
+        self._stop()  # a child that ended: its pipes closed, itself reaped
         self._proc = proc = subprocess.Popen(
-            [sys.executable, "-c", "from labrig.store.isolated import serve; serve()"],
+            # -P: the current folder is not put first on the path (a user's select.py or
+            # h5py.py there must not be imported in its place)
+            [sys.executable, "-P", "-c", "from labrig.store.isolated import serve; serve()"],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             close_fds=True,
@@ -288,20 +300,15 @@ def serve() -> None:
     out.write(_READY)
     out.flush()
     while (request := _message(inp, None)) is not None and request:
-        size_bytes = 0
-        allow_cpu()
-        try:
-            fn, args, size_bytes = pickle.loads(request)
-            result: tuple[str, Any] = ("ok", fn(*args))
-        except Exception as e:  # what the function raised, or a function not found here
-            result = ("raised", e)
-        allow_cpu(size_bytes=size_bytes)  # pickling what was read
-        try:
-            data = pickle.dumps(result, protocol=pickle.HIGHEST_PROTOCOL)
-        except Exception as e:
-            what = result[1] if result[0] == "raised" else e
-            data = pickle.dumps(("bug", "".join(traceback.format_exception(what))))
-        _send(out, data)
+        _send(out, _answer(_call_of, (request,), 0))
+
+
+def _call_of(request: bytes) -> Any:
+    """Make the call a worker was sent: ``(fn, args, size_bytes)`` pickled (raises what the
+    function raises, or that it is not found here)."""
+    fn, args, size_bytes = pickle.loads(request)
+    allow_cpu(size_bytes=size_bytes)
+    return fn(*args)
 
 
 def _ended(code: int | None) -> str:

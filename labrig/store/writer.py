@@ -346,8 +346,13 @@ class RunWriter:
             # disk refuses fails there and then, and no unwritable chunk waits in a cache (with
             # a cache, cutting a channel back after a refused flush read back zeros)
             self._f = h5py.File(self.path, mode, track_order=True, rdcc_nbytes=0)
+        except BaseException:
+            self._reserve.release()
+            raise
+        try:
             self.file_id = file_identity(self._f)
         except BaseException:
+            self._f.close()
             self._reserve.release()
             raise
 
@@ -416,9 +421,10 @@ class RunWriter:
     def _marked_now(self) -> tuple[int, bytes] | None:
         """The open file's size and first :data:`MARK_BYTES` bytes (the HDF5 superblock, which
         records where the file ends): another program's truncation or rewrite changes them."""
+        pread = getattr(os, "pread", None)  # (POSIX: not on Windows, where no mark is kept)
         try:
             fd = self._f.id.get_vfd_handle()
-            return os.fstat(fd).st_size, os.pread(fd, MARK_BYTES, 0)
+            return (os.fstat(fd).st_size, pread(fd, MARK_BYTES, 0)) if pread else None
         except (OSError, ValueError, TypeError):  # not a plain file descriptor: no mark
             return None
 

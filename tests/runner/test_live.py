@@ -332,20 +332,29 @@ def test_two_host_headers_are_refused_even_when_one_names_this_server(served: Li
         assert code == 421 and b"2 Host headers" in body and b"seq" not in body
 
 
-def test_a_request_trickled_a_byte_at_a_time_is_cut_off(finished_run: Path, monkeypatch):
-    """Each wait for data is bounded (REQUEST_TIMEOUT_S) and so is the whole request: a client
-    sending a byte every 0.2 s with a 0.6 s bound is disconnected within about 0.6 s, without an
-    answer; a request sent whole within the bound is answered."""
+@pytest.mark.parametrize("whole", ["", "the request line"])
+def test_a_request_trickled_a_byte_at_a_time_is_cut_off(
+    finished_run: Path, monkeypatch, whole: str
+):
+    """Each wait for data is bounded (REQUEST_TIMEOUT_S) and so is the whole request, headers
+    included: a client sending a byte every 0.2 s (after its request line, sent whole, or from
+    the start) with a 0.6 s bound is disconnected within about 0.6 s, without an answer; a
+    request sent whole within the bound is answered."""
     monkeypatch.setattr(live_server, "REQUEST_TIMEOUT_S", 0.6)
     server = LiveServer(finished_run)
     server.start()
     try:
         host = f"127.0.0.1:{server.port}"
         assert request(server.port, "/frame", host)[0] == 200
-        text = f"GET /frame HTTP/1.1\r\nHost: {host}\r\n" + "X-Slow: " + "x" * 40
+        line = "GET /frame HTTP/1.1\r\n"
+        text = f"Host: {host}\r\n" + "X-Slow: " + "x" * 40
         t0 = time.monotonic()
         got = b"?"
         with socket.create_connection(("127.0.0.1", server.port), timeout=5) as c:
+            if whole:
+                c.sendall(line.encode())
+            else:
+                text = line + text
             try:
                 for ch in text:
                     c.sendall(ch.encode())
@@ -1064,6 +1073,7 @@ def test_a_run_replaced_by_one_of_the_same_entries_is_shown_as_it_is_now(
             shutil.copyfile(other, path)
         server.read_once()
         assert server.state.loops == {} and server.state.ended_entries()
+        assert json.loads(server.document())["files"] == 1  # the page's cue to drop its entry
         while server.read_ended_entry():
             pass
         # the page's numbers have 5 significant digits: both sides rounded once

@@ -221,6 +221,7 @@ async function update(doc) {
     L.loops = await getJSON("/loops");
   }
   renderStatus(doc);
+  if (L.doc && doc.files !== L.doc.files) { L.entry = null; }  // another file at the path
   const name = wanted(doc);
   let view = null;
   if (name === null) {
