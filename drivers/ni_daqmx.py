@@ -30,7 +30,13 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
 from labrig.core.errors import DeviceError
-from labrig.rig.instruments import AcquiredBlock, DriverContext, DriverInfo, Package
+from labrig.rig.instruments import (
+    AcquiredBlock,
+    DriverContext,
+    DriverInfo,
+    Package,
+    converter_step_V,
+)
 
 #: the package the driver needs and how to install it
 PACKAGE = Package("nidaqmx", "nidaqmx", "pip install 'labrig[nidaq]'")
@@ -135,7 +141,7 @@ class NIDAQmx:
 
     def ao_step_V(self) -> float:
         """Volts of one code of the AO converter over its range (``ao_range_V``, ``ao_bits``)."""
-        return 2.0 * self.s.ao_range_V / 2**self.s.ao_bits
+        return converter_step_V(self.s.ao_range_V, self.s.ao_bits)
 
     def configure(self, rate_hz: float, ai_channels: list[str]) -> None:
         unknown = [c for c in ai_channels if c not in self.s.ai]

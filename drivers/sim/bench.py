@@ -78,7 +78,7 @@ from labrig.drivers.sim.structural import (
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from labrig.rig.instruments import TEMPERATURE_V_PER_DEGC
+from labrig.rig.instruments import TEMPERATURE_V_PER_DEGC, converter_step_V
 from labrig.rig.limits import RigLimits
 
 if TYPE_CHECKING:
@@ -427,7 +427,7 @@ class VirtualBench:
         over = bool(np.any(np.abs(x) > rng_V))
         if bits is None:
             return np.clip(x, -rng_V, rng_V), over
-        lsb = 2.0 * rng_V / 2**bits
+        lsb = converter_step_V(rng_V, bits)
         code = np.clip(np.round(x / lsb), -(2 ** (bits - 1)), 2 ** (bits - 1) - 1)
         return code * lsb, over
 

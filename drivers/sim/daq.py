@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field
 
 from labrig.core.errors import DeviceError
-from labrig.rig.instruments import AcquiredBlock, DriverContext, DriverInfo
+from labrig.rig.instruments import AcquiredBlock, DriverContext, DriverInfo, converter_step_V
 
 #: realtime static writes advance the bench by at most this much simulated time (s)
 MAX_STATIC_ADVANCE_S = 1.0
@@ -71,7 +71,7 @@ class SimDAQ:
     def ao_step_V(self) -> float | None:
         """Volts of one code of the AO converter (``None``: the bench's AO is not quantised)."""
         d = self.bench.config.daq
-        return 2.0 * d.ao_range_V / 2**d.ao_bits if d.ao_bits else None
+        return converter_step_V(d.ao_range_V, d.ao_bits) if d.ao_bits else None
 
     def ai_range_V(self) -> tuple[float, float]:
         r = self.bench.config.daq.ai_range_V

@@ -8,7 +8,7 @@ steps, :mod:`~labrig.protocol.concrete`, with :mod:`~labrig.protocol.waveforms`,
 :mod:`~labrig.protocol.preflight` (every step against the rig's limits, what each asks of the
 amplifier measured as one :class:`~labrig.rig.drive_load.DriveLoad`) and
 :mod:`~labrig.protocol.check` (the entry points the CLI calls); the numbers in their messages are
-printed by :mod:`~labrig.protocol.numbers`.
+printed by :mod:`~labrig.core.numbers`.
 
 Typical use (what ``labrig check`` does)::
 

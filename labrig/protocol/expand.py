@@ -25,11 +25,11 @@ from pathlib import Path
 import numpy as np
 
 from labrig.core.errors import InputFileError, InputIssue
+from labrig.core.numbers import beyond, fixed
 from labrig.protocol import broadband as bb
 from labrig.protocol import waveforms as wf
 from labrig.protocol.concrete import Concrete, intervals, num_tag, sanitize
 from labrig.protocol.csvsource import CsvError, load_csv, resolve_csv_path
-from labrig.protocol.numbers import beyond, fixed
 from labrig.protocol.offset_sine import offset_sine_name, offset_sine_parts
 from labrig.protocol.plan import Plan, PlannedStep, Where, field_name, line_of
 from labrig.protocol.schema import (

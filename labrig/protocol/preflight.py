@@ -23,7 +23,7 @@ around a bias (``offset_sine``) gives ``i_peak = 2 pi C_eff A f`` and a cycle-me
 f`` (:func:`max_offset_sine_frequency_hz`); its raised-cosine ramps are measured with the rest,
 and their current scales as ``1 / ramp_s``.
 
-Numbers in the messages are printed by :mod:`labrig.protocol.numbers`: a value over a limit
+Numbers in the messages are printed by :mod:`labrig.core.numbers`: a value over a limit
 never prints as the limit, and a huge one never prints with hundreds of digits.
 
 Problems are collected for all entries and raised together as :class:`InputFileError`, each
@@ -37,7 +37,7 @@ import math
 import numpy as np
 
 from labrig.core.errors import InputFileError, InputIssue
-from labrig.protocol.numbers import amps, at_least, at_most, beyond, exact, fixed_down
+from labrig.core.numbers import amps, at_least, at_most, beyond, exact, fixed_down
 from labrig.protocol.plan import Plan, PlannedStep, Where
 from labrig.protocol.schema import STRAIN_KINDS
 from labrig.rig.drive_load import (

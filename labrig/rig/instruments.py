@@ -48,6 +48,12 @@ TEMPERATURE_V_PER_DEGC = 0.01
 CLIP_FRACTION = 0.9999
 
 
+def converter_step_V(range_V: float, bits: int) -> float:
+    """Volts of one code of a bipolar converter of ``bits`` bits over +-``range_V`` V:
+    ``2 range_V / 2**bits`` (an ADC's or a DAC's least significant bit)."""
+    return 2.0 * range_V / 2**bits
+
+
 @dataclass
 class AcquiredBlock:
     """One block of a playback: AI volts per channel name, samples ``start .. start+len-1``."""

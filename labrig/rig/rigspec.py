@@ -39,6 +39,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 
 from labrig.core.errors import DeviceError, InputFileError, InputIssue
+from labrig.core.numbers import beyond, exact
 from labrig.core.seeds import MAX_SEED
 from labrig.core.yamlio import issues_from_validation, line_index, read_yaml
 from labrig.rig.instruments import DriverInfo, SimulatorInfo
@@ -223,8 +224,8 @@ def reach_issues(resolved: Any, name: str, lines: dict) -> list[InputIssue]:
             if not ok:
                 line = lines.get(("limits", key), lines.get(("limits",)))
                 msg = (
-                    f"{value:g} V is beyond what the rig can drive: {what} is {lo:g} to "
-                    f"{hi:g} V; give a limit within it"
+                    f"{beyond(value, hi if key == 'v_max_V' else lo)} V is beyond what the rig "
+                    f"can drive: {what} is {exact(lo)} to {exact(hi)} V; give a limit within it"
                 )
                 issues.append(InputIssue(name, line, f"limits.{key}", msg))
     return issues

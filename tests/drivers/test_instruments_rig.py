@@ -225,6 +225,8 @@ def test_rig_file_errors_name_file_line_and_field(tmp_path, edit, line_field, me
         ({"limits": {"v_max_V": 100.0}}, None),
         ({"limits": {"v_max_V": 100.001}}, ("v_max_V", "the DAQ's +-10 V output times")),
         ({"limits": {"v_max_V": 1.0e300}}, ("v_max_V", "the DAQ's +-10 V output times")),
+        # a hair past the reach prints as past it, not as the reach itself
+        ({"limits": {"v_max_V": 100.0000001}}, ("v_max_V", "100.0000001 V is beyond")),
         # the gain raised: the simulated amplifier's -30..130 V bounds instead
         ({"amplifier": {"gain_V_per_V": 15.0}, "limits": {"v_max_V": 130.0}}, None),
         (

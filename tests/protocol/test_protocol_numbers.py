@@ -10,8 +10,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from labrig.core.errors import InputFileError
+from labrig.core.numbers import amps, at_least, at_most, beyond, exact, fixed, fixed_down
 from labrig.protocol.check import check_protocol
-from labrig.protocol.numbers import amps, at_least, at_most, beyond, exact, fixed, fixed_down
 
 finite = st.floats(allow_nan=False, allow_infinity=False, min_value=-1e300, max_value=1e300)
 

@@ -93,4 +93,5 @@ def amps(x: float, other: float | None = None) -> str:
         s = _amps_text(x, digits)
         if other is None or s != _amps_text(other, digits):
             return f"{s} A"
+    assert other is not None  # (without ``other`` the loop returned)
     return f"{beyond(x, other)} A"
