@@ -6,9 +6,11 @@ from __future__ import annotations
 import resource
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 from labrig.drivers.sim.bench import BenchConfig, VirtualBench
 from typer.testing import CliRunner
@@ -237,3 +239,32 @@ def children_cpu_s() -> float:
     """CPU seconds (user + system) of this process's children that have been waited for."""
     usage = resource.getrusage(resource.RUSAGE_CHILDREN)
     return usage.ru_utime + usage.ru_stime
+
+
+def arm(monkeypatch: pytest.MonkeyPatch, after: int, act: Callable[[], None]) -> list:
+    """``labrig run`` opens the simulated rig as usual, but ``act`` is called once, when
+    ``after`` samples have been played; returns the list the opened rigs are put in."""
+    from labrig.runner import execute as runner
+
+    real_open = runner.open_rig
+    rigs: list = []
+
+    def open_and_arm(path=None, seed=None):
+        rig = real_open(path, seed)
+        rigs.append(rig)
+        bench, real_step = rig.sim.bench, rig.sim.bench.step
+        played = [0]
+
+        def step(ao):
+            out = real_step(ao)
+            if bench.playing:
+                played[0] += len(ao)
+                if played[0] >= after and played[0] - len(ao) < after:
+                    act()
+            return out
+
+        bench.step = step
+        return rig
+
+    monkeypatch.setattr(runner, "open_rig", open_and_arm)
+    return rigs

@@ -406,8 +406,10 @@ def _handler(server: LiveServer) -> type[BaseHTTPRequestHandler]:
                 return True
             if len(hosts) > 1:
                 shown = f"{len(hosts)} Host headers"
+            elif host is None:
+                shown = "no Host header"
             else:
-                shown = "no Host header" if host is None else f"Host {host[:100]!r}"
+                shown = f"Host {host[:100]!r}"
             server.refused(f"{self.command} {self.path[:100]!r} with {shown}")
             self._text(
                 HTTPStatus.MISDIRECTED_REQUEST,

@@ -170,20 +170,26 @@ def _child(write_fd: int, size_bytes: int, fn: Callable[..., Any], args: tuple) 
         os._exit(code)
 
 
-def _receive(fd: int, deadline: float) -> bytes | None:
-    """Everything the child writes to ``fd`` until it closes it; ``None`` past ``deadline``."""
+def _receive(fd: int, deadline: float | None, n: int | None = None) -> bytes | None:
+    """The bytes a child writes to ``fd``: all until it closes it (``n`` None), or exactly
+    ``n`` (``b""`` when it closes before); ``None`` past ``deadline`` (None: no deadline)."""
     chunks: list[bytes] = []
-    while True:
-        left = deadline - time.monotonic()
-        if left <= 0:
-            return None
-        ready, _, _ = select.select([fd], [], [], left)
-        if not ready:
-            continue
-        chunk = os.read(fd, 1 << 20)
+    left_n = n
+    while left_n is None or left_n > 0:
+        if deadline is not None:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            ready, _, _ = select.select([fd], [], [], left)
+            if not ready:
+                continue
+        chunk = os.read(fd, 1 << 20 if left_n is None else min(left_n, 1 << 20))
         if not chunk:
-            return b"".join(chunks)
+            return b"".join(chunks) if n is None else b""
         chunks.append(chunk)
+        if left_n is not None:
+            left_n -= len(chunk)
+    return b"".join(chunks)
 
 
 def _death(status: int) -> str:
@@ -261,7 +267,7 @@ class IsolatedWorker:
             close_fds=True,
         )
         assert proc.stdout is not None
-        if _read_exactly(proc.stdout.fileno(), 1, time.monotonic() + WORKER_START_S) != _READY:
+        if _receive(proc.stdout.fileno(), time.monotonic() + WORKER_START_S, 1) != _READY:
             code = self._stop()
             raise IsolatedReadError(f"the reading process did not start: {_ended(code)}")
         return proc
@@ -329,25 +335,8 @@ def _message(stream: IO[bytes] | None, deadline: float | None) -> bytes | None:
     ``deadline`` (``None``: no deadline)."""
     assert stream is not None
     fd = stream.fileno()
-    head = _read_exactly(fd, _LENGTH.size, deadline)
+    head = _receive(fd, deadline, _LENGTH.size)
     if not head:
         return head
-    return _read_exactly(fd, _LENGTH.unpack(head)[0], deadline)
+    return _receive(fd, deadline, _LENGTH.unpack(head)[0])
 
-
-def _read_exactly(fd: int, n: int, deadline: float | None) -> bytes | None:
-    chunks: list[bytes] = []
-    while n > 0:
-        if deadline is not None:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                return None
-            ready, _, _ = select.select([fd], [], [], left)
-            if not ready:
-                continue
-        chunk = os.read(fd, min(n, 1 << 20))
-        if not chunk:
-            return b""
-        chunks.append(chunk)
-        n -= len(chunk)
-    return b"".join(chunks)

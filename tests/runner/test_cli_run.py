@@ -19,8 +19,9 @@ import pytest
 from typer.testing import CliRunner
 
 from labrig.cli import app
-from labrig.runner import execute as runner
 from labrig.store import read_run
+
+from helpers import arm
 
 ROOT = Path(__file__).resolve().parents[2]
 PAPER = ROOT / "experiments" / "paper.yaml"
@@ -240,27 +241,7 @@ def test_a_rig_whose_devices_are_absent_exits_3(tmp_path):
 
 
 def test_device_fault_exits_3_with_the_device_named(tmp_path, monkeypatch):
-    real_open = runner.open_rig
-    rigs = []
-
-    def open_and_arm(path=None, seed=None):
-        rig = real_open(path, seed)
-        rigs.append(rig)
-        bench, real_step = rig.sim.bench, rig.sim.bench.step
-        played = [0]
-
-        def step(ao):
-            out = real_step(ao)
-            if bench.playing:
-                played[0] += len(ao)
-                if played[0] >= 2500 and not bench.amp.over_temperature:
-                    bench.inject("over_temperature")
-            return out
-
-        bench.step = step
-        return rig
-
-    monkeypatch.setattr(runner, "open_rig", open_and_arm)
+    rigs = arm(monkeypatch, 2500, lambda: rigs[0].sim.bench.inject("over_temperature"))
     out = tmp_path / "run.h5"
     res = CliRunner().invoke(app, ["run", str(PAPER), "--out", str(out), "--seed", "2"])
     assert res.exit_code == 3, res.output

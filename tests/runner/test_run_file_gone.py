@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -17,36 +16,10 @@ from labrig.cli import app
 from labrig.runner import execute as runner
 from labrig.store import read_run
 
-from helpers import TINY
+from helpers import TINY, arm
 
 #: TINY's entries: 2 cycles at 2 Hz, 500 samples a second: 500 samples each
 PER_ENTRY = 500
-
-
-def arm(monkeypatch: pytest.MonkeyPatch, after: int, act: Callable[[], None]) -> list:
-    """Open the simulated rig as usual, but call ``act`` once ``after`` samples were played."""
-    real_open = runner.open_rig
-    rigs: list = []
-
-    def open_and_arm(path=None, seed=None):
-        rig = real_open(path, seed)
-        rigs.append(rig)
-        bench, real_step = rig.sim.bench, rig.sim.bench.step
-        played = [0]
-
-        def step(ao):
-            out = real_step(ao)
-            if bench.playing:
-                played[0] += len(ao)
-                if played[0] >= after and played[0] - len(ao) < after:
-                    act()
-            return out
-
-        bench.step = step
-        return rig
-
-    monkeypatch.setattr(runner, "open_rig", open_and_arm)
-    return rigs
 
 
 @pytest.fixture(scope="module")
