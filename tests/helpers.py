@@ -3,9 +3,11 @@ protocols. (Fixtures built on them are in ``conftest.py``.)"""
 
 from __future__ import annotations
 
+import os
 import resource
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -233,6 +235,27 @@ def planted_records(
         Record(r.name, fs, r.time_s, r.voltage_V, s, {}, "zoh", dict(meta))
         for r, s in zip(recs, noisy, strict=True)
     ]
+
+
+def contention() -> float:
+    """How many times longer than its CPU time a piece of work takes on the wall clock now
+    (at least 1): the larger of the machine's load per core (1-minute average) and the
+    wall-clock over CPU time of a short numpy sort timed here. On a free core 1; three test
+    workers on two cores about 1.5; a machine at load 10 on 2 cores about 5."""
+    work = np.random.default_rng(0).random(100_000)
+    w0, c0 = time.perf_counter(), time.process_time()
+    for _ in range(4):
+        np.sort(work)
+    wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+    per_core = os.getloadavg()[0] / (os.cpu_count() or 1)
+    return max(1.0, per_core, wall / max(cpu, 1e-6))
+
+
+def slack(seconds: float) -> float:
+    """A wall-clock margin of ``seconds`` on a free machine, stretched by :func:`contention`:
+    for the bounds of tests on timing (a server answers, stops or gives up within its margin)
+    that must hold on a loaded machine without becoming unbounded (a hang still fails)."""
+    return seconds * contention()
 
 
 def children_cpu_s() -> float:

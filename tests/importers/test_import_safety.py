@@ -18,6 +18,7 @@ from labrig.importers.limits import MAX_STRUCT_DEPTH
 from labrig.store import read_run
 
 from helpers import invoke as run_cli
+from helpers import slack
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "import"
 
@@ -160,7 +161,7 @@ def test_truncated_or_zeroed_v73_is_exit_2_quickly(tmp_path: Path, cut: int) -> 
     for f in (truncated, zeroed):
         t0 = time.monotonic()
         res = invoke("import", f, "--out", tmp_path / "r.h5", "--time", "t")
-        assert time.monotonic() - t0 < 10
+        assert time.monotonic() - t0 < slack(10.0)
         assert res.exit_code == 2, res.output
         assert f.name in res.output and "Traceback" not in res.output
 
@@ -182,7 +183,7 @@ def test_isolated_reader_times_out_and_reports_crashes() -> None:
     t0 = time.monotonic()
     with pytest.raises(ReaderError, match=r"longer than 0\.3 s"):
         call_isolated(_sleep, 30.0, timeout_s=0.3)
-    assert time.monotonic() - t0 < 5
+    assert time.monotonic() - t0 < slack(5.0)
     with pytest.raises(ReaderError, match="crashed"):
         call_isolated(_crash, timeout_s=5)
     with pytest.raises(ReaderError, match="boom"):
