@@ -339,4 +339,3 @@ def _message(stream: IO[bytes] | None, deadline: float | None) -> bytes | None:
     if not head:
         return head
     return _receive(fd, deadline, _LENGTH.unpack(head)[0])
-
