@@ -78,6 +78,7 @@ from labrig.drivers.sim.structural import (
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from labrig.model.accel import stream_engine
 from labrig.rig.instruments import TEMPERATURE_V_PER_DEGC, converter_step_V
 from labrig.rig.limits import RigLimits
 
@@ -252,13 +253,16 @@ class _Chain:
     thermal: Thermal | None
     retardation: Retardation | None = None
     extra: dict = field(default_factory=dict)
+    #: the model code the truth and the amplifier's average current run on, fixed for the
+    #: chain (:func:`labrig.model.accel.stream_engine`)
+    engine: str = "numpy"
 
 
 @functools.lru_cache(maxsize=8)
 def average_current_bank(k: float) -> DiscreteBank:
     """The amplifier's average current, ``i_avg[n] = (1 - k) i_avg[n-1] + k |i[n]|``, as one
-    first-order mode of the model's modal bank (compiled; scipy.signal's ``lfilter`` costs a
-    second of import). Kept per ``k`` (a rate and an averaging time): the bank keeps the forms
+    first-order mode of the model's modal bank (scipy.signal's ``lfilter`` costs a second of
+    import). Kept per ``k`` (a rate and an averaging time): the bank keeps the forms
     it derives for its runs, and a run has hundreds of blocks."""
     from labrig.model.modal import DiscreteBank
 
@@ -300,6 +304,13 @@ class VirtualBench:
         self.set_rate(rate_hz)
 
     # -- derived parameters --------------------------------------------------------------------
+    @property
+    def engine(self) -> str:
+        """The model code the bench runs: ``"numpy"``, or ``"compiled"`` when numba's kernels
+        were already loaded in this process when the bench was made
+        (:func:`labrig.model.accel.stream_engine`)."""
+        return self._chain.engine if self._chain is not None else stream_engine()
+
     @property
     def allowed_range_V(self) -> tuple[float, float]:
         """Output range the simulated amplifier allows VMI/VMA (and so SVA) within (V): the
@@ -344,14 +355,16 @@ class VirtualBench:
             if self._chain is not None and self._chain.rate_hz == rate_hz:
                 return
             c = self.config
+            engine = stream_engine()
             if c.truth.preset == "paper":
                 from labrig.model import DynamicHysteresisModel
 
-                truth = DynamicHysteresisModel(c.truth.model_params()).stream(rate_hz)
+                model = DynamicHysteresisModel(c.truth.model_params())
+                truth = model.stream(rate_hz, engine=engine)
             else:
                 from labrig.drivers.sim.hybrid import HybridPlant
 
-                truth = HybridPlant(c.truth.hybrid, rate_hz)
+                truth = HybridPlant(c.truth.hybrid, rate_hz, engine=engine)
             lp = c.effect(ConditionerLowpass)
             creep = c.effect(LogCreep)
             mode = c.effect(ViscoelasticMode)
@@ -363,6 +376,7 @@ class VirtualBench:
                 creep=Creep(creep, rate_hz) if creep else None,
                 thermal=Thermal(self._heat_cfg, rate_hz) if self._heat_cfg else None,
                 retardation=Retardation(mode, rate_hz) if mode else None,
+                engine=engine,
             )
             self._chain.extra = self._structural_chain(rate_hz)
             if self._chain.thermal is not None and self.last.get("temperature_degC"):
@@ -444,7 +458,10 @@ class VirtualBench:
             # vectorised when nothing limits: below the peak rating, average never above its own
             from labrig.model.modal import run_bank
 
-            i_avg, _ = run_bank(average_current_bank(k), i_unl, state=[np.array([a.i_avg])])
+            engine = self._chain.engine if self._chain is not None else "numpy"
+            i_avg, _ = run_bank(
+                average_current_bank(k), i_unl, state=[np.array([a.i_avg])], engine=engine
+            )
             if float(np.max(i_avg)) <= i_av:
                 a.i_avg = float(i_avg[-1])
                 return cmd, False, False

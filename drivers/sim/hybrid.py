@@ -67,9 +67,10 @@ def eq11_discrete(rate_hz: float) -> tuple[NDArray[np.float64], NDArray[np.float
 class HybridPlant:
     """Block-by-block evaluation of the hybrid plant: voltage (V) to strain (ue), at rest at 0 V."""
 
-    def __init__(self, params: HybridParams, rate_hz: float):
+    def __init__(self, params: HybridParams, rate_hz: float, engine: str = "auto"):
         self.params = params
         self.rate_hz = float(rate_hz)
+        self.engine = engine  # the operator's code (QuasiStaticHysteresis.apply)
         self.operator = QuasiStaticHysteresis(
             params.alpha0_ue_per_V, params.gamma_ue_per_V, params.vc_V, "exponential"
         )
@@ -86,7 +87,7 @@ class HybridPlant:
         """Quasi-static strain ``S_stat`` (ue), advancing the hysteresis states."""
         v = np.asarray(v_block, dtype=float)
         p = self.params
-        lin = self.operator.apply(v, self._hyst)
+        lin = self.operator.apply(v, self._hyst, engine=self.engine)
         h, self._h = bouc_wen_stream(
             v, self._h, self._v_prev, p.bw_A_ue_per_V, p.bw_beta_per_V, p.bw_gamma_per_V
         )

@@ -84,10 +84,12 @@ class Simulators:
         self._clock_stop = threading.Event()
 
     def start(self) -> Simulators:
-        # the truth's compiled kernels, and scipy.signal when the bench filters (a second of
-        # import CPU), loaded before any server answers: a first block or a filter setting
+        # the truth's compiled kernels (when the bench runs them: numba already in the process,
+        # labrig.model.accel.stream_engine), and scipy.signal when the bench filters (a second
+        # of import CPU), loaded before any server answers: a first block or a filter setting
         # must not hold the bench past a driver's answer timeout
-        warm_model()
+        if self.bench.engine == "compiled":
+            warm_model()
         if self._filters:
             import scipy.signal  # noqa: F401
         kinds = {"gcs": self.gcs, "modbus_tcp": self.modbus_tcp, "modbus_rtu": self.modbus_rtu}

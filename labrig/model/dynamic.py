@@ -139,7 +139,7 @@ class DynamicHysteresisModel:
         )[0]  # fmt: skip
         return out
 
-    def stream(self, rate_hz: float, hold: str = "zoh") -> ModelStream:
+    def stream(self, rate_hz: float, hold: str = "zoh", engine: str = "auto") -> ModelStream:
         """A stateful evaluator for records that arrive in blocks (simulators, control loops).
 
         Parameters
@@ -148,13 +148,15 @@ class DynamicHysteresisModel:
             Sample rate (Hz).
         hold : {"zoh", "linear"}
             How the voltage behaves between samples.
+        engine : {"auto", "compiled", "numpy"}
+            Which code runs (:meth:`HysteresisOperator.apply`; ``"numpy"`` never loads numba).
 
         Returns
         -------
         ModelStream
             At rest at 0 V.
         """
-        return ModelStream(self, rate_hz, hold)
+        return ModelStream(self, rate_hz, hold, engine)
 
 
 def _fresh(bank: DiscreteBank) -> tuple:
@@ -182,6 +184,9 @@ class ModelStream:
         Sample rate (Hz).
     hold : {"zoh", "linear"}
         How the voltage behaves between samples.
+    engine : {"auto", "compiled", "numpy"}
+        Which code runs: ``"auto"`` compiled when numba is available; ``"numpy"`` never loads
+        numba (the simulated rig's choice, :func:`labrig.model.accel.stream_engine`).
 
     Examples
     --------
@@ -195,11 +200,16 @@ class ModelStream:
     True
     """
 
-    def __init__(self, model: DynamicHysteresisModel, rate_hz: float, hold: str = "zoh"):
+    def __init__(
+        self, model: DynamicHysteresisModel, rate_hz: float, hold: str = "zoh", engine: str = "auto"
+    ):
         self.model = model
         self._bank_t = model.g_t.bank(rate_hz, hold)
         self._bank_d = model.g_d.bank(rate_hz, "linear")
-        self._kern = model.operator._kernels("auto")
+        self._kern = model.operator._kernels(engine)
+        # the banks' engine when the operator runs its numpy code: a user shape (no compiled
+        # operator) keeps the compiled banks unless "numpy" was asked for
+        self._bank_engine = "numpy" if engine == "numpy" else "auto"
         self.reset()
 
     def reset(self) -> None:
@@ -230,10 +240,11 @@ class ModelStream:
         if v.size == 0:
             return np.zeros(0)
         if self._kern is None:
-            vt, self._xt = run_bank(self._bank_t, v, self._xt, self._v_prev)
-            vd, self._xd = run_bank(self._bank_d, vt, self._xd, self._vt_prev)
+            eng = self._bank_engine
+            vt, self._xt = run_bank(self._bank_t, v, self._xt, self._v_prev, engine=eng)
+            vd, self._xd = run_bank(self._bank_d, vt, self._xd, self._vt_prev, engine=eng)
             self._v_prev, self._vt_prev = float(v[-1]), float(vt[-1])
-            return self.model.operator.apply(vd, self._hyst)
+            return self.model.operator.apply(vd, self._hyst, engine="numpy")
         if not np.all(np.isfinite(v)):
             raise ValueError("the voltage record must be finite (found NaN or infinity)")
         op, st = self.model.operator, self._hyst

@@ -317,27 +317,75 @@ def test_which_benches_load_scipy_signal():
 
 
 def test_simulators_load_what_a_reply_needs_before_answering():
-    """Before any server answers, the simulators have loaded what a reply may need: the
-    compiled bank that runs the amplifier's average current (a first block must not compile
-    it, seconds on a new machine, past a driver's 1 s timeout: no kernel signature is added by
-    the block), and scipy.signal only when the bench filters (a paper-truth bench without a
-    filter runs without it; a rig setting the conditioner's low-pass has it at start)."""
+    """Before any server answers, the simulators have loaded what a reply may need. In a
+    process without numba's kernels the bench runs the model's numpy code and never imports
+    numba (its start costs more than a short run, seconds on a new machine); in a process that
+    has loaded them (a fleet simulation) the compiled bank of the amplifier's average current is
+    loaded at start (a first block must not compile it past a driver's 1 s timeout: no kernel
+    signature is added by the block). scipy.signal is loaded only when the bench filters (a
+    paper-truth bench without a filter runs without it; a rig setting the conditioner's
+    low-pass has it at start)."""
     code = (
         "import sys, numpy as np\n"
         "from labrig.drivers.sim.bench import BenchConfig\n"
         "from labrig.drivers.sim.serve import Simulators\n"
-        "from labrig.model import compiled\n"
-        "for hz in (0.0, 1.0):\n"
+        "def served(hz):\n"
         "    sims = Simulators(BenchConfig(), conditioner_filter_hz=hz).start()\n"
-        "    n = len(compiled.bank_run.signatures)\n"
+        "    before = signatures()\n"
         "    try:\n"
         "        sims.bench.step(np.linspace(0.0, 5.0, 3000))\n"
         "    finally:\n"
         "        sims.stop()\n"
-        "    print(n, len(compiled.bank_run.signatures), 'scipy.signal' in sys.modules)\n"
+        "    return sims.bench.engine, before, signatures(), 'scipy.signal' in sys.modules\n"
+        "def signatures():\n"
+        "    mod = sys.modules.get('labrig.model.compiled')\n"
+        "    return -1 if mod is None else len(mod.bank_run.signatures)\n"
+        "print(*served(0.0), 'numba' in sys.modules)\n"
+        "from labrig.model.accel import kernels\n"
+        "assert kernels() is not None\n"
+        "for hz in (0.0, 1.0):\n"
+        "    print(*served(hz))\n"
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
-    first, second = (line.split() for line in res.stdout.splitlines())
-    assert first[0] == first[1] != "0" and first[2] == "False"
-    assert second[0] == second[1] and second[2] == "True"
+    alone, first, second = (line.split() for line in res.stdout.splitlines())
+    assert alone == ["numpy", "-1", "-1", "False", "False"]
+    assert first[0] == "compiled" and first[1] == first[2] != "0" and first[3] == "False"
+    assert second[0] == "compiled" and second[1] == second[2] and second[3] == "True"
+
+
+@pytest.mark.parametrize("truth", ["paper", "hybrid"])
+def test_the_bench_gives_the_same_record_on_either_engine(truth):
+    """The bench runs its model on the numpy code unless numba's kernels are already loaded in
+    the process (labrig.model.accel.stream_engine); the two records agree. With ideal
+    converters the strain differs by under 1e-10 of full scale (rounding, and the compiled
+    stream keeping fewer relaxor modes, within 1e-12 of the input's scale); with the default
+    16-bit converters the recorded codes are equal. Blocks of 100 samples, as the DAQ plays
+    them."""
+    from labrig.model import accel
+
+    rate = 10_000.0
+    v = unipolar(100.0, 10.0, rate, 1.0) / 10.0  # AO volts (gain 10)
+    v[5000:] = np.minimum(v[5000:], 2.0)  # a partial return: minor loops in the operator
+
+    def record(config: BenchConfig, engine: str) -> dict:
+        accel.reset()
+        if engine == "compiled":
+            assert accel.kernels() is not None
+        bench = VirtualBench(config, seed=3, rate_hz=rate)
+        assert bench.engine == engine
+        parts = [bench.step(v[i : i + 100]) for i in range(0, v.size, 100)]
+        return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+    try:
+        ideal = BenchConfig.ideal(truth)
+        a, b = record(ideal, "numpy"), record(ideal, "compiled")
+        scale = float(np.max(np.abs(a["gauge"])))
+        assert scale > 0.1
+        np.testing.assert_allclose(a["gauge"], b["gauge"], rtol=0, atol=1e-10 * scale)
+        plain = BenchConfig(truth={"preset": truth})
+        a, b = record(plain, "numpy"), record(plain, "compiled")
+        for name in a:
+            np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    finally:
+        accel.reset()
