@@ -59,10 +59,9 @@ def kernels() -> ModuleType | None:
 def loaded() -> bool:
     """Whether this process has already loaded the compiled kernels (without loading them).
 
-    A caller whose work is small next to numba's start (about 1.2 s of CPU per process: its
-    import and its first kernel loads; tens of seconds on a machine whose cache is empty) runs
-    the numpy code unless the kernels are already there, e.g. the simulated rig
-    (:func:`labrig.model.accel.stream_engine`).
+    A caller whose work is small next to numba's start (its import and first kernel loads,
+    once per process; a compilation on a machine whose cache is empty) runs the numpy code
+    unless the kernels are already there: the simulated rig (:func:`stream_engine`).
 
     Returns
     -------
@@ -76,10 +75,10 @@ def stream_engine() -> str:
     """The engine for a model run block by block alongside other work (the simulated rig):
     ``"compiled"`` when the kernels are already loaded in this process, else ``"numpy"``.
 
-    The numpy code evaluates a stream at about 1e6 samples per CPU second in 100-sample blocks
-    (the compiled code about 3e6), so it is the cheaper choice for any run shorter than about
-    1.6e6 samples when the kernels would be loaded for it alone; a job that simulates many
-    campaigns in one process (``labrig sim fleet``) loads them first. The two engines agree to
+    The numpy code costs more per block than the compiled code but needs no start, so it is
+    the cheaper choice for a short run; a run long enough to repay numba's start
+    (:data:`labrig.runner.execute.LONG_SIMULATION_S`) and a job that simulates many campaigns
+    in one process (``labrig sim fleet``) load the kernels first. The two engines agree to
     rounding, below one code of the simulated converters.
 
     Returns

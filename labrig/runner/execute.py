@@ -39,6 +39,7 @@ from labrig.core.metadata import RunMetadata, combine
 from labrig.core.outputs import Staged, check_outputs, never_an_output, stage
 from labrig.core.seeds import check_seed
 from labrig.core.version import __version__
+from labrig.model.accel import kernels
 from labrig.protocol.check import load_plan
 from labrig.protocol.plan import Plan, PlannedStep
 from labrig.protocol.preflight import preflight as check_plan
@@ -55,12 +56,18 @@ from labrig.store.space import DISK_FULL, RESERVE_BYTES, is_disk_full
 
 #: acquisition block length (s): the most a crash can lose
 BLOCK_S = 0.1
+#: protocol time (s, rests included) above which a run on a simulated rig loads numba's
+#: compiled kernels before the rig opens, so its bench runs the model on them: the run repays
+#: their start; below it the bench's numpy code costs less (:func:`labrig.model.accel.
+#: stream_engine`; the measurements in docs/instruments.md)
+LONG_SIMULATION_S = 150.0
 #: device health (amplifier and conditioner status) is checked at least this often during a
 #: step or a rest, in protocol time (s), and at the end of every step
 STATUS_CHECK_S = 1.0
 
 __all__ = [
     "BLOCK_S",
+    "LONG_SIMULATION_S",
     "RAMP_CURRENT_FRACTION",
     "STATUS_CHECK_S",
     "DeviceError",
@@ -372,6 +379,8 @@ def execute(
         check_run_output(plan, rig_path, out, overwrite, inputs)
     with interrupt_once() as guard:
         # a stop signal here: open_rig closes what it opened (looked up now: a test seam)
+        if opener is None and _long_simulation(job):
+            kernels()  # before the bench is made (None without numba: it runs its numpy code)
         rig = (opener or open_rig)(rig_path, seed)
         try:
             with guard.defer():
@@ -379,6 +388,12 @@ def execute(
         finally:
             with guard.defer():
                 rig.close()
+
+
+def _long_simulation(job: _Job) -> bool:
+    """The job runs a simulated rig for more than :data:`LONG_SIMULATION_S` of protocol time."""
+    seconds = sum(st.duration_s + st.rest_after_s for st in job.steps)
+    return seconds > LONG_SIMULATION_S and load_rig(job.rig_path).simulated
 
 
 @dataclass
