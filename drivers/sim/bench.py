@@ -253,9 +253,6 @@ class _Chain:
     thermal: Thermal | None
     retardation: Retardation | None = None
     extra: dict = field(default_factory=dict)
-    #: the model code the truth and the amplifier's average current run on, fixed for the
-    #: chain (:func:`labrig.model.accel.stream_engine`)
-    engine: str = "numpy"
 
 
 @functools.lru_cache(maxsize=8)
@@ -284,6 +281,10 @@ class VirtualBench:
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self.lock = threading.RLock()
+        # fixed for the bench's life: a chain rebuilt at another rate later must not start
+        # compiled kernels that the simulators' start did not load (a first block would hold
+        # the bench past a driver's answer timeout while they load)
+        self._engine = stream_engine()
         c = self.config
         lo, hi = self.allowed_range_V
         self.amp = AmplifierState(vmi_V=lo, vma_V=hi)  # the rig's limits from power-on
@@ -309,7 +310,7 @@ class VirtualBench:
         """The model code the bench runs: ``"numpy"``, or ``"compiled"`` when numba's kernels
         were already loaded in this process when the bench was made
         (:func:`labrig.model.accel.stream_engine`)."""
-        return self._chain.engine if self._chain is not None else stream_engine()
+        return self._engine
 
     @property
     def allowed_range_V(self) -> tuple[float, float]:
@@ -355,7 +356,7 @@ class VirtualBench:
             if self._chain is not None and self._chain.rate_hz == rate_hz:
                 return
             c = self.config
-            engine = stream_engine()
+            engine = self._engine
             if c.truth.preset == "paper":
                 from labrig.model import DynamicHysteresisModel
 
@@ -376,7 +377,6 @@ class VirtualBench:
                 creep=Creep(creep, rate_hz) if creep else None,
                 thermal=Thermal(self._heat_cfg, rate_hz) if self._heat_cfg else None,
                 retardation=Retardation(mode, rate_hz) if mode else None,
-                engine=engine,
             )
             self._chain.extra = self._structural_chain(rate_hz)
             if self._chain.thermal is not None and self.last.get("temperature_degC"):
@@ -458,9 +458,8 @@ class VirtualBench:
             # vectorised when nothing limits: below the peak rating, average never above its own
             from labrig.model.modal import run_bank
 
-            engine = self._chain.engine if self._chain is not None else "numpy"
             i_avg, _ = run_bank(
-                average_current_bank(k), i_unl, state=[np.array([a.i_avg])], engine=engine
+                average_current_bank(k), i_unl, state=[np.array([a.i_avg])], engine=self._engine
             )
             if float(np.max(i_avg)) <= i_av:
                 a.i_avg = float(i_avg[-1])

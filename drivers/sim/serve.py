@@ -26,6 +26,7 @@ from labrig.drivers.sim.modbus_server import ModbusConditionerServer
 
 from labrig.core.errors import InputFileError, InputIssue, LabrigError
 from labrig.core.interrupts import interrupt_once
+from labrig.model.accel import kernels
 from labrig.model.warm import warm as warm_model
 from labrig.rig.limits import RigLimits
 from labrig.rig.rigspec import RigSpec, load_rig
@@ -152,6 +153,9 @@ def serve(rig_path: Path | None) -> None:
     and run until Ctrl-C, SIGTERM, SIGHUP or SIGQUIT (each stops the servers and frees their
     ports)."""
     spec = load_rig(rig_path)
+    # a server with no set end: its clock steps the bench 20 times a second for as long as it
+    # runs, which repays numba's start within minutes (accel.stream_engine)
+    kernels()
     with interrupt_once():
         try:
             sims = Simulators(

@@ -13,6 +13,7 @@ import ctypes
 import functools
 import glob
 import os
+import threading
 from collections.abc import Iterator
 from types import ModuleType
 from typing import Any
@@ -48,18 +49,37 @@ def _openblas_libs() -> list[tuple[Any, Any, Any]]:
     return out
 
 
+#: the thread count each OpenBLAS copy had when the outermost block began, and how many blocks
+#: (in any thread) are open: the count is set to 1 by the first and restored by the last, so
+#: blocks that overlap in several threads (a simulated bench stepping in its servers' threads
+#: while a fit runs) never restore a 1 another block set
+_saved: list[tuple[Any, int]] = []
+_depth = 0
+_lock = threading.Lock()
+
+
 @contextlib.contextmanager
 def single_thread_blas() -> Iterator[None]:
-    """Run the block with one OpenBLAS thread (restored afterwards); a no-op if not found."""
-    libs = []
-    try:
-        libs = [(s, g()) for _, s, g in _openblas_libs()]
-        for s, _ in libs:
-            s(1)
-    except Exception:  # pragma: no cover - BLAS without the symbols: leave it alone
-        libs = []
+    """Run the block with one OpenBLAS thread (restored afterwards); a no-op if not found.
+
+    Thread-safe: the setting is process-wide, so it is made by the first of overlapping blocks
+    (in any threads) and undone by the last."""
+    global _depth
+    with _lock:
+        if _depth == 0:
+            try:
+                _saved[:] = [(s, int(g())) for _, s, g in _openblas_libs()]
+                for s, _ in _saved:
+                    s(1)
+            except Exception:  # pragma: no cover - BLAS without the symbols: leave it alone
+                _saved.clear()
+        _depth += 1
     try:
         yield
     finally:
-        for s, n in libs:
-            s(int(n))
+        with _lock:
+            _depth -= 1
+            if _depth == 0:
+                for s, n in _saved:
+                    s(n)
+                _saved.clear()

@@ -389,3 +389,26 @@ def test_the_bench_gives_the_same_record_on_either_engine(truth):
             np.testing.assert_array_equal(a[name], b[name], err_msg=name)
     finally:
         accel.reset()
+
+
+def test_the_engine_is_kept_when_the_rate_changes():
+    """A bench made without numba's kernels keeps the numpy code when its chain is rebuilt at
+    another rate after the kernels were loaded (a first compiled block could otherwise wait on
+    their loading while holding the bench, past a driver's answer timeout): the record is that
+    of a numpy bench made at the new rate, sample for sample."""
+    from labrig.model import accel
+
+    v = unipolar(100.0, 10.0, 2000.0, 0.5) / 10.0
+    try:
+        accel.reset()
+        bench = VirtualBench(BenchConfig.ideal(), seed=3, rate_hz=1000.0)
+        assert accel.kernels() is not None
+        bench.set_rate(2000.0)
+        assert bench.engine == "numpy"
+        got = np.concatenate([bench.step(v[i : i + 100])["gauge"] for i in range(0, v.size, 100)])
+        accel.reset()
+        ref = VirtualBench(BenchConfig.ideal(), seed=3, rate_hz=2000.0)
+        want = np.concatenate([ref.step(v[i : i + 100])["gauge"] for i in range(0, v.size, 100)])
+        np.testing.assert_array_equal(got, want)
+    finally:
+        accel.reset()
