@@ -258,8 +258,8 @@ class _Chain:
 @functools.lru_cache(maxsize=8)
 def average_current_bank(k: float) -> DiscreteBank:
     """The amplifier's average current, ``i_avg[n] = (1 - k) i_avg[n-1] + k |i[n]|``, as one
-    first-order mode of the model's modal bank (scipy.signal's ``lfilter`` costs a second of
-    import). Kept per ``k`` (a rate and an averaging time): the bank keeps the forms
+    first-order mode of the model's modal bank (rather than scipy.signal's ``lfilter``, a
+    heavy import). Kept per ``k`` (a rate and an averaging time): the bank keeps the forms
     it derives for its runs, and a run has hundreds of blocks."""
     from labrig.model.modal import DiscreteBank
 
@@ -614,4 +614,5 @@ class VirtualBench:
             "config": self.config.model_dump(mode="json"),
             "c_eff_F": self.c_eff_F,
             "current_ratings_A": list(self.current_ratings_A),
+            "model_engine": self._engine,
         }

@@ -153,10 +153,10 @@ def serve(rig_path: Path | None) -> None:
     and run until Ctrl-C, SIGTERM, SIGHUP or SIGQUIT (each stops the servers and frees their
     ports)."""
     spec = load_rig(rig_path)
-    # a server with no set end: its clock steps the bench 20 times a second for as long as it
-    # runs, which repays numba's start within minutes (accel.stream_engine)
-    kernels()
     with interrupt_once():
+        # a server with no set end: its clock steps the bench 20 times a second for as long as
+        # it runs, which repays numba's start within minutes (accel.stream_engine)
+        kernels()
         try:
             sims = Simulators(
                 spec.bench_config or BenchConfig(), spec.limits, spec.seed_hint, spec.sim_ports

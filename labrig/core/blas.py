@@ -58,6 +58,22 @@ _depth = 0
 _lock = threading.Lock()
 
 
+def _after_fork_in_child() -> None:
+    """A forked child (the analysis workers of :mod:`labrig.analysis.parallel`) has only the
+    forking thread: the blocks other threads had open are not its own, and the lock, held
+    across the fork, is released (the count it inherited stays as it was)."""
+    global _depth
+    _saved.clear()
+    _depth = 0
+    _lock.release()
+
+
+if hasattr(os, "register_at_fork"):  # POSIX: never fork while another thread holds the lock
+    os.register_at_fork(
+        before=_lock.acquire, after_in_parent=_lock.release, after_in_child=_after_fork_in_child
+    )
+
+
 @contextlib.contextmanager
 def single_thread_blas() -> Iterator[None]:
     """Run the block with one OpenBLAS thread (restored afterwards); a no-op if not found.

@@ -199,8 +199,8 @@ def write_fleet(
     setup = out / "setup"
     setup.mkdir(parents=True, exist_ok=True)
     if n > 1:
-        # many campaigns in one process: numba's start (~1.2 s of CPU) repays itself, and the
-        # simulated rig runs the compiled model once it is loaded (accel.stream_engine)
+        # many campaigns in one process: numba's start repays itself, and the simulated rig
+        # runs the compiled model once it is loaded (accel.stream_engine)
         from labrig.model.accel import kernels
 
         kernels()

@@ -3,7 +3,7 @@
 The hot loops of the model (the hysteresis operator's sequential pass, the relaxor banks'
 recursion) are compiled with numba in :mod:`labrig.model.compiled`. numba is imported only
 when a kernel is first needed, never when ``labrig`` or ``labrig.model`` is imported, so the
-command line starts as fast as before (its import alone costs ~0.3 s of CPU).
+command line starts without it (what its start costs: benchmarks/RESULTS.md).
 
 Compiled machine code is cached on disk (``@njit(cache=True)``): numba writes it to the
 ``__pycache__`` folder beside ``compiled.py`` when that folder is writable, else to its
@@ -18,7 +18,6 @@ caller then runs its numpy code, which gives the same results.
 from __future__ import annotations
 
 import functools
-import sys
 import warnings
 from types import ModuleType
 
@@ -68,7 +67,7 @@ def loaded() -> bool:
     bool
         ``True`` when :func:`kernels` has returned the compiled module in this process.
     """
-    return kernels.cache_info().currsize > 0 and "labrig.model.compiled" in sys.modules
+    return kernels.cache_info().currsize > 0 and kernels() is not None  # the cached answer
 
 
 def stream_engine() -> str:
@@ -77,9 +76,11 @@ def stream_engine() -> str:
 
     The numpy code costs more per block than the compiled code but needs no start, so it is
     the cheaper choice for a short run; a run long enough to repay numba's start
-    (:data:`labrig.runner.execute.LONG_SIMULATION_S`) and a job that simulates many campaigns
-    in one process (``labrig sim fleet``) load the kernels first. The two engines agree to
-    rounding, below one code of the simulated converters.
+    (:func:`labrig.runner.execute.repays_kernels`), a job that simulates many campaigns in one
+    process (``labrig sim fleet``) and a server with no set end (``labrig sim serve``) load the
+    kernels first. The two engines' records agree to 1e-10 of full scale (the compiled stream
+    keeps fewer relaxor modes; tests/drivers/test_sim_physics.py), below one code of the
+    simulated converters.
 
     Returns
     -------

@@ -149,7 +149,7 @@ class DynamicHysteresisModel:
         hold : {"zoh", "linear"}
             How the voltage behaves between samples.
         engine : {"auto", "compiled", "numpy"}
-            Which code runs (:meth:`HysteresisOperator.apply`; ``"numpy"`` never loads numba).
+            Which code runs (:meth:`QuasiStaticHysteresis.apply`; ``"numpy"`` never loads numba).
 
         Returns
         -------
@@ -239,14 +239,14 @@ class ModelStream:
         v = np.ascontiguousarray(v_block, dtype=np.float64)
         if v.size == 0:
             return np.zeros(0)
+        if not np.all(np.isfinite(v)):  # before any state moves
+            raise ValueError("the voltage record must be finite (found NaN or infinity)")
         if self._kern is None:
             eng = self._bank_engine
             vt, self._xt = run_bank(self._bank_t, v, self._xt, self._v_prev, engine=eng)
             vd, self._xd = run_bank(self._bank_d, vt, self._xd, self._vt_prev, engine=eng)
             self._v_prev, self._vt_prev = float(v[-1]), float(vt[-1])
             return self.model.operator.apply(vd, self._hyst, engine="numpy")
-        if not np.all(np.isfinite(v)):
-            raise ValueError("the voltage record must be finite (found NaN or infinity)")
         op, st = self.model.operator, self._hyst
         xs = np.array([p[0] for p in st.older] + [st.u_s], dtype=np.float64)
         ys = np.array([p[1] for p in st.older] + [st.s_s], dtype=np.float64)

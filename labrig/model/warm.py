@@ -10,7 +10,7 @@ from labrig.model.accel import kernels
 @functools.cache
 def warm() -> bool:
     """Load the compiled kernels a streaming simulation uses (numba's import and each kernel's
-    cached machine code, about 0.5-1 s of CPU the first time in a process) now, not on the
+    cached machine code, once per process) now, not on the
     first block: a simulator that answers its instruments' queries within a timeout must not
     pause for it mid-dialogue. Returns whether the kernels are compiled.
 

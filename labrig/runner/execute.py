@@ -56,18 +56,21 @@ from labrig.store.space import DISK_FULL, RESERVE_BYTES, is_disk_full
 
 #: acquisition block length (s): the most a crash can lose
 BLOCK_S = 0.1
-#: protocol time (s, rests included) above which a run on a simulated rig loads numba's
-#: compiled kernels before the rig opens, so its bench runs the model on them: the run repays
-#: their start; below it the bench's numpy code costs less (:func:`labrig.model.accel.
-#: stream_engine`; the measurements in docs/instruments.md)
-LONG_SIMULATION_S = 150.0
+#: the cost rule of :func:`repays_kernels`: numba's start (CPU s per process) against what the
+#: simulated bench's numpy code costs over the compiled code per block and per sample (CPU s;
+#: measured in benchmarks/RESULTS.md, "Seventeenth round")
+NUMBA_START_S = 1.2
+NUMPY_BLOCK_S = 0.7e-3
+NUMPY_SAMPLE_S = 0.2e-6
 #: device health (amplifier and conditioner status) is checked at least this often during a
 #: step or a rest, in protocol time (s), and at the end of every step
 STATUS_CHECK_S = 1.0
 
 __all__ = [
     "BLOCK_S",
-    "LONG_SIMULATION_S",
+    "NUMBA_START_S",
+    "NUMPY_BLOCK_S",
+    "NUMPY_SAMPLE_S",
     "RAMP_CURRENT_FRACTION",
     "STATUS_CHECK_S",
     "DeviceError",
@@ -77,9 +80,11 @@ __all__ = [
     "default_out_path",
     "execute",
     "interrupt_once",
+    "numpy_excess_s",
     "open_rig",
     "preflight",
     "ramp_to_zero",
+    "repays_kernels",
     "run_inputs",
 ]
 
@@ -357,8 +362,9 @@ def execute(
     then ignored). ``on_file(path)`` is called once the run file exists, with the path being
     written (a copy beside the target with ``overwrite`` or ``resume``). ``inputs``: other
     files the command reads, never the run file (:func:`check_run_output`). ``opener``:
-    opens the rig (default :func:`~labrig.runner.rigfile.open_rig`; tests pass one that
-    records).
+    opens the rig (default :func:`~labrig.runner.rigfile.open_rig`, after loading numba's
+    kernels for a simulated run that repays them, :func:`repays_kernels`; tests pass one that
+    records, and nothing is preloaded for it).
 
     Called from the main thread, SIGINT, SIGTERM, SIGHUP and SIGQUIT stop the run once:
     repeats are ignored until the output is at 0 V and the file is closed (see
@@ -390,10 +396,28 @@ def execute(
                 rig.close()
 
 
+def numpy_excess_s(steps: Sequence[PlannedStep]) -> float:
+    """What the simulated bench's numpy code would cost over the compiled code to play
+    ``steps`` and their rests (CPU s): :data:`NUMPY_BLOCK_S` per block of :data:`BLOCK_S` plus
+    :data:`NUMPY_SAMPLE_S` per sample."""
+    out = 0.0
+    for st in steps:
+        seconds = st.duration_s + st.rest_after_s
+        out += seconds / BLOCK_S * NUMPY_BLOCK_S + seconds * st.rate_hz * NUMPY_SAMPLE_S
+    return out
+
+
+def repays_kernels(steps: Sequence[PlannedStep]) -> bool:
+    """Whether playing ``steps`` on a simulated rig repays numba's start: the numpy code's
+    excess (:func:`numpy_excess_s`) above :data:`NUMBA_START_S`. Such a run loads the compiled
+    kernels before its rig opens, so the bench runs the model on them
+    (:func:`labrig.model.accel.stream_engine`)."""
+    return numpy_excess_s(steps) > NUMBA_START_S
+
+
 def _long_simulation(job: _Job) -> bool:
-    """The job runs a simulated rig for more than :data:`LONG_SIMULATION_S` of protocol time."""
-    seconds = sum(st.duration_s + st.rest_after_s for st in job.steps)
-    return seconds > LONG_SIMULATION_S and load_rig(job.rig_path).simulated
+    """The job repays numba's start (:func:`repays_kernels`) on a simulated rig."""
+    return repays_kernels(job.steps) and load_rig(job.rig_path).simulated
 
 
 @dataclass

@@ -354,8 +354,22 @@ def test_simulators_load_what_a_reply_needs_before_answering():
     assert second[0] == "compiled" and second[1] == second[2] and second[3] == "True"
 
 
+@pytest.fixture
+def kernels_as_they_were():
+    """The process's compiled kernels loaded again after the test if they were before (the
+    tests below forget them to make numpy benches), so later benches of this worker run the
+    code they would have run without these tests."""
+    from labrig.model import accel
+
+    was = accel.loaded()
+    yield
+    accel.reset()
+    if was:
+        accel.kernels()
+
+
 @pytest.mark.parametrize("truth", ["paper", "hybrid"])
-def test_the_bench_gives_the_same_record_on_either_engine(truth):
+def test_the_bench_gives_the_same_record_on_either_engine(truth, kernels_as_they_were):
     """The bench runs its model on the numpy code unless numba's kernels are already loaded in
     the process (labrig.model.accel.stream_engine); the two records agree. With ideal
     converters the strain differs by under 1e-10 of full scale (rounding, and the compiled
@@ -391,7 +405,7 @@ def test_the_bench_gives_the_same_record_on_either_engine(truth):
         accel.reset()
 
 
-def test_the_engine_is_kept_when_the_rate_changes():
+def test_the_engine_is_kept_when_the_rate_changes(kernels_as_they_were):
     """A bench made without numba's kernels keeps the numpy code when its chain is rebuilt at
     another rate after the kernels were loaded (a first compiled block could otherwise wait on
     their loading while holding the bench, past a driver's answer timeout): the record is that

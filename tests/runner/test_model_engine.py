@@ -1,13 +1,18 @@
-"""Which code the simulated rig's model runs in a ``labrig run``: the numpy code for a run up to
-:data:`labrig.runner.execute.LONG_SIMULATION_S` of protocol time (numba is never imported),
-numba's compiled kernels for a longer one (loaded before the rig opens). docs/instruments.md,
-"Which code runs the truth"."""
+"""Which code the simulated rig's model runs in a ``labrig run``: the numpy code for a run whose
+numpy excess (:func:`labrig.runner.execute.numpy_excess_s`) stays within numba's start
+(numba is never imported), numba's compiled kernels for a longer one (loaded before the rig
+opens). docs/instruments.md, "Which code runs the truth"."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from labrig.runner import execute as ex
 
 from helpers import TINY
 
@@ -27,9 +32,9 @@ def recording_open(path, seed):
 ex.open_rig = recording_open
 proto, out = Path(sys.argv[1]), Path(sys.argv[2])
 plan, rig = ex.preflight(proto, None)
-seconds = sum(st.duration_s + st.rest_after_s for st in plan.steps)
-for n, threshold in enumerate((seconds, seconds - 1e-6)):  # at the threshold, then just over
-    ex.LONG_SIMULATION_S = threshold
+excess = ex.numpy_excess_s(plan.steps)
+for n, start in enumerate((excess, excess * (1 - 1e-9))):  # at the threshold, then just under
+    ex.NUMBA_START_S = start
     outcome = ex.execute(plan, rig, out.with_name(f"run{n}.h5"), seed=5)
     assert outcome.exit_code == 0, outcome.reason
     print(seen[-1], "numba" in sys.modules)
@@ -51,3 +56,23 @@ def test_a_run_over_the_threshold_runs_the_compiled_model_and_a_shorter_one_neve
     at, over = (line.split() for line in res.stdout.splitlines())
     assert at == ["numpy", "False"]
     assert over == ["compiled", "True"]
+
+
+def step(seconds: float, rest_s: float, rate_hz: float) -> SimpleNamespace:
+    return SimpleNamespace(duration_s=seconds, rest_after_s=rest_s, rate_hz=rate_hz)
+
+
+def test_the_excess_counts_blocks_and_samples() -> None:
+    # 100 s at 1 kHz with a 10 s rest: 1 100 blocks of 0.1 s and 110 000 samples
+    want = 1100 * ex.NUMPY_BLOCK_S + 110_000 * ex.NUMPY_SAMPLE_S
+    assert ex.numpy_excess_s([step(100.0, 10.0, 1000.0)]) == pytest.approx(want, rel=1e-12)
+    # the same time at 100 kHz: the same blocks, 100 times the samples
+    want = 1100 * ex.NUMPY_BLOCK_S + 11_000_000 * ex.NUMPY_SAMPLE_S
+    assert ex.numpy_excess_s([step(100.0, 10.0, 1e5)]) == pytest.approx(want, rel=1e-12)
+
+
+def test_a_short_sweep_runs_numpy_and_a_long_fast_record_repays_the_kernels() -> None:
+    # experiments/sweep.yaml's 69 s at 1 kHz; ten minutes at 1 kHz; one minute at 100 kHz
+    assert not ex.repays_kernels([step(42.0, 27.0, 1000.0)])
+    assert ex.repays_kernels([step(600.0, 0.0, 1000.0)])
+    assert ex.repays_kernels([step(60.0, 0.0, 1e5)])
