@@ -55,3 +55,48 @@ def test_blocks_overlapping_in_two_threads_restore_the_count_only_when_both_clos
         assert seen["a inside"] == [1] * len(before)
         assert seen["b inside after a closed"] == [1] * len(before)
         assert seen["after both"] == before
+
+
+@pytest.mark.timeout(30)
+def test_a_fork_while_another_thread_holds_the_setting_leaves_the_child_free() -> None:
+    """A forked child (the analysis workers fork) must not inherit the setting's lock held by
+    a thread that does not exist in it: another thread holds the lock for 0.3 s across the
+    moment the main thread forks; the child then opens and closes a block and exits. Without
+    the fork hooks the child waits on the lock forever (killed after 5 s here)."""
+    import os
+    import signal
+    import time
+
+    from labrig.core import blas
+
+    if not hasattr(os, "fork"):
+        pytest.skip("no os.fork on this platform")
+    held = threading.Event()
+
+    def hold() -> None:
+        with blas._lock:
+            held.set()
+            time.sleep(0.3)
+
+    t = threading.Thread(target=hold)
+    t.start()
+    assert held.wait(5)
+    pid = os.fork()
+    if pid == 0:  # the child: one block, then leave at once (no pytest teardown)
+        try:
+            with single_thread_blas():
+                pass
+        finally:
+            os._exit(0)
+    t.join(5)
+    deadline = time.monotonic() + 5.0
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        if time.monotonic() > deadline:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            pytest.fail("the forked child waited on the lock")
+        time.sleep(0.02)
+    assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
