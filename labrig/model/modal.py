@@ -340,8 +340,8 @@ def _block_matrices(bank: DiscreteBank, B: int) -> tuple:
 
 _CHUNK = 1 << 16  # samples per pass: keeps the working arrays in cache
 #: records shorter than this (samples) run without :func:`single_thread_blas`: their products
-#: are too small for OpenBLAS to use threads, and a simulated bench, stepping in its servers'
-#: threads, would otherwise change the process-wide setting several times per block
+#: are a few small matrices, and a simulated bench, stepping in its servers' threads, would
+#: otherwise change the process-wide setting several times per block
 SMALL_RECORD = 4096
 
 
@@ -400,7 +400,7 @@ def run_bank(
         y, st = run_bank_multi(bank, u[:, None], None, None if state is None else [state],
                                np.array([u_prev]), engine="compiled")  # fmt: skip
         return y[:, 0, 0], st[0]
-    if u.size < SMALL_RECORD:  # OpenBLAS runs products this small on one thread anyway
+    if u.size < SMALL_RECORD:
         return _run_bank(bank, u, state, u_prev, block)
     with single_thread_blas():
         return _run_bank(bank, u, state, u_prev, block)

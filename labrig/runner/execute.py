@@ -384,9 +384,9 @@ def execute(
         out = out or default_out_path(plan)
         check_run_output(plan, rig_path, out, overwrite, inputs)
     with interrupt_once() as guard:
-        # a stop signal here: open_rig closes what it opened (looked up now: a test seam)
         if opener is None and _long_simulation(job):
             kernels()  # before the bench is made (None without numba: it runs its numpy code)
+        # a stop signal here: open_rig closes what it opened (looked up now: a test seam)
         rig = (opener or open_rig)(rig_path, seed)
         try:
             with guard.defer():
