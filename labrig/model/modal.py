@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from labrig.core.blas import single_thread_blas
-from labrig.model.accel import kernels
+from labrig.model.accel import kernels, stream_engine
 
 HOLDS = ("zoh", "linear")
 ENGINES = ("auto", "compiled", "numpy")
@@ -404,6 +404,50 @@ def run_bank(
         return _run_bank(bank, u, state, u_prev, block)
     with single_thread_blas():
         return _run_bank(bank, u, state, u_prev, block)
+
+
+def first_order_filter(b: ArrayLike, a: ArrayLike, x: ArrayLike) -> NDArray[np.float64]:
+    """A first-order IIR filter at rest before the record, as ``scipy.signal.lfilter(b, a, x)``:
+
+        y[n] = (b[0] x[n] + b[1] x[n-1] - a[1] y[n-1]) / a[0]      (x[-1] = y[-1] = 0)
+
+    run as a one-mode bank (pole ``-a[1]/a[0]``), so the effects' lags need no import of
+    ``scipy.signal`` (about a second of CPU: it loads ``scipy.stats``). The compiled recursion
+    when the kernels are already loaded, else the numpy one
+    (:func:`labrig.model.accel.stream_engine`).
+
+    Parameters
+    ----------
+    b : array_like
+        Numerator ``[b0, b1]`` (a shorter one is padded with zeros).
+    a : array_like
+        Denominator ``[a0, a1]``, ``a0 != 0``.
+    x : array_like
+        The input record.
+
+    Returns
+    -------
+    numpy.ndarray
+        The output at each sample.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> first_order_filter([0.0, 0.5], [1.0, -0.5], np.ones(4)).tolist()
+    [0.0, 0.5, 0.75, 0.875]
+    """
+    bb = np.zeros(2)
+    b_in = np.asarray(b, dtype=np.float64).ravel()
+    a_in = np.asarray(a, dtype=np.float64).ravel()
+    if b_in.size > 2 or a_in.size != 2 or a_in[0] == 0.0:
+        raise ValueError(
+            "a first-order filter needs b of 1-2 and a of 2 terms, a[0] != 0; "
+            f"got b={b_in.tolist()}, a={a_in.tolist()}"
+        )
+    bb[: b_in.size] = b_in / a_in[0]
+    pole = -a_in[1] / a_in[0]
+    bank = DiscreteBank.from_arrays([pole], [bb[1]], [bb[0]], [1.0])
+    return run_bank(bank, np.asarray(x, dtype=np.float64), engine=stream_engine())[0]
 
 
 def _scaled(bank: DiscreteBank, extra: NDArray | None) -> tuple:

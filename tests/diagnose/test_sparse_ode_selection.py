@@ -80,6 +80,33 @@ def test_the_truths_inner_score_is_the_noise() -> None:
     assert got <= 1.3 * ref, (got, ref)
 
 
+def test_each_start_is_refined_once_and_a_refit_repeats_itself(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The threshold paths from the best and from the picked candidate propose some starts
+    again (on these two periods, one of 20): :func:`~labrig.analysis.diagnose.sparse_ode.identify`
+    refines each start once. That changes nothing because the output-error refinement is a
+    function of its start: refined twice, a start gives the same coefficients and score, bit
+    for bit (checked here on the first start and on the one that was proposed twice)."""
+    import labrig.analysis.diagnose.sparse_ode as so
+
+    train = _training()
+    starts: list[SindyBaseline] = []
+    refine = so.refine
+
+    def counted(items, model, offset):  # type: ignore[no-untyped-def]
+        starts.append(model)
+        return refine(items, model, offset)
+
+    monkeypatch.setattr(so, "refine", counted)
+    so.identify(train, True)
+    keys = [(m.coefficients, m.limit_ue) for m in starts]
+    assert keys and len(keys) == len(set(keys)), keys
+    for m in (starts[0], starts[-1]):
+        (a, sa), (b, sb) = refine(train, m, True), refine(train, m, True)
+        assert a.coefficients == b.coefficients and sa == sb
+
+
 def _smart(rate: float, v: np.ndarray, s: np.ndarray) -> list[Record]:
     rec = Record.from_arrays("smart", rate, v, s, hold="linear")
     rec.meta["kind"] = "import"

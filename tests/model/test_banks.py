@@ -234,3 +234,40 @@ def test_continuous_through_lam_one(hold: str) -> None:
             exact = r.filter(np.ones(n), 1e3, "exact", hold)
             assert np.max(np.abs(fast - exact)) <= 1e-9  # rounding grows like eps / |lam - 1|
             assert np.max(np.abs(fast - one)) <= 5 * d
+
+
+@pytest.mark.parametrize("engine", ["numpy", "compiled"])
+@pytest.mark.parametrize(
+    ("b", "a"),
+    [
+        ([0.0, 1.0 - 0.999], [1.0, -0.999]),  # thermal_drift's lag of the loss power
+        ([1.0 - 0.2 * 0.97, -(1.0 - 0.2) * 0.97], [1.0, -0.97]),  # a Kelvin-Voigt element
+        ([3.0], [2.0, -1.0]),  # a[0] != 1, a numerator of one term
+    ],
+)
+def test_first_order_filter_is_lfilter(
+    b: list[float], a: list[float], engine: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """:func:`labrig.model.modal.first_order_filter` against ``scipy.signal.lfilter`` (the
+    reference) on 20 000 samples of a 100 V sweep with noise: 1e-12 of full scale, on either
+    engine (the compiled one when the kernels are loaded)."""
+    from scipy.signal import lfilter
+
+    import labrig.model.modal as modal
+
+    if engine == "compiled" and kernels() is None:
+        pytest.skip("numba is not installed")
+    monkeypatch.setattr(modal, "stream_engine", lambda: engine)
+    x = unipolar_sweep(20_000, 1e3, 5.0, 100.0)
+    x = x + np.random.default_rng(3).normal(0.0, 0.5, x.size)
+    want = lfilter(b, a, x)
+    got = modal.first_order_filter(b, a, x)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.max(np.abs(want)))
+
+
+def test_first_order_filter_refuses_what_is_not_first_order() -> None:
+    from labrig.model.modal import first_order_filter
+
+    for b, a in (([1.0, 0.0, 0.0], [1.0, -0.5]), ([1.0], [1.0, -0.5, 0.1]), ([1.0], [0.0, 1.0])):
+        with pytest.raises(ValueError, match="first-order"):
+            first_order_filter(b, a, np.ones(4))

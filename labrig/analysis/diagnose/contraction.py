@@ -120,17 +120,22 @@ def output_jacobian(
     free runs' forward sensitivities
     (:func:`~labrig.analysis.sindy.free_run_sensitivities`), weighted and centred alike;
     ``None`` without numba."""
-    out = []
+    width = xi.size if chain is None else chain.shape[1]
+    rows = sum(hi - lo for *_, cuts in runs for lo, hi, _m, _w in cuts)
+    out = np.empty((rows, width)) if rows else np.zeros((1, width))
+    at = 0
     for v, rest, rate, cuts in runs:
         run = free_run_sensitivities(xi, v, rate, rest, limit_ue)
         if run is None:
             return None
         J = run[1] if chain is None else run[1] @ chain
         for lo, hi, _m, w in cuts:
-            d = J[lo:hi] * -w
-            out.append(d - d.mean(axis=0) if offset else d)
-    width = xi.size if chain is None else chain.shape[1]
-    return np.concatenate(out) if out else np.zeros((1, width))
+            d = out[at : at + hi - lo]  # each segment's rows written in place: no copies
+            np.multiply(J[lo:hi], -w, out=d)
+            if offset:
+                d -= d.mean(axis=0)
+            at += hi - lo
+    return out
 
 
 def least_squares_jacobian(

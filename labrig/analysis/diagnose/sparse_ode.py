@@ -469,8 +469,13 @@ def identify(
         pick = min(ok, key=lambda c: (len(c[0].support), c[1]))
         return pick[0], pick[1]
 
+    refined_from: set[tuple[tuple[float, ...], float]] = set()
+
     def add(models: Sequence[SindyBaseline]) -> tuple[SindyBaseline, float]:
         for m in models:
+            if (m.coefficients, m.limit_ue) in refined_from:
+                continue  # the same start refines to the same model and score: no change
+            refined_from.add((m.coefficients, m.limit_ue))
             key = tuple(int(k) for k in np.flatnonzero(m.coefficients))
             refined, score = refine(driven, m, offset)
             if key not in cands or score < cands[key][1]:

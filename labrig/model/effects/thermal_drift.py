@@ -6,6 +6,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from labrig.model.effects.base import Context, Effect, Param, fmt3, plus_minus
+from labrig.model.modal import first_order_filter
 
 __all__ = ["ThermalDrift"]
 
@@ -59,15 +60,14 @@ class ThermalDrift(Effect):
         return [{"k_rel": 0.01, "tau_th_s": tau} for tau in (3.0, 30.0, 300.0)]
 
     def theta(self, ctx: Context, tau_s: float | None = None) -> NDArray:
-        from scipy import signal  # lazy: a second of import CPU
-
         if self.temperature:
             T = ctx.temperature
             ref = T[0] if ctx.temperature_ref is None else ctx.temperature_ref
             return ctx.cached(("theta_T",), lambda: T - ref)
         a = float(np.exp(-1.0 / (ctx.rate_hz * tau_s)))
+        power = _entry_power(ctx)
         return ctx.cached(
-            ("theta_P", tau_s), lambda: signal.lfilter([0.0, 1.0 - a], [1.0, -a], _entry_power(ctx))
+            ("theta_P", tau_s), lambda: first_order_filter([0.0, 1.0 - a], [1.0, -a], power)
         )
 
     def apply(self, x, ctx, p):

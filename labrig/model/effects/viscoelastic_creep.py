@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from labrig.model.effects.base import Effect, Param, plus_minus
+from labrig.model.modal import first_order_filter
 
 __all__ = ["ViscoelasticCreep", "kelvin_voigt_filter"]
 
@@ -61,13 +62,11 @@ class ViscoelasticCreep(Effect):
     )
 
     def apply(self, x, ctx, p):
-        from scipy import signal  # lazy: a second of import CPU
-
         c = p["c"]
         if c == 0.0:
             return x
         b, a = kelvin_voigt_filter(c, p["tau_s"], ctx.rate_hz)
-        return signal.lfilter(b, a, x)
+        return first_order_filter(b, a, x)
 
     def describe(self, p, sd):
         return plus_minus(
