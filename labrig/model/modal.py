@@ -411,10 +411,13 @@ def first_order_filter(b: ArrayLike, a: ArrayLike, x: ArrayLike) -> NDArray[np.f
 
         y[n] = (b[0] x[n] + b[1] x[n-1] - a[1] y[n-1]) / a[0]      (x[-1] = y[-1] = 0)
 
-    run as a one-mode bank (pole ``-a[1]/a[0]``), so the effects' lags need no import of
+    run as a one-mode bank (pole ``p = -a[1]/a[0]``), so the effects' lags need no import of
     ``scipy.signal`` (about a second of CPU: it loads ``scipy.stats``). The compiled recursion
     when the kernels are already loaded, else the numpy one
-    (:func:`labrig.model.accel.stream_engine`).
+    (:func:`labrig.model.accel.stream_engine`). The bank folds the numerator into one input
+    gain ``p b[0] + b[1]`` (over ``a[0]``), which loses digits when the two terms nearly cancel
+    (a pole near 1 with a numerator near ``(1, -p)``): write such a filter as a gain plus a lag,
+    as ``viscoelastic_creep`` does.
 
     Parameters
     ----------

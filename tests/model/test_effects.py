@@ -193,6 +193,29 @@ def test_viscoelastic_creep_step_response_is_one_kelvin_voigt_element():
     assert np.array_equal(eff.apply(s, _ctx(s), {"c": 0.0, "tau_s": tau}), s)
 
 
+@pytest.mark.parametrize("engine", ["numpy", "compiled"])
+@pytest.mark.parametrize(("c", "tau_s"), [(0.5, 30.0), (-0.3, 30.0), (-0.3, 3.0)])
+def test_viscoelastic_creep_keeps_its_digits_for_a_slow_lag(
+    c: float, tau_s: float, engine: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The slowest lag the fit allows (tau 30 s) at 10 kHz leaves ``1 - A = 3.3e-6``: a unit
+    step over 10 s (1e5 samples) against the closed form ``1 - c exp(-t/tau)`` within 5e-13
+    (the same filter's ``lfilter(b, a)`` form is off by up to 2e-11 here: its numerator
+    ``1 - c A - (1 - c) A`` is a difference of numbers near 1), on either engine."""
+    import labrig.model.modal as modal
+    from labrig.model.accel import kernels
+
+    if engine == "compiled" and kernels() is None:
+        pytest.skip("numba is not installed")
+    monkeypatch.setattr(modal, "stream_engine", lambda: engine)
+    rate, n = 1e4, 100_000
+    x = np.ones(n)
+    ctx = Context(rate, x, {"e": slice(0, n)})
+    y = library()["viscoelastic_creep"].apply(x, ctx, {"c": c, "tau_s": tau_s})
+    t = (np.arange(n) + 1) / rate
+    assert np.max(np.abs(y - (1 - c * np.exp(-t / tau_s)))) < 5e-13
+
+
 def test_kelvin_voigt_filter_inverse_is_stable_and_exact():
     from scipy import signal
 

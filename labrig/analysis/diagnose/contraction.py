@@ -121,8 +121,8 @@ def output_jacobian(
     (:func:`~labrig.analysis.sindy.free_run_sensitivities`), weighted and centred alike;
     ``None`` without numba."""
     width = xi.size if chain is None else chain.shape[1]
-    rows = sum(hi - lo for *_, cuts in runs for lo, hi, _m, _w in cuts)
-    out = np.empty((rows, width)) if rows else np.zeros((1, width))
+    spans = [hi - lo for *_, cuts in runs for lo, hi, _m, _w in cuts]
+    out = np.empty((sum(spans), width)) if spans else np.zeros((1, width))
     at = 0
     for v, rest, rate, cuts in runs:
         run = free_run_sensitivities(xi, v, rate, rest, limit_ue)

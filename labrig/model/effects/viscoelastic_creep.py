@@ -65,8 +65,12 @@ class ViscoelasticCreep(Effect):
         c = p["c"]
         if c == 0.0:
             return x
-        b, a = kelvin_voigt_filter(c, p["tau_s"], ctx.rate_hz)
-        return first_order_filter(b, a, x)
+        # (1 - c) x + c LP[x], the lag's gain 1 - A as -expm1: the same filter as
+        # kelvin_voigt_filter's (b, a), whose numerator loses digits when A is near 1 (slow
+        # lags at high rates: tau 30 s at 10 kHz leaves 1 - A = 3e-6)
+        w = -1.0 / (ctx.rate_hz * p["tau_s"])
+        lag = first_order_filter([-np.expm1(w)], [1.0, -np.exp(w)], x)
+        return (1.0 - c) * x + c * lag
 
     def describe(self, p, sd):
         return plus_minus(
