@@ -226,6 +226,15 @@ def _loop_span(doc: dict[str, Any], setup: Setup) -> float | None:
     return max(spans) if spans else None
 
 
+def _described(name: str, doc: dict[str, Any]) -> str:
+    """An effect of a ``labrig fit`` file with its fitted values as the fit described them
+    (``"thermal_drift (k = 0.499 +- 0.00046 %/K)"``), or its name alone."""
+    for e in doc.get("effects") or []:
+        if isinstance(e, dict) and e.get("effect") == name and e.get("description"):
+            return f"{name} ({e['description']})"
+    return name
+
+
 def _from_file(
     setup: Setup,
     doc: dict[str, Any],
@@ -269,7 +278,9 @@ def _from_file(
     )
     source = f"from {params_file}"
     if effects[0]:
-        source += " with the effects fitted with it: " + ", ".join(e.name for e in effects[0])
+        source += " with the effects fitted with it: " + "; ".join(
+            _described(e.name, doc) for e in effects[0]
+        )
     fitted_on = doc.get("entries")
     if isinstance(fitted_on, list) and fitted_on != setup.scored:
         notes.insert(

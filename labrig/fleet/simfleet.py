@@ -183,10 +183,10 @@ def write_fleet(
     once the inputs and outputs are checked (:func:`check_free`), before the first run;
     ``progress(actuator)`` after each run. A run that does not complete is a
     :class:`LabrigError` naming it."""
-    from labrig.runner.examples import resolve_protocol
+    from labrig.runner.examples import resolve_existing
     from labrig.runner.execute import execute, preflight
 
-    protocol = resolve_protocol(protocol)
+    protocol = resolve_existing(protocol, "protocol")
     try:
         base = read_text_bounded(protocol, YAML_MAX_BYTES)
     except (OSError, ValueError, UnicodeDecodeError) as e:

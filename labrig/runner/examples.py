@@ -11,6 +11,8 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
+from labrig.core.errors import InputFileError, InputIssue
+
 #: the package that holds the examples (``experiments/`` installed)
 PACKAGE = "labrig.experiments"
 
@@ -54,3 +56,21 @@ def resolve_protocol(given: Path | str) -> Path:
 def resolve_rig(given: Path | str | None) -> Path | None:
     """A rig file or the name of a shipped one (:func:`resolve`); ``None`` stays ``None``."""
     return None if given is None else resolve(given, "rig")
+
+
+def resolve_existing(given: Path | str, kind: str = "protocol") -> Path:
+    """:func:`resolve`, and when ``given`` is a bare name (no folder, no suffix other than
+    ``.yaml``) that is neither a file nor a shipped example, an
+    :class:`~labrig.core.errors.InputFileError` (exit 2) listing the shipped ones of ``kind``
+    (a path with a folder is left to its reader, which says it is not found)."""
+    path = resolve(given, kind)
+    if path.exists() or path.parent != Path(".") or path.suffix not in ("", ".yaml"):
+        return path
+    names = ", ".join(example_names(kind)) or "none installed"
+    what = (
+        "rig file, nor a shipped rig" if kind == "rig" else "protocol file, nor a shipped example"
+    )
+    label = "rigs" if kind == "rig" else "examples"
+    raise InputFileError(
+        [InputIssue(str(path), None, "", f"no such {what} of that name ({label}: {names})")]
+    )

@@ -46,7 +46,7 @@ from labrig.protocol.preflight import preflight as check_plan
 from labrig.rig.instruments import Rig
 from labrig.rig.limits import RigLimits
 from labrig.rig.ramp import RAMP_CURRENT_FRACTION, RampRecord
-from labrig.runner.examples import example_names, resolve_protocol, resolve_rig
+from labrig.runner.examples import resolve_existing
 from labrig.runner.record import record_end
 from labrig.runner.rigfile import load_rig, open_rig
 from labrig.store import Channel, RunWriter, estimate_run_bytes, free_bytes
@@ -131,22 +131,8 @@ def preflight(protocol: Path | str, rig_path: Path | str | None) -> tuple[Plan, 
     else the protocol's ``rig`` key, else the built-in simulated rig. Raises
     :class:`~labrig.core.errors.InputFileError` (exit 2) on any problem.
     """
-    path = resolve_protocol(protocol)
-    if not path.exists() and path.parent == Path(".") and path.suffix in ("", ".yaml"):
-        names = ", ".join(example_names()) or "none installed"
-        raise InputFileError(
-            [
-                InputIssue(
-                    str(path),
-                    None,
-                    "",
-                    f"no such protocol file, nor a shipped example of that name "
-                    f"(examples: {names})",
-                )
-            ]
-        )
-    plan = load_plan(path)
-    given_rig = resolve_rig(rig_path)
+    plan = load_plan(resolve_existing(protocol, "protocol"))
+    given_rig = None if rig_path is None else resolve_existing(rig_path, "rig")
     rig = given_rig if given_rig is not None else plan.rig_path
     limits: RigLimits = load_rig(rig).limits
     check_plan(plan, limits)

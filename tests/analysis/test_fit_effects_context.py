@@ -12,6 +12,7 @@ fitted on, saved with that configuration, and used by ``labrig report --params``
 
 from __future__ import annotations
 
+import html
 import json
 from pathlib import Path
 
@@ -108,6 +109,11 @@ def test_report_with_a_fit_effect_file_predicts_with_the_effect(tmp_path: Path):
     for name, nrmse in doc["per_entry"].items():
         assert table[name]["dynamic.nrmse_pct"] == pytest.approx(nrmse, rel=1e-6)
     assert doc["nrmse_pct"] < 0.8 * doc["without_effects"]["nrmse_pct"]
+    # the page says what the effect was fitted to, as the fit described it
+    (creep,) = doc["effects"]
+    page = (tmp_path / "r.html").read_text()
+    assert creep["effect"] == "viscoelastic_creep" and creep["description"]
+    assert f"viscoelastic_creep ({creep['description']})" in html.unescape(page)
 
 
 def test_a_fit_file_without_its_effects_context_is_read_and_configured_from_the_run(tmp_path):

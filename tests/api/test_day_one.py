@@ -42,6 +42,11 @@ def test_shipped_protocols_by_name_from_any_folder(tmp_path: Path, monkeypatch):
     assert res.exit_code == 0, res.output
     res = invoke("check", "nosuch")
     assert res.exit_code == 2 and "examples: " in res.stderr and "paper" in res.stderr
+    # a misspelled shipped rig is named with the rigs there are (not only "no such file")
+    res = invoke("check", "sweep", "--rig", "hybrd")
+    assert res.exit_code == 2 and "rigs: " in res.stderr, res.output
+    assert "hybrid" in res.stderr and "bipolar" in res.stderr and "Traceback" not in res.output
+    assert invoke("check", "sweep", "--rig", "hybrid").exit_code == 0
     # a file of that name in the working folder wins over the shipped one
     (tmp_path / "paper").write_text("name: mine\nrate_hz: 1000\nsteps: []\n")
     assert "[steps]" in invoke("check", "paper").stderr

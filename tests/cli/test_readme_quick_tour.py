@@ -160,7 +160,7 @@ def run_tour(tmp_path: Path, fast: bool, analysis: bool = True, in_process: bool
         [sys.executable, "tour.py"], cwd=tmp_path, capture_output=True, text=True, timeout=7200
     )
     assert res.returncode == 0, res.stderr
-    assert "'params'" in res.stdout and "'nrmse_pct'" in res.stdout  # the dict as_json gives
+    assert '"params"' in res.stdout and '"nrmse_pct"' in res.stdout  # JSON, as `fit --json`
     for made in ("params.json", "report.html", "diagnosis/diagnosis.json", "theirs.h5",
                  "theirs-diagnosis/diagnosis.html", "fleet/truth.json", "fleet/batch/fleet.html",
                  "runs/sweep.h5"):  # fmt: skip
