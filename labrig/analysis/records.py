@@ -6,6 +6,7 @@ reports consume them. Units: s, V, ue (microstrain), Hz.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -146,3 +147,15 @@ class Record:
             self.hold,
             dict(self.meta),
         )
+
+
+def strain_unit(records: Iterable[Record]) -> str:
+    """The strain's unit as the records state it (``meta["units"]["strain"]``, which the
+    run-file reader sets: ``ue``, or what an import kept, e.g. ``raw``); ``ue`` when none does.
+    """
+    for r in records:
+        units = r.meta.get("units") if isinstance(r.meta, dict) else None
+        u = units.get("strain") if isinstance(units, dict) else None
+        if u:
+            return str(u)
+    return "ue"

@@ -12,6 +12,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
+from rich.text import Text
 
 from labrig.cli.common import (
     HELDOUT_OPTION,
@@ -121,7 +122,9 @@ def fit(
         ui.err.print(f"[yellow]note:[/] {escape(m)}")
     if deliver_json(res.to_json(), as_json=as_json, out=out, overwrite=overwrite):
         con = Console()
-        for t in summary_tables(res, model.value):
+        from labrig.analysis.records import strain_unit
+
+        for t in summary_tables(res, model.value, strain_unit(outcome.setup.scored_records)):
             con.print(t)
         if isinstance(res, EffectsFit):
             con.print(effects_table(res))
@@ -158,8 +161,12 @@ def number(v: float | None, digits: int = 4) -> str:
     return f"{v:.{digits}g}"
 
 
-def summary_tables(res: FitResult | BaselineResult | EffectsFit, model: str) -> list[Table]:
-    """Parameters (with uncertainties) and NRMSE per entry, as rich tables."""
+def summary_tables(
+    res: FitResult | BaselineResult | EffectsFit, model: str, strain_unit: str = "ue"
+) -> list[Table]:
+    """Parameters (with uncertainties) and NRMSE per entry, as rich tables; the strain's unit
+    ``strain_unit`` is the records' (a field named ``_ue`` holds a ``raw`` import's numbers as
+    they are, and its unit says so)."""
     from labrig.analysis.fit import PARAM_NAMES
 
     j = res.to_json()
@@ -179,15 +186,16 @@ def summary_tables(res: FitResult | BaselineResult | EffectsFit, model: str) -> 
             shown = number(v, 5)
             if name in flagged:
                 shown = f"unidentifiable (fitted {shown}; {flagged[name]})"
-            t.add_row(name, escape(shown), number(u, 2), rel, UNITS.get(name, ""))
+            unit = UNITS.get(name, "").replace("ue", strain_unit)
+            t.add_row(name, escape(shown), number(u, 2), rel, Text(unit))
         t.add_row("shape", str(j["params"]["shape"]), "", "", "")
         t.add_row("memory", str(j["params"]["memory"]), "", "", "")
         loop = ident.get("loop")
         if loop:
-            for key, unit in (("loop_width_ue", "ue"), ("loop_curvature", "")):
+            for key, unit in (("loop_width_ue", strain_unit), ("loop_curvature", "")):
                 v, u = loop[key], loop[f"{key}_sd"]
                 rel = "—" if u is None or not v else f"{100 * u / abs(v):.2g} %"
-                t.add_row(key, number(v, 5), number(u, 2), rel, unit)
+                t.add_row(key, number(v, 5), number(u, 2), rel, Text(unit))
             t.caption = (
                 f"loop_width_ue: the operator's loop opening at mid-stroke of a "
                 f"{number(loop['span_V'], 4)} V loop; loop_curvature: span / vc_V. "

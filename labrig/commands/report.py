@@ -12,7 +12,6 @@ the figures (:mod:`labrig.report.plots`, :mod:`labrig.report.control_section`) a
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -24,7 +23,7 @@ from labrig.analysis.baselines import KINDS
 from labrig.analysis.fit import FitResult, predict_record
 from labrig.analysis.noise_floor import noise_floor
 from labrig.analysis.params_file import fitted_effects, read_fit_output
-from labrig.analysis.records import Record
+from labrig.analysis.records import strain_unit
 from labrig.commands.fit import (
     CommandUI,
     FitOutcome,
@@ -364,16 +363,6 @@ def provenance(setup: Setup) -> Provenance:
         instrument=run.instrument,
         n_entries=len(run),
     )
-
-
-def strain_unit(records: Sequence[Record]) -> str:
-    """The strain's unit as the records state it (``ue`` when none does)."""
-    for r in records:
-        units = r.meta.get("units")
-        u = units.get("strain") if isinstance(units, dict) else None
-        if u:
-            return str(u)
-    return "ue"
 
 
 def report_data(setup: Setup, fitted: FittedModels, heldout: bool, from_file: bool) -> ReportData:

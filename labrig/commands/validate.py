@@ -581,7 +581,7 @@ def page_context(v: Validation) -> dict[str, Any]:
     the parameters."""
     from datetime import datetime
 
-    from labrig.commands.report import strain_unit
+    from labrig.analysis.records import strain_unit
     from labrig.core.version import __version__
     from labrig.report.data import EntryView, drive_of
     from labrig.report.plots import validation_figure

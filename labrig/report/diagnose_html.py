@@ -18,7 +18,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from labrig.analysis.diagnose import Diagnosis
-from labrig.analysis.records import Record
+from labrig.analysis.records import Record, strain_unit
 from labrig.report.plots import grid_margins, png, set_title
 from labrig.report.templating import render
 
@@ -64,7 +64,7 @@ def _draw_panels(axes: list[Axes], d: Diagnosis, recs: list[Record]) -> bool:
         ax.grid(True, alpha=0.3)
         if k == 0:
             ax.legend(fontsize=7, loc="upper right")
-        unit = r.meta.get("strain_units", "ue") if isinstance(r.meta, dict) else "ue"
+        unit = strain_unit([r])
         ax.set_ylabel(f"residual ({unit})", fontsize=8)
         ax.set_xlabel("time (s)", fontsize=8)
     return fixed

@@ -13,6 +13,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from labrig.analysis.records import strain_unit
 from labrig.report.data import (
     METRICS,
     MODEL_LABELS,
@@ -287,14 +288,6 @@ def provenance_context(data: ReportData) -> dict[str, Any]:
     }
 
 
-def _strain_unit(data: ReportData) -> str:
-    for e in data.entries:
-        u = e.record.meta.get("units", {}).get("strain")
-        if u:
-            return str(u)
-    return "ue"
-
-
 def report_context(
     data: ReportData,
     frequency_png: bytes | None,
@@ -315,7 +308,7 @@ def report_context(
         noise_floor = {
             "nrmse": f"{nf.nrmse_pct:.3g}",
             "noise": f"{nf.noise_ue:.3g}",
-            "unit": _strain_unit(data),
+            "unit": strain_unit(e.record for e in data.entries),
             "source": nf.source,
         }
     return {

@@ -193,6 +193,7 @@ def run_summary(path: Path | str) -> dict:
                 "max_command_voltage_V": mx(e, "command_voltage"),
                 "max_amplifier_voltage_V": mx(e, "amplifier_voltage"),
                 "max_strain_ue": mx(e, "strain"),
+                "strain_units": e.units.get("strain") or "ue",
                 "channels": e.channels,
             }
             for e in run
@@ -235,14 +236,20 @@ def run_info(path: Path | str) -> RenderableType:
         *_resume_lines(s),
         *_addition_lines(s),
     )
-    t = Table(
-        caption="s: duration; Hz: sample rate; max V: largest command voltage; "
-        "max ue: largest strain"
+    # the strain's unit as the file states it: an import keeps a sensor's numbers as `raw`
+    units = {e["strain_units"] for e in s["entries"]}
+    strain_col = f"max {shown(units.pop())}" if len(units) == 1 else "max strain"
+    t = Table(  # Text: a unit from the file is not read as rich markup
+        caption=Text(
+            "s: duration; Hz: sample rate; max V: largest command voltage; "
+            f"{strain_col}: largest strain"
+        )
     )
     t.add_column("entry", no_wrap=True)
     t.add_column("status")
-    for col in ("samples", "s", "Hz", "max V", "max ue"):
+    for col in ("samples", "s", "Hz", "max V"):
         t.add_column(col, justify="right")
+    t.add_column(Text(strain_col), justify="right")
 
     def g(x: float | None, spec: str = ".1f") -> str:
         if x is None:
@@ -260,7 +267,10 @@ def run_info(path: Path | str) -> RenderableType:
             g(e["duration_s"], ".3f"),
             g(e["rate_hz"], "g"),
             g(e["max_command_voltage_V"]),
-            g(e["max_strain_ue"]),
+            Text(
+                g(e["max_strain_ue"])
+                + ("" if strain_col != "max strain" else f" {shown(e['strain_units'])}")
+            ),
         )
     return Group(head, t)
 

@@ -36,7 +36,13 @@ def test_every_residual_panel_has_axis_labels() -> None:
     assert len(panels) == 3
     for ax in panels:
         assert ax.get_xlabel() == "time (s)"
-        assert ax.get_ylabel().startswith("residual (")
+        assert ax.get_ylabel() == "residual (ue)"  # a simulated run's strain
+    # an import that kept a sensor's numbers (`--strain-units raw`): its residual is in raw, as
+    # the run file's units say (the reader puts them in each record's meta)
+    for r in recs:
+        r.meta["units"] = {"time": "s", "command_voltage": "V", "strain": "raw"}
+    fig = residual_figure(scaled_predictions(recs, 0.9, 1.0), recs)
+    assert {ax.get_ylabel() for ax in fig.axes if ax.lines} == {"residual (raw)"}
 
 
 def test_residual_panels_fit_the_figure_without_overlapping() -> None:

@@ -38,6 +38,12 @@ def test_import_fit_report_on_real_data(tmp_path: Path) -> None:
     assert [r.name for r in records] == ["Model_Vi_Do", "Test_Vi_Do_Di"]
     for r in records:  # the piezo's loop orientation: imported without a sign flip
         assert loop_area(r.voltage_V, r.strain_ue, r.rate_hz, 1.0) > 0
+    # the sensor's numbers are labelled raw wherever a unit is shown, not ue
+    info = invoke("info", run)
+    assert info.exit_code == 0 and "max raw" in info.stdout and "max ue" not in info.stdout
+    shown = invoke("fit", run, "--no-heldout", "--entries", "Model_Vi_Do")
+    assert shown.exit_code == 0, shown.stderr
+    assert "raw/V" in shown.stdout and "ue/V" not in shown.stdout
 
     params = tmp_path / "params.json"
     res = invoke("fit", run, "--json", "--out", params)
