@@ -74,7 +74,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from labrig.analysis.records import Record
+from labrig.analysis.records import Record, strain_unit
 from labrig.model.effects.base import Context
 from labrig.model.effects.empirical import EmpiricalTerms
 
@@ -158,6 +158,9 @@ class TermScales:
     strain_ref_ue: float
     t_ref_C: float | None = None
     dt_ref_K: float | None = None
+    #: the strain's unit as the records state it (``raw`` for a sensor's numbers kept by an
+    #: import): the unit the terms' coefficients are written in
+    strain_unit: str = "ue"
 
     @classmethod
     def from_records(cls, records: Sequence[Record]) -> TermScales:
@@ -178,13 +181,14 @@ class TermScales:
             temps = np.concatenate([r.aux["temperature"] for r in records])
             t_ref = float(np.mean(temps))
             dt_ref = float(np.max(np.abs(temps - t_ref))) or 1.0
-        return cls(v_ref, largest(rates or [0.0]), s_ref, t_ref, dt_ref)
+        return cls(v_ref, largest(rates or [0.0]), s_ref, t_ref, dt_ref, strain_unit(records))
 
 
 def term_library(scales: TermScales) -> dict[str, Term]:
     """The candidate terms for a campaign of these scales, by key (module docstring's table);
     the temperature terms only when the campaign has a temperature channel."""
     vr, rr, sr = scales.v_ref_V, scales.rate_ref_V_per_s, scales.strain_ref_ue
+    u = scales.strain_unit
     sat = ("saturation (strain per volt falling at high field)", "field_saturation")
     hard = "a gain rising at high field (hardening; not in the effect library)"
     terms = [
@@ -194,17 +198,17 @@ def term_library(scales: TermScales) -> dict[str, Term]:
              "time_delay", lambda s, c: dvdt(c)),
         Term("absdVdt", "|dV/dt|", "V/s", rr, "a rate-dependent offset", "",
              lambda s, c: np.abs(dvdt(c))),
-        Term("S", "S", "ue", sr, "a gain change", "", lambda s, c: s,
+        Term("S", "S", u, sr, "a gain change", "", lambda s, c: s,
              lambda s, c: np.ones_like(s)),
-        Term("S_absS", "S|S|", "ue^2", sr * sr, hard, "",
+        Term("S_absS", "S|S|", f"{u}^2", sr * sr, hard, "",
              lambda s, c: s * np.abs(s), lambda s, c: 2.0 * np.abs(s), sat),
         Term("V2", "V^2", "V^2", vr * vr, "electrostriction (even in V)", "quadratic_term",
              lambda s, c: c.acting_voltage() ** 2),
         Term("V3", "V^3", "V^3", vr**3, hard, "", lambda s, c: c.acting_voltage() ** 3, None,
              sat),
-        Term("absdVdt_S", "|dV/dt| S", "V ue/s", rr * sr, "Bouc-Wen-like rate memory", "",
+        Term("absdVdt_S", "|dV/dt| S", f"V {u}/s", rr * sr, "Bouc-Wen-like rate memory", "",
              lambda s, c: np.abs(dvdt(c)) * s, lambda s, c: np.abs(dvdt(c))),
-        Term("V_S", "V S", "V ue", vr * sr, "a field-dependent gain (quadratic in V)",
+        Term("V_S", "V S", f"V {u}", vr * sr, "a field-dependent gain (quadratic in V)",
              "quadratic_term", lambda s, c: c.acting_voltage() * s,
              lambda s, c: c.acting_voltage()),
     ]  # fmt: skip
@@ -240,7 +244,11 @@ def empirical_effect(keys: Sequence[str], scales: TermScales) -> EmpiricalTerms:
         raise ValueError(f"unknown terms {unknown}; known: {', '.join(lib)}")
     # Term's fields are frozen, TermLike's protocol attributes settable (docs/architecture.md,
     # "Types and docstrings": make them read-only properties)
-    return EmpiricalTerms([lib[k] for k in keys], scales.strain_ref_ue)  # type: ignore[misc]
+    return EmpiricalTerms(
+        [lib[k] for k in keys],  # type: ignore[misc]
+        scales.strain_ref_ue,
+        scales.strain_unit,
+    )
 
 
 # -- the regression data of a fitted extended-model problem ----------------------------------

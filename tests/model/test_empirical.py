@@ -10,6 +10,8 @@ on 60 ue with the engine's Jacobian linearising the effect, 2.5 ue without).
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -162,3 +164,24 @@ def test_engine_jacobian_linearises_the_empirical_effect(cubic_campaign) -> None
     zm[j] -= h
     fd = (ext.residual(zp, fo.base) - ext.residual(zm, fo.base)) / (2 * h)
     assert np.linalg.norm(J[:, j] - fd) < 0.01 * np.linalg.norm(fd)
+
+
+def test_terms_are_written_in_the_records_strain_unit() -> None:
+    """An import that kept a sensor's numbers (``--strain-units raw``): the terms' scales take
+    the records' unit, and the effect's parameters and sentences are in ``raw``, never ``ue``
+    (a simulated run's records state ``ue``, records that state nothing are read as ``ue``)."""
+    from labrig.analysis.records import Record
+
+    t = np.arange(400) / 200.0
+    rec = Record.from_arrays("r", 200.0, 3 * np.sin(2 * np.pi * t), 20 * np.sin(2 * np.pi * t))
+    assert TermScales.from_records([rec]).strain_unit == "ue"
+    rec.meta["units"] = {"time": "s", "command_voltage": "V", "strain": "raw"}
+    scales = TermScales.from_records([rec])
+    assert scales.strain_unit == "raw"
+    lib = term_library(scales)
+    assert (lib["S"].unit, lib["S_absS"].unit, lib["V_S"].unit) == ("raw", "raw^2", "V raw")
+    eff = empirical_effect(["S_absS", "V"], scales)
+    assert {p.unit for p in eff.params} == {"raw"}
+    text = eff.describe({p.name: 0.5 for p in eff.params}, {})
+    assert "0.5 raw at full scale" in text and "raw per raw^2" in text
+    assert not re.search(r"\bue\b", text), text

@@ -515,7 +515,9 @@ def empirical_round(
         )
         return [], None, None
     eff = empirical_effect(sel.keys, scales)
-    found = ", ".join(f"{t.name} ({t.coefficient_ue:+.3g} ue at full scale)" for t in sel.terms)
+    found = ", ".join(
+        f"{t.name} ({t.coefficient_ue:+.3g} {scales.strain_unit} at full scale)" for t in sel.terms
+    )
     c, eprob = try_candidate(
         setup, settings, current, eff, sel.start(), rnd, sel.share, say, settings.workers
     )

@@ -67,7 +67,7 @@ class EmpiricalTerms(Effect):
         "term's variable (amplitude, rate, temperature) tells whether the term is physical"
     )
 
-    def __init__(self, terms: Sequence[TermLike], strain_scale_ue: float):
+    def __init__(self, terms: Sequence[TermLike], strain_scale_ue: float, strain_unit: str = "ue"):
         if not terms:
             raise ValueError("an empirical effect needs at least one term")
         keys = [t.key for t in terms]
@@ -78,8 +78,9 @@ class EmpiricalTerms(Effect):
             raise ValueError(f"strain_scale_ue must be positive, got {strain_scale_ue}")
         self.terms = tuple(terms)
         self.strain_scale_ue = b
+        self.strain_unit = strain_unit
         self.params = tuple(
-            Param(self.param_name(t.key), "ue", 0.0, -b, b, 0.01 * b) for t in self.terms
+            Param(self.param_name(t.key), strain_unit, 0.0, -b, b, 0.01 * b) for t in self.terms
         )
 
     @staticmethod
@@ -132,8 +133,8 @@ class EmpiricalTerms(Effect):
             else:
                 pm = "" if s is None or not np.isfinite(s) else f" +- {fmt3(s)}"
                 text = (
-                    f"{t.name}: {fmt3(c)}{pm} ue at full scale "
-                    f"({fmt3(c / t.scale)} ue per {t.unit})"
+                    f"{t.name}: {fmt3(c)}{pm} {self.strain_unit} at full scale "
+                    f"({fmt3(c / t.scale)} {self.strain_unit} per {t.unit})"
                 )
             physics, effect = t.reading(c if c is not None else 1.0)
             if effect:
