@@ -35,27 +35,21 @@ def example_names(kind: str = "protocol") -> list[str]:
     return sorted(p.stem for p in where.glob("*.yaml"))
 
 
+def _a_name(path: Path) -> bool:
+    """Whether ``path`` could name a shipped example: not an existing file, no folder part, no
+    suffix other than ``.yaml``."""
+    return not path.exists() and path.parent == Path(".") and path.suffix in ("", ".yaml")
+
+
 def resolve(given: Path | str, kind: str = "protocol") -> Path:
     """``given`` when it exists or names a folder; else the shipped example of that name when
     there is one; else ``given`` unchanged (its reader then says it is not found)."""
     path = Path(given)
-    if path.exists() or path.parent != Path(".") or path.suffix not in ("", ".yaml"):
-        return path
     folder = examples_folder()
-    if folder is None:
+    if not _a_name(path) or folder is None:
         return path
     candidate = (folder / "rigs" if kind == "rig" else folder) / f"{path.stem}.yaml"
     return candidate if candidate.is_file() else path
-
-
-def resolve_protocol(given: Path | str) -> Path:
-    """A protocol file or the name of a shipped one (:func:`resolve`)."""
-    return resolve(given, "protocol")
-
-
-def resolve_rig(given: Path | str | None) -> Path | None:
-    """A rig file or the name of a shipped one (:func:`resolve`); ``None`` stays ``None``."""
-    return None if given is None else resolve(given, "rig")
 
 
 def resolve_existing(given: Path | str, kind: str = "protocol") -> Path:
@@ -64,7 +58,7 @@ def resolve_existing(given: Path | str, kind: str = "protocol") -> Path:
     :class:`~labrig.core.errors.InputFileError` (exit 2) listing the shipped ones of ``kind``
     (a path with a folder is left to its reader, which says it is not found)."""
     path = resolve(given, kind)
-    if path.exists() or path.parent != Path(".") or path.suffix not in ("", ".yaml"):
+    if not _a_name(path):
         return path
     names = ", ".join(example_names(kind)) or "none installed"
     what = (
