@@ -385,6 +385,7 @@ class Run:
         offset: bool | None = None,
         overwrite: bool = False,
         progress: bool = False,
+        peers: Sequence[str] | None = None,
     ) -> BuiltReport:
         """``labrig report``: model versus measurement. Returns the report (``.page``, the
         HTML; ``.metrics``, what ``labrig report --json`` prints) and writes the page to
@@ -410,6 +411,9 @@ class Run:
             Replace an existing ``out``.
         progress : bool
             Show progress bars on stderr.
+        peers : sequence of str
+            The baselines fitted beside our model (``labrig report --peers``; default: all,
+            empty: none).
 
         Returns
         -------
@@ -431,6 +435,7 @@ class Run:
             method=method,
             heldout=heldout,
             ui=command_ui(progress),
+            peers=peers,
         )
         if target is not None:
             from labrig.core.outputs import write_text_output

@@ -30,6 +30,25 @@ from labrig.cli.common import (
     out_file_option,
 )
 
+#: the baselines a report can fit (labrig.analysis.baselines.KINDS, without importing it here)
+PEERS = ("prandtl_ishlinskii", "bouc_wen", "sindy")
+
+
+def peer_list(text: str) -> tuple[str, ...]:
+    """``--peers a,b``: the names given (``none``: no peer)."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    return () if names == ["none"] else tuple(names)
+
+
+def _peer_names(value: str) -> str:
+    names = [n.strip() for n in value.split(",") if n.strip()]
+    unknown = [n for n in names if n not in PEERS]
+    if not names or (unknown and names != ["none"]):
+        raise typer.BadParameter(
+            f"{value!r}: choose from {', '.join(PEERS)}, comma-separated, or none"
+        )
+    return value
+
 
 @friendly
 def report(
@@ -53,6 +72,14 @@ def report(
     warmup_s: float | None = WARMUP_OPTION,
     heldout: bool = HELDOUT_OPTION,
     offset: bool | None = OFFSET_OPTION,
+    peers: str = typer.Option(
+        ",".join(PEERS),
+        "--peers",
+        metavar="NAMES",
+        callback=_peer_names,
+        help=f"Baselines fitted beside our model, comma-separated: {', '.join(PEERS)}, or none "
+        "(our model alone: faster).",
+    ),
     overwrite: bool = OVERWRITE_OPTION,
 ) -> None:
     """Model versus measurement as one HTML file; baselines fitted on the same data."""
@@ -75,6 +102,7 @@ def report(
         heldout=heldout,
         ui=ui,
         page=out is not None,
+        peers=peer_list(peers),
     )
     if out is not None:
         write_text_output(out, built.page, overwrite=overwrite, being_written=being_written)

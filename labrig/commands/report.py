@@ -12,6 +12,7 @@ the figures (:mod:`labrig.report.plots`, :mod:`labrig.report.control_section`) a
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -305,6 +306,22 @@ def _from_file(
     return out
 
 
+def checked_peers(peers: Sequence[str] | None) -> tuple[str, ...]:
+    """``peers`` in the report's order (:data:`~labrig.analysis.baselines.KINDS`), each once
+    (``None``: all of them); ``ValueError`` naming an unknown one and the valid names."""
+    if peers is None:
+        return KINDS
+    if isinstance(peers, str):  # one name, not its letters
+        peers = [peers]
+    unknown = [p for p in peers if p not in KINDS]
+    if unknown:
+        raise ValueError(
+            f"unknown peer {', '.join(map(repr, unknown))}: choose from {', '.join(KINDS)} "
+            "(or none)"
+        )
+    return tuple(k for k in KINDS if k in peers)
+
+
 def fit_report_models(
     setup: Setup,
     doc: dict[str, Any] | None,
@@ -313,16 +330,20 @@ def fit_report_models(
     heldout: bool,
     progress: Progress,
     fit: FitResult | None = None,
+    peers: Sequence[str] | None = None,
 ) -> FittedModels:
     """Our model (fitted now, or from the ``labrig fit`` output ``doc`` read from
-    ``params_file``, or ``fit`` made on this setup already) and the baselines, fitted on the
-    same records; a baseline that cannot be fitted is reported as such (its ``note``)."""
+    ``params_file``, or ``fit`` made on this setup already) and the baselines ``peers``, fitted
+    on the same records; a baseline that cannot be fitted is reported as such (its ``note``)."""
     t0 = time.perf_counter()
+    peers = checked_peers(peers)
     if doc is None or params_file is None:
         fitted = _fitted_now(setup, method, heldout, progress, fit)
     else:
         fitted = _from_file(setup, doc, params_file, heldout, progress)
-    for kind in KINDS:
+    if not peers:
+        fitted.notes.append("no peers fitted (--peers none)")
+    for kind in peers:
         try:
             if fitted.peers_on is not None:
                 fitted.models[kind] = _peers_elsewhere(setup, fitted.peers_on, kind, progress)
@@ -374,6 +395,10 @@ def report_data(setup: Setup, fitted: FittedModels, heldout: bool, from_file: bo
         notes.append("held-out NRMSE needs two scored entries or more")
     run = setup.run
     scored = setup.scored_records
+    peers = any(k != "dynamic" for k in fitted.models)
+    what = {(True, True): "baselines", (False, True): "model and baselines"}.get(
+        (from_file, peers), "nothing fitted" if from_file else "model"
+    )
     if setup.imported or not run.protocol_name:
         title = f"Model versus measurement: {setup.path.name} (imported data)"
     else:
@@ -384,11 +409,8 @@ def report_data(setup: Setup, fitted: FittedModels, heldout: bool, from_file: bo
         "offset": setup.offset,
         "params_source": fitted.source,
         "comparison": fitted.caveat or "",
-        "fit_time": (
-            f"{fitted.elapsed_s:.1f} s ("
-            + ("baselines" if from_file else "model and baselines")
-            + (", with leave-one-out)" if heldout else ")")
-        ),
+        "fit_time": f"{fitted.elapsed_s:.1f} s ({what}"
+        + (", with leave-one-out)" if heldout else ")"),
     }
     return build_report(
         title,
@@ -454,13 +476,17 @@ def build_run_report(
     ui: CommandUI | None = None,
     page: bool = True,
     fit: FitOutcome | None = None,
+    peers: Sequence[str] | None = None,
 ) -> BuiltReport:
     """``labrig report``: the report of the run file ``path`` (module docstring); our model's
     parameters from ``params_file`` (``labrig fit`` output) when given, else fitted now.
     ``page=False``: the metrics only (no figures drawn; ``BuiltReport.page`` is ``""``).
+    ``peers``: the baselines fitted beside our model (default ``None``: all of
+    :data:`~labrig.analysis.baselines.KINDS`; ``()``: none).
     ``fit``: ``labrig fit`` of the same file with the same settings, already made (``batch
     report``): its records and fit are used, so the file is read and our model fitted once."""
     ui = ui or QuietUI()
+    peers = checked_peers(peers)  # before any work
     doc = read_fit_output(params_file) if params_file is not None else None
     if fit is not None and not isinstance(fit.result, FitResult):
         raise ValueError("report takes a fit of our model (not a baseline or effects fit)")
@@ -471,7 +497,9 @@ def build_run_report(
     with single_thread_blas():
         with ui.fitting() as progress:
             ours = fit.result if fit is not None else None
-            fitted = fit_report_models(setup, doc, params_file, method, heldout, progress, ours)
+            fitted = fit_report_models(
+                setup, doc, params_file, method, heldout, progress, ours, peers
+            )
         data = report_data(setup, fitted, heldout, doc is not None)
         html = ""
         if page:

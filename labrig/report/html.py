@@ -26,7 +26,7 @@ from labrig.report.data import (
 from labrig.report.templating import render as render_template
 from labrig.report.templating import sig
 
-__all__ = ["fmt", "render", "report_context"]
+__all__ = ["fmt", "peers_and_rate", "render", "report_context"]
 
 #: the signed metrics, whose mean is of their absolute values
 SIGNED = ("loop_area_error_pct", "strain_shift_error_ue")
@@ -288,6 +288,33 @@ def provenance_context(data: ReportData) -> dict[str, Any]:
     }
 
 
+def peers_and_rate(models: Mapping[str, Any]) -> str:
+    """The frequency figure's sentence on how the peers shown depend on the rate.
+
+    Parameters
+    ----------
+    models : mapping
+        The report's models by kind (``dynamic``, ``prandtl_ishlinskii``, ...).
+
+    Returns
+    -------
+    str
+        The sentence, or ``""`` when no peer is shown.
+    """
+    names = {"prandtl_ishlinskii": "Prandtl-Ishlinskii", "bouc_wen": "Bouc-Wen"}
+    fixed = [label for kind, label in names.items() if kind in models]
+    parts = []
+    if fixed:
+        one = len(fixed) == 1
+        parts.append(
+            f"{' and '.join(fixed)} {'is' if one else 'are'} rate-independent: "
+            f"{'its' if one else 'their'} loops do not change with frequency"
+        )
+    if "sindy" in models:
+        parts.append("SINDy's sparse ODE does depend on the rate")
+    return "; ".join(parts) + "." if parts else ""
+
+
 def report_context(
     data: ReportData,
     frequency_png: bytes | None,
@@ -329,6 +356,7 @@ def report_context(
         "notes": list(data.notes),
         "metrics": metrics_context(data),
         "frequency_png": frequency_png,
+        "peers_and_rate": peers_and_rate(data.models),
         "params": params_context(data),
         "settings": settings_items(data),
         "control": control,
