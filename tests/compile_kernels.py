@@ -54,12 +54,14 @@ def fit() -> None:
     from labrig.analysis.fit import fit_model
     from labrig.model.effects.amplifier_bandwidth import charging_lowpass
     from labrig.model.effects.rate_hysteresis import rate_hysteresis_state
+    from labrig.model.sections import foh_section, run_section
 
     records = _records(lambda v: 0.9 * v + 0.002 * v * v)
     fit_model(records, heldout=False)
     v = records[0].voltage_V
     charging_lowpass(v, 1e-3, 0.1, 100.0, RATE)
     rate_hysteresis_state(v, 0.1, 0.01, 0.1, RATE)
+    run_section(foh_section([1.0], [1e-6, 1e-3, 1.0], RATE), v)
 
 
 GROUPS = {"stream_and_peers": stream_and_peers, "fit": fit}

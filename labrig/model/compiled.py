@@ -12,7 +12,8 @@ that calls it (the reference of the tests, and the fallback without numba):
 - :func:`chebyshev_panels`: the exact method's log-time Chebyshev interpolant of the step
   response (:mod:`labrig.model.relaxor`), Clenshaw sums eight samples at a time;
 - :func:`rate_hysteresis_run`: the rate-dependent Duhem state of the ``rate_hysteresis``
-  effect (:mod:`labrig.model.effects.rate_hysteresis`), its exact per-interval recurrence.
+  effect (:mod:`labrig.model.effects.rate_hysteresis`), its exact per-interval recurrence;
+- :func:`section_run`: a sampled second-order section's recursion (:mod:`labrig.model.sections`).
 
 Shapes are passed as integer codes (their index in ``labrig.model.hysteresis.SHAPES``:
 exponential 0, linear 1, gaussian 2), memory rules as a flag; every array argument is
@@ -451,6 +452,25 @@ def rate_hysteresis_run(x: np.ndarray, A: float, beta: float, inv_tau_dt: float)
             hk = hk * (1.0 - z) + A * d * (1.0 - 0.5 * z)
         h[k] = hk
     return h
+
+
+@njit(cache=True)
+def section_run(
+    ad: np.ndarray, bd: np.ndarray, c: np.ndarray, dd: float, u: np.ndarray, x0: np.ndarray
+) -> np.ndarray:
+    """A sampled second-order section's recursion over ``u`` from the state ``x0``
+    (:mod:`labrig.model.sections`): ``y[k] = c x[k] + dd u[k]``, ``x[k+1] = ad x[k] + bd u[k]``."""
+    n = u.shape[0]
+    y = np.empty(n)
+    s0, s1 = x0[0], x0[1]
+    for k in range(n):
+        uk = u[k]
+        y[k] = c[0] * s0 + c[1] * s1 + dd * uk
+        s0, s1 = (
+            ad[0, 0] * s0 + ad[0, 1] * s1 + bd[0] * uk,
+            ad[1, 0] * s0 + ad[1, 1] * s1 + bd[1] * uk,
+        )
+    return y
 
 
 # -- the whole fast model ----------------------------------------------------------------------

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import optimize, signal
+from scipy import optimize
 
 from labrig.analysis.extended import ExtendedProblem, effect_context
 from labrig.analysis.records import Record
@@ -24,6 +24,7 @@ from labrig.model.effects.mechanical_resonance import (
     relaxor_resonance,
     resonance_filter,
 )
+from labrig.model.sections import run_section
 
 from helpers import planted_records
 
@@ -34,11 +35,11 @@ TRUTH = PAPER_TABLE1.model_dump()
 def _ringing_hz(f_r: float, zeta: float, rate: float) -> float:
     """Where the ringing of the sampled section's impulse response (its samples from the
     fifth on, a damped sinusoid) peaks in its spectrum (Hz), to 0.1 Hz."""
-    b, a = resonance_filter(1.0 / (2 * np.pi * f_r), zeta, rate)
+    section = resonance_filter(1.0 / (2 * np.pi * f_r), zeta, rate)
     n = round(10 * rate)  # 10 s: 0.1 Hz bins
-    x = np.zeros(n)
-    x[0] = 1.0
-    y = signal.lfilter(b, a, x)
+    x = np.zeros(n + 1)
+    x[1] = 1.0  # at rest at 0 before the unit sample
+    y = run_section(section, x)[1:]
     spec = np.abs(np.fft.rfft(y[4:], n))
     return float(np.fft.rfftfreq(n, 1.0 / rate)[1 + np.argmax(spec[1:])])
 

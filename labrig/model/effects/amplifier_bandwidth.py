@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from labrig.model.effects.base import Effect, Param, plus_minus
+from labrig.model.modal import first_order_filter
 
 __all__ = ["AmplifierBandwidth", "charging_lowpass", "first_order_lowpass"]
 
@@ -160,8 +161,6 @@ class AmplifierBandwidth(Effect):
         self.v_ref = float(v_ref) if v_ref and v_ref > 0 else 100.0
 
     def apply(self, x, ctx, p):
-        from scipy import signal  # lazy: a second of import CPU
-
         tau = p["tau_amp_s"]
         if tau <= 0:
             return x
@@ -171,8 +170,8 @@ class AmplifierBandwidth(Effect):
         b, a = ctx.cached(
             ("amp_lp", tau, ctx.rate_hz), lambda: first_order_lowpass(tau, ctx.rate_hz)
         )
-        zi = signal.lfilter_zi(b, a) * x[0]  # at rest at the first sample
-        return signal.lfilter(b, a, x, zi=zi)[0]
+        x0 = x[0]  # at rest at the first sample (the filter's gain at DC is 1)
+        return x0 + first_order_filter(b, a, x - x0)
 
     def physical(self, p):
         tau = p["tau_amp_s"]

@@ -7,9 +7,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
-from numpy.typing import NDArray
 
 from labrig.model.effects.base import Effect, Param, plus_minus
+from labrig.model.sections import Section, foh_section, run_section
 
 __all__ = [
     "MIMIC_PEAK",
@@ -21,24 +21,13 @@ __all__ = [
 ]
 
 
-def resonance_filter(
-    tau_r: float, zeta: float, rate_hz: float, internal: float = 0.0
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(b, a)`` (for ``lfilter``, ``a[0] = 1``) of ``(1 + 2 q zeta tau_r s) / (1 + 2 zeta
-    tau_r s + (tau_r s)^2)`` (``q = internal``, the share of the damping inside the stack)
-    sampled with a first-order hold (the strain is smooth between samples: exact for a strain
-    linear between them; ``scipy.signal.cont2discrete``, method ``"foh"``)."""
-    from scipy import signal  # lazy: a second of import CPU
-
+def resonance_filter(tau_r: float, zeta: float, rate_hz: float, internal: float = 0.0) -> Section:
+    """``(1 + 2 q zeta tau_r s) / (1 + 2 zeta tau_r s + (tau_r s)^2)`` (``q = internal``, the
+    share of the damping inside the stack) sampled with a first-order hold (the strain is
+    smooth between samples: exact for a strain linear between them;
+    :func:`labrig.model.sections.foh_section`)."""
     num = [2.0 * internal * zeta * tau_r, 1.0] if internal > 0 else [1.0]
-    bd, ad, _ = signal.cont2discrete(
-        (num, [tau_r * tau_r, 2.0 * zeta * tau_r, 1.0]),
-        1.0 / rate_hz,
-        method="foh",
-    )
-    b = np.atleast_1d(np.squeeze(bd)).astype(float)
-    a = np.asarray(ad, float)
-    return b / a[0], a / a[0]
+    return foh_section(num, [tau_r * tau_r, 2.0 * zeta * tau_r, 1.0], rate_hz)
 
 
 def aliased_hz(f_hz: float, rate_hz: float) -> float:
@@ -196,16 +185,11 @@ class MechanicalResonance(Effect):
         )
 
     def apply(self, x, ctx, p):
-        from scipy import signal  # lazy: a second of import CPU
-
         tau = p["tau_r_s"]
         if tau <= 0:
             return x
-        b, a = self._filter(ctx, tau, p["zeta"], p.get("internal", 0.0))
-        zi = signal.lfilter_zi(b, a)  # at rest at the first sample
-        if x.ndim == 2:
-            return signal.lfilter(b, a, x, axis=0, zi=zi[:, None] * x[0][None, :])[0]
-        return signal.lfilter(b, a, x, zi=zi * x[0])[0]
+        # at rest at the first sample; a 2-D x (tangent columns) column by column
+        return run_section(self._filter(ctx, tau, p["zeta"], p.get("internal", 0.0)), x)
 
     def tangent_columns(self, x, dX, ctx, p):
         return self.apply(dX, ctx, p)  # linear: every column in one call

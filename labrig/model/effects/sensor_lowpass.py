@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from labrig.model.effects.base import Effect, Param, plus_minus
+from labrig.model.sections import foh_section, run_section
 
 __all__ = ["SensorLowpass"]
 
@@ -13,7 +14,8 @@ class SensorLowpass(Effect):
     """A low-pass on the measured strain (conditioner or anti-alias filter): a second-order
     section ``1 / (1 + 2 zeta tau s + (tau s)^2)`` with a fitted cutoff ``fc = 1 / (2 pi tau)``
     and a fitted damping ``zeta`` (0.71: Butterworth, 0.87: Bessel-like, large: first order with
-    ``tau_1 = 2 zeta tau``).
+    ``tau_1 = 2 zeta tau``), sampled with a first-order hold and at rest at the first sample
+    (:mod:`labrig.model.sections`).
 
     Acts on the measured output. Signature: a quadrature residual (lagging the strain) growing
     with frequency, the same percentage at 50 and 100 V. Null: ``tau = 0``. Confusable with a
@@ -65,21 +67,14 @@ class SensorLowpass(Effect):
         ]
 
     def apply(self, x, ctx, p):
-        from scipy import signal  # lazy: a second of import CPU
-
         tau, zeta = p["tau_s"], p["zeta"]
         if tau <= 0:
             return x
-
-        def design():
-            bd, ad, _ = signal.cont2discrete(
-                ([1.0], [tau * tau, 2 * zeta * tau, 1.0]), 1.0 / ctx.rate_hz, method="foh"
-            )
-            return np.atleast_1d(np.squeeze(bd)) / ad[0], np.asarray(ad, float) / ad[0]
-
-        b, a = ctx.cached(("lp2", tau, zeta, ctx.rate_hz), design)
-        zi = signal.lfilter_zi(b, a) * x[0]
-        return signal.lfilter(b, a, x, zi=zi)[0]
+        sec = ctx.cached(
+            ("lp2", tau, zeta, ctx.rate_hz),
+            lambda: foh_section([1.0], [tau * tau, 2 * zeta * tau, 1.0], ctx.rate_hz),
+        )
+        return run_section(sec, x)  # at rest at the first sample
 
     def physical(self, p):
         tau = p["tau_s"]
