@@ -18,6 +18,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from labrig.cli.common import (
+    PEERS_OPTION,
     Memory,
     Method,
     StructuralEffect,
@@ -27,6 +28,7 @@ from labrig.cli.common import (
     json_option,
     one_of,
     out_dir_option,
+    peer_list,
     plural,
 )
 from labrig.cli.diagnose import ALSO_OPTION, MAINS_HZ_OPTION, MAX_EFFECTS_OPTION
@@ -190,9 +192,10 @@ def report(
     force: bool = FORCE,
     method: Method = METHOD,
     heldout: bool = HELDOUT,
+    peers: str = PEERS_OPTION,
 ) -> None:
     """`labrig fit` and `labrig report` on every run file: parameters, baselines, HTML pages."""
-    opts = {"method": method.value, "heldout": heldout}
+    opts = {"method": method.value, "heldout": heldout, "peers": peer_list(peers)}
     code = batch_command(
         "report", run_files, out, scheduler, workers, serial, as_json, force, **opts
     )

@@ -305,6 +305,35 @@ OFFSET_OPTION = flag(
     "--offset/--no-offset",
     help="Fit one strain offset per entry (default: on for imported data).",
 )
+#: the baselines a report can fit (labrig.analysis.baselines.KINDS, without importing it here)
+PEERS = ("prandtl_ishlinskii", "bouc_wen", "sindy")
+
+
+def peer_list(text: str) -> tuple[str, ...]:
+    """``--peers a,b``: the names given (``none``: no peer)."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    return () if names == ["none"] else tuple(names)
+
+
+def _peer_names(value: str) -> str:
+    """``--peers``' check: names of :data:`PEERS`, or ``none``; else a usage error."""
+    names = [n.strip() for n in value.split(",") if n.strip()]
+    unknown = [n for n in names if n not in PEERS]
+    if not names or (unknown and names != ["none"]):
+        raise typer.BadParameter(
+            f"{value!r}: choose from {', '.join(PEERS)}, comma-separated, or none"
+        )
+    return value
+
+
+PEERS_OPTION = typer.Option(
+    ",".join(PEERS),
+    "--peers",
+    metavar="NAMES",
+    callback=_peer_names,
+    help=f"Baselines fitted beside our model, comma-separated: {', '.join(PEERS)}, or none "
+    "(our model alone: faster).",
+)
 ENTRIES_HELP = "{}, comma-separated (default: every complete one)."
 RIG_OPTION_HELP = (
     "Rig file, or a shipped rig's name such as hybrid (default: the protocol's `rig`, else the "

@@ -18,6 +18,7 @@ from labrig.cli.common import (
     HELDOUT_OPTION,
     OFFSET_OPTION,
     OVERWRITE_OPTION,
+    PEERS_OPTION,
     WARMUP_OPTION,
     Method,
     check_out,
@@ -28,26 +29,8 @@ from labrig.cli.common import (
     json_text,
     one_of,
     out_file_option,
+    peer_list,
 )
-
-#: the baselines a report can fit (labrig.analysis.baselines.KINDS, without importing it here)
-PEERS = ("prandtl_ishlinskii", "bouc_wen", "sindy")
-
-
-def peer_list(text: str) -> tuple[str, ...]:
-    """``--peers a,b``: the names given (``none``: no peer)."""
-    names = [n.strip() for n in text.split(",") if n.strip()]
-    return () if names == ["none"] else tuple(names)
-
-
-def _peer_names(value: str) -> str:
-    names = [n.strip() for n in value.split(",") if n.strip()]
-    unknown = [n for n in names if n not in PEERS]
-    if not names or (unknown and names != ["none"]):
-        raise typer.BadParameter(
-            f"{value!r}: choose from {', '.join(PEERS)}, comma-separated, or none"
-        )
-    return value
 
 
 @friendly
@@ -72,14 +55,7 @@ def report(
     warmup_s: float | None = WARMUP_OPTION,
     heldout: bool = HELDOUT_OPTION,
     offset: bool | None = OFFSET_OPTION,
-    peers: str = typer.Option(
-        ",".join(PEERS),
-        "--peers",
-        metavar="NAMES",
-        callback=_peer_names,
-        help=f"Baselines fitted beside our model, comma-separated: {', '.join(PEERS)}, or none "
-        "(our model alone: faster).",
-    ),
+    peers: str = PEERS_OPTION,
     overwrite: bool = OVERWRITE_OPTION,
 ) -> None:
     """Model versus measurement as one HTML file; baselines fitted on the same data."""

@@ -56,9 +56,12 @@ class TaskOptions:
     also: tuple[str, ...] = ()
     max_effects: int = 2
     mains_hz: float | None = None
+    #: the baselines a report fits (``None``: all of them)
+    peers: tuple[str, ...] | None = None
 
     def to_json(self) -> dict[str, Any]:
-        return {**asdict(self), "also": list(self.also)}
+        peers = None if self.peers is None else list(self.peers)
+        return {**asdict(self), "also": list(self.also), "peers": peers}
 
 
 @dataclass(frozen=True)
@@ -279,7 +282,9 @@ def report_part(source: Snapshot | Path, opt: TaskOptions, out: TaskResult) -> N
     from labrig.commands.report import build_run_report
 
     snap = _snapshot(source)
-    built = build_run_report(snap.path, None, method=opt.method, heldout=opt.heldout, fit=snap.fit)
+    built = build_run_report(
+        snap.path, None, method=opt.method, heldout=opt.heldout, fit=snap.fit, peers=opt.peers
+    )
     out.documents["report.html"] = built.page
     out.documents["report.json"] = dumps(built.metrics)
     by_entry = {e["entry"]: e for e in out.entries}

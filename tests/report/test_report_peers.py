@@ -15,7 +15,7 @@ import pytest
 
 import labrig
 from labrig.analysis.baselines import KINDS
-from labrig.cli.report import PEERS
+from labrig.cli.common import PEERS
 from labrig.commands.report import checked_peers
 from labrig.report.html import peers_and_rate
 
