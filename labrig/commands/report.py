@@ -42,6 +42,7 @@ from labrig.core.version import __version__
 from labrig.model import DynamicHysteresisModel, ModelParams
 from labrig.model.effects import Effect
 from labrig.report.data import (
+    PEER_NAMES,
     Fitted,
     Provenance,
     ReportData,
@@ -50,15 +51,20 @@ from labrig.report.data import (
 )
 
 
-def peers_caveat(params_file: Path | str, fitted_on: Any, run_file: Path | str) -> str:
+def peers_caveat(
+    params_file: Path | str, fitted_on: Any, run_file: Path | str, peers: Sequence[str] = KINDS
+) -> str | None:
     """What ``labrig report RUN --params P`` compares, said plainly: our model was identified
-    wherever ``P`` was fitted (``fitted_on``: its entries), the peers are fitted now on the
+    wherever ``P`` was fitted (``fitted_on``: its entries), the ``peers`` are fitted now on the
     report's own records, so they are scored in-sample; ``labrig validate`` compares like with
-    like."""
+    like. ``None`` without peers (nothing is compared)."""
+    if not peers:
+        return None
     on = ", ".join(map(str, fitted_on)) if isinstance(fitted_on, list) and fitted_on else "?"
+    names = ", ".join(PEER_NAMES[k] for k in peers)
     return (
         f"Not a like-for-like comparison: our model's parameters come from {params_file} "
-        f"(identified on {on}), while the peers (Prandtl-Ishlinskii, Bouc-Wen, SINDy) are "
+        f"(identified on {on}), while the peers ({names}) are "
         f"fitted now on the records of this report, so they are scored in-sample. To identify "
         f"every model on the same training records and score them all on records none of them "
         f"saw: labrig validate TRAIN.h5 --on {Path(run_file).name}"
@@ -241,6 +247,7 @@ def _from_file(
     params_file: Path,
     heldout: bool = False,
     progress: Progress | None = None,
+    peers: Sequence[str] = KINDS,
 ) -> FittedModels:
     """Our model with the parameters (and effects) of a ``labrig fit`` file. The file gives
     its held-out NRMSE as a mean only; with ``heldout`` (and two scored entries or more, no
@@ -294,14 +301,16 @@ def _from_file(
         if train is not None:
             missing = [str(p) for p in train if not p.is_file()]
             notes.append(f"the training files of {params_file} are not found: {', '.join(missing)}")
-        out.caveat = peers_caveat(params_file, fitted_on, setup.path)
+        out.caveat = peers_caveat(params_file, fitted_on, setup.path, peers)
     elif not (len(train) == 1 and same_file(train[0], setup.path)):
         out.peers_on = train
         names = ", ".join(p.name for p in train)
+        who = "our model and the peers are" if peers else "our model is"
+        does = "predict" if peers else "predicts"
         notes.insert(
             0,
-            f"our model and the peers are identified on {names} (the training files of "
-            f"{params_file.name}) and predict the records of this report",
+            f"{who} identified on {names} (the training files of {params_file.name}) and "
+            f"{does} the records of this report",
         )
     return out
 
@@ -311,13 +320,13 @@ def checked_peers(peers: Sequence[str] | None) -> tuple[str, ...]:
     (``None``: all of them); ``ValueError`` naming an unknown one and the valid names."""
     if peers is None:
         return KINDS
-    if isinstance(peers, str):  # one name, not its letters
-        peers = [peers]
+    # one name, not its letters; an iterator read once
+    peers = [peers] if isinstance(peers, str) else list(peers)
     unknown = [p for p in peers if p not in KINDS]
     if unknown:
         raise ValueError(
             f"unknown peer {', '.join(map(repr, unknown))}: choose from {', '.join(KINDS)} "
-            "(or none)"
+            "(none: an empty list)"
         )
     return tuple(k for k in KINDS if k in peers)
 
@@ -340,9 +349,9 @@ def fit_report_models(
     if doc is None or params_file is None:
         fitted = _fitted_now(setup, method, heldout, progress, fit)
     else:
-        fitted = _from_file(setup, doc, params_file, heldout, progress)
+        fitted = _from_file(setup, doc, params_file, heldout, progress, peers)
     if not peers:
-        fitted.notes.append("no peers fitted (--peers none)")
+        fitted.notes.append("no peers fitted (peers: none)")
     for kind in peers:
         try:
             if fitted.peers_on is not None:
@@ -396,9 +405,11 @@ def report_data(setup: Setup, fitted: FittedModels, heldout: bool, from_file: bo
     run = setup.run
     scored = setup.scored_records
     peers = any(k != "dynamic" for k in fitted.models)
-    what = {(True, True): "baselines", (False, True): "model and baselines"}.get(
-        (from_file, peers), "nothing fitted" if from_file else "model"
-    )
+    if from_file and not peers:
+        fit_time = "leave-one-out fits of our model" if heldout else "nothing fitted"
+    else:
+        what = "baselines" if from_file else ("model and baselines" if peers else "model")
+        fit_time = what + (", with leave-one-out" if heldout else "")
     if setup.imported or not run.protocol_name:
         title = f"Model versus measurement: {setup.path.name} (imported data)"
     else:
@@ -409,8 +420,7 @@ def report_data(setup: Setup, fitted: FittedModels, heldout: bool, from_file: bo
         "offset": setup.offset,
         "params_source": fitted.source,
         "comparison": fitted.caveat or "",
-        "fit_time": f"{fitted.elapsed_s:.1f} s ({what}"
-        + (", with leave-one-out)" if heldout else ")"),
+        "fit_time": f"{fitted.elapsed_s:.1f} s ({fit_time})",
     }
     return build_report(
         title,

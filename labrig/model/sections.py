@@ -14,8 +14,10 @@ without numba. Neither imports ``scipy.signal``, about a second of CPU to import
 ``scipy.stats``): the effect library's low-pass is among the candidates of every diagnosis.
 
 The state is the controllable canonical form scaled by the natural frequency
-``w0 = sqrt(d0 / d2)``, so that both states are of the input's size whatever ``w0``:
-``A = [[-d1/d2, -w0], [w0, 0]]``, ``B = [1, 0]``, ``C = [n1/d2, n0/(d2 w0)]``.
+``w0 = sqrt(d0 / d2)``, so that both states are of the input's size whatever ``w0`` (the
+continuous state at rest under ``u`` is ``[0, u]``): ``A = [[-d1/d2, -w0], [w0, 0]]``, ``B = [w0, 0]``,
+``C = [n1/(d2 w0), n0/d0]``. A section whose every pole decays by more than
+:data:`FAST_LIMIT` per sample passes the input through at its gain at DC.
 """
 
 from __future__ import annotations
@@ -29,7 +31,12 @@ from scipy.linalg import expm
 
 from labrig.model.accel import kernels
 
-__all__ = ["Section", "foh_section", "run_section"]
+__all__ = ["FAST_LIMIT", "Section", "foh_section", "run_section"]
+
+#: the decay per sample (rate times ``dt``) of a section's slowest pole above which it settles
+#: within a sample: its response to an input linear between samples is then the input times
+#: the gain at DC, to about ``1 / FAST_LIMIT`` of the input's step per sample
+FAST_LIMIT = 1e12
 
 
 @dataclass(frozen=True)
@@ -103,32 +110,38 @@ def foh_section(num: ArrayLike, den: ArrayLike, rate_hz: float) -> Section:
         )
     n1, n0 = (0.0, n[0]) if n.size == 1 else (n[0], n[1])
     w0 = math.sqrt(d[2] / d[0])
-    a = np.array([[-d[1] / d[0], -w0], [w0, 0.0]])
     dt = 1.0 / float(rate_hz)
+    # the slowest pole's decay rate is at least min(d1 / (2 d2), d0 / d1) (their real parts'
+    # mean for a complex pair, their product over their sum for two real ones)
+    if d[1] / d[0] > 0 and min(d[1] / (2 * d[0]), d[2] / d[1]) * dt > FAST_LIMIT:
+        # settled within a sample: the output is the input times the gain at DC (the matrix
+        # exponential overflows long before the section is this fast)
+        z = np.zeros(2)
+        return Section(np.zeros((2, 2)), z, z.copy(), float(n0 / d[2]))
+    a = np.array([[-d[1] / d[0], -w0], [w0, 0.0]])
     em = np.zeros((4, 4))  # [[A dt, B dt, 0], [0, 0, 1], [0, 0, 0]]
     em[:2, :2] = a * dt
-    em[0, 2] = dt
+    em[0, 2] = w0 * dt
     em[2, 3] = 1.0
     ms = expm(em)
     ad, b1, b2 = ms[:2, :2], ms[:2, 2], ms[:2, 3]
-    c = np.array([n1 / d[0], n0 / (d[0] * w0)])
+    c = np.array([n1 / (d[0] * w0), n0 / d[2]])
     return Section(
         np.ascontiguousarray(ad), np.ascontiguousarray(b1 - b2 + ad @ b2), c, float(c @ b2)
     )
 
 
-def _section_loop(sec: Section, u: NDArray[np.float64], x0: NDArray[np.float64]) -> NDArray:
-    """The recursion in Python (the reference of the compiled kernel, and its fallback)."""
+def _lfilter_form(sec: Section) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The section's transfer function ``(b, a)`` in ``z^-1`` (for ``lfilter``):
+    ``a = [1, -tr Ad, det Ad]``, ``b = [Dd, C Bd - Dd tr Ad, k + Dd det Ad]`` with
+    ``k = C adj(-Ad) Bd``'s constant term."""
     (a00, a01), (a10, a11) = sec.ad.tolist()
     b0, b1 = sec.bd.tolist()
     c0, c1 = sec.c.tolist()
-    dd = sec.dd
-    s0, s1 = x0.tolist()
-    y = []
-    for uk in u.tolist():
-        y.append(c0 * s0 + c1 * s1 + dd * uk)
-        s0, s1 = a00 * s0 + a01 * s1 + b0 * uk, a10 * s0 + a11 * s1 + b1 * uk
-    return np.array(y, dtype=np.float64)
+    tr, det = a00 + a11, a00 * a11 - a01 * a10
+    k = c0 * (a01 * b1 - a11 * b0) + c1 * (a10 * b0 - a00 * b1)
+    d = sec.dd
+    return np.array([d, c0 * b0 + c1 * b1 - d * tr, k + d * det]), np.array([1.0, -tr, det])
 
 
 def run_section(sec: Section, x: ArrayLike) -> NDArray[np.float64]:
@@ -156,8 +169,11 @@ def run_section(sec: Section, x: ArrayLike) -> NDArray[np.float64]:
     u = np.ascontiguousarray(u)
     if u.size == 0:
         return u.copy()
-    x0 = sec.rest_state(float(u[0]))
     k = kernels()
+    x0 = sec.rest_state(float(u[0]))
     if k is not None:
         return k.section_run(sec.ad, sec.bd, sec.c, sec.dd, u, x0)
-    return _section_loop(sec, u, x0)
+    from scipy import signal  # without numba only: its import costs about a second
+
+    b, a = _lfilter_form(sec)
+    return signal.lfilter(b, a, u, zi=signal.lfilter_zi(b, a) * u[0])[0]

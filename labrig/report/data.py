@@ -41,6 +41,12 @@ MODEL_LABELS: dict[str, str] = {
     "bouc_wen": "Bouc-Wen",
     "sindy": "SINDy (sparse ODE)",
 }
+#: the peers' names in a sentence
+PEER_NAMES: dict[str, str] = {
+    "prandtl_ishlinskii": "Prandtl-Ishlinskii",
+    "bouc_wen": "Bouc-Wen",
+    "sindy": "SINDy",
+}
 MODEL_SHORT: dict[str, str] = {
     "dynamic": "ours",
     "prandtl_ishlinskii": "PI",

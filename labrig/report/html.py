@@ -19,6 +19,7 @@ from labrig.report.data import (
     MODEL_LABELS,
     MODEL_SHORT,
     PARAM_ROWS,
+    PEER_NAMES,
     EntryView,
     Fitted,
     ReportData,
@@ -119,6 +120,7 @@ def metrics_context(data: ReportData) -> dict[str, Any]:
         "rows": rows,
         "mean": mean,
         "legend": ", ".join(f"{MODEL_SHORT.get(k, k)} = {MODEL_LABELS.get(k, k)}" for k in keys),
+        "compared": len(keys) > 1,  # a best in bold
     }
 
 
@@ -301,8 +303,7 @@ def peers_and_rate(models: Mapping[str, Any]) -> str:
     str
         The sentence, or ``""`` when no peer is shown.
     """
-    names = {"prandtl_ishlinskii": "Prandtl-Ishlinskii", "bouc_wen": "Bouc-Wen"}
-    fixed = [label for kind, label in names.items() if kind in models]
+    fixed = [PEER_NAMES[k] for k in ("prandtl_ishlinskii", "bouc_wen") if k in models]
     parts = []
     if fixed:
         one = len(fixed) == 1

@@ -5,7 +5,8 @@ References: ``scipy.signal.cont2discrete(..., method="foh")`` with ``lfilter`` a
 (``lfilter_zi``), 1e-9 of the record's range (lfilter's transfer-function form itself is off
 the continuous solution by up to 1e-10 for a slow section sampled fast); ``solve_ivp``
 (DOP853, rtol 1e-13) of ``tau^2 y'' + 2 zeta tau y' + y = u`` with ``u`` linear between
-samples, where the section must be within 1e-12 of the range.
+samples, where the section must be within 1e-12 of the range. Without numba the recursion
+is scipy's ``lfilter`` on the section's transfer function (its import only then).
 """
 
 from __future__ import annotations
@@ -72,20 +73,35 @@ def test_a_slow_section_sampled_fast_is_the_continuous_solution(rate, fc, zeta):
     np.testing.assert_allclose(got, sol.y[0], rtol=0, atol=1e-12 * np.ptp(x))
 
 
-def test_the_compiled_recursion_is_the_loop_and_columns_are_records(monkeypatch):
+def test_the_compiled_recursion_is_lfilter_and_columns_are_records(monkeypatch):
     assert accel.kernels() is not None
     rate, tau = 2000.0, 1.0 / (2 * np.pi * 90.0)
     sec = foh_section([1.0], [tau * tau, 0.3 * tau, 1.0], rate)
     x = record(4000, rate, seed=3)
     compiled = run_section(sec, x)
     with monkeypatch.context() as m:
-        m.setattr(sections, "kernels", lambda: None)  # the Python loop, as without numba
-        loop = run_section(sec, x)
-    assert not np.array_equal(loop, x)
-    np.testing.assert_allclose(compiled, loop, rtol=0, atol=1e-13 * np.ptp(x))
+        m.setattr(sections, "kernels", lambda: None)  # as without numba: scipy's lfilter
+        fallback = run_section(sec, x)
+    assert not np.array_equal(fallback, x)
+    np.testing.assert_allclose(compiled, fallback, rtol=0, atol=1e-12 * np.ptp(x))
     both = run_section(sec, np.stack([x, -2.0 * x], axis=1))
     np.testing.assert_array_equal(both[:, 0], run_section(sec, x))
     np.testing.assert_array_equal(both[:, 1], run_section(sec, -2.0 * x))
+
+
+@pytest.mark.parametrize("tau", [1e-30, 1e-43, 1e-100])
+def test_a_section_settled_within_a_sample_passes_the_input_through(tau):
+    """Poles decaying by e^(1e12) or more per sample (below that the matrix exponential is
+    computed; it overflowed to NaN near 1e-43 s at 100 Hz)."""
+    x = record(500, 100.0, seed=5)
+    got = run_section(foh_section([1.0], [tau * tau, 2 * 0.7 * tau, 1.0], 100.0), x)
+    np.testing.assert_allclose(got, x, rtol=0, atol=1e-12 * np.ptp(x))
+
+
+def test_the_state_is_of_the_inputs_size_whatever_the_section():
+    for tau in (1e-6, 1e-3, 0.02):
+        sec = foh_section([1.0], [tau * tau, 2 * 0.7 * tau, 1.0], 10_000.0)
+        assert 0.01 < np.max(np.abs(sec.rest_state(1.0))) < 10.0
 
 
 def test_a_constant_input_stays_where_it_is():

@@ -58,8 +58,9 @@ def test_a_page_without_peers_says_so_and_shows_none(tiny_run: Path, tmp_path: P
     res = invoke("report", tiny_run, "--no-heldout", "--peers", "none", "--out", out)
     assert res.exit_code == 0, res.stderr
     text = re.sub(r"data:image/png;base64,[^\"']+", "", out.read_text())
-    assert "no peers fitted (--peers none)" in text
+    assert "no peers fitted (peers: none)" in text
     assert "(model)" in text and "model and baselines" not in text
+    assert "Bold: the best" not in text  # one model: no best
     for label in ("Prandtl", "Bouc-Wen", "SINDy"):
         assert label not in text
 
@@ -78,6 +79,7 @@ def test_the_library_call_takes_peers_in_any_order_and_refuses_unknown_ones(tiny
         "sindy",
     )
     assert checked_peers("sindy") == ("sindy",)
+    assert checked_peers(k for k in ["bouc_wen", "sindy"]) == ("bouc_wen", "sindy")
     assert checked_peers([]) == ()
     with pytest.raises(ValueError, match=r"'bw'.*choose from prandtl_ishlinskii"):
         labrig.open(tiny_run).report(peers=["bw"])
@@ -91,3 +93,20 @@ def test_the_frequency_caption_speaks_of_the_peers_shown():
     both = peers_and_rate(dict.fromkeys(KINDS, 0))
     assert both.startswith("Prandtl-Ishlinskii and Bouc-Wen are rate-independent: their loops")
     assert both.endswith("; SINDy's sparse ODE does depend on the rate.")
+
+
+def test_the_in_sample_caveat_names_the_peers_fitted(tiny_run: Path, tmp_path: Path):
+    """A parameter file that does not name its training files: the peers are fitted on the
+    report's own records, and the caveat says which (none: no caveat, nothing is compared)."""
+    params = tmp_path / "p.json"
+    assert invoke("fit", tiny_run, "--no-heldout", "--out", params).exit_code == 0
+    doc = json.loads(params.read_text())
+    del doc["train_files"]
+    params.write_text(json.dumps(doc))
+    base = ("report", tiny_run, "--params", params, "--no-heldout", "--json")
+    one = invoke(*base, "--peers", "bouc_wen")
+    assert one.exit_code == 0, one.stderr
+    assert "the peers (Bouc-Wen) are fitted now" in " ".join(one.stderr.split())
+    alone = invoke(*base, "--peers", "none")
+    assert alone.exit_code == 0, alone.stderr
+    assert "like-for-like" not in alone.stderr
