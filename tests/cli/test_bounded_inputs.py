@@ -43,11 +43,8 @@ def test_a_device_as_a_yaml_input_is_refused_at_once(tmp_path, args):
 
 @needs_dev_zero
 @pytest.mark.timeout(60)
-def test_a_device_as_a_parameter_file_is_refused_at_once(tmp_path):
-    from helpers import TINY, run_protocol
-
-    run = run_protocol(TINY, tmp_path, 1)
-    res = invoke("report", run, "--params", ZERO)
+def test_a_device_as_a_parameter_file_is_refused_at_once(tiny_run):
+    res = invoke("report", tiny_run, "--params", ZERO)
     _refused(res, ZERO)
 
 

@@ -70,9 +70,15 @@ def check_must_show(params: dict, nrmse: float, run_file: Path) -> float:
     return floor_pct
 
 
-def test_fit_json_recovers_the_truth(small_run: Path, tmp_path: Path) -> None:
-    out = tmp_path / "sub" / "params.json"
-    res = invoke("fit", small_run, "--json", "--no-heldout", "--out", out)
+@pytest.fixture(scope="module")
+def base_fit(small_run: Path, tmp_path_factory) -> tuple:
+    """``labrig fit --json --no-heldout --out``: the result and the parameter file."""
+    out = tmp_path_factory.mktemp("base") / "sub" / "params.json"
+    return invoke("fit", small_run, "--json", "--no-heldout", "--out", out), out
+
+
+def test_fit_json_recovers_the_truth(small_run: Path, base_fit: tuple) -> None:
+    res, out = base_fit
     assert res.exit_code == 0, res.stderr
     j = json.loads(res.stdout)  # stdout is the JSON and nothing else
     assert list(j) == JSON_KEYS
@@ -88,7 +94,9 @@ def test_fit_json_recovers_the_truth(small_run: Path, tmp_path: Path) -> None:
     assert "chained as one run" in res.stderr
 
 
-def test_fit_with_an_effect_the_rig_does_not_have(small_run: Path, tmp_path: Path) -> None:
+def test_fit_with_an_effect_the_rig_does_not_have(
+    small_run: Path, base_fit: tuple, tmp_path: Path
+) -> None:
     """--effect viscoelastic_creep on the default rig (its truth is the model, no creep): the
     fitted creep is negligible and the model's parameters stay the truth's. (Measured: c =
     -0.33 % +- 0.07 %: 5 formal sigma, because c trades off against G_t's slow tail; the formal
@@ -105,7 +113,7 @@ def test_fit_with_an_effect_the_rig_does_not_have(small_run: Path, tmp_path: Pat
     check_must_show(j["params"], j["nrmse_pct"], small_run)
     # the fit minimises the sum of squared per-entry NRMSE, not their mean: the nested model
     # (the effect's null is the base) is never worse in that objective
-    base = json.loads(invoke("fit", small_run, "--no-heldout", "--json").stdout)
+    base = json.loads(base_fit[0].stdout)  # the fit without the effect
 
     def objective(per_entry: dict[str, float]) -> float:
         return float(np.sum(np.square(list(per_entry.values()))))

@@ -64,10 +64,10 @@ def test_a_rig_files_seed_outside_the_range_is_a_bad_input(tmp_path, seed):
 
 
 @pytest.mark.parametrize("port", [-1, 65536])
-def test_ports_outside_0_to_65535_are_usage_errors(tmp_path, port):
-    out = run_protocol(TINY, tmp_path, 1)
-    _usage_error(invoke("watch", out, "--port", port), "--port")
+def test_ports_outside_0_to_65535_are_usage_errors(tiny_run, tmp_path, port):
+    _usage_error(invoke("watch", tiny_run, "--port", port), "--port")
     proto = tmp_path / "protocol.yaml"
+    proto.write_text(TINY)
     res = invoke("run", proto, "--live-port", port, "--out", tmp_path / "x.h5")
     _usage_error(res, "--live-port")
     assert not (tmp_path / "x.h5").exists()

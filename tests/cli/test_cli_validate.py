@@ -364,9 +364,9 @@ def test_diagnose_now_equals_effects_from_the_diagnosis_file(files, tmp_path: Pa
 
 
 @pytest.fixture(scope="module")
-def rig_runs(tmp_path_factory) -> tuple[Path, Path]:
-    d = tmp_path_factory.mktemp("rig")
-    return run_protocol(TINY, d, seed=1), run_protocol(TINY, d, seed=2)
+def rig_runs(tiny_run: Path, tmp_path_factory) -> tuple[Path, Path]:
+    """The shared run of TINY (seed 1) and another (seed 2)."""
+    return tiny_run, run_protocol(TINY, tmp_path_factory.mktemp("rig"), seed=2)
 
 
 def test_recorded_runs_are_chained_and_scored_without_offset(rig_runs, files) -> None:

@@ -33,16 +33,17 @@ def test_two_entries_are_refused_with_the_ways_on(tmp_path: Path) -> None:
     assert "Traceback" not in res.output and not (tmp_path / "d").exists()
 
 
+#: 500 samples: four parts of one period each
 ONE = """\
 name: one entry
-rate_hz: 1000
+rate_hz: 500
 rest_s: 0.5
 steps:
   - kind: sweep
     amplitudes_V: [100]
-    frequencies_hz: [2]
+    frequencies_hz: [4]
     cycles: 4
-    min_duration_s: 2
+    min_duration_s: 1
 """
 
 

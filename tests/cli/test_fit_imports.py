@@ -1,8 +1,9 @@
 """``labrig fit`` imports what the fit needs only: the effect library only when ``--effect`` names
 an effect, never scipy.signal with scipy.stats (about 1.5 s of CPU to import; the library's
 filters do without it), and none of the peers' or the report's libraries (pysindy with
-scikit-learn and pandas, matplotlib: about 2 s more) unless ``--model sindy`` asks for SINDy. Whole-command CPU and the floor of a fresh process:
-``benchmarks/bench_commands.py [--floor]`` and ``benchmarks/bench_speed.py phases``."""
+scikit-learn and pandas, matplotlib: about 2 s more) unless ``--model sindy`` asks for SINDy.
+Whole-command CPU and the floor of a fresh process: ``benchmarks/bench_commands.py [--floor]``
+and ``benchmarks/bench_speed.py phases``."""
 
 from __future__ import annotations
 

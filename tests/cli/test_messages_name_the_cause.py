@@ -10,7 +10,7 @@ from pathlib import Path
 import h5py
 import pytest
 
-from helpers import TINY, invoke, run_protocol
+from helpers import invoke
 
 
 def refused(res, *words: str) -> None:
@@ -21,17 +21,12 @@ def refused(res, *words: str) -> None:
         assert w in flat, (w, res.stderr)
 
 
-@pytest.fixture(scope="module")
-def a_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return run_protocol(TINY, tmp_path_factory.mktemp("run"), seed=1)
-
-
-def test_watch_on_a_port_in_use_names_its_own_option(a_run: Path):
+def test_watch_on_a_port_in_use_names_its_own_option(tiny_run: Path):
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
         busy.listen(1)
         port = busy.getsockname()[1]
-        res = invoke("watch", a_run, "--port", port)
+        res = invoke("watch", tiny_run, "--port", port)
     refused(res, f"127.0.0.1:{port}", "--port", "cannot serve there")
     assert "--live-port" not in res.stderr
 

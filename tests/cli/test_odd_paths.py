@@ -42,7 +42,12 @@ def test_a_symbolic_link_as_output_is_refused_and_its_file_kept(tiny_run, tmp_pa
     assert link.is_symlink() and target.read_text() == "{}"
 
 
-def test_a_batch_folder_may_be_a_link_to_a_folder_not_a_loop(tiny_run, tmp_path):
+def test_a_batch_folder_may_be_a_link_to_a_folder_not_a_loop(tiny_run, tmp_path, monkeypatch):
+    # the fleet page (its figures, most of this batch's CPU) is not read here; its own tests:
+    # tests/fleet/test_fleet.py, tests/api/test_day_one.py
+    import labrig.fleet.fleet_report as fleet_report
+
+    monkeypatch.setattr(fleet_report, "write_fleet_report", lambda path, *args: path)
     (tmp_path / "a").symlink_to(tmp_path / "b")
     (tmp_path / "b").symlink_to(tmp_path / "a")
     res = invoke("batch", "fit", tiny_run, "--out", tmp_path / "a", "--serial")

@@ -68,6 +68,30 @@ def gcs_url(lines: list[str]) -> str:
     return next(w for x in lines if "GCS" in x for w in x.split() if w.startswith("socket://"))
 
 
+def ask(s: serial.SerialBase, line: bytes) -> bytes:
+    s.write(line)
+    return s.read_until(b"\n")
+
+
+def check_the_rigs_limits(lines: list[str], s: serial.SerialBase) -> None:
+    """The default rig allows -20..100 V: the standalone amplifier starts with VMI/VMA there
+    (not at its hardware -30..130 V) and refuses SVA beyond them, before any labrig driver
+    has configured it (the first commands of a new server)."""
+    assert "-20 to 100 V" in "".join(lines)
+    assert ask(s, b"VMA? 1\n") == b"1=100.0000\n"
+    assert ask(s, b"VMI? 1\n") == b"1=-20.0000\n"
+    s.write(b"ONL 1 1\n")
+    assert ask(s, b"ERR?\n") == b"0\n"
+    for cmd, err in ((b"SVA A 130\n", b"17\n"), (b"VMA 1 130\n", b"17\n")):
+        s.write(cmd)
+        assert ask(s, b"ERR?\n") == err, cmd
+    s.write(b"SVA A 1_0\n")  # not a number in GCS (Python's float() would say 10)
+    assert ask(s, b"ERR?\n") == b"1\n"
+    time.sleep(0.2)
+    assert ask(s, b"VOL? 1\n") == b"1=0.0000\n"  # the output never moved
+    assert ask(s, b"SVA? A\n") == b"A=0.0000\n"
+
+
 @pytest.mark.parametrize(
     "stop",
     # the default tier stops it by Ctrl-C and SIGTERM; the other two signals take the same
@@ -81,12 +105,16 @@ def gcs_url(lines: list[str]) -> str:
     ids=["ctrl-c", "sigterm", "sighup", "sigquit"],
 )
 def test_serve_prints_addresses_and_answers_until_stopped(stop):
+    """The server holds the rig's limits from its first command, answers real clients, and
+    stops cleanly on the signal (one server for all three: starting one, numba's kernels
+    loaded, costs more than its checks)."""
     proc, lines = start_serve()
     try:
         text = "".join(lines)
         tcp = next(x for x in lines if "Modbus TCP" in x).split()[-3]
         assert "Modbus RTU" in text
         with serial.serial_for_url(gcs_url(lines), timeout=2) as s:
+            check_the_rigs_limits(lines, s)
             s.write(b"ONL 1 1\nSVA A 10\n")
             time.sleep(0.3)  # the bench clock runs in real time
             s.write(b"VOL? 1\n")
@@ -99,35 +127,6 @@ def test_serve_prints_addresses_and_answers_until_stopped(stop):
         out = stop_serve(proc, stop)
     assert "stopping the simulators" in out  # stopped cleanly, not killed by the signal
     assert proc.returncode == 0
-
-
-def ask(s: serial.SerialBase, line: bytes) -> bytes:
-    s.write(line)
-    return s.read_until(b"\n")
-
-
-def test_serve_applies_the_rigs_limits_from_the_start():
-    """The default rig allows -20..100 V: the standalone amplifier starts with VMI/VMA there
-    (not at its hardware -30..130 V) and refuses SVA beyond them, before any labrig driver
-    has configured it."""
-    proc, lines = start_serve()
-    try:
-        assert "-20 to 100 V" in "".join(lines)
-        with serial.serial_for_url(gcs_url(lines), timeout=2) as s:
-            assert ask(s, b"VMA? 1\n") == b"1=100.0000\n"
-            assert ask(s, b"VMI? 1\n") == b"1=-20.0000\n"
-            s.write(b"ONL 1 1\n")
-            assert ask(s, b"ERR?\n") == b"0\n"
-            for cmd, err in ((b"SVA A 130\n", b"17\n"), (b"VMA 1 130\n", b"17\n")):
-                s.write(cmd)
-                assert ask(s, b"ERR?\n") == err, cmd
-            s.write(b"SVA A 1_0\n")  # not a number in GCS (Python's float() would say 10)
-            assert ask(s, b"ERR?\n") == b"1\n"
-            time.sleep(0.2)
-            assert ask(s, b"VOL? 1\n") == b"1=0.0000\n"  # the output never moved
-            assert ask(s, b"SVA? A\n") == b"A=0.0000\n"
-    finally:
-        stop_serve(proc)
 
 
 @pytest.fixture

@@ -94,6 +94,11 @@ def test_a_run_file_being_written_is_not_analysed(run_copy: Path, tmp_path: Path
 
 
 def test_batch_report_fits_our_model_once(run_copy: Path, tmp_path: Path, monkeypatch):
+    # the fleet page (its figures, most of this batch's CPU) is not read here; its own tests:
+    # tests/fleet/test_fleet.py, tests/api/test_day_one.py
+    import labrig.fleet.fleet_report as fleet_report
+
+    monkeypatch.setattr(fleet_report, "write_fleet_report", lambda path, *args: path)
     real_fit = fit_module.fit_model
     calls = []
 

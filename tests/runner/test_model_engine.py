@@ -14,7 +14,13 @@ import pytest
 
 from labrig.runner import execute as ex
 
-from helpers import TINY
+#: one short sine: the threshold is set from the run itself, so any length will do
+ONE_SINE = """\
+name: one sine
+rate_hz: 500
+steps:
+  - {kind: sine, amplitude_V: 60, frequency_hz: 2, cycles: 1}
+"""
 
 CODE = """
 import sys
@@ -47,8 +53,8 @@ for n, start in enumerate((excess, excess * (1 - 1e-9))):  # at the threshold, t
 def test_a_run_over_the_threshold_runs_the_compiled_model_and_a_shorter_one_never_imports_numba(
     tmp_path: Path,
 ) -> None:
-    proto = tmp_path / "tiny.yaml"
-    proto.write_text(TINY)
+    proto = tmp_path / "one.yaml"
+    proto.write_text(ONE_SINE)
     res = subprocess.run(
         [sys.executable, "-c", CODE, str(proto), str(tmp_path / "run.h5")],
         capture_output=True,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -56,14 +57,24 @@ def digest(p: Path) -> str:
     return hashlib.sha256(p.read_bytes()).hexdigest()
 
 
-@pytest.fixture
-def aborted(tmp_path: Path) -> tuple[Path, Path]:
-    """A run aborted halfway through its second entry, by alice."""
-    proto = protocol(tmp_path)
-    out = tmp_path / "run.h5"
+@pytest.fixture(scope="module")
+def aborted_once(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A run aborted halfway through its second entry, by alice (recorded once, read-only)."""
+    folder = tmp_path_factory.mktemp("aborted")
+    proto = protocol(folder)
+    out = folder / "run.h5"
     o = run(proto, out, progress=interrupt_in(1), metadata=from_options(operator="alice"))
     assert (o.status, o.exit_code) == ("aborted", 130)
     return proto, out
+
+
+@pytest.fixture
+def aborted(aborted_once: tuple[Path, Path], tmp_path: Path) -> tuple[Path, Path]:
+    """A copy of :func:`aborted_once`'s protocol and run file in ``tmp_path``, the test's own."""
+    proto, out = aborted_once
+    shutil.copyfile(proto, tmp_path / proto.name)
+    shutil.copyfile(out, tmp_path / out.name)
+    return tmp_path / proto.name, tmp_path / out.name
 
 
 def test_resume_finishes_the_campaign_and_records_it(aborted, tmp_path):

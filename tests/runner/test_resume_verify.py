@@ -10,6 +10,7 @@ opened, the file byte for byte as it was.
 from __future__ import annotations
 
 import hashlib
+import shutil
 from pathlib import Path
 
 import h5py
@@ -34,10 +35,11 @@ def digest(p: Path) -> str:
     return hashlib.sha256(p.read_bytes()).hexdigest()
 
 
-@pytest.fixture
-def aborted(tmp_path: Path) -> tuple[Path, Path]:
-    """A run stopped (Ctrl-C) in its second entry: resumable."""
-    proto = tmp_path / "campaign.yaml"
+@pytest.fixture(scope="module")
+def aborted_once(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A run stopped (Ctrl-C) in its second entry: resumable (recorded once, read-only)."""
+    folder = tmp_path_factory.mktemp("aborted")
+    proto = folder / "campaign.yaml"
     proto.write_text(yaml.safe_dump({"name": "verify", "rate_hz": 1000, "steps": STEPS}))
 
     def progress(k, n, name, f, left):
@@ -45,10 +47,19 @@ def aborted(tmp_path: Path) -> tuple[Path, Path]:
             raise KeyboardInterrupt
 
     plan, rig = runner.preflight(proto, None)
-    out = tmp_path / "run.h5"
+    out = folder / "run.h5"
     o = runner.execute(plan, rig, out, seed=3, progress=progress)
     assert o.status == "aborted"
     return proto, out
+
+
+@pytest.fixture
+def aborted(aborted_once: tuple[Path, Path], tmp_path: Path) -> tuple[Path, Path]:
+    """A copy of :func:`aborted_once`'s protocol and run file in ``tmp_path``, the test's own."""
+    proto, out = aborted_once
+    shutil.copyfile(proto, tmp_path / proto.name)
+    shutil.copyfile(out, tmp_path / out.name)
+    return tmp_path / proto.name, tmp_path / out.name
 
 
 def damage(path: Path) -> None:

@@ -88,7 +88,8 @@ FILL_DURING_RUN = textwrap.dedent(
 )
 
 # Runs inside the namespace: the runner in-process with the free-space check bypassed, so the
-# full disk is met by HDF5's own write; then `labrig info` and the process's own clean exit.
+# full disk is met by HDF5's own write; then `labrig info` (in this process too: labrig is loaded
+# here already) and the process's own clean exit.
 HDF5_MEETS_IT = textwrap.dedent(
     """
     import json, os, shutil, subprocess, sys, threading, time
@@ -115,10 +116,12 @@ HDF5_MEETS_IT = textwrap.dedent(
 
     threading.Thread(target=fill, daemon=True).start()
     o = execute(plan, rig, run, seed=4, realtime=True)
-    info = subprocess.run([labrig_exe, "info", str(run)], capture_output=True, text=True)
+    from typer.testing import CliRunner
+    from labrig.cli import app
+    info = CliRunner().invoke(app, ["info", str(run)])
     shutil.copy(run, os.path.join(out_dir, "run.h5"))
     print(json.dumps({"status": o.status, "code": o.exit_code, "reason": o.reason,
-                      "info_code": info.returncode, "info": info.stdout + info.stderr,
+                      "info_code": info.exit_code, "info": info.output,
                       "left": sorted(os.listdir(mnt))}))
     """
 )

@@ -25,6 +25,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+import store_isolation_calls as in_child
 
 from labrig.core.errors import InputFileError, InputIssue
 from labrig.store import RunWriter, read_run
@@ -156,42 +157,12 @@ def test_ctrl_c_stops_a_command_reading_a_looping_file(hanging: list[Path]):
 # -- the isolation -------------------------------------------------------------------------
 
 
-def _crash() -> None:
-    os.kill(os.getpid(), signal.SIGSEGV)
-
-
-def _spin() -> None:
-    while True:
-        pass
-
-
-def _sleep() -> None:
-    time.sleep(60)
-
-
-def _refuse() -> None:
-    raise InputFileError([InputIssue("f.h5", 3, "entry/data", "why")])
-
-
-def _value(n: int) -> dict:
-    return {"x": np.arange(n)}
-
-
-def _pid() -> int:
-    print("a stray print in the reader")  # must not garble its answers
-    return os.getpid()
-
-
-def _unpicklable() -> None:
-    raise ValueError(lambda: 0)
-
-
 @pytest.fixture
 def worker_call(monkeypatch) -> Iterator:
-    """A long-lived :class:`IsolatedWorker`'s ``call`` (a new interpreter that finds this
-    module's functions by name: this folder and tests/ on its path)."""
+    """A long-lived :class:`IsolatedWorker`'s ``call`` (a new interpreter that finds the
+    functions of ``store_isolation_calls`` by name: this folder on its path)."""
     here = Path(__file__).parent
-    path = [str(here), str(here.parent), os.environ.get("PYTHONPATH", "")]
+    path = [str(here), os.environ.get("PYTHONPATH", "")]
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join(path))
     worker = IsolatedWorker()
     try:
@@ -209,7 +180,7 @@ def isolated(request) -> Iterator:
 
 def test_a_crashing_reader_is_reported_not_fatal(isolated):
     with pytest.raises(IsolatedReadError, match="crashed reading it \\(SIGSEGV\\)"):
-        isolated(_crash, size_bytes=0)
+        isolated(in_child.crash, size_bytes=0)
 
 
 def _cpu_of(pid: int) -> float:
@@ -219,12 +190,12 @@ def _cpu_of(pid: int) -> float:
 
 
 def test_a_looping_reader_is_stopped_by_its_cpu_time(isolated):
-    isolated(_value, 1, size_bytes=0)  # (a worker started: its start is not the read's CPU)
+    isolated(in_child.value, 1, size_bytes=0)  # (a worker started: its start is not the read's CPU)
     worker = getattr(isolated, "__self__", None)
     before = _cpu_of(worker.pid) if worker is not None else 0.0  # (counted when reaped)
     t0 = time.process_time(), children_cpu_s()
     with pytest.raises(IsolatedReadError, match="looped on it"):
-        isolated(_spin, size_bytes=0)
+        isolated(in_child.spin, size_bytes=0)
     # the parent waited without spending CPU; the child was stopped after about STEP_CPU_S of
     # its own CPU (CPU seconds, not the wall clock: a loaded machine stretches the wall time)
     assert time.process_time() - t0[0] < 0.5
@@ -233,34 +204,34 @@ def test_a_looping_reader_is_stopped_by_its_cpu_time(isolated):
 
 
 def test_a_waiting_reader_is_stopped_by_the_wall_clock(isolated, monkeypatch):
-    isolated(_value, 1, size_bytes=0)
+    isolated(in_child.value, 1, size_bytes=0)
     monkeypatch.setattr(store_isolated, "BASE_WALL_S", 0.5)
     t0 = time.monotonic()
     with pytest.raises(IsolatedReadError, match="did not finish within"):
-        isolated(_sleep, size_bytes=0)
+        isolated(in_child.sleep, size_bytes=0)
     assert time.monotonic() - t0 < slack(5.0)
 
 
 def test_results_and_errors_come_back(isolated):
-    np.testing.assert_array_equal(isolated(_value, 5, size_bytes=0)["x"], np.arange(5))
+    np.testing.assert_array_equal(isolated(in_child.value, 5, size_bytes=0)["x"], np.arange(5))
     with pytest.raises(InputFileError) as e:
-        isolated(_refuse, size_bytes=0)
+        isolated(in_child.refuse, size_bytes=0)
     assert e.value.issues == [InputIssue("f.h5", 3, "entry/data", "why")]
     assert e.value.exit_code == 2
     with pytest.raises(IsolatedCallError, match="ValueError"):
-        isolated(_unpicklable, size_bytes=0)
+        isolated(in_child.unpicklable, size_bytes=0)
 
 
 def test_the_worker_is_one_process_started_again_after_a_failure(worker_call):
     """The worker answers every call from the same process (no fork per call), and after a
     failure (a crash) the next call is answered by a new one."""
     isolated = worker_call
-    first = isolated(_pid, size_bytes=0)
-    assert first != os.getpid() and isolated(_pid, size_bytes=0) == first
+    first = isolated(in_child.pid, size_bytes=0)
+    assert first != os.getpid() and isolated(in_child.pid, size_bytes=0) == first
     with pytest.raises(IsolatedReadError):
-        isolated(_crash, size_bytes=0)
-    again = isolated(_pid, size_bytes=0)
-    assert again not in (first, os.getpid()) and isolated(_pid, size_bytes=0) == again
+        isolated(in_child.crash, size_bytes=0)
+    again = isolated(in_child.pid, size_bytes=0)
+    assert again not in (first, os.getpid()) and isolated(in_child.pid, size_bytes=0) == again
 
 
 # -- seals -----------------------------------------------------------------------------------
@@ -455,7 +426,7 @@ def test_recent_files_are_kept_within_their_count_and_bytes(tmp_path: Path, monk
 
     monkeypatch.setattr(store_reader, "call_isolated", counting)
     monkeypatch.setattr(store_reader, "_recent", type(store_reader._recent)())
-    files = [write_run(tmp_path / f"run{k}.h5", n=100 + k) for k in range(3)]
+    files = [write_run(tmp_path / f"run{k}.h5") for k in range(3)]  # copies: one write
     for path in [*files, *files]:  # a file read again after others is read once
         read_run(path)
     assert calls == files
@@ -468,7 +439,7 @@ def test_recent_files_are_kept_within_their_count_and_bytes(tmp_path: Path, monk
     # the bytes bound, at one file's samples (every array the read returns): one byte below,
     # the file is not kept (read at each call); at exactly its size, it is
     one = sum(a.nbytes for e in read_run(files[1]) for a in e.data.values())
-    assert one >= 3 * 2 * 101 * 8  # at least its entries' two channels
+    assert one >= 3 * 2 * 300 * 8  # at least its entries' two channels
     store_reader._recent.clear()
     monkeypatch.setattr(store_reader, "RECENT_BYTES", one - 1)
     read_run(files[1]), read_run(files[1])
