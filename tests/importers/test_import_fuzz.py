@@ -97,20 +97,29 @@ def test_numbers_round_trip(tmp_path: Path, values, style, header: bool, index: 
     np.testing.assert_array_equal(entry.strain, table[:, 2])
 
 
-@FAST
-@given(data=st.binary(max_size=400))
-def test_arbitrary_bytes_as_mat(tmp_path: Path, data: bytes) -> None:
+#: the MATLAB cases read each input through the isolated reader (a forked process per read):
+#: 20 inputs each in the default tier, and the same properties on 200 in the slow tier
+MAT = settings(FAST, max_examples=20)
+MAT_LONG = settings(FAST, max_examples=200)
+
+
+def mat_cases(case, **strategies):
+    """``case`` on :data:`MAT` inputs, and its slow-tier twin on :data:`MAT_LONG`."""
+    return MAT(given(**strategies)(case)), pytest.mark.slow(MAT_LONG(given(**strategies)(case)))
+
+
+def _bytes_as_mat(tmp_path: Path, data: bytes) -> None:
     f = tmp_path / "fuzz.mat"
     f.write_bytes(b"MATLAB 5.0 MAT-file".ljust(116) + b"\x00" * 8 + b"\x00\x01IM" + data)
     read(f, voltage="1", strain="2", rate_hz=10.0)
 
 
-@FAST
-@given(
-    source=st.sampled_from(["plain_v5.mat", "plain_v73.mat", "controldesk.mat", "rows_v5.mat"]),
-    flips=st.lists(st.tuples(st.integers(0, 10**6), st.integers(1, 255)), min_size=1, max_size=8),
+test_arbitrary_bytes_as_mat, test_arbitrary_bytes_as_mat_200 = mat_cases(
+    _bytes_as_mat, data=st.binary(max_size=400)
 )
-def test_damaged_mat_files(tmp_path: Path, source: str, flips) -> None:
+
+
+def _damaged_mat(tmp_path: Path, source: str, flips) -> None:
     raw = bytearray((DATA / source).read_bytes())
     for where, mask in flips:
         raw[where % len(raw)] ^= mask
@@ -119,17 +128,16 @@ def test_damaged_mat_files(tmp_path: Path, source: str, flips) -> None:
     read(f, rate_hz=200.0, voltage="1", strain="2", stack_length_mm=18.0)
 
 
+test_damaged_mat_files, test_damaged_mat_files_200 = mat_cases(
+    _damaged_mat,
+    source=st.sampled_from(["plain_v5.mat", "plain_v73.mat", "controldesk.mat", "rows_v5.mat"]),
+    flips=st.lists(st.tuples(st.integers(0, 10**6), st.integers(1, 255)), min_size=1, max_size=8),
+)
+
 SHAPES = st.sampled_from([(1, 20), (20, 1), (20,), (3, 20), (20, 3), (4, 4), (2, 3, 4), (0, 0)])
 
 
-@FAST
-@given(
-    variables=st.dictionaries(
-        st.from_regex(r"[a-z][a-z0-9_]{0,8}", fullmatch=True), SHAPES, min_size=1, max_size=5
-    ),
-    seed=st.integers(0, 2**32 - 1),
-)
-def test_arbitrary_mat_variables(tmp_path: Path, variables: dict, seed: int) -> None:
+def _mat_variables(tmp_path: Path, variables: dict, seed: int) -> None:
     rng = np.random.default_rng(seed)
     arrays = {name: rng.normal(size=shape) for name, shape in variables.items()}
     buffer = io.BytesIO()
@@ -142,6 +150,15 @@ def test_arbitrary_mat_variables(tmp_path: Path, variables: dict, seed: int) -> 
         assert entry.voltage_V.size == entry.strain.size >= 2
         signals = [a.ravel() if min(a.shape, default=0) <= 1 else a for a in arrays.values()]
         assert any(np.array_equal(entry.voltage_V, s) for s in _all_signals(signals))
+
+
+test_arbitrary_mat_variables, test_arbitrary_mat_variables_200 = mat_cases(
+    _mat_variables,
+    variables=st.dictionaries(
+        st.from_regex(r"[a-z][a-z0-9_]{0,8}", fullmatch=True), SHAPES, min_size=1, max_size=5
+    ),
+    seed=st.integers(0, 2**32 - 1),
+)
 
 
 def _all_signals(arrays: list[np.ndarray]) -> list[np.ndarray]:
