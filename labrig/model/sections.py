@@ -15,8 +15,8 @@ without numba. Neither imports ``scipy.signal``, about a second of CPU to import
 
 The state is the controllable canonical form scaled by the natural frequency
 ``w0 = sqrt(d0 / d2)``, so that both states are of the input's size whatever ``w0`` (the
-continuous state at rest under ``u`` is ``[0, u]``): ``A = [[-d1/d2, -w0], [w0, 0]]``, ``B = [w0, 0]``,
-``C = [n1/(d2 w0), n0/d0]``. A section whose every pole decays by more than
+continuous state at rest under ``u`` is ``[0, u]``): ``A = [[-d1/d2, -w0], [w0, 0]]``,
+``B = [w0, 0]``, ``C = [n1/(d2 w0), n0/d0]``. A section whose every pole decays by more than
 :data:`FAST_LIMIT` per sample passes the input through at its gain at DC.
 """
 
