@@ -18,6 +18,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from labrig.cli.common import (
+    PEERS,
     PEERS_OPTION,
     Memory,
     Method,
@@ -195,7 +196,9 @@ def report(
     peers: str = PEERS_OPTION,
 ) -> None:
     """`labrig fit` and `labrig report` on every run file: parameters, baselines, HTML pages."""
-    opts = {"method": method.value, "heldout": heldout, "peers": peer_list(peers)}
+    chosen = peer_list(peers)
+    every = set(chosen) == set(PEERS)  # the default: None, the options of earlier batches
+    opts = {"method": method.value, "heldout": heldout, "peers": None if every else chosen}
     code = batch_command(
         "report", run_files, out, scheduler, workers, serial, as_json, force, **opts
     )

@@ -60,8 +60,12 @@ class TaskOptions:
     peers: tuple[str, ...] | None = None
 
     def to_json(self) -> dict[str, Any]:
-        peers = None if self.peers is None else list(self.peers)
-        return {**asdict(self), "also": list(self.also), "peers": peers}
+        doc = {**asdict(self), "also": list(self.also)}
+        if self.peers is None:  # every peer: the options as before there was a choice, so
+            del doc["peers"]  # batches made then are still recognised (the cache's identity)
+        else:
+            doc["peers"] = list(self.peers)
+        return doc
 
 
 @dataclass(frozen=True)

@@ -36,3 +36,5 @@ def test_other_peers_are_other_options():
     test_fleet.py): each choice of peers is its own."""
     chosen = [TaskOptions(), TaskOptions(peers=()), TaskOptions(peers=("bouc_wen",))]
     assert len({json.dumps(o.to_json(), sort_keys=True) for o in chosen}) == 3
+    # every peer (the default): the options of a batch made before there was a choice
+    assert "peers" not in TaskOptions().to_json()
