@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import resource
+import shutil
 import subprocess
 import sys
 import time
@@ -117,6 +118,12 @@ def merge(base: dict, over: dict) -> dict:
     for k, v in over.items():
         out[k] = merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
     return out
+
+
+def copied(folder: Path, *files: Path) -> tuple[Path, ...]:
+    """Copies of ``files`` in ``folder``, under their names (a test's own, from a module's
+    read-only originals)."""
+    return tuple(Path(shutil.copyfile(f, folder / f.name)) for f in files)
 
 
 def rig_path(tmp_path: Path, **over) -> Path:

@@ -309,15 +309,19 @@ OFFSET_OPTION = flag(
 PEERS = ("prandtl_ishlinskii", "bouc_wen", "sindy")
 
 
+def _names(text: str) -> list[str]:
+    return [n.strip() for n in text.split(",") if n.strip()]
+
+
 def peer_list(text: str) -> tuple[str, ...]:
     """``--peers a,b``: the names given (``none``: no peer)."""
-    names = [n.strip() for n in text.split(",") if n.strip()]
+    names = _names(text)
     return () if names == ["none"] else tuple(names)
 
 
 def _peer_names(value: str) -> str:
     """``--peers``' check: names of :data:`PEERS`, or ``none``; else a usage error."""
-    names = [n.strip() for n in value.split(",") if n.strip()]
+    names = _names(value)
     unknown = [n for n in names if n not in PEERS]
     if not names or (unknown and names != ["none"]):
         raise typer.BadParameter(

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -20,6 +19,8 @@ from labrig.core.errors import InputFileError
 from labrig.core.metadata import from_options
 from labrig.runner import execute as runner
 from labrig.store import read_run, run_info
+
+from helpers import copied
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -71,10 +72,8 @@ def aborted_once(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 @pytest.fixture
 def aborted(aborted_once: tuple[Path, Path], tmp_path: Path) -> tuple[Path, Path]:
     """A copy of :func:`aborted_once`'s protocol and run file in ``tmp_path``, the test's own."""
-    proto, out = aborted_once
-    shutil.copyfile(proto, tmp_path / proto.name)
-    shutil.copyfile(out, tmp_path / out.name)
-    return tmp_path / proto.name, tmp_path / out.name
+    proto, out = copied(tmp_path, *aborted_once)
+    return proto, out
 
 
 def test_resume_finishes_the_campaign_and_records_it(aborted, tmp_path):

@@ -10,7 +10,6 @@ opened, the file byte for byte as it was.
 from __future__ import annotations
 
 import hashlib
-import shutil
 from pathlib import Path
 
 import h5py
@@ -21,7 +20,7 @@ from labrig.core.errors import InputFileError
 from labrig.runner import execute as runner
 from labrig.store import read_run
 
-from helpers import invoke
+from helpers import copied, invoke
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -56,10 +55,8 @@ def aborted_once(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 @pytest.fixture
 def aborted(aborted_once: tuple[Path, Path], tmp_path: Path) -> tuple[Path, Path]:
     """A copy of :func:`aborted_once`'s protocol and run file in ``tmp_path``, the test's own."""
-    proto, out = aborted_once
-    shutil.copyfile(proto, tmp_path / proto.name)
-    shutil.copyfile(out, tmp_path / out.name)
-    return tmp_path / proto.name, tmp_path / out.name
+    proto, out = copied(tmp_path, *aborted_once)
+    return proto, out
 
 
 def damage(path: Path) -> None:
