@@ -18,7 +18,7 @@ from __future__ import annotations
 import datetime
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import yaml
 from pydantic import BaseModel, ValidationError
@@ -36,9 +36,11 @@ MAX_DEPTH = 64
 MAX_INT_DIGITS = 100
 
 
-class BoundedLoader(yaml.SafeLoader):
-    """PyYAML's safe loader, refusing base-60 numbers and integers of more than
-    :data:`MAX_INT_DIGITS` digits (a ``ConstructorError`` with the value's line)."""
+class BoundedConstructor(yaml.constructor.SafeConstructor):
+    """PyYAML's safe constructor, refusing base-60 numbers and integers of more than
+    :data:`MAX_INT_DIGITS` digits, and naming the line of a date that does not exist (a
+    ``ConstructorError`` with the value's line). The first base of a loader class
+    (:class:`PythonLoader`, :data:`BoundedLoader`), before PyYAML's safe loader."""
 
     def refuse_odd_number(self, node: yaml.ScalarNode) -> None:
         """A base-60 number, an integer written in octal (a leading zero), hexadecimal or
@@ -81,32 +83,79 @@ class BoundedLoader(yaml.SafeLoader):
             self.refuse_odd_number(node)
         return super().construct_yaml_float(node)
 
+    def construct_yaml_timestamp(self, node: yaml.ScalarNode) -> datetime.date:
+        try:
+            return super().construct_yaml_timestamp(node)
+        except ValueError as e:  # 2026-13-45: datetime's own message, e.g. "month must be ..."
+            raise yaml.constructor.ConstructorError(
+                None, None, f"{self.construct_scalar(node)!r} is not a date ({e})", node.start_mark
+            ) from None
 
-BoundedLoader.add_constructor("tag:yaml.org,2002:int", BoundedLoader.construct_yaml_int)
-BoundedLoader.add_constructor("tag:yaml.org,2002:float", BoundedLoader.construct_yaml_float)
+
+class PythonLoader(BoundedConstructor, yaml.SafeLoader):
+    """The bounded safe loader on PyYAML's own parser, written in Python."""
 
 
-def _depth_issue(loader: BoundedLoader, name: str) -> InputIssue | None:
-    """Nesting deeper than :data:`MAX_DEPTH`, found on the parser's events (no recursion)."""
+def _constructors(cls: Any) -> None:
+    """Register :class:`BoundedConstructor`'s checks on the loader class ``cls``."""
+    cls.add_constructor("tag:yaml.org,2002:int", BoundedConstructor.construct_yaml_int)
+    cls.add_constructor("tag:yaml.org,2002:float", BoundedConstructor.construct_yaml_float)
+    cls.add_constructor("tag:yaml.org,2002:timestamp", BoundedConstructor.construct_yaml_timestamp)
+
+
+_constructors(PythonLoader)
+
+
+#: a loader class: :class:`BoundedConstructor` on one of PyYAML's safe loaders
+LoaderClass = type[BoundedConstructor]
+
+if getattr(yaml, "__with_libyaml__", False):
+
+    class LibyamlLoader(BoundedConstructor, yaml.CSafeLoader):
+        """The bounded safe loader on libyaml's parser (PyYAML's C extension)."""
+
+    #: the loader :func:`read_yaml` and :func:`load_text` use: on libyaml's parser where
+    #: PyYAML has it (its wheels on PyPI do), which takes about a fifteenth of the CPU of
+    #: PyYAML's parser in Python (:class:`PythonLoader`, used without it). Both read the same
+    #: documents to the same data and name the same lines (the tests compare them); their
+    #: syntax errors are worded differently, and libyaml takes a tab for the space after
+    #: ``key:`` (YAML 1.2 allows it).
+    _constructors(LibyamlLoader)
+    BoundedLoader: LoaderClass = LibyamlLoader
+else:  # pragma: no cover - PyYAML built without libyaml
+    BoundedLoader = PythonLoader
+
+
+def _depth_issue(loader: Any, name: str) -> InputIssue | None:
+    """Nesting deeper than :data:`MAX_DEPTH`, found on the parser's events (no recursion);
+    libyaml's own limit (1000 levels, reached first when the brackets of one line run that
+    deep) is reported the same way."""
     depth = 0
-    while loader.check_event():
-        event = loader.get_event()
-        if isinstance(event, yaml.CollectionStartEvent):
-            depth += 1
-            if depth > MAX_DEPTH:
-                line = event.start_mark.line + 1 if event.start_mark else None
-                return InputIssue(
-                    name, line, "", f"nested more than {MAX_DEPTH} levels deep (lists, mappings)"
-                )
-        elif isinstance(event, yaml.CollectionEndEvent):
-            depth -= 1
+    try:
+        while loader.check_event():
+            event = loader.get_event()
+            if isinstance(event, yaml.CollectionStartEvent):
+                depth += 1
+                if depth > MAX_DEPTH:
+                    line = event.start_mark.line + 1 if event.start_mark else None
+                    return _too_deep(name, line)
+            elif isinstance(event, yaml.CollectionEndEvent):
+                depth -= 1
+    except yaml.MarkedYAMLError as e:
+        if "maximum nesting depth" not in str(e.problem):
+            raise
+        return _too_deep(name, e.problem_mark.line + 1 if e.problem_mark else None)
     return None
 
 
-def _compose(text: str, name: str) -> tuple[yaml.Node | None, object]:
+def _too_deep(name: str, line: int | None) -> InputIssue:
+    return InputIssue(name, line, "", f"nested more than {MAX_DEPTH} levels deep (lists, mappings)")
+
+
+def _compose(text: str, name: str, loader_class: LoaderClass) -> tuple[yaml.Node | None, object]:
     """The document's node tree and data, each bound checked before the step it protects
     (module docstring); PyYAML's own errors propagate as ``YAMLError``."""
-    loader = BoundedLoader(text)
+    loader: Any = loader_class(text)  # type: ignore[call-arg]
     try:
         deep = _depth_issue(loader, name)
     except (ValueError, OverflowError) as e:  # PyYAML's scanner on odd escapes ("\U9999...")
@@ -115,7 +164,7 @@ def _compose(text: str, name: str) -> tuple[yaml.Node | None, object]:
         loader.dispose()
     if deep is not None:
         raise InputFileError([deep])
-    loader = BoundedLoader(text)
+    loader = loader_class(text)  # type: ignore[call-arg]
     try:
         node = loader.get_single_node()
         bomb = _expanded_size_issue(node, name) if node is not None else None
@@ -136,8 +185,11 @@ def _compose(text: str, name: str) -> tuple[yaml.Node | None, object]:
     return node, data
 
 
-def _unreadable(name: str, loader: BoundedLoader, e: Exception) -> InputFileError:
-    line = loader.get_mark().line + 1
+def _unreadable(name: str, loader: Any, e: Exception) -> InputFileError:
+    """A value PyYAML's Python scanner fails on (``"\\U99999999"``: ``chr`` refuses it), at the
+    scanner's line; libyaml's parser refuses such text itself, as a syntax error."""
+    mark = loader.get_mark() if hasattr(loader, "get_mark") else None
+    line = mark.line + 1 if mark is not None else None
     return InputFileError([InputIssue(name, line, "", f"YAML error: cannot read this ({e})")])
 
 
@@ -252,8 +304,9 @@ def _line_for(loc: tuple, lines: dict) -> int | None:
     return lines.get(())
 
 
-def read_yaml(path: Path | str) -> tuple[object, dict, str]:
-    """Parse a YAML file: ``(data, line_index, text)``; syntax problems raise InputFileError."""
+def read_yaml(path: Path | str, loader: LoaderClass | None = None) -> tuple[object, dict, str]:
+    """Parse a YAML file: ``(data, line_index, text)``; syntax problems raise InputFileError.
+    ``loader``: the loader class (default :data:`BoundedLoader`)."""
     p = Path(path)
     name = str(path)
     try:
@@ -272,23 +325,25 @@ def read_yaml(path: Path | str) -> tuple[object, dict, str]:
     if "\x00" in text:
         line = text[: text.index("\x00")].count("\n") + 1
         raise InputFileError([InputIssue(name, line, "", "binary data in a YAML file")])
-    node, data = _parse(text, name)
+    node, data = _parse(text, name, loader)
     lines = line_index(node) if node is not None else {}
     return data, lines, text
 
 
-def load_text(text: str, name: str = "<text>") -> object:
+def load_text(text: str, name: str = "<text>", loader: LoaderClass | None = None) -> object:
     """Parse YAML text with the bounds of :func:`read_yaml` (a recorded protocol or rig text,
     for example); problems raise InputFileError naming ``name``."""
     if len(text) > MAX_BYTES:
         raise InputFileError([InputIssue(name, None, "", "text is too large for YAML")])
-    return _parse(text, name)[1]
+    return _parse(text, name, loader)[1]
 
 
-def _parse(text: str, name: str) -> tuple[yaml.Node | None, object]:
+def _parse(
+    text: str, name: str, loader: LoaderClass | None = None
+) -> tuple[yaml.Node | None, object]:
     """:func:`_compose` with every failure as an InputFileError naming the line."""
     try:
-        return _compose(text, name)
+        return _compose(text, name, loader or BoundedLoader)
     except yaml.constructor.ConstructorError as e:
         line = e.problem_mark.line + 1 if e.problem_mark else None
         raise InputFileError([InputIssue(name, line, "", str(e.problem))]) from None
