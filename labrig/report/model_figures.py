@@ -24,6 +24,7 @@ backend switch, no display.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib import colormaps
@@ -32,6 +33,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from labrig.model import PAPER_TABLE1, DynamicHysteresisModel, Relaxor
+from labrig.report.plots import grid_margins
 
 #: fractional orders of the unit-relaxor figures (the paper's Figs. 3 and 5)
 ORDERS: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75)
@@ -46,6 +48,23 @@ _DPI = 120
 def _colors(n: int) -> list:
     cmap = colormaps["viridis"]
     return [cmap(x) for x in np.linspace(0.0, 0.9, n)]
+
+
+def _grid(
+    width_in: float, height_in: float, rows: int, cols: int, **margins_in: float
+) -> tuple[Figure, Any]:
+    """A figure of ``rows x cols`` panels with fixed margins in inches (a title line above
+    the panels; :func:`~labrig.report.plots.grid_margins`): a constrained layout would lay the
+    figure out by drawing it, about a third of its cost, once more."""
+    fig = Figure(figsize=(width_in, height_in))
+    margins = {"left_in": 0.8, "right_in": 0.2, "bottom_in": 0.55, "top_in": 0.65, **margins_in}
+    kw = grid_margins(width_in, height_in, rows, cols, **margins)
+    return fig, fig.subplots(rows, cols, gridspec_kw=kw)
+
+
+def _suptitle(fig: Figure, text: str) -> None:
+    """The figure's title, centred in its top margin's first 0.3 inches."""
+    fig.suptitle(text, y=1.0 - 0.08 / fig.get_figheight(), va="top")
 
 
 def _save(fig: Figure, path: Path) -> Path:
@@ -65,8 +84,9 @@ def figure_frequency_response(path: Path) -> Path:
     """Bode plot of the unit relaxors (the paper's Fig. 3)."""
     w = np.logspace(-3, 3, 601)  # rad/s; tau = 1 s so w is also w*tau
     f = w / (2 * np.pi)
-    fig = Figure(figsize=(7.0, 6.5), layout="constrained")
-    ax_m, ax_p = fig.subplots(2, 1, sharex=True)
+    fig, (ax_m, ax_p) = _grid(7.0, 6.5, 2, 1, top_in=0.45, hgap_in=0.2)
+    ax_p.sharex(ax_m)
+    ax_m.tick_params(labelbottom=False)
     for lam, col in zip(ORDERS, _colors(len(ORDERS)), strict=True):
         g = Relaxor(1.0, lam).frequency_response(f)
         ax_m.semilogx(w, 20 * np.log10(np.abs(g)), color=col, label=_lam_label(lam))
@@ -80,8 +100,8 @@ def figure_frequency_response(path: Path) -> Path:
     for ax in (ax_m, ax_p):
         ax.grid(True, which="both", alpha=0.3)
     ax_m.legend(ncol=2, fontsize=8, loc="lower left")
-    fig.suptitle(
-        "Frequency response of unit relaxors H(s) = 1/(1 + (τs)^λ)  (cf. the paper's Fig. 3)"
+    _suptitle(
+        fig, "Frequency response of unit relaxors H(s) = 1/(1 + (τs)^λ)  (cf. the paper's Fig. 3)"
     )
     return _save(fig, path)
 
@@ -107,8 +127,7 @@ def figure_input_output(path: Path, cycles: int = 6, per_cycle: int = 240) -> Pa
     the last one bold (close to the steady-state ellipse, except for the slow drift of the
     small orders, which is the long memory the model is after).
     """
-    fig = Figure(figsize=(11.0, 7.4), layout="constrained")
-    axes = fig.subplots(2, len(OMEGA_TAU_IO))
+    fig, axes = _grid(11.0, 7.4, 2, len(OMEGA_TAU_IO), top_in=0.65, wgap_in=0.55, hgap_in=0.85)
     cols = _colors(len(ORDERS_IO))
     for row, unipolar in enumerate((False, True)):
         for j, omega in enumerate(OMEGA_TAU_IO):
@@ -132,9 +151,10 @@ def figure_input_output(path: Path, cycles: int = 6, per_cycle: int = 240) -> Pa
             if j == 0:
                 ax.set_ylabel("output out(t) (a.u.)")
     axes[0, 0].legend(fontsize=8, loc="upper left")
-    fig.suptitle(
+    _suptitle(
+        fig,
         f"Input-output characteristics of unit relaxors (τ = 1 s), {cycles} cycles from rest: "
-        "thin = transient, bold = last cycle  (cf. the paper's Fig. 4)"
+        "thin = transient, bold = last cycle  (cf. the paper's Fig. 4)",
     )
     return _save(fig, path)
 
@@ -146,8 +166,7 @@ def figure_step_response(path: Path) -> Path:
     """Unit-step responses on linear and logarithmic time axes (the paper's Fig. 5)."""
     t_lin = np.linspace(0.0, 10.0, 801)
     t_log = np.logspace(-3, 3, 1201)
-    fig = Figure(figsize=(11.0, 4.8), layout="constrained")
-    ax_l, ax_g = fig.subplots(1, 2)
+    fig, (ax_l, ax_g) = _grid(11.0, 4.8, 1, 2, top_in=0.6)
     ax_l.plot(
         np.r_[-0.5, 0.0, 0.0, t_lin[-1]], [0, 0, 1, 1], color="k", ls="--", lw=1, label="input"
     )
@@ -165,7 +184,7 @@ def figure_step_response(path: Path) -> Path:
         ax.set_ylim(-0.05, 1.7)
         ax.grid(True, which="both", alpha=0.3)
     ax_l.legend(fontsize=8, ncol=2, loc="lower right")
-    fig.suptitle("Step responses of unit relaxors 1 - E_λ(-(t/τ)^λ)  (cf. the paper's Fig. 5)")
+    _suptitle(fig, "Step responses of unit relaxors 1 - E_λ(-(t/τ)^λ)  (cf. the paper's Fig. 5)")
     return _save(fig, path)
 
 
@@ -186,8 +205,7 @@ def figure_hysteresis_loop(path: Path, cycles: int = 8, rate_hz: float = 1000.0)
     per = round(rate_hz)
     mins = np.arange(per, n, per)  # the 0 V minima, t = 1, 2, ... s
 
-    fig = Figure(figsize=(11.0, 8.0), layout="constrained")
-    (ax_v, ax_s), (ax_loop, ax_a) = fig.subplots(2, 2)
+    fig, ((ax_v, ax_s), (ax_loop, ax_a)) = _grid(11.0, 8.0, 2, 2, top_in=0.65, hgap_in=0.85)
 
     ax_v.plot(t, v, color="k", lw=1.0, label="driving voltage V")
     ax_v.plot(t, vstar, color="tab:red", lw=1.0, label="equivalent static voltage V* = G_t G_d V")
@@ -244,9 +262,10 @@ def figure_hysteresis_loop(path: Path, cycles: int = 8, rate_hz: float = 1000.0)
 
     for ax in (ax_v, ax_s, ax_loop, ax_a):
         ax.grid(True, alpha=0.3)
-    fig.suptitle(
+    _suptitle(
+        fig,
         "Dynamic hysteresis model, the paper's Table 1 parameters, 0-100 V unipolar sine at 1 Hz "
-        "(cf. the paper's Fig. 1)"
+        "(cf. the paper's Fig. 1)",
     )
     return _save(fig, path)
 
