@@ -16,8 +16,9 @@ reported: the machine is shared.
 The datasets: ``experiments/paper.yaml`` run on the simulated rig with seed 1 (11 entries) and the
 real micromanipulator record ``tests/data/real/yan9a-micromanipulator/Model_Vi_Do.dat`` imported as
 the README says. Commands: ``labrig --help``, ``fit --json``, ``report --json`` (every peer),
-``diagnose --json``, and on the run side ``check experiments/paper.yaml`` and ``run
-experiments/sweep.yaml`` (seed 1, 10 entries, 42 s of samples at 1 kHz, on the simulated rig). The
+``diagnose --json``, on the run side ``check experiments/paper.yaml`` and ``run
+experiments/sweep.yaml`` (seed 1, 10 entries, 42 s of samples at 1 kHz, on the simulated rig), and
+``model figures`` (the paper's section-2 figures, from the model alone). The
 JSON documents of both implementations are compared: the largest relative difference of every NRMSE,
 the effects added and the verdict's class.
 
@@ -237,11 +238,13 @@ def main() -> int:
             str(work / "sweep.h5"),
             "--overwrite",
         ],
+        # the paper's section-2 figures, drawn from the model alone
+        "figures": lambda f: ["model", "figures", "--out", str(work / "figures"), "--overwrite"],
     }
     only = [c for c in args.only.split(",") if c] or list(commands)
     rows = []
     for cname in only:
-        files = {"-": None} if cname in ("help", "check", "run") else data
+        files = {"-": None} if cname in ("help", "check", "run", "figures") else data
         for dname, f in files.items():
             times: dict[str, list[float]] = {"this": [], "previous": []}
             outs: dict[str, str] = {}
