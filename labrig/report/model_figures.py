@@ -127,7 +127,7 @@ def figure_input_output(path: Path, cycles: int = 6, per_cycle: int = 240) -> Pa
     the last one bold (close to the steady-state ellipse, except for the slow drift of the
     small orders, which is the long memory the model is after).
     """
-    fig, axes = _grid(11.0, 7.4, 2, len(OMEGA_TAU_IO), top_in=0.65, wgap_in=0.55, hgap_in=0.85)
+    fig, axes = _grid(11.0, 7.4, 2, len(OMEGA_TAU_IO), top_in=0.65, wgap_in=0.7, hgap_in=0.85)
     cols = _colors(len(ORDERS_IO))
     for row, unipolar in enumerate((False, True)):
         for j, omega in enumerate(OMEGA_TAU_IO):
