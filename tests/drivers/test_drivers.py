@@ -11,7 +11,7 @@ says)."""
 from __future__ import annotations
 
 import json
-import os
+import logging
 import subprocess
 import sys
 from importlib import metadata
@@ -35,15 +35,31 @@ ONE_SINE = "name: one\nrate_hz: 1000\nsteps:\n  - kind: sine\n    amplitude_V: 1
 ONE_SINE += "    frequency_hz: 5\n    cycles: 2\n"
 
 
-def labrig(*args: object, mode: str | None = None, stand_in: bool = True, cwd: Path = ROOT):
-    """``labrig ARGS`` in a child process, with the stand-in nidaqmx on the path."""
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "LABRIG_FAKE_NIDAQMX")}
-    if stand_in:
-        env["PYTHONPATH"] = str(STAND_IN)
-    if mode is not None:
-        env["LABRIG_FAKE_NIDAQMX"] = mode
-    cmd = [sys.executable, "-m", "labrig.cli", *map(str, args)]
-    return subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cwd, timeout=90)
+@pytest.fixture
+def stand_in(monkeypatch: pytest.MonkeyPatch, tmp_path: Path):
+    """``labrig ARGS`` in this process (typer's CliRunner) in ``tmp_path``, with the stand-in
+    nidaqmx importable as on a child's path and LABRIG_FAKE_NIDAQMX at ``mode``; the stand-in
+    forgotten after (the other tests see nidaqmx missing, as it is here)."""
+    monkeypatch.syspath_prepend(str(STAND_IN))
+    monkeypatch.chdir(tmp_path)
+
+    def invoke(*args: object, mode: str):
+        monkeypatch.setenv("LABRIG_FAKE_NIDAQMX", mode)
+        # as in a labrig process, where no handler is configured: log records reach stderr
+        # through logging's last resort (pytest's capturing handlers set aside meanwhile)
+        root = logging.getLogger()
+        handlers = root.handlers[:]
+        root.handlers.clear()
+        try:
+            return CliRunner().invoke(app, [str(a) for a in args], env={"COLUMNS": "160"})
+        finally:
+            root.handlers[:] = handlers
+
+    try:
+        yield invoke
+    finally:
+        for name in [m for m in sys.modules if m == "nidaqmx" or m.startswith("nidaqmx.")]:
+            del sys.modules[name]
 
 
 def assert_no_leak(text: str) -> None:
@@ -97,35 +113,14 @@ def test_drivers_lists_roles_and_packages() -> None:
     assert "4 drivers (3 usable" in text.stderr
 
 
-#: ``labrig check`` twice in one child (typer's CliRunner): with ``--json``, then as text
-CHECK_BOTH_WAYS = """
-import json, sys
-from typer.testing import CliRunner
-from labrig.cli import app
-args = ["check", *sys.argv[1:]]
-done = [CliRunner().invoke(app, a) for a in ([*args, "--json"], args)]
-print(json.dumps([(r.exit_code, r.stdout, r.stderr, repr(r.exception)) for r in done]))
-"""
-
-
-def test_check_loads_the_drivers_and_opens_nothing() -> None:
+def test_check_loads_the_drivers_and_opens_nothing(stand_in) -> None:
     """With the stand-in (every call into NI's driver would fail) and serial ports that do not
-    exist, check still passes: it imports and validates, and calls nothing. (Both outputs from
-    one child: the stand-in is on its path, and neither is about the process.)"""
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    env.update(PYTHONPATH=str(STAND_IN), LABRIG_FAKE_NIDAQMX="no_runtime")
-    child = subprocess.run(
-        [sys.executable, "-c", CHECK_BOTH_WAYS, str(PROTOCOL), "--rig", str(LAB_RIG)],
-        capture_output=True,
-        text=True,
-        env=env,
-        cwd=ROOT,
-        timeout=90,
-    )
-    assert child.returncode == 0, child.stderr
-    (code, out, err, exc), (text_code, text_out, text_err, _) = json.loads(child.stdout)
-    assert code == 0, (err, exc)
-    doc = json.loads(out)
+    exist, check still passes: it imports and validates, and calls nothing. (In-process, with
+    ``--json`` then as text: neither is about the process.)"""
+    args = ["check", PROTOCOL, "--rig", LAB_RIG]
+    res = stand_in(*args, "--json", mode="no_runtime")
+    assert res.exit_code == 0, (res.stderr, repr(res.exception))
+    doc = json.loads(res.stdout)
     drivers = {d["role"]: d for d in doc["drivers"]}
     assert [drivers[r]["name"] for r in ("daq", "amplifier", "conditioner")] == [
         "nidaqmx",
@@ -134,9 +129,10 @@ def test_check_loads_the_drivers_and_opens_nothing() -> None:
     ]
     assert drivers["daq"]["packages"][0]["version"] == "0.0.0+labrig.stand-in"
     assert doc["rig_name"] == "lab-p888" and doc["simulated"] is False
-    assert text_code == 0, text_err
-    assert "loaded, no device opened" in text_out
-    assert "daq: nidaqmx (labrig" in text_out
+    text = stand_in(*args, mode="no_runtime")
+    assert text.exit_code == 0, text.stderr
+    assert "loaded, no device opened" in text.stdout
+    assert "daq: nidaqmx (labrig" in text.stdout
 
 
 def test_check_without_the_package_exits_3() -> None:
@@ -148,27 +144,38 @@ def test_check_without_the_package_exits_3() -> None:
     assert_no_leak(res.output)
 
 
+#: ``labrig check`` then ``labrig run`` in one child with pymodbus blocked (typer's CliRunner)
+PYMODBUS_BLOCKED = """
+import json, sys
+sys.modules["pymodbus"] = None
+from typer.testing import CliRunner
+from labrig.cli import app
+commands = (["check", "one.yaml"], ["run", "one.yaml", "--out", "r.h5"])
+done = [CliRunner().invoke(app, a) for a in commands]
+print(json.dumps([(r.exit_code, r.output, r.stderr, repr(r.exception)) for r in done]))
+"""
+
+
 def test_a_package_missing_at_driver_import_exits_3(tmp_path: Path) -> None:
-    """pymodbus blocked (``sys.modules["pymodbus"] = None``): the conditioner's driver module
-    does not import; check and run say so as a device fault before anything is opened."""
+    """pymodbus blocked (``sys.modules["pymodbus"] = None``) in a new interpreter: the
+    conditioner's driver module does not import; check and run say so as a device fault
+    before anything is opened. (Both commands from one child: the block is on the process, the
+    exit codes and messages are the commands'.)"""
     (tmp_path / "one.yaml").write_text(ONE_SINE)
-    code = (
-        "import sys; sys.modules['pymodbus'] = None; from labrig.cli import app; "
-        "app(sys.argv[1:], prog_name='labrig')"
+    child = subprocess.run(
+        [sys.executable, "-c", PYMODBUS_BLOCKED],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=60,
     )
-    for args in (["check", "one.yaml"], ["run", "one.yaml", "--out", "r.h5"]):
-        res = subprocess.run(
-            [sys.executable, "-c", code, *args],
-            capture_output=True,
-            text=True,
-            cwd=tmp_path,
-            timeout=60,
-        )
-        assert res.returncode == 3, res.stderr
-        msg = " ".join(res.stderr.split())
+    assert child.returncode == 0, child.stderr
+    for code, output, stderr, exc in json.loads(child.stdout):
+        assert code == 3 and exc.startswith("SystemExit("), (stderr, exc)
+        msg = " ".join(stderr.split())
         assert "conditioner (strain_modbus driver): load driver failed" in msg, msg
         assert "'pymodbus' is not installed (pip install 'pymodbus>=3.16,<3.17')" in msg
-        assert_no_leak(res.stderr + res.stdout)
+        assert_no_leak(output)
     assert not (tmp_path / "r.h5").exists()
 
 
@@ -179,30 +186,38 @@ def test_a_package_missing_at_driver_import_exits_3(tmp_path: Path) -> None:
         ("no_device", "device 'Dev1' not found (devices: Dev7)"),
     ],
 )
-def test_run_without_runtime_or_device_exits_3(tmp_path: Path, mode: str, detail: str) -> None:
+def test_run_without_runtime_or_device_exits_3(
+    tmp_path: Path, stand_in, mode: str, detail: str
+) -> None:
+    """In-process (the exit code and the message are the command's, not the process's)."""
     (tmp_path / "one.yaml").write_text(ONE_SINE)
-    res = labrig("run", "one.yaml", "--rig", LAB_RIG, "--out", "r.h5", mode=mode, cwd=tmp_path)
-    assert res.returncode == 3, res.stderr
+    res = stand_in("run", "one.yaml", "--rig", LAB_RIG, "--out", "r.h5", mode=mode)
+    assert res.exit_code == 3, res.output
+    assert isinstance(res.exception, SystemExit), repr(res.exception)
     msg = " ".join(res.stderr.split())
     assert f"daq (NI-DAQmx Dev1): open failed: {detail}" in msg, msg
-    assert_no_leak(res.stderr + res.stdout)
+    assert_no_leak(res.output)
     assert "DAQ stop failed" not in res.stderr  # nothing was energised, nothing to stop
     assert not (tmp_path / "r.h5").exists()
 
 
-def test_a_device_lost_in_the_run_exits_3_and_says_stop_failed_once(tmp_path: Path) -> None:
+def test_a_device_lost_in_the_run_exits_3_and_says_stop_failed_once(
+    tmp_path: Path, stand_in
+) -> None:
     """The device answers at open, then every task fails: the run fails at its first playback,
-    the ramp to 0 V falls back to the amplifier's setpoint, the file records the failure."""
+    the ramp to 0 V falls back to the amplifier's setpoint, the file records the failure.
+    (In-process: the exit code and the messages are the command's.)"""
     rig = sim_backed_rig(tmp_path)
     (tmp_path / "one.yaml").write_text(ONE_SINE)
-    res = labrig("run", "one.yaml", "--rig", rig, "--out", "r.h5", mode="unplugged", cwd=tmp_path)
-    assert res.returncode == 3, res.stderr
+    res = stand_in("run", "one.yaml", "--rig", rig, "--out", "r.h5", mode="unplugged")
+    assert res.exit_code == 3, res.output
+    assert isinstance(res.exception, SystemExit), repr(res.exception)
     msg = " ".join(res.stderr.split())
     assert "run failed: daq (NI-DAQmx Dev1): play failed: Device cannot be accessed." in msg
     assert "(DAQmx status -201003)" in msg
     assert res.stderr.count("DAQ stop failed") == 1, res.stderr
     assert "ramping the amplifier's setpoint" in msg
-    assert_no_leak(res.stderr + res.stdout)
+    assert_no_leak(res.output)
     info = CliRunner().invoke(app, ["info", str(tmp_path / "r.h5"), "--json"])
     assert info.exit_code == 0, info.output
     assert json.loads(info.stdout)["status"] == "failed"

@@ -3,6 +3,7 @@ limits hold from the first command, and a port in use is a clear error."""
 
 from __future__ import annotations
 
+import os
 import signal
 import socket
 import subprocess
@@ -94,11 +95,12 @@ def check_the_rigs_limits(lines: list[str], s: serial.SerialBase) -> None:
 
 @pytest.mark.parametrize(
     "stop",
-    # the default tier stops it by Ctrl-C and SIGTERM; the other two signals take the same
-    # path (one handler) and run in the slow tier
+    # the default tier stops it by Ctrl-C; the other three signals take the same path (one
+    # handler, the same exception) and run in the slow tier, and in the default tier's
+    # in-process test below
     [
         signal.SIGINT,
-        signal.SIGTERM,
+        pytest.param(signal.SIGTERM, marks=pytest.mark.slow),
         pytest.param(signal.SIGHUP, marks=pytest.mark.slow),
         pytest.param(signal.SIGQUIT, marks=pytest.mark.slow),
     ],
@@ -107,7 +109,10 @@ def check_the_rigs_limits(lines: list[str], s: serial.SerialBase) -> None:
 def test_serve_prints_addresses_and_answers_until_stopped(stop):
     """The server holds the rig's limits from its first command, answers real clients, and
     stops cleanly on the signal (one server for all three: starting one, numba's kernels
-    loaded, costs more than its checks)."""
+    loaded, costs more than its checks).
+
+    Fast equivalent in the default tier: tests/drivers/test_sim_serve.py::test_serve_stops_on_every_stop_signal_as_on_ctrl_c
+    """  # noqa: E501
     proc, lines = start_serve()
     try:
         text = "".join(lines)
@@ -127,6 +132,51 @@ def test_serve_prints_addresses_and_answers_until_stopped(stop):
         out = stop_serve(proc, stop)
     assert "stopping the simulators" in out  # stopped cleanly, not killed by the signal
     assert proc.returncode == 0
+
+
+class _StubSimulators:
+    """Stands in for the servers in :func:`test_serve_stops_on_every_stop_signal_as_on_ctrl_c`."""
+
+    stopped = 0
+
+    def __init__(self, *args, **kwargs):
+        pass
+
+    def start(self):
+        return self
+
+    def run_clock(self):
+        pass
+
+    def stop(self):
+        type(self).stopped += 1
+
+
+@pytest.mark.parametrize(
+    "stop", [signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT], ids=["sigterm", "sighup", "sigquit"]
+)
+def test_serve_stops_on_every_stop_signal_as_on_ctrl_c(stop, monkeypatch, capsys):
+    """``serve``'s own path, in-process with its servers stood in for: a SIGTERM, SIGHUP or
+    SIGQUIT while it serves is caught as the Ctrl-C of the test above (the process's, in the
+    default tier): it says it stops, stops the simulators and returns (exit 0)."""
+    import labrig.drivers.sim.serve as serve_mod
+
+    def addresses(name, sims):
+        # the signal's handler is serve's (never the default, which would end this process)
+        assert signal.getsignal(stop) not in (signal.SIG_DFL, signal.SIG_IGN, None)
+        os.kill(os.getpid(), stop)
+        time.sleep(5)  # the handler raises here
+        raise AssertionError("the signal was not raised in serve")
+
+    monkeypatch.setattr(serve_mod, "kernels", lambda: None)
+    monkeypatch.setattr(serve_mod, "Simulators", _StubSimulators)
+    monkeypatch.setattr(serve_mod, "_print_addresses", addresses)
+    monkeypatch.setattr(_StubSimulators, "stopped", 0)
+    before = signal.getsignal(stop)
+    serve_mod.serve(None)  # returns: the signal did not escape as an exception
+    assert "stopping the simulators" in capsys.readouterr().out
+    assert _StubSimulators.stopped == 1
+    assert signal.getsignal(stop) == before
 
 
 @pytest.fixture

@@ -1,7 +1,7 @@
 """`labrig run / info / export / check` end to end on the simulated rig.
 
-The paper's campaign (experiments/paper.yaml, 11 entries) runs once in a real ``labrig``
-process; the tests read its file: statuses, the NeXus layout, and loops that look like the
+The paper's campaign (experiments/paper.yaml, 11 entries) runs once (in-process, typer's
+CliRunner); the tests read its file: statuses, the NeXus layout, and loops that look like the
 paper's (about 1000 ue at 100 V, hysteresis, a positive strain at 0 V after the first cycle).
 Device faults and bad --out paths go through the CLI in-process (typer's CliRunner).
 """
@@ -12,6 +12,7 @@ import csv
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import h5py
 import numpy as np
@@ -47,17 +48,20 @@ def labrig_cmd() -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def paper_run(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess]:
+def paper_run(tmp_path_factory) -> tuple[Path, SimpleNamespace]:
+    """``labrig run`` of the paper's campaign, in-process (typer's CliRunner) from a folder of
+    its own; its exit code and outputs as a finished process's (``returncode``, ``stdout``,
+    ``stderr``). The signals tests run ``labrig`` as a process (tests/runner/
+    test_runner_signals.py)."""
     d = tmp_path_factory.mktemp("paper")
     out = d / "paper.h5"
-    proc = subprocess.run(
-        [*labrig_cmd(), "run", str(PAPER), "--out", str(out), "--seed", str(SEED)],
-        cwd=d,
-        capture_output=True,
-        text=True,
-        timeout=150,
-    )
-    return out, proc
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(d)
+        res = CliRunner().invoke(
+            app, ["run", str(PAPER), "--out", str(out), "--seed", str(SEED)], env={"COLUMNS": "80"}
+        )
+    assert isinstance(res.exception, SystemExit | None), repr(res.exception)
+    return out, SimpleNamespace(returncode=res.exit_code, stdout=res.stdout, stderr=res.stderr)
 
 
 @pytest.fixture(scope="module")

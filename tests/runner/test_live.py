@@ -70,38 +70,79 @@ VENDORED = {
 
 pytestmark = pytest.mark.timeout(120)
 
-#: a writer that appends a 100-sample block every 0.1 s (as labrig run does at 1 kHz), until a
-#: line on its stdin tells it to write the rest at once
-WRITER = """
-import select, sys, numpy as np
-from labrig.store import RunWriter, read_run
-path, blocks = sys.argv[1], int(sys.argv[2])
-hurry = False
-with RunWriter(path, "name: w\\n", "", {}, seed=1, protocol_name="watch test",
-               planned_entries=["first", "second"]) as w:
-    for name in ("first", "second"):
-        e = w.begin_entry(name, {"kind": "sine", "n_samples": blocks * 100}, 1000.0,
-                          ["command_voltage", "strain"])
-        for b in range(blocks):
-            k = np.arange(b * 100, (b + 1) * 100)
-            v = 50 * (1 - np.cos(2 * np.pi * k / 500))
-            e.append({"command_voltage": v, "strain": 9 * v})
-            print("block", name, b, flush=True)
-            hurry = hurry or bool(select.select([sys.stdin], [], [], 0.1)[0])
-        e.finish("complete")
-"""
+
+def _write(path: Path, blocks: int, said: int, hurry_fd: int) -> None:
+    """Appends a 100-sample block every 0.1 s (as labrig run does at 1 kHz), saying so on the
+    pipe ``said``, until a line on ``hurry_fd`` tells it to write the rest at once."""
+    hurry = False
+    with RunWriter(path, "name: w\n", "", {}, seed=1, protocol_name="watch test",
+                   planned_entries=["first", "second"]) as w:  # fmt: skip
+        for name in ("first", "second"):
+            e = w.begin_entry(name, {"kind": "sine", "n_samples": blocks * 100}, 1000.0,
+                              ["command_voltage", "strain"])  # fmt: skip
+            for b in range(blocks):
+                k = np.arange(b * 100, (b + 1) * 100)
+                v = 50 * (1 - np.cos(2 * np.pi * k / 500))
+                e.append({"command_voltage": v, "strain": 9 * v})
+                with contextlib.suppress(OSError):  # (no one listening any more)
+                    os.write(said, f"block {name} {b}\n".encode())
+                hurry = hurry or bool(select.select([hurry_fd], [], [], 0.1)[0])
+            e.finish("complete")
 
 
-def start_writer(path: Path, blocks: int) -> subprocess.Popen:
-    p = subprocess.Popen(
-        [sys.executable, "-c", WRITER, str(path), str(blocks)],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    assert p.stdout is not None
-    assert p.stdout.readline().startswith("block first 0")
-    return p
+class Writer:
+    """A run file being written by another process: a fork of this one (labrig loaded), with
+    a process's ``pid``, ``poll``, ``wait`` and ``kill``; ``hurry`` tells it to write the rest
+    of its blocks at once."""
+
+    def __init__(self, path: Path, blocks: int):
+        said_r, said_w = os.pipe()
+        hurry_r, self._hurry = os.pipe()
+        pid = os.fork()
+        if pid == 0:  # the child: never returns to the test, whatever happens
+            code = 1
+            try:
+                os.close(said_r)
+                os.close(self._hurry)
+                _write(path, blocks, said_w, hurry_r)
+                code = 0
+            finally:
+                os._exit(code)
+        os.close(said_w)
+        os.close(hurry_r)
+        self.pid, self.returncode = pid, None
+        try:
+            assert select.select([said_r], [], [], 30)[0], "the writer never wrote"
+            assert os.read(said_r, 64).startswith(b"block first 0")
+        finally:
+            os.close(said_r)  # (its later lines are not read: it writes on regardless)
+
+    def poll(self) -> int | None:
+        if self.returncode is None:
+            pid, status = os.waitpid(self.pid, os.WNOHANG)
+            if pid:
+                self.returncode = os.waitstatus_to_exitcode(status)
+        return self.returncode
+
+    def wait(self, timeout: float = 30) -> int:
+        end = time.monotonic() + timeout
+        while self.poll() is None:
+            assert time.monotonic() < end, "the writer did not end"
+            time.sleep(0.02)
+        return self.returncode
+
+    def hurry(self) -> None:
+        with contextlib.suppress(OSError):  # (a writer that has ended)
+            os.write(self._hurry, b"hurry\n")
+        os.close(self._hurry)
+
+    def kill(self) -> None:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(self.pid, signal.SIGKILL)
+
+
+def start_writer(path: Path, blocks: int) -> Writer:
+    return Writer(path, blocks)
 
 
 def get(url: str) -> dict:
@@ -137,10 +178,7 @@ def test_watch_follows_a_run_being_written(tmp_path: Path):
                 break
             time.sleep(0.1)
         # seen written (or the writer done): the rest of its blocks at once, not at 10 a second
-        assert writer.stdin is not None
-        with contextlib.suppress(BrokenPipeError):  # (a writer that has ended)
-            writer.stdin.write("hurry\n")
-            writer.stdin.close()
+        writer.hurry()
         running = [f for f in frames if f.get("status") == "running" and "entry" in f]
         assert len({f["seq"] for f in running}) >= 3, frames[-3:]
         # the entry seen growing longest (on a loaded machine the view may come up late in
@@ -186,7 +224,7 @@ def test_info_says_being_written_then_incomplete_after_a_kill(tmp_path: Path):
         assert "being written now by process" in r.stdout
         assert str(writer.pid) in r.stdout
     finally:
-        os.kill(writer.pid, signal.SIGKILL)
+        writer.kill()
         writer.wait()
     r = invoke("info", run)
     assert r.exit_code == 0, r.output

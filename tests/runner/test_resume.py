@@ -3,11 +3,11 @@ recorded, the protocol checked, and a failed resume leaving the file as it was."
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
+import select
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -151,26 +151,39 @@ def test_another_protocol_or_a_complete_file_is_refused_before_anything(aborted,
 
 def test_a_failed_resume_leaves_the_aborted_file_as_it_was(aborted, tmp_path):
     """A resume killed (SIGKILL) in the middle of its entries: the aborted file is byte for
-    byte what it was, and still reads as aborted; a later resume finishes it."""
+    byte what it was, and still reads as aborted; a later resume finishes it. (The resume runs
+    in a fork of this process, labrig already loaded: the kill ends a process all the same.)"""
     proto, out = aborted
     before = digest(out)
-    code = (
-        "import sys, pathlib; from labrig.runner import execute as runner\n"
-        "plan, rig = runner.preflight(pathlib.Path(sys.argv[1]), None)\n"
-        "def progress(k, n, name, f, left):\n"
-        "    if f > 0.3: print('playing', flush=True)\n"
-        "runner.execute(plan, rig, None, seed=5, realtime=True, progress=progress,"
-        " resume=pathlib.Path(sys.argv[2]))\n"
-    )
-    p = subprocess.Popen(
-        [sys.executable, "-c", code, str(proto), str(out)], stdout=subprocess.PIPE, text=True
-    )
-    assert p.stdout is not None
-    assert p.stdout.readline().strip() == "playing"  # the resume is recording into its copy
-    partial = list(tmp_path.glob(".run.h5.*.partial/run.h5"))
-    assert len(partial) == 1
-    os.kill(p.pid, signal.SIGKILL)
-    p.wait(timeout=10)
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: never returns to the test, whatever happens
+        code = 1
+        try:
+            os.close(read_fd)
+
+            def progress(k, n, name, f, left):
+                if f > 0.3:
+                    os.write(write_fd, b"playing\n")
+
+            plan, rig = runner.preflight(proto, None)
+            runner.execute(plan, rig, None, seed=5, realtime=True, progress=progress, resume=out)
+            code = 0
+        finally:
+            os._exit(code)
+    os.close(write_fd)
+    try:
+        with os.fdopen(read_fd) as said:
+            assert select.select([said], [], [], 60)[0], "the resume never played"
+            assert said.readline().strip() == "playing"  # recording into its copy
+            partial = list(tmp_path.glob(".run.h5.*.partial/run.h5"))
+            assert len(partial) == 1
+            os.kill(pid, signal.SIGKILL)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        _, status = os.waitpid(pid, 0)
+    assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL
     assert digest(out) == before
     assert read_run(out).status == "aborted"
     for d in tmp_path.glob(".run.h5.*.partial"):  # what a person deletes by hand

@@ -1,7 +1,8 @@
 """Signals for real: SIGINT, SIGTERM, SIGHUP, SIGQUIT and SIGKILL sent to a running ``labrig run``.
 
-Each test starts the run in a subprocess on the simulated rig, paced to the wall clock
-(``--realtime``), lets it write for a while and signals it:
+Each test starts the run in a subprocess on the simulated rig (``labrig run``, or the runner in a
+fork of the test's process), paced to the wall clock (``--realtime``), lets it write for a while
+and signals it:
 
 - SIGINT (Ctrl-C), SIGTERM, SIGHUP (terminal or SSH session closed), SIGQUIT (Ctrl-\\): exit
   code 128 + signal number (130, 143, 129, 131), a valid file whose run and running entry are
@@ -16,6 +17,7 @@ Each test starts the run in a subprocess on the simulated rig, paced to the wall
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import pty
@@ -25,7 +27,6 @@ import signal
 import subprocess
 import sys
 import termios
-import textwrap
 import threading
 import time
 from pathlib import Path
@@ -34,7 +35,7 @@ import h5py
 import numpy as np
 import pytest
 
-from labrig.runner.execute import preflight
+from labrig.runner.execute import execute, preflight
 from labrig.store import read_run
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -201,21 +202,32 @@ def test_interrupt_stops_at_0V_with_an_aborted_valid_file(tmp_path, sig, repeats
     assert np.all(np.abs(volts) >= abs(v0) - RAMP_LIMIT_V_PER_S * t - 1e-9)
 
 
-WRITER = textwrap.dedent(
-    """
-    import sys
-    from pathlib import Path
-    from labrig.runner.execute import execute, preflight
-
-    plan, rig = preflight(Path(sys.argv[1]), None)
+def run_reporting_blocks(proto: Path, out: Path, said: int) -> None:
+    """The runner, paced to the clock, saying ``flushed K ENTRY N`` on the pipe ``said`` after
+    each block of an entry is appended (and flushed)."""
+    plan, rig = preflight(proto, None)
 
     def progress(k, n, name, frac, left):
         if name == plan.steps[k].name:  # not a rest
-            print("flushed", k, name, round(frac * plan.steps[k].n_samples), flush=True)
+            n_done = round(frac * plan.steps[k].n_samples)
+            os.write(said, f"flushed {k} {name} {n_done}\n".encode())
 
-    execute(plan, rig, Path(sys.argv[2]), seed=5, realtime=True, progress=progress)
-    """
-)
+    execute(plan, rig, out, seed=5, realtime=True, progress=progress)
+
+
+def pipe_lines(fd: int, timeout_s: float):
+    """The lines read from ``fd`` until its end; each within ``timeout_s`` (or fail)."""
+    buf = b""
+    while True:
+        while b"\n" not in buf:
+            assert select.select([fd], [], [], timeout_s)[0], "the run stopped reporting"
+            chunk = os.read(fd, 65536)
+            if not chunk:
+                return
+            buf += chunk
+        line, buf = buf.split(b"\n", 1)
+        yield line.decode()
+
 
 KILL_PROTOCOL = """\
 name: kill test
@@ -235,30 +247,46 @@ steps:
 
 def test_sigkill_keeps_every_reported_block(tmp_path):
     """The runner's progress callback runs after each block is appended (and flushed); the
-    wrapper prints it, the test kills the process mid-entry and reads the file as it is."""
+    child running it says so on a pipe, the test kills it mid-entry and reads the file as it is:
+    every reported block there, the file incomplete, and (paced to the clock) no more samples
+    than the time since the file appeared."""
     proto = tmp_path / "kill.yaml"
     proto.write_text(KILL_PROTOCOL)
     out = tmp_path / "run.h5"
-    proc = Proc([sys.executable, "-c", WRITER, str(proto), str(out)], tmp_path)
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()  # the run in a fork of this process (labrig loaded): killed as any process
+    if pid == 0:  # the child: never returns to the test, whatever happens
+        code = 1
+        try:
+            os.close(read_fd)
+            run_reporting_blocks(proto, out, write_fd)
+            code = 0
+        finally:
+            os._exit(code)
+    os.close(write_fd)
     reported: dict[str, int] = {}
+    killed = False
     try:
-        while True:
-            line = proc.wait_line(lambda s: s.startswith("flushed"), timeout=30)
+        end = time.monotonic() + 30
+        while not out.exists():
+            assert os.waitpid(pid, os.WNOHANG) == (0, 0), "the run ended early"
+            assert time.monotonic() < end, "the run file never appeared"
+            time.sleep(0.02)
+        t0 = time.monotonic()  # (the lines meanwhile wait in the pipe, none lost)
+        for line in pipe_lines(read_fd, 30):
             _, k, name, n = line.split()
-            reported[name] = int(n)
-            if int(k) == 1 and int(n) >= 1500:  # 0.75 s into the second entry
-                proc.p.send_signal(signal.SIGKILL)
-                break
-        proc.finish(timeout=30)
-    finally:
-        proc.finish(timeout=5)
-    # lines printed between our read and the kill were reported too
-    while not proc.lines.empty():
-        _, line = proc.lines.get()
-        if line.startswith("flushed"):
-            _, _, name, n = line.split()
             reported[name] = max(reported.get(name, 0), int(n))
-    assert proc.p.returncode == -signal.SIGKILL, proc.stderr
+            if int(k) == 1 and int(n) >= 1500 and not killed:  # 0.75 s into the second entry
+                os.kill(pid, signal.SIGKILL)
+                elapsed = time.monotonic() - t0
+                killed = True
+            # lines written between our read and the kill were reported too: read on to the end
+    finally:
+        os.close(read_fd)
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        _, status = os.waitpid(pid, 0)
+    assert killed and os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL, status
 
     plan, _ = preflight(proto, None)
     f = read_run(out)  # no repair step needed
@@ -273,9 +301,19 @@ def test_sigkill_keeps_every_reported_block(tmp_path):
     assert e2.n_samples < second.n_samples
     check_prefix(e1, first)
     check_prefix(e2, second)
+    # paced to the clock: the samples never ahead of the time it ran, give or take one block
+    assert e1.duration_s + e2.duration_s <= elapsed + 0.2
 
 
+@pytest.mark.slow
 def test_sigkill_of_the_cli_leaves_a_readable_incomplete_file(tmp_path):
+    """SIGKILL of ``labrig run`` itself: the file as it was, readable, incomplete (``running``),
+    its samples intact and never ahead of the clock. (No cleanup runs on SIGKILL: what is in
+    the file is what the runner had flushed, as in the test above, which kills the runner's
+    process at a known block.)
+
+    Fast equivalent in the default tier: tests/runner/test_runner_signals.py::test_sigkill_keeps_every_reported_block
+    """  # noqa: E501
     out = tmp_path / "run.h5"
     proc = Proc([*labrig_cmd(), "run", str(SWEEP), "--realtime", "--out", str(out)], tmp_path)
     try:

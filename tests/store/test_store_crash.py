@@ -1,77 +1,99 @@
 """Crash safety, for real: SIGKILL a process writing a run file, then read the file back.
 
-The writer prints ``flushed K ENTRY N`` after every ``append`` (which flushes before it
-returns). After the kill, every block reported flushed must be in the file, intact, and the
-run must read as incomplete (status ``running``).
+The writer (a fork of the test's process) says ``flushed K ENTRY N`` after every ``append``
+(which flushes before it returns). After the kill, every block reported flushed must be in the
+file, intact, and the run must read as incomplete (status ``running``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import random
+import select
 import signal
-import subprocess
-import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from labrig.store import read_run
+from labrig.store import RunWriter, read_run
 
-ROOT = Path(__file__).resolve().parents[2]
 N_ENTRIES, N_BLOCKS, BLOCK = 3, 300, 200
 
-WRITER = f"""
-import sys
-import numpy as np
-from labrig.store import RunWriter
 
-w = RunWriter(sys.argv[1], "name: crash\\n", "", {{"daq": {{"identity": {{"model": "sim"}}}}}},
-              seed=7, planned_entries=[f"entry{{i}}" for i in range({N_ENTRIES})])
-k = 0
-for i in range({N_ENTRIES}):
-    e = w.begin_entry(f"entry{{i}}", {{"i": i}}, 1000.0,
-                      ["command_voltage", "strain", "temperature"])
-    for b in range({N_BLOCKS}):
-        g = np.arange(b * {BLOCK}, (b + 1) * {BLOCK}, dtype=float)
-        e.append({{"command_voltage": g, "strain": g + i * 1e6, "temperature": -g}})
-        k += 1
-        print(f"flushed {{k}} {{i}} {{e.n_samples}}", flush=True)
-    e.finish("complete")
-w.finish("complete")
-print("done", flush=True)
-"""
+def _write(path: Path, said: int) -> None:
+    """The writer: ``flushed K ENTRY N`` on the pipe ``said`` after every block appended."""
+    w = RunWriter(
+        str(path),
+        "name: crash\n",
+        "",
+        {"daq": {"identity": {"model": "sim"}}},
+        seed=7,
+        planned_entries=[f"entry{i}" for i in range(N_ENTRIES)],
+    )
+    k = 0
+    for i in range(N_ENTRIES):
+        e = w.begin_entry(
+            f"entry{i}", {"i": i}, 1000.0, ["command_voltage", "strain", "temperature"]
+        )
+        for b in range(N_BLOCKS):
+            g = np.arange(b * BLOCK, (b + 1) * BLOCK, dtype=float)
+            e.append({"command_voltage": g, "strain": g + i * 1e6, "temperature": -g})
+            k += 1
+            os.write(said, f"flushed {k} {i} {e.n_samples}\n".encode())
+        e.finish("complete")
+    w.finish("complete")
+    os.write(said, b"done\n")
+
+
+def _lines(fd: int, timeout_s: float) -> Iterator[str]:
+    """The lines read from ``fd`` until its end; each within ``timeout_s`` (or fail)."""
+    buf = b""
+    while True:
+        while b"\n" not in buf:
+            assert select.select([fd], [], [], timeout_s)[0], "the writer stopped answering"
+            chunk = os.read(fd, 65536)
+            if not chunk:
+                return
+            buf += chunk
+        line, buf = buf.split(b"\n", 1)
+        yield line.decode()
 
 
 def _kill_and_check(path: Path, target: int) -> None:
-    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    proc = subprocess.Popen(
-        [sys.executable, "-c", WRITER, str(path)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-    )
+    """The writer runs in a fork of this process (labrig already loaded; a SIGKILL ends it
+    as it would any process)."""
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: never returns to the test, whatever happens
+        code = 1
+        try:
+            os.close(read_fd)
+            _write(path, write_fd)
+            code = 0
+        finally:
+            os._exit(code)
+    os.close(write_fd)
     reported: dict[int, int] = {}  # entry -> samples reported flushed
+    killed = False
     try:
-        assert proc.stdout is not None
-        for line in proc.stdout:
+        for line in _lines(read_fd, 60):
             if line.startswith("flushed"):
                 _, k, i, n = line.split()
                 reported[int(i)] = int(n)
-                if int(k) >= target:
-                    proc.send_signal(signal.SIGKILL)  # while it goes on writing
-                    break
-        # lines printed between our read and the kill were reported flushed too
-        for line in proc.stdout:
-            if line.startswith("flushed"):
-                _, k, i, n = line.split()
-                reported[int(i)] = int(n)
+                if int(k) >= target and not killed:
+                    os.kill(pid, signal.SIGKILL)  # while it goes on writing
+                    killed = True
+            # lines written between our read and the kill were reported flushed too: read on
+            # to the end of the pipe
     finally:
-        proc.kill()
-        proc.wait(timeout=30)
-    assert proc.returncode == -signal.SIGKILL, proc.stderr.read() if proc.stderr else ""
+        os.close(read_fd)
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        _, status = os.waitpid(pid, 0)
+    assert killed and os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL, status
 
     run = read_run(path)
     assert run.status == "running" and run.incomplete
