@@ -39,7 +39,8 @@ def test_report_control_entries(tmp_path: Path) -> None:
     assert res.exit_code == 0, res.output
     html = tmp_path / "r.html"
     args = ["report", str(run), "--params", str(params), "--out", str(html), "--json"]
-    res = runner.invoke(app, [*args, "--no-heldout"])
+    # our model only: the peers are not what this checks (test_report_peers.py)
+    res = runner.invoke(app, [*args, "--no-heldout", "--peers", "none"])
     assert res.exit_code == 0, res.output
     table = json.loads(res.stdout[res.stdout.index("{") :])
     d = table["strain_sine_800ue_10Hz_direct"]

@@ -64,20 +64,25 @@ def call_args(case: tuple) -> tuple:
     return view, p, warm, noise, unit, others
 
 
-def test_reused_entry_figure_is_a_new_figure_pixel_for_pixel() -> None:
+@pytest.fixture(scope="module")
+def reused_pixels() -> list[np.ndarray]:
+    """The pixels of :data:`CASES` drawn in order on one reused figure (read by two tests)."""
     reused = plots.EntryFigures()
-    for case in CASES:
+    return [pixels(reused(*call_args(case))) for case in CASES]
+
+
+def test_reused_entry_figure_is_a_new_figure_pixel_for_pixel(reused_pixels) -> None:
+    for case, a in zip(CASES, reused_pixels, strict=True):
         args = call_args(case)
-        a, b = pixels(reused(*args)), pixels(plots.entry_figure(*args))
+        b = pixels(plots.entry_figure(*args))
         assert a.shape == b.shape
         assert np.array_equal(a, b), (args[0].name, int(np.sum(np.any(a != b, axis=-1))))
 
 
-def test_reused_entry_figure_differs_when_entries_differ() -> None:
-    """The comparison above can fail: two different entries do not draw the same pixels."""
-    reused = plots.EntryFigures()
-    a = pixels(reused(*call_args(CASES[0])))
-    b = pixels(reused(*call_args(CASES[1])))
+def test_reused_entry_figure_differs_when_entries_differ(reused_pixels) -> None:
+    """The comparison above can fail: two different entries, the first two drawn on the
+    reused figure, do not draw the same pixels."""
+    a, b = reused_pixels[0], reused_pixels[1]
     assert a.shape == b.shape and not np.array_equal(a, b)
 
 
