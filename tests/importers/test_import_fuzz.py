@@ -70,16 +70,17 @@ def test_arbitrary_text_tables(tmp_path: Path, parts: list[str], encoding: str) 
 FINITE = st.floats(allow_nan=False, allow_infinity=False, min_value=-1e300, max_value=1e300)
 
 
-@FAST
-@given(
-    values=st.lists(st.lists(FINITE, min_size=3, max_size=3), min_size=2, max_size=30),
-    style=st.sampled_from(
+NUMBER_TABLES = {
+    "values": st.lists(st.lists(FINITE, min_size=3, max_size=3), min_size=2, max_size=30),
+    "style": st.sampled_from(
         [(",", "."), (";", "."), (";", ","), ("\t", "."), ("\t", ","), (" ", ".")]
     ),
-    header=st.booleans(),
-    index=st.booleans(),
-)
-def test_numbers_round_trip(tmp_path: Path, values, style, header: bool, index: bool) -> None:
+    "header": st.booleans(),
+    "index": st.booleans(),
+}
+
+
+def _numbers_round_trip(tmp_path: Path, values, style, header: bool, index: bool) -> None:
     sep, decimal = style
     table = np.asarray(values)
     lead = sep if index and sep != " " else ""
@@ -97,9 +98,26 @@ def test_numbers_round_trip(tmp_path: Path, values, style, header: bool, index: 
     np.testing.assert_array_equal(entry.strain, table[:, 2])
 
 
+@settings(FAST, max_examples=15)
+@given(**NUMBER_TABLES)
+def test_numbers_round_trip(tmp_path: Path, values, style, header: bool, index: bool) -> None:
+    _numbers_round_trip(tmp_path, values, style, header, index)
+
+
+@pytest.mark.slow
+@settings(FAST, max_examples=200)
+@given(**NUMBER_TABLES)
+def test_numbers_round_trip_200(tmp_path: Path, values, style, header: bool, index: bool):
+    """The round trip on 200 tables.
+
+    Fast equivalent in the default tier: tests/importers/test_import_fuzz.py::test_numbers_round_trip
+    """  # noqa: E501
+    _numbers_round_trip(tmp_path, values, style, header, index)
+
+
 #: the MATLAB cases read each input through the isolated reader (a forked process per read):
-#: 20 inputs each in the default tier, and the same properties on 200 in the slow tier
-MAT = settings(FAST, max_examples=20)
+#: 10 inputs each in the default tier, and the same properties on 200 in the slow tier
+MAT = settings(FAST, max_examples=10)
 MAT_LONG = settings(FAST, max_examples=200)
 
 

@@ -17,8 +17,8 @@ from labrig.importers.isolated import ReaderError, call_isolated
 from labrig.importers.limits import MAX_STRUCT_DEPTH
 from labrig.store import read_run
 
+from helpers import copied, slack
 from helpers import invoke as run_cli
-from helpers import slack
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "import"
 
@@ -36,11 +36,20 @@ def csv(path: Path, text: str) -> Path:
     return path
 
 
-@pytest.fixture
-def precious(tmp_path: Path) -> Path:
-    out = tmp_path / "precious.h5"
+@pytest.fixture(scope="module")
+def precious_original(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A run file imported once per module (the tests get copies of it)."""
+    out = tmp_path_factory.mktemp("original") / "precious.h5"
     res = invoke("import", DATA / "header.csv", "--out", out)
     assert res.exit_code == 0, res.output
+    out.chmod(0o444)
+    return out
+
+
+@pytest.fixture
+def precious(tmp_path: Path, precious_original: Path) -> Path:
+    """An existing run file of the test's own, byte for byte the module's imported one."""
+    (out,) = copied(tmp_path, precious_original)
     return out
 
 

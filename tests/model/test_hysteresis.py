@@ -290,14 +290,13 @@ def records(draw):
     return u
 
 
-HYP = settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+#: 6 random records per operator and memory rule (72 per property) in the default tier, 30
+#: each (360) in the slow twins
+HYP = settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+HYP_LONG = settings(HYP, max_examples=30)
 
 
-@pytest.mark.parametrize("memory", MEMORIES)
-@pytest.mark.parametrize("name", NAMES)
-@HYP
-@given(u=records())
-def test_invert_apply_round_trip(name: str, memory: str, u: np.ndarray) -> None:
+def _check_round_trip(name: str, memory: str, u: np.ndarray) -> None:
     op = op_for(name, memory)
     s = op.apply(u)
     # branch inverse polished to machine precision: 1e-9 V as required
@@ -307,8 +306,25 @@ def test_invert_apply_round_trip(name: str, memory: str, u: np.ndarray) -> None:
 @pytest.mark.parametrize("memory", MEMORIES)
 @pytest.mark.parametrize("name", NAMES)
 @HYP
-@given(u=records(), data=st.data())
-def test_streaming_equals_whole_record(name: str, memory: str, u: np.ndarray, data) -> None:
+@given(u=records())
+def test_invert_apply_round_trip(name: str, memory: str, u: np.ndarray) -> None:
+    _check_round_trip(name, memory, u)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("memory", MEMORIES)
+@pytest.mark.parametrize("name", NAMES)
+@HYP_LONG
+@given(u=records())
+def test_invert_apply_round_trip_many(name: str, memory: str, u: np.ndarray) -> None:
+    """The round trip on five times as many random records.
+
+    Fast equivalent in the default tier: tests/model/test_hysteresis.py::test_invert_apply_round_trip
+    """  # noqa: E501
+    _check_round_trip(name, memory, u)
+
+
+def _check_streaming(name: str, memory: str, u: np.ndarray, data) -> None:
     op = op_for(name, memory)
     whole = op.apply(u)
     cuts = sorted(
@@ -322,6 +338,27 @@ def test_streaming_equals_whole_record(name: str, memory: str, u: np.ndarray, da
     state = HysteresisState()
     back = np.concatenate([op.invert(b, state) for b in np.split(whole, cuts)])
     np.testing.assert_allclose(back, u, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("memory", MEMORIES)
+@pytest.mark.parametrize("name", NAMES)
+@HYP
+@given(u=records(), data=st.data())
+def test_streaming_equals_whole_record(name: str, memory: str, u: np.ndarray, data) -> None:
+    _check_streaming(name, memory, u, data)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("memory", MEMORIES)
+@pytest.mark.parametrize("name", NAMES)
+@HYP_LONG
+@given(u=records(), data=st.data())
+def test_streaming_equals_whole_record_many(name: str, memory: str, u: np.ndarray, data) -> None:
+    """Streaming in random splits on five times as many random records.
+
+    Fast equivalent in the default tier: tests/model/test_hysteresis.py::test_streaming_equals_whole_record
+    """  # noqa: E501
+    _check_streaming(name, memory, u, data)
 
 
 @pytest.mark.slow

@@ -72,14 +72,13 @@ def records(draw) -> np.ndarray:
     return u
 
 
-HYP = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+#: 8 random records per shape and memory rule (72 per property) in the default tier, 40 each
+#: (360) in the slow twins
+HYP = settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+HYP_LONG = settings(HYP, max_examples=40)
 
 
-@pytest.mark.parametrize("memory", MEMORIES)
-@pytest.mark.parametrize("shape", list(SHAPES))
-@HYP
-@given(u=records(), held=st.sampled_from([0.0, 35.0, -12.5]), data=st.data())
-def test_compiled_equals_numpy(shape: str, memory: str, u: np.ndarray, held: float, data) -> None:
+def _check_compiled_equals_numpy(shape: str, memory: str, u: np.ndarray, held: float, data):
     op = op_for(shape, memory)
     ref = op.apply(u, op.held_state(held), engine="numpy")
     assert_close(op.apply(u, op.held_state(held), engine="compiled"), ref)
@@ -91,6 +90,27 @@ def test_compiled_equals_numpy(shape: str, memory: str, u: np.ndarray, held: flo
     assert_close(np.concatenate(p1), np.concatenate(p2))
     assert_close(np.concatenate(p1), ref)
     assert_states_close(s1, s2, float(np.max(np.abs(ref))))
+
+
+@pytest.mark.parametrize("memory", MEMORIES)
+@pytest.mark.parametrize("shape", list(SHAPES))
+@HYP
+@given(u=records(), held=st.sampled_from([0.0, 35.0, -12.5]), data=st.data())
+def test_compiled_equals_numpy(shape: str, memory: str, u: np.ndarray, held: float, data) -> None:
+    _check_compiled_equals_numpy(shape, memory, u, held, data)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("memory", MEMORIES)
+@pytest.mark.parametrize("shape", list(SHAPES))
+@HYP_LONG
+@given(u=records(), held=st.sampled_from([0.0, 35.0, -12.5]), data=st.data())
+def test_compiled_equals_numpy_many(shape: str, memory: str, u: np.ndarray, held: float, data):
+    """Compiled against numpy on five times as many random records.
+
+    Fast equivalent in the default tier: tests/model/test_operator_compiled.py::test_compiled_equals_numpy
+    """  # noqa: E501
+    _check_compiled_equals_numpy(shape, memory, u, held, data)
 
 
 @pytest.mark.parametrize("memory", MEMORIES)
@@ -211,11 +231,7 @@ def test_parameter_derivatives_match_differences(shape: str, memory: str, engine
         assert np.max(np.abs(dP[:, 2])) > 1.0
 
 
-@pytest.mark.parametrize("memory", MEMORIES)
-@pytest.mark.parametrize("shape", list(SHAPES))
-@HYP
-@given(u=records(), held=st.sampled_from([0.0, 35.0]), seed=st.integers(0, 2**16))
-def test_sensitivities_compiled_equal_numpy_and_tangent(shape, memory, u, held, seed) -> None:
+def _check_sensitivities(shape: str, memory: str, u: np.ndarray, held: float, seed: int):
     op = op_for(shape, memory)
     du = np.random.default_rng(seed).standard_normal((u.size, 3))
     S1, P1, U1 = op.sensitivities(u, held, du, engine="compiled")
@@ -226,6 +242,27 @@ def test_sensitivities_compiled_equal_numpy_and_tangent(shape, memory, u, held, 
         assert_close(U1[:, j], U2[:, j])
         # each column is what tangent computes for it (numpy reference)
         assert_close(U1[:, j], op.tangent(u, du[:, j], held, engine="numpy"))
+
+
+@pytest.mark.parametrize("memory", MEMORIES)
+@pytest.mark.parametrize("shape", list(SHAPES))
+@HYP
+@given(u=records(), held=st.sampled_from([0.0, 35.0]), seed=st.integers(0, 2**16))
+def test_sensitivities_compiled_equal_numpy_and_tangent(shape, memory, u, held, seed) -> None:
+    _check_sensitivities(shape, memory, u, held, seed)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("memory", MEMORIES)
+@pytest.mark.parametrize("shape", list(SHAPES))
+@HYP_LONG
+@given(u=records(), held=st.sampled_from([0.0, 35.0]), seed=st.integers(0, 2**16))
+def test_sensitivities_compiled_equal_numpy_and_tangent_many(shape, memory, u, held, seed):
+    """The sensitivities on five times as many random records.
+
+    Fast equivalent in the default tier: tests/model/test_operator_compiled.py::test_sensitivities_compiled_equal_numpy_and_tangent
+    """  # noqa: E501
+    _check_sensitivities(shape, memory, u, held, seed)
 
 
 @pytest.mark.parametrize("engine", ["compiled", "numpy"])

@@ -13,6 +13,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -23,10 +24,12 @@ from labrig.protocol.check import check_protocol
 from labrig.protocol.schema import STEP_KINDS, Protocol
 
 FUZZ = settings(
-    max_examples=60,  # the default tier's share of generated protocols
+    max_examples=20,  # the default tier's share of generated protocols
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
 )
+#: the slow tier's twins of the properties that build whole plans: three times as many inputs
+FUZZ_LONG = settings(FUZZ, max_examples=60)
 
 TOP_KEYS = ["name", "description", "rig", "rate_hz", "rest_s", "edge_slew_V_per_s", "steps"]
 STEP_KEYS = [
@@ -132,13 +135,36 @@ def test_random_dicts_only_raise_validation_errors(data):
         Protocol.model_validate(data)
 
 
+@pytest.mark.slow
+@FUZZ_LONG
+@given(protocol_like)
+def test_random_dicts_only_raise_validation_errors_many(data):
+    """Random protocol-like dicts, three times as many.
+
+    Fast equivalent in the default tier: tests/protocol/test_protocol_fuzz.py::test_random_dicts_only_raise_validation_errors
+    """  # noqa: E501
+    with contextlib.suppress(ValidationError):
+        Protocol.model_validate(data)
+
+
 @FUZZ
 @given(protocol_like)
 def test_random_protocol_files_only_raise_input_file_errors(data):
     _check_file(_dump(data))
 
 
-@FUZZ
+@pytest.mark.slow
+@FUZZ_LONG
+@given(protocol_like)
+def test_random_protocol_files_only_raise_input_file_errors_many(data):
+    """Random protocol-like files, three times as many.
+
+    Fast equivalent in the default tier: tests/protocol/test_protocol_fuzz.py::test_random_protocol_files_only_raise_input_file_errors
+    """  # noqa: E501
+    _check_file(_dump(data))
+
+
+@settings(FUZZ, max_examples=60)
 @given(json_like)
 def test_random_documents_only_raise_input_file_errors(data):
     _check_file(_dump(data))
@@ -241,9 +267,10 @@ def _expected_entries(d: dict) -> int:
     return n
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(valid_protocol)
-def test_valid_protocols_round_trip(d):
+VALID = settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+def _check_round_trip(d: dict) -> None:
     p = Protocol.model_validate(d)
     again = Protocol.model_validate(p.model_dump(mode="json", exclude_none=True))
     assert again == p
@@ -256,22 +283,38 @@ def test_valid_protocols_round_trip(d):
         assert v[0] == 0.0 and v[-1] == 0.0 and np.all(np.isfinite(v))
 
 
+@VALID
+@given(valid_protocol)
+def test_valid_protocols_round_trip(d):
+    _check_round_trip(d)
+
+
+@pytest.mark.slow
+@settings(VALID, max_examples=60)
+@given(valid_protocol)
+def test_valid_protocols_round_trip_many(d):
+    """Generated valid protocols, three times as many.
+
+    Fast equivalent in the default tier: tests/protocol/test_protocol_fuzz.py::test_valid_protocols_round_trip
+    """  # noqa: E501
+    _check_round_trip(d)
+
+
 PAPER = (Path(__file__).resolve().parents[2] / "experiments" / "paper.yaml").read_text()
 
 
-@settings(max_examples=100, deadline=None)
-@given(
-    st.lists(
-        st.tuples(
-            st.integers(0, len(PAPER) - 1),
-            st.sampled_from(["delete", "insert", "replace"]),
-            st.sampled_from(list(":-[]{}#&*!|>'\"%@` \t\n0123456789.eE-+abc")),
-        ),
-        min_size=1,
-        max_size=4,
-    )
+PAPER_EDITS = st.lists(
+    st.tuples(
+        st.integers(0, len(PAPER) - 1),
+        st.sampled_from(["delete", "insert", "replace"]),
+        st.sampled_from(list(":-[]{}#&*!|>'\"%@` \t\n0123456789.eE-+abc")),
+    ),
+    min_size=1,
+    max_size=4,
 )
-def test_mutated_paper_yaml_only_raises_input_file_errors(edits):
+
+
+def _check_mutated_paper(edits) -> None:
     text = PAPER
     for pos, op, ch in edits:
         pos = min(pos, len(text) - 1)
@@ -282,3 +325,20 @@ def test_mutated_paper_yaml_only_raises_input_file_errors(edits):
         else:
             text = text[:pos] + ch + text[pos + 1 :]
     _check_file(text)
+
+
+@settings(max_examples=25, deadline=None)
+@given(PAPER_EDITS)
+def test_mutated_paper_yaml_only_raises_input_file_errors(edits):
+    _check_mutated_paper(edits)
+
+
+@pytest.mark.slow
+@settings(max_examples=100, deadline=None)
+@given(PAPER_EDITS)
+def test_mutated_paper_yaml_only_raises_input_file_errors_many(edits):
+    """Random edits of the paper's protocol, four times as many.
+
+    Fast equivalent in the default tier: tests/protocol/test_protocol_fuzz.py::test_mutated_paper_yaml_only_raises_input_file_errors
+    """  # noqa: E501
+    _check_mutated_paper(edits)
