@@ -4,9 +4,12 @@ PyYAML's composer keeps the line of every node, so each pydantic error location 
 and indices) is mapped back to the line where that value (or its parent) was written.
 
 Bounds, checked before the parts of PyYAML that recurse or allocate: at most
-:data:`MAX_BYTES` of text, :data:`MAX_DEPTH` levels of nesting (counted on the parser's events,
-which do not recurse), :data:`MAX_EXPANDED_NODES` values once aliases are expanded, integers of
-at most :data:`MAX_INT_DIGITS` digits. YAML 1.1's base-60 numbers (``1:30`` read as 90) and its
+:data:`MAX_BYTES` of text; :data:`MAX_DEPTH` levels of nesting and :data:`MAX_EXPANDED_NODES`
+values, counted on the parser's events (which do not recurse) before the document is built,
+and again once aliases are expanded, on the built node graph without expanding it (where an
+alias inside the value it names, a loop, is refused too); integers of at most
+:data:`MAX_INT_DIGITS` digits. A value its explicit tag cannot convert (``!!int abc``) is
+refused at its line. YAML 1.1's base-60 numbers (``1:30`` read as 90) and its
 integers in octal (``017`` read as 15), hexadecimal (``0x10``) or binary (``0b11``) are refused
 with their line: write the number in decimal, or quote the text. So is a merge of several
 mappings (``<<: [*a, *b]``), whose precedence PyYAML reverses from YAML's (the last one wins
@@ -83,6 +86,19 @@ class BoundedConstructor(yaml.constructor.SafeConstructor):
             self.refuse_odd_number(node)
         return super().construct_yaml_float(node)
 
+    def construct_object(self, node: yaml.Node, deep: bool = False) -> Any:
+        """PyYAML's, with a value its tag cannot convert (``!!int abc``, ``!!bool maybe``,
+        ``!!timestamp never``: PyYAML's converters raise ``ValueError``, ``KeyError``,
+        ``IndexError``, ...) refused as a ``ConstructorError`` at the value's line."""
+        try:
+            return super().construct_object(node, deep)
+        except (ValueError, TypeError, KeyError, IndexError, AttributeError, OverflowError):
+            tag = str(node.tag).rsplit(":", 1)[-1]
+            shown = repr(node.value)[:60] if isinstance(node, yaml.ScalarNode) else "this value"
+            raise yaml.constructor.ConstructorError(
+                None, None, f"{shown} cannot be read as !!{tag}", node.start_mark
+            ) from None
+
     def construct_yaml_timestamp(self, node: yaml.ScalarNode) -> datetime.date:
         try:
             return super().construct_yaml_timestamp(node)
@@ -126,26 +142,39 @@ else:  # pragma: no cover - PyYAML built without libyaml
     BoundedLoader = PythonLoader
 
 
-def _depth_issue(loader: Any, name: str) -> InputIssue | None:
-    """Nesting deeper than :data:`MAX_DEPTH`, found on the parser's events (no recursion);
-    libyaml's own limit (1000 levels, reached first when the brackets of one line run that
-    deep) is reported the same way."""
-    depth = 0
+def _event_issue(loader: Any, name: str) -> InputIssue | None:
+    """Nesting deeper than :data:`MAX_DEPTH`, or more than :data:`MAX_EXPANDED_NODES` values
+    before any alias is expanded, found on the parser's events (no recursion, no node kept);
+    libyaml's own nesting limit (1000 levels, reached first when the brackets of one line run
+    that deep) is reported as nesting too."""
+    depth = values = 0
     try:
         while loader.check_event():
             event = loader.get_event()
+            if isinstance(event, yaml.CollectionStartEvent | yaml.ScalarEvent | yaml.AliasEvent):
+                values += 1
+                if values > MAX_EXPANDED_NODES:
+                    return _too_many(name, _line(event.start_mark), aliases=False)
             if isinstance(event, yaml.CollectionStartEvent):
                 depth += 1
                 if depth > MAX_DEPTH:
-                    line = event.start_mark.line + 1 if event.start_mark else None
-                    return _too_deep(name, line)
+                    return _too_deep(name, _line(event.start_mark))
             elif isinstance(event, yaml.CollectionEndEvent):
                 depth -= 1
     except yaml.MarkedYAMLError as e:
         if "maximum nesting depth" not in str(e.problem):
             raise
-        return _too_deep(name, e.problem_mark.line + 1 if e.problem_mark else None)
+        return _too_deep(name, _line(e.problem_mark))
     return None
+
+
+def _line(mark: Any) -> int | None:
+    return mark.line + 1 if mark is not None else None
+
+
+def _too_many(name: str, line: int | None, aliases: bool) -> InputIssue:
+    what = "aliases expand this document to" if aliases else "this document has"
+    return InputIssue(name, line, "", f"{what} more than {MAX_EXPANDED_NODES} values")
 
 
 def _too_deep(name: str, line: int | None) -> InputIssue:
@@ -157,7 +186,7 @@ def _compose(text: str, name: str, loader_class: LoaderClass) -> tuple[yaml.Node
     (module docstring); PyYAML's own errors propagate as ``YAMLError``."""
     loader: Any = loader_class(text)  # type: ignore[call-arg]
     try:
-        deep = _depth_issue(loader, name)
+        deep = _event_issue(loader, name)
     except (ValueError, OverflowError) as e:  # PyYAML's scanner on odd escapes ("\U9999...")
         raise _unreadable(name, loader, e) from None
     finally:
@@ -167,7 +196,7 @@ def _compose(text: str, name: str, loader_class: LoaderClass) -> tuple[yaml.Node
     loader = loader_class(text)  # type: ignore[call-arg]
     try:
         node = loader.get_single_node()
-        bomb = _expanded_size_issue(node, name) if node is not None else None
+        bomb = _expanded_issue(node, name) if node is not None else None
         if bomb is not None:
             raise InputFileError([bomb])
         refused = (
@@ -193,34 +222,52 @@ def _unreadable(name: str, loader: Any, e: Exception) -> InputFileError:
     return InputFileError([InputIssue(name, line, "", f"YAML error: cannot read this ({e})")])
 
 
-def _expanded_size_issue(root: yaml.Node, name: str) -> InputIssue | None:
-    """Refuse YAML whose aliases (``*name``) expand to an enormous document.
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.MappingNode):
+        return [v for kv in node.value for v in kv]
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    return []
 
-    Counts the nodes of the alias-expanded tree without expanding it (post-order over the
-    shared node graph), before anything walks or validates the expanded data.
-    """
-    sizes: dict[int, int] = {}
-    order, stack = [], [root]
+
+def _expanded_issue(root: yaml.Node, name: str) -> InputIssue | None:
+    """Refuse YAML whose aliases (``*name``) make a loop (an alias inside the value it names:
+    ``a: &x [*x]``), nest deeper than :data:`MAX_DEPTH` levels once expanded (anchors each
+    wrapping the one before in lists) or expand to more than :data:`MAX_EXPANDED_NODES` values
+    ("billion laughs").
+
+    Measures the alias-expanded tree without expanding it: a depth-first walk of the shared
+    node graph (no recursion), each node's expanded size and depth computed once, after its
+    children's; a child still open on the walk's path is a loop. Before anything walks or
+    validates the expanded data."""
+    size: dict[int, int] = {}
+    depth: dict[int, int] = {}
+    open_: set[int] = set()
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
     while stack:
-        node = stack.pop()
-        if node is None or id(node) in sizes:
+        node, closing = stack.pop()
+        key = id(node)
+        kids = _children(node)
+        if closing:
+            open_.discard(key)
+            size[key] = 1 + sum(size[id(k)] for k in kids)
+            level = 1 if isinstance(node, yaml.CollectionNode) else 0
+            depth[key] = level + max((depth[id(k)] for k in kids), default=0)
+            if size[key] > MAX_EXPANDED_NODES:
+                return _too_many(name, _line(node.start_mark), aliases=True)
+            if depth[key] > MAX_DEPTH:
+                return _too_deep(name, _line(node.start_mark))
             continue
-        sizes[id(node)] = 0
-        order.append(node)
-        if isinstance(node, yaml.MappingNode):
-            stack.extend(v for kv in node.value for v in kv)
-        elif isinstance(node, yaml.SequenceNode):
-            stack.extend(node.value)
-    for node in reversed(order):
-        kids = []
-        if isinstance(node, yaml.MappingNode):
-            kids = [v for kv in node.value for v in kv]
-        elif isinstance(node, yaml.SequenceNode):
-            kids = node.value
-        sizes[id(node)] = 1 + sum(sizes.get(id(k), 1) for k in kids)
-        if sizes[id(node)] > MAX_EXPANDED_NODES:
-            msg = f"aliases expand this document to more than {MAX_EXPANDED_NODES} values"
-            return InputIssue(name, node.start_mark.line + 1, "", msg)
+        if key in size:
+            continue
+        open_.add(key)
+        stack.append((node, True))
+        for k in kids:
+            if id(k) in open_:
+                msg = "an alias inside the value it names (a loop): write the value out"
+                return InputIssue(name, _line(k.start_mark), "", msg)
+            if id(k) not in size:
+                stack.append((k, False))
     return None
 
 
@@ -345,18 +392,45 @@ def _parse(
     try:
         return _compose(text, name, loader or BoundedLoader)
     except yaml.constructor.ConstructorError as e:
-        line = e.problem_mark.line + 1 if e.problem_mark else None
+        line = _line_in(text, e.problem_mark)
         raise InputFileError([InputIssue(name, line, "", str(e.problem))]) from None
     except yaml.MarkedYAMLError as e:
         mark = e.problem_mark or e.context_mark
-        line = mark.line + 1 if mark else None
-        msg = f"YAML syntax error: {e.problem or e}" + (f" ({e.context})" if e.context else "")
-        raise InputFileError([InputIssue(name, line, "", msg)]) from e
+        problem = f"{e.problem or e}"
+        problem += _character_at(text, mark, named="found character '" in problem)
+        msg = f"YAML syntax error: {problem}" + (f" ({e.context})" if e.context else "")
+        raise InputFileError([InputIssue(name, _line_in(text, mark), "", msg)]) from e
+    except UnicodeError as e:  # libyaml's parser takes UTF-8: a lone surrogate cannot be
+        msg = f"not valid Unicode text ({e})"
+        raise InputFileError([InputIssue(name, None, "", msg)]) from None
     except yaml.YAMLError as e:
         raise InputFileError([InputIssue(name, None, "", f"YAML error: {e}")]) from e
     except RecursionError:  # not expected past the depth check; a message all the same
         msg = "nested too deeply to read"
         raise InputFileError([InputIssue(name, None, "", msg)]) from None
+
+
+def _line_in(text: str, mark: Any) -> int | None:
+    """The 1-based line of ``mark``, at most the text's last line (libyaml names the line
+    after the last when an error is found at the end of a text without a final newline)."""
+    if mark is None:
+        return None
+    last = text.count("\n") + (0 if text.endswith("\n") else 1)
+    return max(1, min(mark.line + 1, last))
+
+
+def _character_at(text: str, mark: Any, named: bool) -> str:
+    """`` ('@')``: the character a syntax error found, which libyaml's message leaves out
+    (PyYAML's parser in Python names it: ``named``); for a tab, what to write instead."""
+    if mark is None:
+        return ""
+    lines = text.splitlines()
+    if not 0 <= mark.line < len(lines) or not 0 <= mark.column < len(lines[mark.line]):
+        return ""
+    char = lines[mark.line][mark.column]
+    if char == "\t":
+        return " (a tab: YAML indents and separates with spaces)"
+    return f" ({char!r})" if not (named or char.isspace()) else ""
 
 
 def what_was_given(value: object) -> str:
