@@ -3,13 +3,16 @@ protocols. (Fixtures built on them are in ``conftest.py``.)"""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import resource
+import select
 import shutil
+import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -298,3 +301,43 @@ def arm(monkeypatch: pytest.MonkeyPatch, after: int, act: Callable[[], None]) ->
 
     monkeypatch.setattr(runner, "open_rig", open_and_arm)
     return rigs
+
+
+def fork_saying(work: Callable[[int], None]) -> tuple[int, int]:
+    """``work(fd)`` in a fork of this process (labrig already loaded: a SIGKILL ends it as it
+    would any process), saying what it has to say on the pipe ``fd``. Returns ``(pid, the
+    pipe's read end)``. The child never returns to the test: it exits 0 after ``work``, 1 if
+    ``work`` raised."""
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        code = 1
+        try:
+            os.close(read_fd)
+            work(write_fd)
+            code = 0
+        finally:
+            os._exit(code)
+    os.close(write_fd)
+    return pid, read_fd
+
+
+def pipe_lines(fd: int, timeout_s: float) -> Iterator[str]:
+    """The lines read from ``fd`` until its end; each within ``timeout_s`` (or fail)."""
+    buf = b""
+    while True:
+        while b"\n" not in buf:
+            assert select.select([fd], [], [], timeout_s)[0], "the child stopped answering"
+            chunk = os.read(fd, 65536)
+            if not chunk:
+                return
+            buf += chunk
+        line, buf = buf.split(b"\n", 1)
+        yield line.decode()
+
+
+def reaped(pid: int) -> int:
+    """The wait status of the child ``pid``, SIGKILLed first if it still runs."""
+    with contextlib.suppress(ProcessLookupError):
+        os.kill(pid, signal.SIGKILL)
+    return os.waitpid(pid, 0)[1]

@@ -58,7 +58,7 @@ from labrig.model import DynamicHysteresisModel
 from labrig.runner.execute import RunOutcome
 from labrig.store import RunWriter, read_run
 
-from helpers import invoke, slack
+from helpers import fork_saying, invoke, slack
 
 ROOT = Path(__file__).resolve().parents[2]
 #: the vendored files as packed in the npm registry's uplot 1.6.32 (sha256, taken from the
@@ -96,19 +96,13 @@ class Writer:
     of its blocks at once."""
 
     def __init__(self, path: Path, blocks: int):
-        said_r, said_w = os.pipe()
         hurry_r, self._hurry = os.pipe()
-        pid = os.fork()
-        if pid == 0:  # the child: never returns to the test, whatever happens
-            code = 1
-            try:
-                os.close(said_r)
-                os.close(self._hurry)
-                _write(path, blocks, said_w, hurry_r)
-                code = 0
-            finally:
-                os._exit(code)
-        os.close(said_w)
+
+        def write(said: int) -> None:
+            os.close(self._hurry)
+            _write(path, blocks, said, hurry_r)
+
+        pid, said_r = fork_saying(write)
         os.close(hurry_r)
         self.pid, self.returncode = pid, None
         try:

@@ -3,7 +3,6 @@ recorded, the protocol checked, and a failed resume leaving the file as it was."
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import os
 import select
@@ -20,7 +19,7 @@ from labrig.core.metadata import from_options
 from labrig.runner import execute as runner
 from labrig.store import read_run, run_info
 
-from helpers import copied
+from helpers import copied, fork_saying, reaped
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -155,23 +154,16 @@ def test_a_failed_resume_leaves_the_aborted_file_as_it_was(aborted, tmp_path):
     in a fork of this process, labrig already loaded: the kill ends a process all the same.)"""
     proto, out = aborted
     before = digest(out)
-    read_fd, write_fd = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # the child: never returns to the test, whatever happens
-        code = 1
-        try:
-            os.close(read_fd)
 
-            def progress(k, n, name, f, left):
-                if f > 0.3:
-                    os.write(write_fd, b"playing\n")
+    def resume(said: int) -> None:
+        def progress(k, n, name, f, left):
+            if f > 0.3:
+                os.write(said, b"playing\n")
 
-            plan, rig = runner.preflight(proto, None)
-            runner.execute(plan, rig, None, seed=5, realtime=True, progress=progress, resume=out)
-            code = 0
-        finally:
-            os._exit(code)
-    os.close(write_fd)
+        plan, rig = runner.preflight(proto, None)
+        runner.execute(plan, rig, None, seed=5, realtime=True, progress=progress, resume=out)
+
+    pid, read_fd = fork_saying(resume)
     try:
         with os.fdopen(read_fd) as said:
             assert select.select([said], [], [], 60)[0], "the resume never played"
@@ -180,9 +172,7 @@ def test_a_failed_resume_leaves_the_aborted_file_as_it_was(aborted, tmp_path):
             assert len(partial) == 1
             os.kill(pid, signal.SIGKILL)
     finally:
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGKILL)
-        _, status = os.waitpid(pid, 0)
+        status = reaped(pid)
     assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL
     assert digest(out) == before
     assert read_run(out).status == "aborted"

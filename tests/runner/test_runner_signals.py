@@ -17,7 +17,6 @@ and signals it:
 
 from __future__ import annotations
 
-import contextlib
 import fcntl
 import os
 import pty
@@ -37,6 +36,8 @@ import pytest
 
 from labrig.runner.execute import execute, preflight
 from labrig.store import read_run
+
+from helpers import fork_saying, pipe_lines, reaped
 
 ROOT = Path(__file__).resolve().parents[2]
 SWEEP = ROOT / "experiments" / "sweep.yaml"
@@ -215,20 +216,6 @@ def run_reporting_blocks(proto: Path, out: Path, said: int) -> None:
     execute(plan, rig, out, seed=5, realtime=True, progress=progress)
 
 
-def pipe_lines(fd: int, timeout_s: float):
-    """The lines read from ``fd`` until its end; each within ``timeout_s`` (or fail)."""
-    buf = b""
-    while True:
-        while b"\n" not in buf:
-            assert select.select([fd], [], [], timeout_s)[0], "the run stopped reporting"
-            chunk = os.read(fd, 65536)
-            if not chunk:
-                return
-            buf += chunk
-        line, buf = buf.split(b"\n", 1)
-        yield line.decode()
-
-
 KILL_PROTOCOL = """\
 name: kill test
 rate_hz: 2000
@@ -253,17 +240,8 @@ def test_sigkill_keeps_every_reported_block(tmp_path):
     proto = tmp_path / "kill.yaml"
     proto.write_text(KILL_PROTOCOL)
     out = tmp_path / "run.h5"
-    read_fd, write_fd = os.pipe()
-    pid = os.fork()  # the run in a fork of this process (labrig loaded): killed as any process
-    if pid == 0:  # the child: never returns to the test, whatever happens
-        code = 1
-        try:
-            os.close(read_fd)
-            run_reporting_blocks(proto, out, write_fd)
-            code = 0
-        finally:
-            os._exit(code)
-    os.close(write_fd)
+    # the run in a fork of this process (labrig loaded): killed as any process
+    pid, read_fd = fork_saying(lambda said: run_reporting_blocks(proto, out, said))
     reported: dict[str, int] = {}
     killed = False
     try:
@@ -283,9 +261,7 @@ def test_sigkill_keeps_every_reported_block(tmp_path):
             # lines written between our read and the kill were reported too: read on to the end
     finally:
         os.close(read_fd)
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGKILL)
-        _, status = os.waitpid(pid, 0)
+        status = reaped(pid)
     assert killed and os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL, status
 
     plan, _ = preflight(proto, None)

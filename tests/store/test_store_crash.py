@@ -7,18 +7,17 @@ file, intact, and the run must read as incomplete (status ``running``).
 
 from __future__ import annotations
 
-import contextlib
 import os
 import random
-import select
 import signal
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from labrig.store import RunWriter, read_run
+
+from helpers import fork_saying, pipe_lines, reaped
 
 N_ENTRIES, N_BLOCKS, BLOCK = 3, 300, 200
 
@@ -48,38 +47,14 @@ def _write(path: Path, said: int) -> None:
     os.write(said, b"done\n")
 
 
-def _lines(fd: int, timeout_s: float) -> Iterator[str]:
-    """The lines read from ``fd`` until its end; each within ``timeout_s`` (or fail)."""
-    buf = b""
-    while True:
-        while b"\n" not in buf:
-            assert select.select([fd], [], [], timeout_s)[0], "the writer stopped answering"
-            chunk = os.read(fd, 65536)
-            if not chunk:
-                return
-            buf += chunk
-        line, buf = buf.split(b"\n", 1)
-        yield line.decode()
-
-
 def _kill_and_check(path: Path, target: int) -> None:
     """The writer runs in a fork of this process (labrig already loaded; a SIGKILL ends it
     as it would any process)."""
-    read_fd, write_fd = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # the child: never returns to the test, whatever happens
-        code = 1
-        try:
-            os.close(read_fd)
-            _write(path, write_fd)
-            code = 0
-        finally:
-            os._exit(code)
-    os.close(write_fd)
+    pid, read_fd = fork_saying(lambda said: _write(path, said))
     reported: dict[int, int] = {}  # entry -> samples reported flushed
     killed = False
     try:
-        for line in _lines(read_fd, 60):
+        for line in pipe_lines(read_fd, 60):
             if line.startswith("flushed"):
                 _, k, i, n = line.split()
                 reported[int(i)] = int(n)
@@ -90,9 +65,7 @@ def _kill_and_check(path: Path, target: int) -> None:
             # to the end of the pipe
     finally:
         os.close(read_fd)
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGKILL)
-        _, status = os.waitpid(pid, 0)
+        status = reaped(pid)
     assert killed and os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL, status
 
     run = read_run(path)
