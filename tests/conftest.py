@@ -3,11 +3,13 @@ tests/analysis, tests/diagnose, ...). Helpers that are not fixtures are in ``hel
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -17,23 +19,30 @@ from compile_kernels import GROUPS
 
 from helpers import ROOT, TINY, run_protocol
 
-#: test files that take the longest (CPU seconds measured on the suite, cold caches for mypy),
-#: handed out first: with ``--dist loadfile`` a file runs on one worker, and a long file started
-#: last keeps the other workers idle at the end of the run (``--no-loadscope-reorder`` in
+#: test files that take the longest (wall-clock seconds per file on a new checkout's suite,
+#: 2026-11-29: 44 s for the type check with mypy's cache cold down to 12 s), handed out
+#: first: with ``--dist loadfile`` a file runs on one worker, and a long file started last
+#: keeps the other workers idle at the end of the run (``--no-loadscope-reorder`` in
 #: pyproject.toml keeps this order; pytest-xdist would otherwise hand out files by their number
 #: of tests, the type check's two tests last)
 LONGEST_FIRST = (
     "tests/test_types.py",
-    "tests/fleet/test_fleet.py",
-    "tests/cli/test_readme_quick_tour.py",
-    "tests/runner/test_runner_signals.py",
-    "tests/drivers/test_drivers.py",
-    "tests/model/test_relaxor.py",
-    "tests/store/test_safety_disk_full.py",
-    "tests/drivers/test_sim_serve.py",
-    "tests/store/test_corrupt_runfiles.py",
-    "tests/api/test_api.py",
     "tests/runner/test_live.py",
+    "tests/fleet/test_fleet.py",
+    "tests/store/test_store_isolation.py",
+    "tests/store/test_corrupt_runfiles.py",
+    "tests/runner/test_runner_signals.py",
+    "tests/model/test_relaxor.py",
+    "tests/cli/test_fuzz_parsers.py",
+    "tests/api/test_api.py",
+    "tests/model/test_mittag_leffler.py",
+    "tests/store/test_seal_additions.py",
+    "tests/cli/test_cli_validate.py",
+    "tests/control/test_control_remanence.py",
+    "tests/store/test_safety_disk_full.py",
+    "tests/runner/test_resume.py",
+    "tests/report/test_report_figures.py",
+    "tests/cli/test_readme_quick_tour.py",
 )
 
 
@@ -43,13 +52,15 @@ def pytest_configure(config: pytest.Config) -> None:
     processes, and each would otherwise compile labrig's ~200 modules from source (about
     0.25 s of CPU per process). The caches are ``__pycache__`` folders, ignored by git.
 
-    In the controller of a parallel session, also fills numba's cache when it is empty
-    (:func:`compile_kernels_once`)."""
+    In the controller of a parallel session, before the workers start: fills numba's cache
+    when it is empty (:func:`compiling_kernels`) and, meanwhile, writes the test modules'
+    rewritten bytecode (:func:`rewrite_test_modules`)."""
     os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
     sys.dont_write_bytecode = False
     parallel = config.getoption("numprocesses", None) and not config.getoption("collectonly")
     if parallel and not hasattr(config, "workerinput"):
-        compile_kernels_once()
+        with compiling_kernels():
+            rewrite_test_modules(config)
 
 
 #: typer's CliRunner turns the app into a click command on every ``invoke`` (about 20 ms for
@@ -90,13 +101,16 @@ def kernel_cache_is_cold(
     return False
 
 
-def compile_kernels_once(timeout_s: float = 300.0) -> None:
-    """Before the workers start, compile the numba kernels into their cache when it is cold:
-    ``tests/compile_kernels.py``'s two groups at once (about 11 s of wall clock on 2 cores in
-    a new checkout), instead of every worker and every ``labrig`` command the first tests
-    start compiling the same kernels at the same time. Only a warm-up: a failure or a
-    timeout here leaves the kernels to be compiled where they are first used."""
+@contextlib.contextmanager
+def compiling_kernels(timeout_s: float = 300.0) -> Iterator[None]:
+    """Compiles the numba kernels into their cache, when it is cold, while the ``with`` block
+    runs and until it is done: ``tests/compile_kernels.py``'s two groups at once (about 15 s
+    of wall clock on 2 cores in a new checkout), instead of every worker and every ``labrig``
+    command the first tests start compiling the same kernels at the same time. Only a
+    warm-up: a failure or a timeout here leaves the kernels to be compiled where they are
+    first used."""
     if not kernel_cache_is_cold():
+        yield
         return
     script = ROOT / "tests" / "compile_kernels.py"
     procs = [
@@ -110,6 +124,7 @@ def compile_kernels_once(timeout_s: float = 300.0) -> None:
     ]
     deadline = time.monotonic() + timeout_s
     try:
+        yield
         for p in procs:
             p.wait(timeout=max(0.0, deadline - time.monotonic()))
     except subprocess.TimeoutExpired:
@@ -119,6 +134,26 @@ def compile_kernels_once(timeout_s: float = 300.0) -> None:
             if p.poll() is None:
                 p.kill()
                 p.wait()
+
+
+def rewrite_test_modules(config: pytest.Config) -> None:
+    """Writes the bytecode of every test module whose assertions pytest rewrites (its
+    ``__pycache__/*-pytest-*.pyc``), where it is missing or older than its source, as pytest's
+    import hook does on import. In a new checkout each worker would otherwise rewrite all of
+    them at once on collecting (about 7.6 s of CPU per worker); they now load the files
+    written here. Relies on pytest's internal ``_pytest.assertion.rewrite``: when that
+    changes, it does nothing, and each worker rewrites as before."""
+    try:
+        from _pytest.assertion import rewrite
+
+        state = config.stash[rewrite.assertstate_key]
+        for fn in sorted((ROOT / "tests").rglob("test_*.py")):
+            pyc = rewrite.get_cache_dir(fn) / (fn.name[:-3] + rewrite.PYC_TAIL)
+            if rewrite._read_pyc(fn, pyc) is None and rewrite.try_makedirs(pyc.parent):
+                source_hash, co = rewrite._rewrite_test(fn, config)
+                rewrite._write_pyc(state, co, source_hash, pyc)
+    except (ImportError, AttributeError, KeyError, TypeError, OSError, SyntaxError):
+        return
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

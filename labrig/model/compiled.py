@@ -307,9 +307,9 @@ def bank_run(
             _bank_block(a, cw[q], feed[q], ca, ccw[q], wq, wcq, uc, n, u_prev[j], yc)
             for k in range(n):
                 y[k, j, q] = yc[k]
-            if q == 0:
-                w[j] = wq
-                wc[j] = wcq
+            if q == 0:  # loops, not ``w[j] = wq``: numba's shape-error message compiles for 7 s
+                _copy_rows(wq, w[j], wq.shape[0])
+                _copy_rows(wcq, wc[j], wcq.shape[0])
     return y
 
 
