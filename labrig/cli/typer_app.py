@@ -10,8 +10,10 @@ whose groups are :class:`LabrigGroup` unless told otherwise, so a command regist
 
 from __future__ import annotations
 
+import atexit
 import enum
 import functools
+import gc
 import typing
 from pathlib import Path
 from typing import Any
@@ -178,3 +180,15 @@ class LabrigTyper(typer.Typer):
     def command(self, *args: Any, **kwargs: Any) -> Any:
         kwargs["cls"] = kwargs.get("cls") or LabrigCommand
         return super().command(*args, **kwargs)
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        """The command line as a process runs it (the ``labrig`` script, ``python -m labrig``),
+        which ends when the command does: at exit, after the exit handlers registered before
+        this call, every object is moved to the collector's permanent generation
+        (``gc.freeze``), so the interpreter's last collections do not walk the heap the
+        command built (scipy, numba, matplotlib and the data), which took most of a second of
+        CPU after a fit (benchmarks/RESULTS.md). Files, locks and children are closed by the
+        command itself and by exit handlers, never by the collector. The tests' in-process
+        runner invokes the click command and does not pass here."""
+        atexit.register(gc.freeze)
+        return super().__call__(*args, **kwargs)
