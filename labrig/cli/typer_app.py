@@ -186,8 +186,8 @@ class LabrigTyper(typer.Typer):
         which ends when the command does: at exit, after the exit handlers registered before
         this call, every object is moved to the collector's permanent generation
         (``gc.freeze``), so the interpreter's last collections do not walk the heap the
-        command built (scipy, numba, matplotlib and the data), which took most of a second of
-        CPU after a fit (benchmarks/RESULTS.md). Files, locks and children are closed by the
+        command built (scipy, numba, matplotlib and the data; what that saves is in
+        benchmarks/RESULTS.md). Files, locks and children are closed by the
         command itself and by exit handlers, never by the collector. The tests' in-process
         runner invokes the click command and does not pass here."""
         atexit.register(gc.freeze)

@@ -243,12 +243,11 @@ def _expanded_issue(root: yaml.Node, name: str) -> InputIssue | None:
     size: dict[int, int] = {}
     depth: dict[int, int] = {}
     open_: set[int] = set()
-    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    stack: list[tuple[yaml.Node, list[yaml.Node] | None]] = [(root, None)]  # kids: closing
     while stack:
-        node, closing = stack.pop()
+        node, kids = stack.pop()
         key = id(node)
-        kids = _children(node)
-        if closing:
+        if kids is not None:
             open_.discard(key)
             size[key] = 1 + sum(size[id(k)] for k in kids)
             level = 1 if isinstance(node, yaml.CollectionNode) else 0
@@ -261,13 +260,14 @@ def _expanded_issue(root: yaml.Node, name: str) -> InputIssue | None:
         if key in size:
             continue
         open_.add(key)
-        stack.append((node, True))
+        kids = _children(node)
+        stack.append((node, kids))
         for k in kids:
             if id(k) in open_:
                 msg = "an alias inside the value it names (a loop): write the value out"
                 return InputIssue(name, _line(k.start_mark), "", msg)
             if id(k) not in size:
-                stack.append((k, False))
+                stack.append((k, None))
     return None
 
 
@@ -413,10 +413,11 @@ def _parse(
 def _line_in(text: str, mark: Any) -> int | None:
     """The 1-based line of ``mark``, at most the text's last line (libyaml names the line
     after the last when an error is found at the end of a text without a final newline)."""
-    if mark is None:
+    line = _line(mark)
+    if line is None:
         return None
     last = text.count("\n") + (0 if text.endswith("\n") else 1)
-    return max(1, min(mark.line + 1, last))
+    return max(1, min(line, last))
 
 
 def _character_at(text: str, mark: Any, named: bool) -> str:
