@@ -34,6 +34,7 @@ from labrig.analysis.metrics import drive_frequency_hz, is_periodic, last_period
 from labrig.analysis.records import Record
 from labrig.analysis.simulate import OperatorFamily, Scored, build_sequences, score_segments
 from labrig.model import Relaxor
+from labrig.model.hysteresis import memory_samples
 
 __all__ = ["EntryKind", "classify", "generic_starts", "staged_fit"]
 
@@ -71,16 +72,22 @@ def _fit_static(
     vmax = max(float(np.max(np.abs(r.voltage_V))) for r in records)
     vmax = vmax if vmax > 0 else 1.0
     k = len(records)
+    # each record up to its window's end, the history before the window cut to the samples
+    # the operator's memory depends on (memory_samples): the same strain in the window
+    inputs = [
+        r.voltage_V[memory_samples(r.voltage_V[: w.stop], w.start)]
+        for r, w in zip(records, windows, strict=True)
+    ]
 
     def solve(log_vc: float) -> tuple[float, np.ndarray]:
         vc = float(np.exp(log_vc))
         rows, rhs = [], []
-        for i, (r, s, w) in enumerate(zip(records, singles, windows, strict=True)):
+        for i, (r, s, w, u) in enumerate(zip(records, singles, windows, inputs, strict=True)):
             v = r.voltage_V
             op = family.operator(1.0, 1.0, vc)
-            g = op.apply(v, op.held_state(v[0])) - v
+            g = op.apply(u, op.held_state(v[0]))[u.size - (w.stop - w.start) :] - v[w]
             a = np.zeros((w.stop - w.start, 2 + k))
-            a[:, 0], a[:, 1], a[:, 2 + i] = v[w], g[w], 1.0
+            a[:, 0], a[:, 1], a[:, 2 + i] = v[w], g, 1.0
             weight = s.segments[0].weight
             rows.append(a * weight)
             rhs.append(r.strain_ue[w] * weight)

@@ -698,6 +698,42 @@ class QuasiStaticHysteresis:
         return u
 
 
+def memory_samples(u: ArrayLike, start: int) -> NDArray[np.intp]:
+    """Indices of the samples of ``u`` that :meth:`QuasiStaticHysteresis.apply` needs to give
+    the same strain from sample ``start`` on: the first sample, every sample before ``start``
+    that is not strictly between its neighbours (turning points and flat stretches) and every
+    sample from ``start``.
+
+    The operator is rate independent: along a monotone run the branch and the memory depend on
+    the run's ends only (a turning point is a sample; a minor loop closes when the input passes
+    a remembered one, which a jump past it does as well), so ``apply(u[idx])`` equals
+    ``apply(u)[idx]`` under every memory rule. A long history then costs one sample per
+    reversal.
+
+    Parameters
+    ----------
+    u : array_like
+        The voltage record (V).
+    start : int
+        The first sample whose strain is wanted (0 <= start <= len(u)).
+
+    Returns
+    -------
+    numpy.ndarray
+        Increasing sample indices, ending with ``start, ..., len(u) - 1``.
+    """
+    x = np.asarray(u, dtype=float)
+    n = x.size
+    if not 0 <= start <= n:
+        raise ValueError(f"start must be within 0..{n}, not {start}")
+    keep = np.ones(start, dtype=bool)
+    m = min(start, n - 1)  # samples 1..m-1 have both neighbours
+    if m >= 2:
+        d = np.diff(x[: m + 1])
+        keep[1:m] = d[:-1] * d[1:] <= 0  # sample i drops when strictly between i-1 and i+1
+    return np.concatenate((np.flatnonzero(keep), np.arange(start, n))).astype(np.intp)
+
+
 def _finite(x: ArrayLike, what: str) -> NDArray[np.float64]:
     """``x`` as a float array; a NaN or infinity would corrupt the remembered turning points."""
     a = np.asarray(x, dtype=float)

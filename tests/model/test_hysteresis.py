@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 from scipy import special
 
 from labrig.model import HysteresisState, QuasiStaticHysteresis, Shape
+from labrig.model.hysteresis import memory_samples
 
 from reference.hysteresis_ref import hysteresis_ref, polyline
 
@@ -462,3 +463,50 @@ def test_open_rest_point_changes_nothing_on_a_unipolar_drive() -> None:
     a = QuasiStaticHysteresis(8.9, 7.8, 65.0, memory="return_point").apply(u)
     b = QuasiStaticHysteresis(8.9, 7.8, 65.0, memory="return_point_open").apply(u)
     np.testing.assert_array_equal(a, b)
+
+
+# -- the samples a window's strain depends on -------------------------------------------------
+
+
+def _check_memory_samples(name: str, memory: str, u: np.ndarray, start: int) -> None:
+    op = op_for(name, memory)
+    idx = memory_samples(u, start)
+    tail = u.size - start
+    np.testing.assert_array_equal(idx[idx.size - tail :], np.arange(start, u.size))
+    assert idx[0] == 0 and np.all(np.diff(idx) > 0)
+    engines = ("numpy",) if name == "custom" else ("numpy", "compiled")
+    for engine in engines:
+        whole = op.apply(u, op.held_state(u[0]), engine=engine)
+        cut = op.apply(u[idx], op.held_state(u[0]), engine=engine)
+        # the same branches from the same turning points: equal to rounding (measured: equal)
+        np.testing.assert_allclose(cut[cut.size - tail :], whole[start:], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("memory", MEMORIES)
+@pytest.mark.parametrize("name", NAMES)
+@HYP
+@given(u=records(), data=st.data())
+def test_memory_samples_leave_the_strain_after_start_unchanged(name, memory, u, data) -> None:
+    """Rate independence put to use: the history before ``start`` cut to its turning points
+    and flat stretches gives the same strain from ``start`` on."""
+    start = data.draw(st.integers(0, u.size), label="start")
+    _check_memory_samples(name, memory, u, start)
+
+
+def test_memory_samples_keep_turning_points_and_flat_stretches_only() -> None:
+    u = np.array([0.0, 1.0, 2.0, 3.0, 2.0, 1.0, 1.0, 1.0, 2.0, 5.0, 9.0, 4.0, 3.0])
+    # dropped: 1 and 2 (rising), 4 (falling), 8 and 9 (rising); kept: the ends of the runs,
+    # the flat stretch 5-7; from start 10 on, every sample
+    np.testing.assert_array_equal(memory_samples(u, 10), [0, 3, 5, 6, 7, 10, 11, 12])
+    np.testing.assert_array_equal(memory_samples(u, 0), np.arange(u.size))
+    np.testing.assert_array_equal(memory_samples(u, 1), np.arange(u.size))
+    # start at the end: the last sample has no successor and stays
+    np.testing.assert_array_equal(memory_samples(u, u.size), [0, 3, 5, 6, 7, 10, 12])
+    # a long monotone history costs its two ends
+    ramp = np.r_[np.linspace(0.0, 100.0, 10_001), np.linspace(99.0, 50.0, 50)]
+    assert memory_samples(ramp, 10_001).size == 2 + 50
+    for name in NAMES:
+        _check_memory_samples(name, "return_point", ramp, 10_001)
+    for bad in (-1, u.size + 1):
+        with pytest.raises(ValueError, match="start must be within"):
+            memory_samples(u, bad)
