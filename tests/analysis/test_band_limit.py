@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.signal import resample_poly
 
 from labrig.analysis.band_limit import band_limit, taps
 from labrig.analysis.sindy import LIBRARY, SindyBaseline, free_run
@@ -20,6 +19,8 @@ def test_every_qth_sample_is_resample_poly(q: int, n: int) -> None:
     """Decimated by ``q``, the band-limited signal is scipy's polyphase resampling with its
     default Kaiser filter and line padding, to 1e-12 of the signal's size (a random walk: the
     ends do not meet, so the line padding matters; lengths shorter than the filter too)."""
+    from scipy.signal import resample_poly  # here: importing it costs every worker ~0.6 s
+
     x = np.cumsum(np.random.default_rng(q * n).normal(size=n)) + 3.0
     want = resample_poly(x, 1, q, padtype="line")
     got = band_limit(x, 1.0 / q)[::q]

@@ -7,7 +7,6 @@ The bench: +0.5 %/K of strain per kelvin, the stack heating by up to 20 K over t
 
 from __future__ import annotations
 
-import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
@@ -28,6 +27,8 @@ HEATING = {
 @pytest.mark.slow  # a minute; thermal_drift's recovery on a short campaign: tests/diagnose
 @pytest.mark.timeout(600)
 def test_thermal_drift_is_found_in_imported_csv_files(tmp_path):
+    import pandas as pd  # here: the only test of the module to write CSV (slow tier)
+
     recs = bench_campaign([HEATING], seed=3)
     rise = max(float(r.aux["temperature"].max()) for r in recs) - recs[0].aux["temperature"][0]
     assert 15.0 < rise < 25.0  # the campaign heats the stack by up to about 20 K

@@ -17,7 +17,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from scipy.signal import resample_poly
 
 from labrig.analysis.diagnose.acceptance import MIN_GAIN
 from labrig.analysis.diagnose.contraction import contraction_margin
@@ -130,6 +129,8 @@ def test_real_record_the_sparse_odes_score_does_not_hinge_on_how_the_record_was_
     and 0.224 %; now each is within the 0.216 % a six-term ODE reached on the field's whole file
     and within 15 % of the others; on two processes the numbers are the same. About 40 s of
     CPU."""
+    from scipy.signal import resample_poly  # here: importing it costs every worker ~0.6 s
+
     rows = np.loadtxt(SMART, delimiter=",", usecols=(1, 2, 3))
     t, s, v = rows[:, 0], rows[:, 1], rows[:, 2]
     k = t.size // 100

@@ -11,6 +11,7 @@ in time and ended by the fixture.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import signal
@@ -28,7 +29,9 @@ from labrig.fleet.table import read_table
 
 from helpers import FLEET_CAMPAIGN
 
-pytest.importorskip("distributed")
+if importlib.util.find_spec("distributed") is None:  # found, not imported: importing
+    # it costs every test process about half a second of collection
+    pytest.skip("needs distributed (the fleet extra)", allow_module_level=True)
 pytestmark = [pytest.mark.cluster, pytest.mark.timeout(900)]
 
 BIN = Path(sys.executable).parent

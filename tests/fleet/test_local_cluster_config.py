@@ -6,12 +6,15 @@ LocalCluster of one worker through the batch's own code and asks the worker (``c
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from contextlib import ExitStack
 
 import pytest
 
-pytest.importorskip("distributed")
+if importlib.util.find_spec("distributed") is None:  # found, not imported: importing
+    # it costs every test process about half a second of collection
+    pytest.skip("needs distributed (the fleet extra)", allow_module_level=True)
 
 
 def test_nanny_environment_has_no_trim_threshold() -> None:

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-import pint
 import pytest
 import yaml
 from typer.testing import CliRunner
@@ -93,6 +92,8 @@ def test_every_new_object_is_sealed_and_the_file_reads(run_file: Path):
 
 
 def test_every_unit_is_one_pint_reads_and_nothing_unset_is_stored(run_file: Path):
+    import pint  # here: it imports dask, about half a second for every test process
+
     ureg = pint.UnitRegistry()
     units, nulls = {}, []
 

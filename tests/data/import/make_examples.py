@@ -10,11 +10,14 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import h5py
 import numpy as np
-import pandas as pd
 from scipy.io import savemat
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 HERE = Path(__file__).resolve().parent
 N = 64  # samples per record
@@ -38,10 +41,14 @@ def signals(n: int = N, rate_hz: float = RATE_HZ) -> dict[str, np.ndarray]:
 
 
 def _frame(cols: dict[str, np.ndarray]) -> pd.DataFrame:
+    import pandas as pd  # on use: the import tests load this module, most never need pandas
+
     return pd.DataFrame(cols)
 
 
 def text_examples() -> None:
+    import pandas as pd
+
     sig = signals()
     t, v, s, d, temp = (sig[k] for k in ("time", "voltage", "strain", "displacement_um",
                                          "temperature"))  # fmt: skip
