@@ -5,7 +5,9 @@
    the last full period of each (plus one offset per entry, the strain shift not modelled at this
    stage). This fits the branch closed form to the loop, the integral of the paper's fit of
    ``alpha = dS/dV``, so no numerical differentiation is needed. These are *apparent* values:
-   the transient relaxor scales the voltage by ``|G_t|`` at the drive frequency.
+   the transient relaxor scales the voltage by ``|G_t|`` at the drive frequency. The operator
+   is rate independent, so the record before that period enters through its turning points
+   only (:func:`~labrig.model.hysteresis.memory_samples`): the same strain in the period.
 2. *Transient*: ``lam_t, tau_t`` with the refined static part (``alpha0, gamma, vc`` free again)
    from the whole lowest-frequency records, whose strain shift drifts over the cycles, with
    ``G_d`` left out; a few starts of ``lam_t``.

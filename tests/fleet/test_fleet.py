@@ -24,7 +24,6 @@ import h5py
 import numpy as np
 import pytest
 import yaml
-from scipy import stats
 
 from labrig.analysis.simulate import PARAM_NAMES
 from labrig.fleet.outliers import Z_LIMIT, flag_runs, robust_z
@@ -267,6 +266,8 @@ def test_without_dask_serial_with_a_note_and_without_pyarrow_csv(fleet, tmp_path
 
 
 def test_robust_z_against_scipy_mad():
+    from scipy import stats  # here, not for every worker's collection
+
     rng = np.random.default_rng(3)
     x = rng.normal(10.0, 2.0, 101)
     ref = (x - np.median(x)) / stats.median_abs_deviation(x, scale="normal")
@@ -338,6 +339,8 @@ def test_simulated_fleet_truth_and_run_files(fleet):
 
 
 def test_manufacturing_spread_and_defect_mix():
+    from scipy import stats  # here, not for every worker's collection
+
     fleet = draw_fleet(3000, seed=1, defect_fraction=0.05)
     # a standard normal truncated at +-3 has standard deviation 0.98658 (independent value)
     trunc_sd = float(stats.truncnorm(-TRUNCATE_SIGMA, TRUNCATE_SIGMA).std())

@@ -16,7 +16,7 @@ import sys
 
 import numpy as np
 import pytest
-from scipy import integrate, signal
+from scipy import integrate
 
 from labrig.model import accel, sections
 from labrig.model.effects import library
@@ -30,6 +30,8 @@ def record(n: int, rate: float, seed: int = 0) -> np.ndarray:
 
 
 def scipy_reference(num, den, rate, x):
+    from scipy import signal  # here, not for every worker's collection
+
     bd, ad, _ = signal.cont2discrete((num, den), 1.0 / rate, method="foh")
     b = np.atleast_1d(np.squeeze(bd)) / ad[0]
     a = np.asarray(ad, float) / ad[0]
@@ -143,6 +145,8 @@ print("scipy.signal" in sys.modules)
 
 
 def test_the_amplifiers_fixed_corner_is_lfilter_at_rest():
+    from scipy import signal  # here, not for every worker's collection
+
     from labrig.model.effects.amplifier_bandwidth import first_order_lowpass
 
     rate = 10_000.0

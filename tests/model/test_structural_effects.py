@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import integrate, signal
+from scipy import integrate
 
 from labrig.analysis.extended import ExtendedProblem
 from labrig.analysis.records import Record
@@ -83,6 +83,8 @@ def test_every_registered_structural_candidate_is_opt_in(name):
 def test_amplifier_bandwidth_is_lsims_first_order_lowpass_for_a_linear_hold():
     """A voltage linear between samples: the filter's samples are lsim's (which interpolates
     its input linearly), to 1e-9 of the drive."""
+    from scipy import signal  # here, not for every worker's collection
+
     eff = library()["amplifier_bandwidth"]
     tau = 4e-4
     t = np.arange(3000) / FS
@@ -98,6 +100,8 @@ def test_amplifier_bandwidth_is_the_interval_mean_of_the_filtered_held_voltage()
     """A held (zoh) voltage: each sample is the mean of the continuous filter's output over the
     interval its input is held, the reference from lsim on a grid 64 times finer (trapezoid
     mean; agreement 1e-4 of the drive)."""
+    from scipy import signal  # here, not for every worker's collection
+
     eff = library()["amplifier_bandwidth"]
     tau, m, n = 2.5e-4, 64, 400
     rng = np.random.default_rng(2)
@@ -151,6 +155,8 @@ def test_amplifier_bandwidth_without_rise_is_the_fixed_corner_exactly():
 
 
 def test_mechanical_resonance_is_lsims_second_order_section():
+    from scipy import signal  # here, not for every worker's collection
+
     eff = library()["mechanical_resonance"]
     tau, zeta = 1 / (2 * np.pi * 700.0), 0.03
     t = np.arange(4000) / FS

@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy import signal
 
 from labrig.core.errors import InputFileError
 from labrig.protocol import preflight as pf
@@ -131,6 +130,8 @@ def test_transition_shorter_than_a_sample_is_refused(tmp_path):
 def test_triangle_matches_scipy_sawtooth(tmp_path, start, offset, phase):
     """scipy.signal.sawtooth(x, width=0.5) rises from -1 at x = 0 to +1 at pi: a triangle that
     starts at the bias rising is its phase pi/2, one starting low is phase 0."""
+    from scipy import signal  # here, not for every worker's collection
+
     a, f, rate = 40.0, 4.0, 2000.0  # whole cycles in whole samples: no edge ramps
     step = only_step(
         write(
