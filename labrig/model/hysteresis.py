@@ -701,8 +701,8 @@ class QuasiStaticHysteresis:
 def memory_samples(u: ArrayLike, start: int) -> NDArray[np.intp]:
     """Indices of the samples of ``u`` that :meth:`QuasiStaticHysteresis.apply` needs to give
     the same strain from sample ``start`` on: the first sample, every sample before ``start``
-    that is not strictly between its neighbours (turning points and flat stretches) and every
-    sample from ``start``.
+    that is not strictly between its neighbours (turning points, flat stretches and any sample
+    that is not finite) and every sample from ``start``.
 
     The operator is rate independent: along a monotone run the branch and the memory depend on
     the run's ends only (a turning point is a sample; a minor loop closes when the input passes
@@ -730,7 +730,8 @@ def memory_samples(u: ArrayLike, start: int) -> NDArray[np.intp]:
     m = min(start, n - 1)  # samples 1..m-1 have both neighbours
     if m >= 2:
         d = np.diff(x[: m + 1])
-        keep[1:m] = d[:-1] * d[1:] <= 0  # sample i drops when strictly between i-1 and i+1
+        # sample i drops only when strictly between i-1 and i+1 (a NaN stays, for apply to refuse)
+        keep[1:m] = ~(d[:-1] * d[1:] > 0)
     return np.concatenate((np.flatnonzero(keep), np.arange(start, n))).astype(np.intp)
 
 

@@ -507,6 +507,12 @@ def test_memory_samples_keep_turning_points_and_flat_stretches_only() -> None:
     assert memory_samples(ramp, 10_001).size == 2 + 50
     for name in NAMES:
         _check_memory_samples(name, "return_point", ramp, 10_001)
+    # a sample that is not finite stays, so the operator still refuses the record
+    holed = ramp.copy()
+    holed[5_000] = np.nan
+    assert 5_000 in memory_samples(holed, 10_001)
+    with pytest.raises(ValueError, match="finite"):
+        QuasiStaticHysteresis(ALPHA0, GAMMA, VC).apply(holed[memory_samples(holed, 10_001)])
     for bad in (-1, u.size + 1):
         with pytest.raises(ValueError, match="start must be within"):
             memory_samples(u, bad)
