@@ -729,9 +729,11 @@ def memory_samples(u: ArrayLike, start: int) -> NDArray[np.intp]:
     keep = np.ones(start, dtype=bool)
     m = min(start, n - 1)  # samples 1..m-1 have both neighbours
     if m >= 2:
-        d = np.diff(x[: m + 1])
+        with np.errstate(invalid="ignore"):  # inf - inf: a NaN step, kept like a NaN sample
+            d = np.diff(x[: m + 1])
         # sample i drops only when strictly between i-1 and i+1 (a NaN stays, for apply to refuse)
-        keep[1:m] = ~(d[:-1] * d[1:] > 0)
+        s = np.sign(d)  # signs, not the product of the steps: that overflows past 1e154 V
+        keep[1:m] = ~(s[:-1] * s[1:] > 0)
     return np.concatenate((np.flatnonzero(keep), np.arange(start, n))).astype(np.intp)
 
 
