@@ -9,6 +9,7 @@ Run from the repository root (a few minutes on a loaded 2-core machine)::
     .venv/bin/python benchmarks/bench_speed.py reads A.h5 B.h5 C.h5   # files read again
     git worktree add /tmp/before COMMIT    # the tree to compare with, then:
     .venv/bin/python benchmarks/bench_speed.py checked-read A.h5 B.h5 --tree /tmp/before
+    .venv/bin/python benchmarks/bench_speed.py static-stage A.h5 B.h5 --tree /tmp/before
 
 ``phases``: one fresh process each for ``fit`` and for ``diagnose`` (one worker), CPU seconds
 (``getrusage`` of the process and its children: the store reads a run file in a child process)
@@ -56,6 +57,12 @@ one fresh process per tree, interleaved ``--repeats`` times (default 2); each pr
 every file 9 times and gives the median CPU seconds (``time.process_time``) of a read, and a
 yardstick (``numpy.sort`` of 1e6 floats) timed beside it; the ratio of the medians per file, and
 whether the two trees read the same (every field and every sample equal).
+
+``static-stage``: the staged fit's static stage (``labrig.analysis.staged._fit_static``) in the
+fit ``labrig fit`` makes (no leave-one-out), five fits of each file in one fresh process per
+tree (this one and ``--tree``'s), interleaved ``--repeats`` times; the median CPU seconds of the
+stage in the four warm fits (the first pays numba's start), the ratio of the medians per file,
+whether both trees' stages return the same parameters (to the last digit), and the yardstick.
 
 Prints markdown on stdout (copied into ``benchmarks/RESULTS.md``).
 """
@@ -197,6 +204,42 @@ for p in map(Path, sys.argv[2:]):
     run.path = None
     digest = hashlib.sha256(repr(canon([run, shapes])).encode()).hexdigest()
     out[p.name] = [statistics.median(ts), digest]
+print(json.dumps([out, statistics.median(sticks)]))
+"""
+
+#: what the child process of ``static-stage`` runs: ``labrig fit``'s fit (no leave-one-out) of
+#: each file five times; one JSON line (median CPU s of the static stage in the warm fits, the
+#: stage's result; the yardstick's median)
+STATIC_STAGE = r"""
+import json, statistics, sys, time
+from pathlib import Path
+import numpy as np
+tree = sys.argv[1]
+sys.path.insert(0, tree)
+from labrig.analysis import staged
+assert staged.__file__.startswith(tree), staged.__file__
+from labrig.commands.fit import fit_dynamic
+from labrig.commands.prepare import prepare
+out, sticks = {}, []
+for p in map(Path, sys.argv[2:]):
+    setup = prepare(p)
+    calls, results = [], []
+    stage = staged._fit_static
+    def timed(*a, **k):
+        t = time.process_time()
+        results.append(stage(*a, **k))
+        calls.append(time.process_time() - t)
+        return results[-1]
+    staged._fit_static = timed
+    for _ in range(5):
+        fit_dynamic(setup, "global", heldout=False, progress=None)
+        x = np.random.default_rng(0).random(1_000_000)
+        t = time.process_time()
+        np.sort(x)
+        sticks.append(time.process_time() - t)
+    staged._fit_static = stage
+    # the first fit pays numba's start; the stage's result in full precision
+    out[p.name] = [statistics.median(calls[1:]), repr(sorted(results[-1].items()))]
 print(json.dumps([out, statistics.median(sticks)]))
 """
 
@@ -434,14 +477,17 @@ def reads(paths: list[Path], repeats: int) -> None:
     print(f"\nlast one only / last {kept}: {ratio:.2f}x the CPU")
 
 
-def checked_read(paths: list[Path], repeats: int, tree: Path) -> None:
-    """The ``checked-read`` comparison (module docstring)."""
+def compare_trees(code: str, paths: list[Path], repeats: int, tree: Path, what: str) -> None:
+    """Run ``code`` (a child's script: ``argv`` the tree, then the files; its last line JSON
+    ``[{file: [median CPU s, digest]}, yardstick s]``) with this tree's labrig and with
+    ``tree``'s, one fresh process per tree, interleaved ``repeats`` times; print the medians
+    per file, their ratio and whether every digest agrees. ``what``: the table's caption."""
     trees = {"this tree": ROOT, f"`--tree` ({tree.name})": tree}
     got: dict[str, list] = {k: [] for k in trees}
     for _ in range(repeats):
         for label, root in trees.items():
             res = subprocess.run(
-                [sys.executable, "-c", CHECKED_READ, str(root), *map(str, paths)],
+                [sys.executable, "-c", code, str(root), *map(str, paths)],
                 capture_output=True,
                 text=True,
                 check=True,
@@ -449,8 +495,7 @@ def checked_read(paths: list[Path], repeats: int, tree: Path) -> None:
             )
             got[label].append(json.loads(res.stdout.strip().splitlines()[-1]))
     print(header() + "\n")
-    print("One checked read, CPU s (median of 9 reads in a process; median and range over "
-          f"{repeats} processes per tree, interleaved):\n")  # fmt: skip
+    print(f"{what}; median and range over {repeats} processes per tree, interleaved:\n")
     print("| file | " + " | ".join(trees) + " | ratio |")
     print("|---|" + "---|" * (len(trees) + 1))
     this, other = (got[k] for k in trees)
@@ -466,23 +511,30 @@ def checked_read(paths: list[Path], repeats: int, tree: Path) -> None:
     }
     sticks = [r[1] for rows in got.values() for r in rows]
     print(f"\nyardstick {1e3 * statistics.median(sticks):.1f} ms (median of the processes'); "
-          f"what each tree read the same (every field, every sample): {same}; load average "
-          f"now {os.getloadavg()[0]:.2f}")  # fmt: skip
+          f"the same result in both trees: {same}; load average now "
+          f"{os.getloadavg()[0]:.2f}")  # fmt: skip
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     modes = ("phases", "library", "fleet-task", "documents", "reads", "checked-read")
+    modes += ("static-stage",)
     ap.add_argument("what", choices=modes)
     ap.add_argument("run", type=Path, nargs="+", help="run file(s); documents: several")
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--reference", help="documents: another installation's Python")
-    ap.add_argument("--tree", type=Path, help="checked-read: another checkout to compare with")
+    ap.add_argument(
+        "--tree", type=Path, help="checked-read, static-stage: another checkout to compare with"
+    )
     a = ap.parse_args()
-    if a.what == "checked-read":
+    if a.what in ("checked-read", "static-stage"):
         if a.tree is None:
-            ap.error("checked-read needs --tree (another checkout)")
-        checked_read([r.resolve() for r in a.run], a.repeats, a.tree.resolve())
+            ap.error(f"{a.what} needs --tree (another checkout)")
+        code, what = {
+            "checked-read": (CHECKED_READ, "One checked read, CPU s (median of 9 reads)"),
+            "static-stage": (STATIC_STAGE, "The staged fit's static stage, CPU s (median of 4)"),
+        }[a.what]
+        compare_trees(code, [r.resolve() for r in a.run], a.repeats, a.tree.resolve(), what)
         return 0
     if a.what == "documents":
         documents([r.resolve() for r in a.run], a.repeats, a.reference)
