@@ -169,14 +169,26 @@ for rnd in range(3):
 print(json.dumps([times[0], times[1:], out]))
 """
 
-#: what the child process of ``checked-read`` runs: one JSON line (median CPU s of a read per
-#: file, the yardstick's median, a digest of what each file read to)
-CHECKED_READ = r"""
+#: the start of a child script of :func:`compare_trees`: labrig imported from the tree its first
+#: argument names, and the yardstick (``numpy.sort`` of 1e6 floats, CPU s)
+IN_TREE = r"""
 import hashlib, json, statistics, sys, time
 from pathlib import Path
 import numpy as np
 tree = sys.argv[1]
 sys.path.insert(0, tree)
+def yardstick():
+    x = np.random.default_rng(0).random(1_000_000)
+    t = time.process_time()
+    np.sort(x)
+    return time.process_time() - t
+"""
+
+#: what the child process of ``checked-read`` runs: one JSON line (median CPU s of a read per
+#: file, the yardstick's median, a digest of what each file read to)
+CHECKED_READ = (
+    IN_TREE
+    + r"""
 from labrig.store import parse
 assert parse.__file__.startswith(tree), parse.__file__
 out, sticks = {}, []
@@ -187,10 +199,7 @@ for p in map(Path, sys.argv[2:]):
         t = time.process_time()
         run, shapes = parse.read_run_here(p)
         ts.append(time.process_time() - t)
-        x = np.random.default_rng(0).random(1_000_000)
-        t = time.process_time()
-        np.sort(x)
-        sticks.append(time.process_time() - t)
+        sticks.append(yardstick())
     def canon(x):
         if hasattr(x, "__dataclass_fields__"):
             return canon(vars(x))
@@ -206,16 +215,14 @@ for p in map(Path, sys.argv[2:]):
     out[p.name] = [statistics.median(ts), digest]
 print(json.dumps([out, statistics.median(sticks)]))
 """
+)
 
 #: what the child process of ``static-stage`` runs: ``labrig fit``'s fit (no leave-one-out) of
 #: each file five times; one JSON line (median CPU s of the static stage in the warm fits, the
 #: stage's result; the yardstick's median)
-STATIC_STAGE = r"""
-import json, statistics, sys, time
-from pathlib import Path
-import numpy as np
-tree = sys.argv[1]
-sys.path.insert(0, tree)
+STATIC_STAGE = (
+    IN_TREE
+    + r"""
 from labrig.analysis import staged
 assert staged.__file__.startswith(tree), staged.__file__
 from labrig.commands.fit import fit_dynamic
@@ -233,15 +240,13 @@ for p in map(Path, sys.argv[2:]):
     staged._fit_static = timed
     for _ in range(5):
         fit_dynamic(setup, "global", heldout=False, progress=None)
-        x = np.random.default_rng(0).random(1_000_000)
-        t = time.process_time()
-        np.sort(x)
-        sticks.append(time.process_time() - t)
+        sticks.append(yardstick())
     staged._fit_static = stage
     # the first fit pays numba's start; the stage's result in full precision
     out[p.name] = [statistics.median(calls[1:]), repr(sorted(results[-1].items()))]
 print(json.dumps([out, statistics.median(sticks)]))
 """
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 
