@@ -170,13 +170,19 @@ print(json.dumps([times[0], times[1:], out]))
 """
 
 #: the start of a child script of :func:`compare_trees`: labrig imported from the tree its first
-#: argument names, and the yardstick (``numpy.sort`` of 1e6 floats, CPU s)
+#: argument names (``from_tree`` checks where a module came from), and the yardstick
+#: (``numpy.sort`` of 1e6 floats, CPU s)
 IN_TREE = r"""
 import hashlib, json, statistics, sys, time
 from pathlib import Path
 import numpy as np
+import importlib
 tree = sys.argv[1]
 sys.path.insert(0, tree)
+def from_tree(name):
+    module = importlib.import_module(name)
+    assert module.__file__.startswith(tree), module.__file__
+    return module
 def yardstick():
     x = np.random.default_rng(0).random(1_000_000)
     t = time.process_time()
@@ -189,8 +195,7 @@ def yardstick():
 CHECKED_READ = (
     IN_TREE
     + r"""
-from labrig.store import parse
-assert parse.__file__.startswith(tree), parse.__file__
+parse = from_tree("labrig.store.parse")
 out, sticks = {}, []
 for p in map(Path, sys.argv[2:]):
     run, shapes = parse.read_run_here(p)
@@ -223,8 +228,7 @@ print(json.dumps([out, statistics.median(sticks)]))
 STATIC_STAGE = (
     IN_TREE
     + r"""
-from labrig.analysis import staged
-assert staged.__file__.startswith(tree), staged.__file__
+staged = from_tree("labrig.analysis.staged")
 from labrig.commands.fit import fit_dynamic
 from labrig.commands.prepare import prepare
 out, sticks = {}, []
