@@ -258,7 +258,7 @@ def check_records(
     naming the entry: ``records`` are simulated, ``scored`` of them fitted; ``alone``: each
     record is simulated on its own (from rest), so each must move its voltage."""
     keep = set(scored)
-    issues = []
+    issues = unit_issues([(path, r) for r in records if r.name in keep])
     for r in records:
         issues += _record_issues(path, r, r.name in keep, alone)
     fitted = [r for r in records if r.name in keep]
@@ -278,6 +278,48 @@ def check_records(
             )
     if issues:
         raise InputFileError(issues)
+
+
+def _unit(r: Record, channel: str) -> str:
+    units = r.meta.get("units") if isinstance(r.meta, dict) else None
+    u = units.get(channel) if isinstance(units, dict) else None
+    return str(u) if u else ""
+
+
+def unit_issues(records: Sequence[tuple[Path, Record]]) -> list[InputIssue]:
+    """Units that make records unfit to fit or score together (each with its file): a voltage
+    not in V (the model's input is volts), and strains in more than one unit (one model, one
+    NRMSE: ``ue`` beside ``raw`` numbers would mix scales). ``""`` (a unit not stated) counts
+    as V and ue, the run file's units."""
+    out = []
+    for path, r in records:
+        if _unit(r, "command_voltage") not in ("", "V"):
+            out.append(
+                InputIssue(
+                    str(path),
+                    None,
+                    f"{r.name}/command_voltage",
+                    f"in {_unit(r, 'command_voltage')!r}, not V: the model's input is volts "
+                    "(labrig import converts mV and kV, and --voltage-scale turns raw numbers "
+                    "into volts)",
+                )
+            )
+    strain = {(path, r.name): _unit(r, "strain") or "ue" for path, r in records}
+    if len(set(strain.values())) > 1:
+        (p0, n0), u0 = next(iter(strain.items()))
+        for (path, name), u in strain.items():
+            if u != u0:
+                out.append(
+                    InputIssue(
+                        str(path),
+                        None,
+                        f"{name}/strain",
+                        f"in {u!r}, but {n0!r} ({Path(p0).name}) is in {u0!r}: records fitted "
+                        "or scored together need one strain unit (import them with the same "
+                        "--strain-units, or convert one with --strain-scale)",
+                    )
+                )
+    return out
 
 
 #: the magnitude bound of each channel checked by :func:`check_records` (bound, unit)

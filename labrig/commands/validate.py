@@ -62,7 +62,13 @@ from labrig.commands.fit import (
     fit_dynamic,
     fit_with_effects,
 )
-from labrig.commands.prepare import AnalysisError, Setup, prepare, training_setup
+from labrig.commands.prepare import (
+    AnalysisError,
+    Setup,
+    prepare,
+    training_setup,
+    unit_issues,
+)
 from labrig.core.errors import InputFileError, InputIssue
 from labrig.core.jsonsafe import json_safe
 from labrig.core.outputs import same_file
@@ -446,6 +452,11 @@ def validate_runs(
     tr = training_setup(train_p, warmup_s, offset)
     tests = [prepare(p, None, warmup_s, offset) for p in test_p]
     check_unseen(tr, tests)
+    mixed = unit_issues(
+        [(Path(s.path), r) for s in (tr, *tests) for r in s.scored_records]
+    )  # each file is checked alone by prepare; here the training and test files together
+    if mixed:
+        raise InputFileError(mixed)
     ui.announce(tr)
     notes = [f"training: {n}" for n in tr.notes]
     for s in tests:

@@ -46,10 +46,12 @@ def channel(
             return "temperature", values, "degC", "no unit given: taken as degC"
         out, _, note = convert(values, unit, "temperature")
         return "temperature", out, "degC", note
+    origin = table.columns[k].origin
+    counted = f"counted from {origin} (integers past 2**53, kept exact)" if origin else ""
     if unit.kind in ("voltage", "time", "temperature"):
         out, stored, note = convert(values, unit, unit.kind)
-        return name, out, stored, note
-    return name, values, unit.text, ""
+        return name, out, stored, "; ".join(x for x in (counted, note) if x)
+    return name, values, unit.text, counted
 
 
 def _own_name(table: Table, k: int, taken: set[str]) -> str:

@@ -100,6 +100,25 @@ def _in_unit(
         raise table.error(
             k, f"is in {unit.text}, not a {role} unit (expected e.g. {RUN_UNITS[role]})"
         )
+    other = unit.pint_unit is not None and not unit.pint_unit.dimensionless
+    if role == "strain" and other and unit.kind != "strain":  # a time or voltage as the strain
+        raise table.error(
+            k,
+            f"is in {unit.text}, not a strain unit (expected e.g. ue, %, mm/m, or um with "
+            "--stack-length-mm): a swapped column? (--strain-units raw keeps the numbers as "
+            "they are)",
+        )
+    if role == "voltage" and unit.kind != "voltage":
+        # volts are the model's input: another quantity (mA, um) never, raw numbers if scaled
+        if other or "voltage" not in checked.scales:
+            raise table.error(
+                k,
+                f"is in {unit.text!r}, not a voltage unit (V, mV, kV...): give the column's "
+                "unit in the file"
+                + ("" if other else ", or --voltage-scale K to turn these numbers into volts"),
+            )
+        note = f"{unit.text} * --voltage-scale taken as V"
+        return values, "V", note
     out, stored, note = convert(values, unit, role)
     if unit.kind != role:
         note = f"unit {unit.text!r} kept as it is (no conversion to {RUN_UNITS[role]} defined)"
@@ -123,16 +142,24 @@ def conversion_notes(meta: Mapping[str, Any]) -> list[str]:
 
 def _time_base(
     table: Table, sel: Selection, checked: Checked, n: int
-) -> tuple[NDArray[np.float64], float, dict]:
-    """(time in s as read, rate in Hz, metadata) of the record."""
+) -> tuple[NDArray[np.float64], float, dict, float]:
+    """(time in s from the first sample, rate in Hz, metadata, the first sample's time in s as
+    the file gives it) of the record. The time column is counted from its first value before
+    its unit is converted: stamps of large magnitude (nanoseconds since 1970) keep their steps
+    (their differences are exact; 9e15 ns converted first would keep steps of 2e-5 s to 1e-4)."""
     lo, hi = RATE_RANGE_HZ
     rate_opt = checked.opt.rate_hz
     if sel.time is None:
         if rate_opt is None:
             raise table.error(None, "no time column: give the sample rate with --rate-hz")
-        return np.arange(n) / rate_opt, float(rate_opt), {"rate_from": "--rate-hz"}
+        return np.arange(n) / rate_opt, float(rate_opt), {"rate_from": "--rate-hz"}, 0.0
     _column(table, sel.time, n, "time", sel.voltage)
-    t, stored, note = _in_unit(table, sel.time, "time", table.columns[sel.time].unit, checked)
+    c = table.columns[sel.time]
+    assert c.values is not None
+    first = float(c.values[0])
+    c.values = c.values - first  # exact for stamps of one binade, and for integer counts
+    t, stored, note = _in_unit(table, sel.time, "time", c.unit, checked)
+    start_s = float(convert(np.array([c.origin + first]), parse_unit(c.unit), "time")[0][0])
     if stored != "s":
         raise table.error(sel.time, f"{note}: a time column needs a time unit (s, ms...)")
     dt = np.diff(t)
@@ -141,7 +168,8 @@ def _time_base(
         i = int(back[0]) + 1
         raise table.error(
             sel.time,
-            f"time {t[i]:.9g} s does not increase (the sample before: {t[i - 1]:.9g} s)",
+            f"time {t[i] + start_s:.9g} s does not increase (the sample before: "
+            f"{t[i - 1] + start_s:.9g} s)",
             i,
         )
     step = float(np.median(dt))
@@ -163,12 +191,19 @@ def _time_base(
         raise table.error(
             sel.time, f"--rate-hz {rate_opt:g} disagrees with the time column ({rate:.9g} Hz)"
         )
-    return t, rate, {"rate_from": "time column"} | ({"time_conversion": note} if note else {})
+    if c.origin:  # integers past 2**53: counted from the first in integers (read exactly)
+        note = "; ".join(x for x in (f"counted from its first value {c.origin}", note) if x)
+    meta = {"rate_from": "time column"} | ({"time_conversion": note} if note else {})
+    return t, rate, meta, start_s
 
 
-def _window(table: Table, t: NDArray[np.float64], checked: Checked) -> tuple[slice, dict]:
+def _window(
+    table: Table, t: NDArray[np.float64], checked: Checked, start_s: float
+) -> tuple[slice, dict]:
+    """The samples inside ``--window`` (in the file's time: ``t + start_s``)."""
     if checked.window is None:
         return slice(None), {}
+    t = t + start_s
     t0, t1 = checked.window
     inside = np.flatnonzero((t >= t0) & (t <= t1))
     if inside.size < 2:
@@ -210,8 +245,18 @@ def _core(table: Table, sel: Selection, checked: Checked, n: int) -> dict:
         ),
     ):
         _column(table, k, n, role, sel.voltage)
-        values, stored, note = _in_unit(table, k, role, unit, checked)
-        values, how = _scaled(role, values, checked, offset)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            values, stored, note = _in_unit(table, k, role, unit, checked)
+        with np.errstate(over="ignore", invalid="ignore"):
+            values, how = _scaled(role, values, checked, offset)
+        if not np.all(np.isfinite(values)):  # finite in the file: the conversion overflowed
+            i = int(np.flatnonzero(~np.isfinite(values))[0])
+            raise table.error(
+                k,
+                f"becomes {values[i]} in {stored} after the unit conversion and scale: "
+                "check --stack-length-mm and the --*-scale options",
+                i,
+            )
         meta = {"from": table.place(k, False), "unit_in_file": unit, "unit": stored, **how}
         out[role] = (values, stored, meta | ({"conversion": note} if note else {}))
     return out
@@ -226,7 +271,7 @@ def build_entry(table: Table, checked: Checked, name: str) -> ImportedEntry:
     n = table.columns[sel.voltage].length or 0
     if n < 2:
         raise table.error(sel.voltage, f"{n} sample{'s' * (n != 1)}: need at least 2")
-    t, rate, time_meta = _time_base(table, sel, checked, n)
+    t, rate, time_meta, start_s = _time_base(table, sel, checked, n)
     core = _core(table, sel, checked, n)
     aux, aux_meta, skipped = aux_channels(table, sel, n)
     unknown = set(checked.scales) - {"voltage", "strain"} - set(aux)
@@ -240,7 +285,7 @@ def build_entry(table: Table, checked: Checked, name: str) -> ImportedEntry:
         values, how = _scaled(ch, aux[ch][0], checked)
         aux[ch] = (values, aux[ch][1])
         aux_meta[ch].update(how)
-    cut, window_meta = _window(table, t, checked)
+    cut, window_meta = _window(table, t, checked, start_s)
     meta = {
         "kind": "import",
         "hold": "linear",

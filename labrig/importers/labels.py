@@ -3,8 +3,11 @@ channel name and a unit; a file gives an entry name. Names in a run file are HDF
 then letters, digits or underscores, at most 63 characters.
 
 Header forms understood (the unit is then converted by :mod:`labrig.importers.units`):
-``strain [ue]``, ``strain (ue)``, ``strain / ue``, ``strain in ue`` and ``strain_ue`` (the last
-one only for the units of :data:`SUFFIX_UNITS`, so that ``strain_raw`` stays a name).
+``strain [ue]``, ``strain (ue)``, ``strain <ue>``, ``strain / ue``, ``strain in ue`` and
+``strain_ue`` (the last one only for the units of :data:`SUFFIX_UNITS`, so that ``strain_raw``
+stays a name); ``t/ms`` (quantity/unit without spaces, DIN 1313 style), ``voltage: mV`` and
+``voltage - mV`` only when what follows is a unit pint knows and the whole is not a ratio of
+like units (``mm/m`` stays a strain unit, ``force/disp`` a name).
 """
 
 from __future__ import annotations
@@ -24,8 +27,10 @@ CORE_NAMES = frozenset({"time", "voltage", "command_voltage", "strain"})
 #: names an entry may not take (groups of the run file itself)
 RESERVED_ENTRY_NAMES = frozenset({"run"})
 
-_BRACKETED = re.compile(r"^(?P<name>.*?)\s*[\[\(\{](?P<unit>[^\[\]\(\)\{\}]*)[\]\)\}]\s*$")
+_BRACKETED = re.compile(r"^(?P<name>.*?)\s*[\[\(\{<](?P<unit>[^\[\]\(\)\{\}<>]*)[\]\)\}>]\s*$")
 _SLASH = re.compile(r"^(?P<name>.*?\S)\s+(?:/|in)\s+(?P<unit>\S.*)$")
+#: ``t/ms``, ``voltage: mV``, ``voltage - mV``: taken only when the unit parses (:func:`_known`)
+_TIGHT = re.compile(r"^(?P<name>[^/:]*?[A-Za-z][^/:]*?)\s*(?:/|:|\s-)\s*(?P<unit>[^/\s][^:]*)$")
 _NAME_RE = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,62}")
 _MAX_LABEL = 200
 
@@ -38,10 +43,27 @@ def split_label(label: str) -> tuple[str, str]:
         m = pattern.match(text)
         if m and m.group("name").strip():
             return m.group("name").strip(), m.group("unit").strip()
+    m = _TIGHT.match(text)
+    if m and _known(m.group("unit").strip()) and not _a_ratio(text):
+        return m.group("name").strip(), m.group("unit").strip()
     head, sep, tail = text.rpartition("_")
     if sep and head and tail in SUFFIX_UNITS:
         return head, tail
     return text, ""
+
+
+def _known(text: str) -> bool:
+    from labrig.importers.units import parse_unit
+
+    return parse_unit(text).pint_unit is not None
+
+
+def _a_ratio(text: str) -> bool:
+    """``mm/m``, ``um/m``: the whole label is a dimensionless unit (a strain), not a name/unit."""
+    from labrig.importers.units import parse_unit
+
+    u = parse_unit(text).pint_unit
+    return u is not None and bool(u.dimensionless)
 
 
 def safe_name(text: str, fallback: str = "ch") -> str:

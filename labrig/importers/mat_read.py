@@ -17,6 +17,7 @@ out (as the string ``"<complex>"`` etc.).
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -59,6 +60,14 @@ def _depth(path: str, depth: int) -> None:
         raise ValueError(f"{path}: structs or cells nested more than {MAX_STRUCT_DEPTH} deep")
 
 
+def _numeric(a: np.ndarray) -> np.ndarray:
+    """float64, except integers past 2**53 (kept as they are, so that
+    :class:`~labrig.importers.table.Column` counts them exactly from their first value)."""
+    if a.dtype.kind in "iu" and a.size and (int(a.max()) > 2**53 or int(a.min()) < -(2**53)):
+        return a
+    return np.asarray(a, dtype=np.float64)
+
+
 def _plain(value: Any, path: str, depth: int, budget: _Budget) -> Any:
     """scipy's simplified value -> tree node."""
     _depth(path, depth)
@@ -83,7 +92,7 @@ def _plain(value: Any, path: str, depth: int, budget: _Budget) -> Any:
         return np.asarray(float(value))
     if isinstance(value, np.ndarray) and value.dtype.kind in "fiu":
         budget.take(path, values=int(value.size))
-        return np.asarray(value, dtype=np.float64)
+        return _numeric(value)
     if (isinstance(value, np.ndarray) and value.dtype.kind == "c") or isinstance(value, complex):
         return "<complex>"
     return f"<{type(value).__name__}>"
@@ -98,9 +107,31 @@ def load_v5(path: str) -> Tree:
         raise ValueError(f"the variables hold {declared} values: at most {MAX_MAT_VALUES} are read")
     # mat_dtype: each array in the class MATLAB gives it (logical arrays as bool, not as the
     # uint8 they are stored in: a logical is left out, as for v7.3)
-    mat = loadmat(path, simplify_cells=True, mat_dtype=True)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        mat = loadmat(path, simplify_cells=True, mat_dtype=True)
     budget = _Budget()
-    return {k: _plain(v, k, 0, budget) for k, v in mat.items() if not k.startswith("__")}
+    tree = {k: _plain(v, k, 0, budget) for k, v in mat.items() if not k.startswith("__")}
+    if any(issubclass(w.category, np.exceptions.ComplexWarning) for w in caught):
+        # mat_dtype casts a complex double to double (keeping the real part): read the file
+        # again in its stored types to find the complex variables, which are left out
+        stored = loadmat(path, simplify_cells=True)
+        again = _Budget()
+        raw = {k: _plain(v, k, 0, again) for k, v in stored.items() if not k.startswith("__")}
+        tree = _complex_marked(tree, raw)
+    return tree
+
+
+def _complex_marked(node: Any, raw: Any) -> Any:
+    """``node`` with each value that is ``"<complex>"`` in ``raw`` (the same tree read in the
+    file's stored types) marked so."""
+    if isinstance(raw, str) and raw == "<complex>":
+        return raw
+    if isinstance(node, dict) and isinstance(raw, dict):
+        return {k: _complex_marked(v, raw.get(k)) for k, v in node.items()}
+    if isinstance(node, list) and isinstance(raw, list) and len(node) == len(raw):
+        return [_complex_marked(a, b) for a, b in zip(node, raw, strict=True)]
+    return node
 
 
 def _h5_text(ds: Any) -> str:
@@ -132,7 +163,7 @@ def _h5_node(f: Any, obj: Any, path: str, depth: int, budget: _Budget) -> Any:
     if obj.dtype.kind not in "fiu":
         return f"<{cls or obj.dtype}>"
     budget.take(path, values=int(obj.size))
-    return np.squeeze(np.asarray(obj[()], dtype=np.float64).T)
+    return np.squeeze(_numeric(np.asarray(obj[()])).T)
 
 
 def _h5_struct(f: Any, group: Any, path: str, depth: int, budget: _Budget) -> Any:

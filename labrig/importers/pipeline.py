@@ -169,5 +169,5 @@ def import_files(
     _check_out(files, out, overwrite)
     check_distinct(files)
     entries = read_entries(files, checked)
-    write_run(out, entries, import_description(files, asdict(opt)), metadata)
+    write_run(out, entries, import_description(files, asdict(opt)), metadata, overwrite)
     return entries

@@ -17,6 +17,34 @@ from numpy.typing import NDArray
 
 from labrig.core.errors import InputFileError, InputIssue
 
+#: integers of larger magnitude lose their low bits as float64 (2**53)
+EXACT_INTEGER = 2**53
+
+
+def exact_floats(values: NDArray) -> tuple[NDArray[np.float64], int]:
+    """``values`` as float64, and the origin they are counted from: an integer array holding a
+    magnitude past :data:`EXACT_INTEGER` (nanoseconds since 1970, a sample counter) becomes the
+    exact differences from its first value, computed in integers (exact while the record spans
+    less than 2**53 counts), with that value as the origin; anything else converts as it is,
+    origin 0."""
+    a = np.asarray(values).reshape(-1)
+    if a.size == 0 or a.dtype.kind not in "iu":
+        return np.asarray(a, dtype=np.float64), 0
+    if int(a.max()) <= EXACT_INTEGER and int(a.min()) >= -EXACT_INTEGER:
+        return a.astype(np.float64), 0
+    origin = int(a[0])
+    return relative_to(a, origin), origin
+
+
+def relative_to(a: NDArray, origin: int) -> NDArray[np.float64]:
+    """``a - origin`` as float64, the subtraction in integers when ``a`` holds integers (uint64
+    wraps, and is read back as the signed difference)."""
+    if a.dtype.kind == "u":
+        return (a - np.uint64(origin % 2**64)).view(np.int64).astype(np.float64)
+    if a.dtype.kind == "i":
+        return (a - np.int64(origin)).astype(np.float64)
+    return np.asarray(a, dtype=np.float64) - float(origin)
+
 
 def bad(path: Path | str, message: str, line: int | None = None, where: str = "") -> InputFileError:
     """The error for one problem in an input file: ``FILE:LINE: [WHERE] MESSAGE`` (exit 2)."""
@@ -30,7 +58,9 @@ class Column:
     own (False for columns known only by position), its values (float64, NaN where a cell was
     empty; None until loaded), the number that picks it (``--voltage 3``), other names that
     pick it (a raw header cell, a ControlDesk channel's short name), and for a ControlDesk
-    channel the index of its time column (``axis``; ``is_axis`` marks a time column)."""
+    channel the index of its time column (``axis``; ``is_axis`` marks a time column).
+    ``origin``: the values are counted from it (:func:`exact_floats`; 0 for nearly every
+    column)."""
 
     label: str
     unit: str
@@ -42,10 +72,11 @@ class Column:
     aliases: tuple[str, ...] = ()
     axis: int | None = None
     is_axis: bool = False
+    origin: int = 0
 
     def __post_init__(self) -> None:
         if self.values is not None:
-            self.values = np.asarray(self.values, dtype=np.float64).reshape(-1)
+            self.values, self.origin = exact_floats(self.values)
             self.length = int(self.values.size)
 
 

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from labrig.importers.limits import CHUNK_ROWS, MAX_COLUMNS, MAX_ROWS, SNIFF_BYTES
 from labrig.importers.sniff import Layout, LayoutError, find_layout
-from labrig.importers.table import Column, Table, bad
+from labrig.importers.table import Column, Table, bad, exact_floats, relative_to
 
 
 def read_layout(
@@ -165,6 +165,7 @@ class _Reader:
         columns = {k: _Growing(capacity) for k in indices}
         blank_rows: list[NDArray[np.int64]] = []
         text_columns: set[int] = set()
+        origins: dict[int, int] = {}  # integer columns past 2**53: counted from their first value
         start = 0
         try:
             for chunk in self._chunks(enc):
@@ -175,7 +176,7 @@ class _Reader:
                 for k in indices:
                     if k in text_columns:
                         continue
-                    values = _numbers(chunk[k], self.layout.decimal)
+                    values = _numbers(chunk[k], origins, k)
                     if values is None:
                         if k in required:
                             raise self._not_a_number(table, chunk[k], k, start)
@@ -197,6 +198,7 @@ class _Reader:
             values = columns.pop(k).result()
             table.columns[k].values = values
             table.columns[k].length = int(values.size)
+            table.columns[k].origin = origins.get(k, 0)
 
     def _not_a_number(self, table: Table, col: pd.Series, k: int, start: int) -> Exception:
         text = col.astype("string").str.strip()
@@ -223,13 +225,22 @@ class _Reader:
         return bad(self.path, f"cannot parse as delimited text: {str(e).strip()[:200]}")
 
 
-def _numbers(col: pd.Series, decimal: str) -> NDArray[np.float64] | None:
-    """The column as float64, or None if it holds text."""
+def _numbers(col: pd.Series, origins: dict[int, int], k: int) -> NDArray[np.float64] | None:
+    """Column ``k`` of one block as float64, or None if it holds text. An integer column is
+    counted from ``origins[k]``, set by its first block (:func:`exact_floats`), so that time
+    stamps past 2**53 (nanoseconds since 1970) keep their steps exact."""
     if pd.api.types.is_bool_dtype(col) or not pd.api.types.is_numeric_dtype(col):
         if col.isna().all():
             return np.full(len(col), np.nan)
         return None
-    return col.to_numpy(dtype=np.float64, na_value=np.nan)
+    if pd.api.types.is_integer_dtype(col):
+        raw = col.to_numpy()
+        if k not in origins:
+            values, origins[k] = exact_floats(raw)
+            return values
+        return relative_to(raw, origins[k])
+    values = col.to_numpy(dtype=np.float64, na_value=np.nan)
+    return values - float(origins[k]) if origins.get(k) else values
 
 
 def read_text(

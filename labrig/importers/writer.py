@@ -1,21 +1,22 @@
 """Imported entries into a run file, written beside the target and renamed over it only when
 complete: an existing file is replaced (with ``--overwrite``) by a whole new one or not at all.
 
-The new file is written as ``.<name>.<random>.partial/<name>`` in the target's folder (same file
-system, so the final :func:`os.replace` is atomic; the file records its own name) and the
-temporary folder is removed whatever happens.
+The new file is written as ``.<name>.<random>.partial/<name>`` in the target's folder
+(:func:`labrig.core.outputs.stage`: same file system, so putting it in place is atomic; the file
+records its own name) and the temporary folder is removed whatever happens. Without
+``--overwrite`` a file that appeared at the target while the import ran is kept and the import
+refused (:meth:`~labrig.core.outputs.Staged.commit`); a write that fails (a full disk) leaves
+the target as it was.
 """
 
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import tempfile
 from pathlib import Path
 
+from labrig.core.errors import StorageError
 from labrig.core.metadata import RunMetadata
-from labrig.core.outputs import STAGING_SUFFIX
+from labrig.core.outputs import stage
 from labrig.core.version import __version__
 from labrig.importers.entry import ImportedEntry
 from labrig.store import Channel, RunWriter
@@ -68,16 +69,24 @@ def write_run(
     entries: list[ImportedEntry],
     description: dict,
     metadata: RunMetadata | None = None,
+    overwrite: bool = False,
 ) -> None:
-    """Write ``entries`` to ``out`` (beside it first, then renamed over it)."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    folder = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=STAGING_SUFFIX, dir=out.parent))
+    """Write ``entries`` to ``out`` (beside it first, then put in place; an existing ``out``
+    is replaced only with ``overwrite``, even one that appeared while this ran)."""
+    from labrig.store.reader import being_written
+
+    staged = stage([out], overwrite=overwrite, being_written=being_written)
     try:
-        partial = folder / out.name
-        write_entries(partial, entries, description, metadata)
-        os.replace(partial, out)
+        try:
+            write_entries(staged.path(out), entries, description, metadata)
+        except StorageError as e:  # the partial file is removed below: say what is left
+            kept = "kept as it was" if out.exists() else "not written"
+            raise StorageError(
+                str(out), e.operation, f"{e.detail.split(';')[0]}; {out} {kept}"
+            ) from None
+        staged.commit()
     finally:
-        shutil.rmtree(folder, ignore_errors=True)
+        staged.discard()
 
 
 def import_description(files: list[Path], options: dict) -> dict:

@@ -86,6 +86,19 @@ def test_binary_and_empty_refused() -> None:
         ("disp / um", ("disp", "um")),
         ('"time (s)"', ("time", "s")),
         ("command_voltage", ("command_voltage", "")),
+        # quantity/unit without spaces (DIN 1313), a colon or a dash: split only when what
+        # follows is a unit and the whole is not a ratio of like units (a strain unit)
+        ("t/ms", ("t", "ms")),
+        ("U/mV", ("U", "mV")),
+        ("S/µm", ("S", "µm")),
+        ("voltage: mV", ("voltage", "mV")),
+        ("voltage - mV", ("voltage", "mV")),
+        ("voltage <mV>", ("voltage", "mV")),
+        ("Dehnung/µm/m", ("Dehnung", "µm/m")),
+        ("mm/m", ("mm/m", "")),
+        ("um/m", ("um/m", "")),
+        ("force/disp", ("force/disp", "")),
+        ("x-y", ("x-y", "")),
     ],
 )
 def test_split_label(label: str, expected: tuple[str, str]) -> None:
@@ -229,3 +242,182 @@ def test_a_column_in_a_time_unit_is_the_time(tmp_path: Path) -> None:
     res = runner.invoke(app, ["import", str(two), "--out", str(tmp_path / "c.h5"),
                               "--stack-length-mm", "18"])  # fmt: skip
     assert res.exit_code == 2 and "time" in res.output, res.output
+
+
+def _write(path: Path, header: str, scale_v: float = 1.0, scale_t: float = 1.0) -> Path:
+    t = np.arange(400) / 1000.0
+    v = 50 + 50 * np.sin(2 * np.pi * 5 * t)
+    rows = "".join(
+        f"{a * scale_t:.6f};{b * scale_v:.6f};{10 * b:.6f}\n" for a, b in zip(t, v, strict=True)
+    )
+    path.write_text(header + "\n" + rows.replace(".", ","))
+    return path
+
+
+def test_din_style_headers_give_the_units(tmp_path: Path) -> None:
+    """``t/ms;U/mV;S/ue`` with decimal commas: the time in ms and the voltage in mV are
+    converted (read as s and V before: a rate of 1 Hz and 100 000 V)."""
+    f = _write(tmp_path / "din.csv", "t/ms;U/mV;S/ue", scale_v=1e3, scale_t=1e3)
+    out = tmp_path / "din.h5"
+    res = CliRunner().invoke(app, ["import", str(f), "--out", str(out), "--time", "1",
+                                   "--voltage", "2", "--strain", "3"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    (e,) = list(read_run(out))
+    assert e.rate_hz == pytest.approx(1000.0, rel=1e-9)
+    assert float(np.max(e["command_voltage"])) == pytest.approx(100.0, abs=1e-3)
+    assert e.units["strain"] == "ue"
+
+
+@pytest.mark.parametrize("unit", ["mv", "mA", "counts", "um"])
+def test_a_voltage_column_not_in_volts_is_refused_unless_scaled(tmp_path: Path, unit: str):
+    """The model's input is volts: a voltage column in an unknown unit (``mv``, ``counts``) or
+    another quantity (``mA``, ``um``) is refused, naming the column; ``--voltage-scale``
+    turns raw numbers into volts (a unit of another quantity stays refused)."""
+    f = _write(tmp_path / "v.csv", f"time [s];voltage [{unit}];strain [ue]", scale_v=1e3)
+    out = tmp_path / "v.h5"
+    res = CliRunner().invoke(app, ["import", str(f), "--out", str(out)])
+    assert res.exit_code == 2, res.output
+    assert "column 2" in res.output and unit in res.output and "Traceback" not in res.output
+    assert not out.exists()
+    res = CliRunner().invoke(app, ["import", str(f), "--out", str(out), "--voltage-scale", "1e-3"])
+    if unit in ("mA", "um"):  # pint knows them, and they are no voltage: never a voltage
+        assert res.exit_code == 2, res.output
+        return
+    assert res.exit_code == 0, res.output
+    (e,) = list(read_run(out))
+    assert e.units["command_voltage"] == "V"
+    assert float(np.max(e["command_voltage"])) == pytest.approx(100.0, abs=1e-3)
+
+
+@pytest.mark.parametrize("column", ["time", "temperature"])
+def test_a_time_or_temperature_column_is_not_taken_as_the_strain(tmp_path: Path, column: str):
+    f = tmp_path / "a.csv"
+    f.write_text("time [s],voltage [V],strain [ue],temperature [degC]\n"
+                 + "".join(f"{i / 1000},{i % 50},{i % 7},25\n" for i in range(200)))  # fmt: skip
+    res = CliRunner().invoke(app, ["import", str(f), "--out", str(tmp_path / "x.h5"),
+                                   "--strain", column, "--rate-hz", "1000"])  # fmt: skip
+    assert res.exit_code == 2 and "not a strain unit" in res.output, res.output
+    ok = CliRunner().invoke(app, ["import", str(f), "--out", str(tmp_path / "x.h5"),
+                                  "--strain", column, "--strain-units", "raw",
+                                  "--rate-hz", "1000"])  # fmt: skip
+    assert ok.exit_code == 0, ok.output  # said to keep the numbers: kept, labelled raw
+
+
+def test_records_in_two_strain_units_are_not_fitted_or_validated_together(tmp_path: Path):
+    """One run file holding an entry in ue and one in raw numbers, or a training file in ue and
+    a test file in raw: refused (exit 2) naming both, never one NRMSE over mixed scales."""
+    t = np.arange(2000) / 1000.0
+    v = 50 + 50 * np.sin(2 * np.pi * 2 * t)
+    for name, unit, k in (("a", "ue", 10.0), ("b", "raw", 0.01)):
+        (tmp_path / f"{name}.csv").write_text(
+            f"time [s],voltage [V],strain [{unit}]\n"
+            + "".join(
+                f"{x:.4f},{y:.4f},{k * y + 0.1 * np.sin(x):.6f}\n"
+                for x, y in zip(t, v, strict=True)
+            )
+        )
+    run = CliRunner()
+    both = tmp_path / "both.h5"
+    res = run.invoke(app, ["import", str(tmp_path / "a.csv"), str(tmp_path / "b.csv"),
+                           "--out", str(both)])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    res = run.invoke(app, ["fit", str(both), "--no-heldout"])
+    assert res.exit_code == 2, res.output
+    text = " ".join(res.output.split())
+    assert "b/strain" in text and "'raw'" in text and "'ue'" in text
+    for name in ("a", "b"):
+        res = run.invoke(app, ["import", str(tmp_path / f"{name}.csv"), "--out",
+                               str(tmp_path / f"{name}.h5")])  # fmt: skip
+        assert res.exit_code == 0, res.output
+    res = run.invoke(app, ["validate", str(tmp_path / "a.h5"), "--on", str(tmp_path / "b.h5"),
+                           "--json"])  # fmt: skip
+    assert res.exit_code == 2 and "one strain unit" in " ".join(res.output.split()), res.output
+
+
+@pytest.mark.parametrize(
+    ("first", "origin"),
+    [
+        (2**53 - 20_000 * 9_999, 0),  # the last stamp is 2**53 itself: exact as float64 already
+        (2**53 - 20_000 * 9_999 + 1, 2**53 - 20_000 * 9_999 + 1),  # the last is 2**53 + 1
+        (1_732_900_000_000_000_000, 1_732_900_000_000_000_000),  # ns since 1970 (int64)
+        (2**63 + 12_345, 2**63 + 12_345),  # past int64: read as uint64
+    ],
+)
+def test_integer_time_stamps_past_2_53_keep_their_steps_exact(
+    tmp_path: Path, first: int, origin: int
+) -> None:
+    """Time in integer nanoseconds: 10 000 stamps 20 000 ns apart are a uniform 50 kHz record.
+    As float64 the stamps past 2**53 lose their low bits (steps of 19 968 and 20 480 ns: refused
+    as not uniform before); counted from the first stamp in integers, every step is exact."""
+    f = tmp_path / "ns.csv"
+    f.write_text("time [ns],voltage [V],strain [ue],counter\n" + "".join(
+        f"{first + 20_000 * i},{50 + 40 * np.sin(i / 50):.4f},{np.sin(i / 50):.5f},{first + i}\n"
+        for i in range(10_000)
+    ))  # fmt: skip
+    out = tmp_path / "ns.h5"
+    res = CliRunner().invoke(app, ["import", str(f), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    (e,) = list(read_run(out))
+    assert e.rate_hz == pytest.approx(50_000.0, rel=1e-12)
+    # ns -> s rounds each step to float64 (1e-16 relative); the float64 stamps were 2 % off
+    np.testing.assert_allclose(np.diff(e.time), 2e-5, rtol=1e-9)
+    assert ("counted from its first value" in res.output) == bool(origin)
+    counter = e["counter"]
+    np.testing.assert_array_equal(np.diff(counter), np.ones(9_999))  # exact steps of 1
+    assert counter[0] == (0 if first + 9_999 > 2**53 else first)  # past 2**53: from the first
+
+
+def test_integer_time_stamps_past_2_53_in_a_mat_file(tmp_path: Path) -> None:
+    from scipy.io import savemat
+
+    t = np.uint64(1_732_900_000_000_000_000) + np.arange(5_000, dtype=np.uint64) * np.uint64(
+        1_000_000
+    )  # 1 kHz in ns
+    v = 50 + 40 * np.sin(np.arange(5_000) / 40)
+    savemat(tmp_path / "ns.mat", {"time_ns": t, "voltage_V": v, "strain_ue": 10 * v})
+    out = tmp_path / "ns.h5"
+    res = CliRunner().invoke(app, ["import", str(tmp_path / "ns.mat"), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    (e,) = list(read_run(out))
+    assert e.rate_hz == pytest.approx(1000.0, rel=1e-12)  # 999.596 Hz from float64 stamps
+    np.testing.assert_allclose(np.diff(e.time), 1e-3, rtol=1e-9)
+
+
+@pytest.mark.parametrize(
+    "options",
+    [["--strain-scale", "1e308"], ["--strain", "disp", "--stack-length-mm", "1e-310"],
+     ["--voltage-scale", "1e307"]],
+)  # fmt: skip
+def test_a_conversion_that_overflows_is_refused_at_the_import(tmp_path: Path, options: list[str]):
+    f = tmp_path / "a.csv"
+    f.write_text("time [s],voltage [V],strain [ue],disp [um]\n"
+                 + "".join(f"{i / 1000},{20 + i % 50},{5 + i % 7},{3 + i % 7}\n"
+                           for i in range(200)))  # fmt: skip
+    res = CliRunner().invoke(app, ["import", str(f), "--out", str(tmp_path / "x.h5"), *options])
+    assert res.exit_code == 2, res.output
+    assert "after the unit conversion and scale" in " ".join(res.output.split())
+    assert "Warning" not in res.output and not (tmp_path / "x.h5").exists()
+    ok = CliRunner().invoke(app, ["import", str(f), "--out", str(tmp_path / "y.h5"),
+                                  *[o.replace("1e308", "1e3").replace("1e-310", "18")
+                                    .replace("1e307", "10") for o in options]])  # fmt: skip
+    assert ok.exit_code == 0, ok.output
+
+
+def test_a_complex_variable_of_a_v5_mat_file_is_left_out_not_cut_to_its_real_part(
+    tmp_path: Path,
+) -> None:
+    from scipy.io import savemat
+
+    t = np.arange(2000) / 1000
+    v = 50 + 40 * np.sin(2 * np.pi * 5 * t)
+    savemat(tmp_path / "c.mat", {"time_s": t, "voltage_V": v + 1j * np.cos(t),
+                                 "strain_ue": 10 * v, "s": {"z": v + 1j, "w": v}})  # fmt: skip
+    res = CliRunner().invoke(app, ["import", str(tmp_path / "c.mat"), "--list"])
+    assert res.exit_code == 0, res.output
+    text = " ".join(res.output.split())
+    assert "left out: variable voltage_V: complex values" in text
+    assert "variable s.z: complex values" in text and "variable s.w" in text
+    assert "ComplexWarning" not in res.output
+    out = tmp_path / "c.h5"
+    res = CliRunner().invoke(app, ["import", str(tmp_path / "c.mat"), "--out", str(out)])
+    assert res.exit_code == 2 and "which column is the voltage" in res.output, res.output

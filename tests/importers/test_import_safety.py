@@ -208,3 +208,53 @@ def test_list_writes_nothing(tmp_path: Path) -> None:
     assert res.exit_code == 0 and "temperature" in res.output
     res = invoke("import", DATA / "header.csv")
     assert res.exit_code == 64 and "--out" in res.output  # a missing option: a usage error
+
+
+def test_a_file_that_appears_at_out_during_the_import_is_kept(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Another process creates ``--out`` while the import writes: without ``--overwrite`` its
+    file survives and the import is refused (exit 2); with it, the import replaces it."""
+    import labrig.importers.writer as writer
+
+    out = tmp_path / "race.h5"
+    real = writer.write_entries
+
+    def write_then_race(path: Path, *args: object) -> None:
+        real(path, *args)
+        out.write_bytes(b"precious")  # appears after the output check, before the rename
+
+    monkeypatch.setattr(writer, "write_entries", write_then_race)
+    res = invoke("import", DATA / "header.csv", "--out", out)
+    assert res.exit_code == 2, res.output
+    assert "appeared while the command ran; kept" in res.output and "Traceback" not in res.output
+    assert out.read_bytes() == b"precious"
+    assert [p.name for p in tmp_path.iterdir()] == ["race.h5"]  # no partial folder left
+    out.unlink()
+    res = invoke("import", DATA / "header.csv", "--out", out, "--overwrite")
+    assert res.exit_code == 0, res.output
+    assert [e.name for e in read_run(out)] == ["header"]
+
+
+def test_a_full_disk_during_the_import_names_what_is_left(
+    tmp_path: Path, precious: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The partial file is removed, so the message names the target and what became of it,
+    never the partial file."""
+    import labrig.importers.writer as writer
+    from labrig.core.errors import StorageError
+
+    def full(path: Path, *args: object) -> None:
+        path.write_bytes(b"half")
+        raise StorageError(str(path), "write", "disk full: 1 kB free; the file keeps every block")
+
+    monkeypatch.setattr(writer, "write_entries", full)
+    before = digest(precious)
+    res = invoke("import", DATA / "bom.csv", "--out", precious, "--overwrite")
+    assert res.exit_code == 3, res.output
+    text = " ".join(res.output.split())
+    assert f"{precious} kept as it was" in text and ".partial" not in text
+    assert digest(precious) == before
+    res = invoke("import", DATA / "bom.csv", "--out", tmp_path / "new.h5")
+    assert res.exit_code == 3 and "new.h5 not written" in " ".join(res.output.split())
+    assert not (tmp_path / "new.h5").exists()
