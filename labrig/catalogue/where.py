@@ -34,9 +34,10 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from datetime import date, datetime, timedelta
+from fractions import Fraction
 from typing import Any
 
 from labrig.core.errors import LabrigError
@@ -139,23 +140,32 @@ def date_span(text: str) -> tuple[datetime, datetime] | None:
     """The instants ``[start, end)`` a date names: a year, a month, a day, or one instant
     (``end == start``); ``None`` when ``text`` is not a date."""
     m = _PARTIAL_DATE.match(text)
-    if m:
-        year, month = int(m.group(1)), int(m.group(2) or 0)
-        if month == 0:
-            return datetime(year, 1, 1), datetime(year + 1, 1, 1)
-        if not 1 <= month <= 12:
-            return None
-        end = datetime(year + month // 12, month % 12 + 1, 1)
-        return datetime(year, month, 1), end
     try:
+        if m:
+            year, month = int(m.group(1)), int(m.group(2) or 0)
+            if month == 0:
+                return datetime(year, 1, 1), _or_last(lambda: datetime(year + 1, 1, 1))
+            if not 1 <= month <= 12:
+                return None
+            end = _or_last(lambda: datetime(year + month // 12, month % 12 + 1, 1))
+            return datetime(year, month, 1), end
         if len(text) == 10:
             d = date.fromisoformat(text)
             start = datetime(d.year, d.month, d.day)
-            return start, start + timedelta(days=1)
+            return start, _or_last(lambda: start + timedelta(days=1))
         t = datetime.fromisoformat(text)
-    except ValueError:
+    except ValueError:  # year 0, a day 31 of a 30-day month
         return None
     return t, t
+
+
+def _or_last(end: Callable[[], datetime]) -> datetime:
+    """The end of a span, or the last instant Python represents when the span is the last
+    one (year 9999: its end, year 10000, is past :data:`datetime.max`)."""
+    try:
+        return end()
+    except (ValueError, OverflowError):
+        return datetime.max
 
 
 def parse_where(text: str) -> Condition:
@@ -247,6 +257,9 @@ def _one(value: Any, c: Condition) -> bool:
     if c.number is not None and stored is not None:
         if isinstance(stored, int) and c.integer is not None:
             return _order_exact(stored, c.integer, op)
+        exact = _fraction(c.value) if isinstance(stored, int) and op != "=" else None
+        if exact is not None:  # seed>=9007199254740992.5: as written, not as a float
+            return _order_exact(stored, exact, op)
         return _order(stored, c.number, op)
     if c.span is not None and (t := _as_time(value)) is not None:
         return _compare_times(t, Condition(c.text, "date", op, c.value, None, c.span))
@@ -267,8 +280,16 @@ def _order(a: float, b: float, op: str) -> bool:
     return {"<": a < b, "<=": a <= b, ">": a > b, ">=": a >= b}[op]
 
 
-def _order_exact(a: int, b: int, op: str) -> bool:
-    """Two whole numbers, exactly (seeds, counts, ids: 64 bits, no tolerance)."""
+def _fraction(text: str) -> Fraction | None:
+    try:
+        return Fraction(text.strip())
+    except (ValueError, ZeroDivisionError):
+        return None
+
+
+def _order_exact(a: int, b: int | Fraction, op: str) -> bool:
+    """A whole number against a whole number or a decimal as written, exactly (seeds, counts,
+    ids: 64 bits, no tolerance; a decimal is not rounded to a float first)."""
     return {"=": a == b, "<": a < b, "<=": a <= b, ">": a > b, ">=": a >= b}[op]
 
 

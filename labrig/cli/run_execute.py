@@ -71,6 +71,7 @@ def run_with_progress(
             typer.echo(f"error: --resume {extras.resume}: run file not found", err=True)
             return 2
     resume = None
+    named = out is not None
     if extras.resume is None:
         out = out or default_out_path(plan)
         check_run_output(plan, rig_path, out, overwrite, [extras.params])
@@ -88,7 +89,17 @@ def run_with_progress(
         outcome = None
         try:
             outcome = _execute_with_bar(
-                console, plan, rig_path, out, seed, realtime, overwrite, extras, live, resume
+                console,
+                plan,
+                rig_path,
+                out,
+                seed,
+                realtime,
+                overwrite,
+                extras,
+                live,
+                resume,
+                default_name=not named,
             )
         except Interrupted as e:  # before the run file existed: nothing energised or written
             _say(console, f"[red]stopped before the run began[/]: {escape(e.reason)}")
@@ -188,9 +199,11 @@ def _execute_with_bar(
     extras: RunExtras,
     live,
     resume: ResumePlan | None = None,
+    default_name: bool = False,
 ) -> RunOutcome:
-    """``execute`` under a progress bar; a terminal that disappears during the run (the bar's
-    last redraw fails), or a stop signal while the bar closes, does not lose the outcome."""
+    """``execute`` under a progress bar (``default_name``: ``out`` was chosen, not given); a
+    terminal that disappears during the run (the bar's last redraw fails), or a stop signal
+    while the bar closes, does not lose the outcome."""
     done: list = []
     try:
         with Progress(
@@ -220,6 +233,7 @@ def _execute_with_bar(
                     plan, rig_path, out, seed, realtime, progress, overwrite,
                     metadata=extras.metadata, resume=resume,
                     on_file=live.follow if live is not None else None, inputs=[extras.params],
+                    default_name=default_name,
                 )
             )  # fmt: skip
     except OSError:

@@ -425,7 +425,10 @@ def _handler(server: LiveServer) -> type[BaseHTTPRequestHandler]:
                 server.refused(f"a request target of {len(self.path)} characters")
                 self._text(HTTPStatus.REQUEST_URI_TOO_LONG, f"at most {MAX_TARGET} characters")
                 return
-            route, _, query = self.path.partition("?")
+            # http.server reduces a target's leading "//" to "/": answer the target as sent,
+            # so that only the listed paths, spelled as listed, are served
+            words = self.requestline.split()
+            route, _, query = (words[1] if len(words) == 3 else self.path).partition("?")
             if route == "/frame":
                 server.clients += 1
                 server.last_ask = time.monotonic()

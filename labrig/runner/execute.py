@@ -337,6 +337,7 @@ def execute(
     on_file: Callable[[Path], None] | None = None,
     inputs: Sequence[Path | None] = (),
     opener: Callable[[Path | None, int | None], Rig] | None = None,
+    default_name: bool = False,
 ) -> RunOutcome:
     """Run a preflighted plan on the rig and log it; returns the outcome (never raises for
     device faults, a full disk or stop signals once the run file exists: those are recorded
@@ -350,7 +351,10 @@ def execute(
     files the command reads, never the run file (:func:`check_run_output`). ``opener``:
     opens the rig (default :func:`~labrig.runner.rigfile.open_rig`, after loading numba's
     kernels for a simulated run that repays them, :func:`repays_kernels`; tests pass one that
-    records, and nothing is preloaded for it).
+    records, and nothing is preloaded for it). ``default_name``: ``out`` is
+    :func:`default_out_path`'s choice (as it is when ``out`` is None), so a file that appears
+    there meanwhile (another run started in the same second) moves this run to the next free
+    name instead of refusing it.
 
     Called from the main thread, SIGINT, SIGTERM, SIGHUP and SIGQUIT stop the run once:
     repeats are ignored until the output is at 0 V and the file is closed (see
@@ -367,7 +371,8 @@ def execute(
         out = job.resume.path  # the file resumed (a ResumePlan names it)
     else:
         job.metadata = combine(getattr(plan.protocol, "metadata", None), metadata)
-        out = out or default_out_path(plan)
+        job.default_name = default_name or out is None
+        out = _free_name(job, out or default_out_path(plan))
         check_run_output(plan, rig_path, out, overwrite, inputs)
     with interrupt_once() as guard:
         if opener is None and _long_simulation(job):
@@ -420,6 +425,8 @@ class _Job:
     resume: ResumePlan | None = None
     #: the options given to a resume (recorded with it)
     options: RunMetadata = field(default_factory=RunMetadata)
+    #: the run file's name was chosen here, not given: another free name will do
+    default_name: bool = False
 
     @property
     def steps(self) -> list[PlannedStep]:
@@ -553,6 +560,14 @@ def _reopen_writer(
     return writer
 
 
+def _free_name(job: _Job, out: Path) -> Path:
+    """``out``, or when its name was chosen here and another run has taken it meanwhile (two
+    runs started in one second), the next free name."""
+    if job.default_name and out.exists():
+        return default_out_path(job.plan, out.parent)
+    return out
+
+
 def _run_on(rig: Rig, job: _Job, out: Path, guard: SignalGuard) -> RunOutcome:
     """The run proper, with stop signals deferred (checked between blocks)."""
     setup = _prepare(rig, job.plan, job.realtime)
@@ -561,6 +576,7 @@ def _run_on(rig: Rig, job: _Job, out: Path, guard: SignalGuard) -> RunOutcome:
         check_same_rig(job.resume, rig.rig_text, str(job.rig_path or ""))
         staged: Staged | None = stage([out], overwrite=True, option="--resume")
     else:
+        out = _free_name(job, out)
         # a file that appeared since check_run_output: refused unless --overwrite
         check_run_output(job.plan, job.rig_path, out, job.overwrite)
         # --overwrite: the new file is written beside the old one and replaces it once closed

@@ -294,7 +294,9 @@ class RunWriter:
         if self.path.exists() and not overwrite:
             raise FileExistsError(f"run file {self.path} exists; refusing to overwrite it")
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._open(reserve_bytes, "w")
+        # "x" creates the file or fails if another process has made it since the check above:
+        # two writers never truncate each other's file
+        self._open(reserve_bytes, "w" if overwrite else "x")
         self.version = software_version or __version__
         self.metadata = metadata or RunMetadata()
         f = self._f

@@ -390,6 +390,15 @@ def mixed(tmp_path_factory: pytest.TempPathFactory) -> Path:
         (["seed=9223372036854775782"], {"big26.h5"}),
         (["seed>=9223372036854775783"], {"big25.h5"}),
         (["seed<9223372036854775783", "protocol=big"], {"big26.h5"}),
+        # a decimal between the two seeds, as written (as a float it is 2**63, above both)
+        (["seed>=9223372036854775782.5"], {"big25.h5"}),
+        (["seed<9223372036854775782.5", "protocol=big"], {"big26.h5"}),
+        # the last dates Python represents: a span that ends past year 9999 is not an error
+        (["since=9999"], set()),
+        (["since=9999-12"], set()),
+        (["date>=9999"], set()),
+        (["until=9999-12-31", "protocol=big"], {"big25.h5", "big26.h5"}),
+        (["until=9999", "protocol=big"], {"big25.h5", "big26.h5"}),
     ],
     ids=lambda x: repr(sorted(x)) if isinstance(x, set) else str(x),
 )

@@ -4,6 +4,7 @@ rests when they make it (labrig.protocol.preflight, labrig.protocol.expand)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
@@ -86,3 +87,35 @@ def test_a_slow_edge_to_a_sane_voltage_is_blamed_on_the_slew(tmp_path, volts, bl
     )
     assert e.issues[0].field == blamed, str(e)
     assert "samples, more than the 50000000 allowed in one entry (its edge ramp" in str(e)
+
+
+@pytest.mark.parametrize("rate", [1000.0, 1130.0, 5000.0, 10000.0])
+@pytest.mark.parametrize("kind", ["sine", "offset_sine", "triangle"])
+def test_the_current_limits_do_not_depend_on_the_sample_rate(tmp_path, kind: str, rate: float):
+    """A drive 0.1 % under its highest frequency passes and 0.1 % over it is refused at every
+    sample rate. The reference is i = C_eff dV/dt on the continuous waveform: a unipolar sine of
+    amplitude A peaks at pi C A f and averages 2 C A f over a cycle, a sine around a bias 2 pi C
+    A f and 4 C A f, a triangle (swing 2 A, slope 4 A f) 4 C A f for both (the built-in rig's
+    C_eff, i_peak_A, i_avg_A). On a grid of 20-80 points a cycle the corners of the triangle
+    and the crests of the sine fall between points and read up to 2.5 % low."""
+    from labrig.rig.limits import RigLimits
+
+    lim = RigLimits()
+    c, a = lim.effective_capacitance_F, 60.0
+    peak_per_hz, mean_per_hz = {
+        "sine": (math.pi * c * a, 2 * c * a),
+        "offset_sine": (2 * math.pi * c * a, 4 * c * a),
+        "triangle": (4 * c * a, 4 * c * a),
+    }[kind]
+    f_max = min(lim.i_peak_A / peak_per_hz, lim.i_avg_A / mean_per_hz)
+    bias = "" if kind == "sine" else ", offset_V: 40"
+    for f, ok in ((f_max * 0.999, True), (f_max * 1.001, False)):
+        if rate / f < 20:
+            continue  # too few samples a cycle: refused for that, not for the current
+        text = (f"name: r\nrate_hz: {rate!r}\nsteps:\n  - {{kind: {kind}, amplitude_V: {a}"
+                f"{bias}, frequency_hz: {f!r}, cycles: 20}}\n")  # fmt: skip
+        if ok:
+            passes(tmp_path, text)
+        else:
+            msg = str(refusal(tmp_path, text))
+            assert "on average" in msg or "peak" in msg, msg

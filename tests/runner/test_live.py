@@ -439,6 +439,10 @@ def test_unlisted_paths_methods_and_sizes_are_refused(served: LiveServer):
         "/vendor/",
         "/vendor/README.md",  # in the package, not a listed path
         "http://127.0.0.1/frame",  # absolute form: not a path
+        "//live.js",  # http.server reduces "//" to "/": the target as sent is not listed
+        "///frame",
+        "//vendor/uPlot.iife.min.js",
+        "//",
     ):
         code, _, body = request(port, target, host)
         assert code == 404, target

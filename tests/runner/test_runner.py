@@ -322,3 +322,44 @@ def test_interrupt_once_outside_the_main_thread_does_nothing():
     t.start()
     t.join(5)
     assert seen == [True]
+
+
+def test_a_default_name_taken_meanwhile_moves_the_run_to_the_next_free_name(tmp_path: Path):
+    """``labrig run`` without ``--out`` chooses ``runs/NAME-STAMP.h5``; another run started in
+    the same second may create that file first: this run then takes the next free name (never
+    a refusal, never a write into the other run's file), while a name the user gave is
+    refused as before."""
+    p = write_protocol(tmp_path, [{"kind": "hold", "voltage_V": 1.0, "duration_s": 0.05}])
+    plan, rig = runner.preflight(p, None)
+    chosen = runner.default_out_path(plan, tmp_path / "runs")
+    chosen.parent.mkdir()
+    chosen.write_bytes(b"the other run's file")  # it appeared after the name was chosen
+    outcome = runner.execute(plan, rig, chosen, seed=1, default_name=True)
+    assert outcome.exit_code == 0, outcome.reason
+    assert outcome.path != chosen and outcome.path.parent == chosen.parent
+    # the same second's next name, or a later second's (the clock may have moved on)
+    assert outcome.path.name.startswith("runner_test-") and outcome.path.suffix == ".h5"
+    assert chosen.read_bytes() == b"the other run's file"
+    assert read_run(outcome.path).status == "complete"
+    with pytest.raises(InputFileError, match="exists"):
+        runner.execute(plan, rig, chosen, seed=1)  # given by the user: refused
+
+
+def test_the_writer_never_truncates_a_file_created_after_its_check(tmp_path, monkeypatch):
+    """Two writers racing for one path: the second's create fails (O_EXCL), the first's file
+    keeps its bytes."""
+    from labrig.store import RunWriter
+
+    target = tmp_path / "r.h5"
+    real_exists = Path.exists
+
+    def racing_exists(self: Path, *a, **k) -> bool:
+        if self == target and not real_exists(self):
+            target.write_bytes(b"the other writer's file")  # created right after the check
+            return False
+        return real_exists(self, *a, **k)
+
+    monkeypatch.setattr(Path, "exists", racing_exists)
+    with pytest.raises(FileExistsError):
+        RunWriter(target, "name: x\n", "", {}, 1)
+    assert target.read_bytes() == b"the other writer's file"
