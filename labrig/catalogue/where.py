@@ -257,9 +257,10 @@ def _one(value: Any, c: Condition) -> bool:
     if c.number is not None and stored is not None:
         if isinstance(stored, int) and c.integer is not None:
             return _order_exact(stored, c.integer, op)
-        exact = _fraction(c.value) if isinstance(stored, int) and op != "=" else None
-        if exact is not None:  # seed>=9007199254740992.5: as written, not as a float
-            return _order_exact(stored, exact, op)
+        if isinstance(stored, int) and op != "=":  # seed>=9007199254740992.5: as written
+            exact = _fraction(c.value)
+            if exact is not None:
+                return _order_exact(stored, exact, op)
         return _order(stored, c.number, op)
     if c.span is not None and (t := _as_time(value)) is not None:
         return _compare_times(t, Condition(c.text, "date", op, c.value, None, c.span))
