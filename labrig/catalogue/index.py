@@ -85,6 +85,10 @@ class FolderIndex:
         self.path: Path | None = folder / INDEX_NAME
         self.note = ""
         try:
+            if self.path.is_symlink() or (self.path.exists() and not self.path.is_file()):
+                # never written through: a link could lead out of the folder, to a database
+                # whose tables this index would drop
+                raise sqlite3.OperationalError("a symbolic link or not a file: not followed")
             self.db = self._open_file(self.path)
         except sqlite3.Error as e:
             self.note = f"index kept in memory ({self.path}: {e})"

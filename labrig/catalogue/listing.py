@@ -283,7 +283,7 @@ def list_runs(
     unreadable = sorted((r for r in listed if not r.readable), key=lambda r: str(r.path))
     runs = []
     for run in listed:
-        ok, entries = matches(run.record, conditions)
+        ok, entries = matches({**run.record, "path": str(run.path)}, conditions)
         if ok:
             run.entries = entries
             runs.append(run)

@@ -33,6 +33,7 @@ known) a key that no run listed has.
 from __future__ import annotations
 
 import math
+import os
 import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
@@ -329,6 +330,9 @@ def _run_values(record: dict[str, Any], c: Condition) -> list[Any]:
         return [len(record.get("entries", []))]
     if c.key == "protocol":
         return [record.get("protocol"), record.get("protocol_file")]
+    if c.key == "file":  # as listed, and as an absolute path
+        path = record.get("path")
+        return [path, os.path.abspath(path)] if isinstance(path, str) else []
     if c.key == "status":  # as the listing prints it (incomplete), and as the file stores it
         status = record.get("status")
         return [SHOWN_STATUS.get(str(status), status), status]

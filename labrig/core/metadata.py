@@ -37,7 +37,7 @@ TEXT_KEYS = frozenset({OPERATOR, SAMPLE, ACTUATOR_MODEL, ACTUATOR_SERIAL})
 
 MetaValue = str | bool | int | float
 
-_INT = re.compile(r"[-+]?(0|[1-9][0-9]{0,17})")
+_INT = re.compile(r"[-+]?(0|[1-9][0-9]*)")
 _FLOAT = re.compile(r"[-+]?([0-9]+\.[0-9]*|\.[0-9]+|[0-9]+)([eE][-+]?[0-9]{1,3})?")
 
 
@@ -99,7 +99,7 @@ def check_value(key: str, value: object) -> MetaValue:
     if isinstance(value, bool | str):
         pass
     elif isinstance(value, int):
-        if abs(value) >= 2**63:
+        if not -(2**63) <= value < 2**63:
             raise MetadataError(f"{key}: whole numbers must fit in 64 bits")
     elif isinstance(value, float):
         if not math.isfinite(value):
@@ -120,7 +120,9 @@ def check_value(key: str, value: object) -> MetaValue:
 def parse_value(key: str, text: str) -> MetaValue:
     """A command-line value: a number, ``true``/``false`` or text (module docstring)."""
     if key not in TEXT_KEYS:
-        if _INT.fullmatch(text):
+        if _INT.fullmatch(text):  # never a float: 99999999999999999999999 is no 1e+23
+            if len(text) > 40:
+                raise MetadataError(f"{key}: whole numbers must fit in 64 bits")
             return check_value(key, int(text))
         if _FLOAT.fullmatch(text):
             return check_value(key, float(text))

@@ -127,6 +127,10 @@ SELECTIONS: list[tuple[list[str], set[str]]] = [
     (["since=2026-03", "until=2026-03"], {"a.h5", "d.h5"}),
     (["date<2026-03-01"], {"b.h5"}),
     (["date~2026-03"], {"a.h5", "d.h5"}),
+    # the file's path, as listed and as an absolute path
+    (["file~b.h"], {"b.h5"}),
+    (["file!~b.h"], {"a.h5", "c.h5", "d.h5"}),
+    (["file~h5", "protocol=sweep"], {"b.h5"}),
     # with an offset, as instants: d began 21:30 UTC on March 31st
     (["since=2026-03-31T21:00+00:00"], {"c.h5", "d.h5"}),
     (["since=2026-03-31T22:00+00:00"], {"c.h5"}),
@@ -182,6 +186,13 @@ def test_where_selects_the_right_files(folder: Path, where: list[str], expected:
     for w in where:
         args += ["--where", w]
     assert listed(cli(*args)) == expected
+
+
+def test_where_file_equals_the_path_as_listed_or_absolute(folder: Path):
+    absolute = str((folder / "c.h5").absolute())
+    assert listed(cli(str(folder), "--json", "--where", f"file={absolute}")) == {"c.h5"}
+    listed_as = str(folder / "d.h5")
+    assert listed(cli(str(folder), "--json", "--where", f"file={listed_as}")) == {"d.h5"}
 
 
 def test_listing_shows_status_protocol_date_metadata_and_entries(folder: Path):
@@ -550,3 +561,29 @@ def test_the_python_listing_keeps_big_whole_numbers(tmp_path: Path):
     ids = dict(zip(frame["protocol"], frame["metadata/batch_id"], strict=True))
     assert ids["a"] == 2**62 + 3 and type(ids["a"]) is int
     assert ids["b"] is None or ids["b"] != ids["b"]  # absent: None or NaN
+
+
+@pytest.mark.parametrize("target_kind", ["database", "text"])
+def test_an_index_that_is_a_symbolic_link_is_not_followed(tmp_path: Path, target_kind: str):
+    """``DIR/.labrig-index.sqlite`` linking elsewhere: the listing keeps its index in memory
+    and says so; the file linked to keeps its tables and rows, the link stays a link."""
+    import sqlite3
+
+    d = tmp_path / "runs"
+    d.mkdir()
+    write_run(d / "x.h5", "first", [("sine", 10, 1)])
+    other = tmp_path / "other.sqlite"
+    if target_kind == "database":
+        db = sqlite3.connect(other)
+        db.execute("CREATE TABLE files (path TEXT, precious TEXT)")
+        db.execute("INSERT INTO files VALUES ('a', 'kept')")
+        db.commit()
+        db.close()
+    else:
+        other.write_text("not a database, and not labrig's")
+    before = other.read_bytes()
+    (d / INDEX_NAME).symlink_to(other)
+    listing = list_runs([d])
+    assert [r.path.name for r in listing.runs] == ["x.h5"]
+    assert any("not followed" in n for n in listing.notes), listing.notes
+    assert (d / INDEX_NAME).is_symlink() and other.read_bytes() == before

@@ -237,3 +237,24 @@ def test_a_run_without_metadata_has_no_user_or_sample(tmp_path: Path):
         assert f["a/definition"][()] == b"NXlabrig"
         assert "i_peak_A" not in f["run/instrument/amp"]  # unset: absent
         assert f["run/instrument/amp/gain_V_per_V"].attrs["units"] == "V/V"
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("n=9223372036854775807", 2**63 - 1),  # the largest 64-bit whole number: kept exactly
+        ("n=-9223372036854775808", -(2**63)),
+        ("n=9007199254740993", 2**53 + 1),  # past 2**53: no float on the way
+        ("n=12345678901234567890123", None),  # 23 digits: refused, never stored as 1.2e+22
+        ("n=9223372036854775808", None),  # 2**63: just outside
+        ("n=-9223372036854775809", None),
+        ("n=" + "9" * 5000, None),  # beyond Python's digit limit for int(): refused the same
+    ],
+)
+def test_whole_numbers_of_meta_are_exact_or_refused(text: str, expected: int | None) -> None:
+    if expected is None:
+        with pytest.raises(MetadataError, match="64 bits"):
+            parse_assignment(text)
+    else:
+        key, value = parse_assignment(text)
+        assert key == "n" and type(value) is int and value == expected
