@@ -40,7 +40,6 @@ summary per model is the mean over the folds (every file weighs the same).
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import math
 from collections.abc import Sequence
@@ -72,6 +71,7 @@ from labrig.commands.prepare import (
 from labrig.core.errors import InputFileError, InputIssue
 from labrig.core.jsonsafe import json_safe
 from labrig.core.outputs import same_file
+from labrig.core.samples import samples_digest
 from labrig.model import ModelParams
 from labrig.model.effects import Effect
 
@@ -382,22 +382,15 @@ def _floor(tests: Sequence[Setup], ours: ValidatedModel) -> tuple[float | None, 
     return float(np.mean(vals)), f"{SOURCE} (our model on the test records)"
 
 
-def _samples_digest(r: Record) -> bytes:
-    """SHA-256 of a record's voltage and strain samples (float64, little-endian)."""
-    h = hashlib.sha256(np.ascontiguousarray(r.voltage_V, dtype="<f8").tobytes())
-    h.update(np.ascontiguousarray(r.strain_ue, dtype="<f8").tobytes())
-    return h.digest()
-
-
 def check_unseen(train: Setup, tests: Sequence[Setup]) -> None:
     """No test record holds the very samples of a training record: the same capture imported
     twice under two names, or a file gathering several captures one of which is also tested,
     would score a model on data it was identified on (:func:`check_files` catches the same
     file only). Records are compared by their voltage and strain samples
-    (:func:`_samples_digest`)."""
+    (:func:`~labrig.core.samples.samples_digest`)."""
     seen: dict[bytes, str] = {}
     for r in train.records:
-        seen.setdefault(_samples_digest(r), r.name)
+        seen.setdefault(samples_digest(r.voltage_V, r.strain_ue), r.name)
     issues = [
         InputIssue(
             str(s.path),
@@ -409,7 +402,7 @@ def check_unseen(train: Setup, tests: Sequence[Setup]) -> None:
         )
         for s in tests
         for r in s.records
-        if (d := _samples_digest(r)) in seen
+        if (d := samples_digest(r.voltage_V, r.strain_ue)) in seen
     ]
     if issues:
         raise InputFileError(issues)

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from labrig.core.errors import InputFileError, InputIssue
 from labrig.core.metadata import RunMetadata
+from labrig.core.samples import samples_digest
 from labrig.importers.dspace import capture_table, find_captures
 from labrig.importers.entry import ImportedEntry, build_entry
 from labrig.importers.labels import entry_name
@@ -144,11 +145,30 @@ def read_entries(files: list[Path], checked: Checked) -> list[ImportedEntry]:
     """Every input read and checked, in the order given (nothing is written)."""
     entries: list[ImportedEntry] = []
     taken: set[str] = set()
+    seen: dict[bytes, ImportedEntry] = {}
+    issues: list[InputIssue] = []
     for f in files:
         for table in read_tables(Path(f), checked):
             name = entry_name(table.source, table.capture, table.n_captures, taken)
-            entries.append(build_entry(table, checked, name))
+            e = build_entry(table, checked, name)
+            # the same samples from files that differ in bytes (line ends, a BOM, a header):
+            # two entries of one record would let a leave-one-out score see what it scores
+            first = seen.setdefault(samples_digest(e.voltage_V, e.strain), e)
+            if first is not e:
+                issues.append(
+                    InputIssue(
+                        str(e.source),
+                        None,
+                        e.meta.get("capture", ""),
+                        f"holds the same voltage and strain samples as {first.source}"
+                        + (f" ({first.meta['capture']})" if first.meta.get("capture") else "")
+                        + ": give each record once",
+                    )
+                )
+            entries.append(e)
             taken.add(name)
+    if issues:
+        raise InputFileError(issues)
     return entries
 
 

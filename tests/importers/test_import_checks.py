@@ -148,3 +148,28 @@ def test_two_files_of_the_same_content_are_refused_naming_both(tmp_path: Path):
     ok = run_import(f, other, "--out", tmp_path / "r.h5")
     assert ok.exit_code == 0, ok.output
     assert [e.name for e in read_run(tmp_path / "r.h5")] == ["a", "b"]
+
+
+def test_the_same_samples_in_files_of_other_bytes_are_refused(tmp_path: Path):
+    """Line ends, a byte-order mark, another header or units that convert to the same values:
+    the files differ, the records do not. One sample changed: two records."""
+    f = _csv(tmp_path / "a.csv", "time_s,voltage_V,strain_ue")
+    text = f.read_text()
+    crlf = tmp_path / "a_crlf.csv"
+    crlf.write_bytes(text.replace("\n", "\r\n").encode())
+    bom = tmp_path / "a_bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + text.replace("time_s,", "t [s],").encode())
+    res = run_import(f, crlf, bom, "--out", tmp_path / "r.h5")
+    assert res.exit_code == 2, res.output
+    said = " ".join(res.stderr.split())
+    assert f"{crlf}: holds the same voltage and strain samples as {f}" in said
+    assert f"{bom}: holds the same voltage and strain samples as {f}" in said
+    assert not (tmp_path / "r.h5").exists()
+    lines = text.splitlines()
+    *head, last = lines
+    cells = last.split(",")
+    cells[2] = repr(float(cells[2]) + 1e-3)  # one strain sample differs
+    changed = tmp_path / "changed.csv"
+    changed.write_text("\n".join([*head, ",".join(cells)]) + "\n")
+    ok = run_import(f, changed, "--out", tmp_path / "r.h5")
+    assert ok.exit_code == 0, ok.output

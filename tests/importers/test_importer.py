@@ -50,7 +50,7 @@ def test_no_header_indices_rate_and_scale(tmp_path: Path) -> None:
     v = np.linspace(0, 3, n)
     raw = -2.0 * v
     f = _csv(tmp_path / "a.dat", None, [v, np.zeros(n), raw], delim="\t")
-    g = _csv(tmp_path / "b.dat", None, [v, np.zeros(n), raw], delim=" ")
+    g = _csv(tmp_path / "b.dat", None, [v, np.zeros(n), 1.5 * raw], delim=" ")  # other data
     out = tmp_path / "r.h5"
     args = ["import", str(f), str(g), "--out", str(out), "--voltage", "1", "--strain", "3"]
     args += ["--rate-hz", "200", "--strain-scale", "-1", "--voltage-scale", "10"]
