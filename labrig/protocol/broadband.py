@@ -166,6 +166,18 @@ def prbs_parts(s: PrbsStep, n: int, rate_hz: float) -> tuple[list[wf.Segment], d
 # -- multisine -----------------------------------------------------------------------------
 
 
+#: the most line-samples (lines x samples of the entry) a multisine may ask of its peak search
+#: (``MULTISINE_PEAK_OVERSAMPLE`` times the entry's samples, each a sum over every line): about
+#: 30 ns each, so that ``labrig check`` of one entry stays within about 20 s of CPU
+MAX_MULTISINE_LINE_SAMPLES = 30_000_000
+
+
+def multisine_work(n_lines: int, n_samples: int) -> int:
+    """Line-samples of an entry's multisine: ``n_lines x n_samples`` (each sample a sum of every
+    line); at most :data:`MAX_MULTISINE_LINE_SAMPLES`."""
+    return n_lines * n_samples
+
+
 def _multisine_sum(t: Array, freqs: Array, phases: Array) -> Array:
     t = np.asarray(t, dtype=float)
     out = np.zeros(t.shape)

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from labrig.core.errors import InputFileError, InputIssue
-from labrig.core.numbers import beyond, fixed
+from labrig.core.numbers import at_most, beyond, fixed
 from labrig.protocol import broadband as bb
 from labrig.protocol import waveforms as wf
 from labrig.protocol.concrete import Concrete, intervals, num_tag, sanitize
@@ -341,6 +341,16 @@ class _Builder:
         where = self._around_where(base, ("frequencies_hz",), "duration_s")
         n = self.n_of(s.duration_s, where["length"], "the multisine")
         if n is None:
+            return []
+        work, most = bb.multisine_work(len(s.frequencies_hz), n), bb.MAX_MULTISINE_LINE_SAMPLES
+        if work > most:  # its peak search and its samples would take minutes to compute
+            self.issue(
+                where["length"],
+                f"{len(s.frequencies_hz)} lines over {n} samples ({work:.3g} line-samples) are "
+                f"more than a multisine may have ({most:.3g}; each sample sums every line): "
+                f"use fewer lines, a shorter duration_s or a lower rate_hz (at most "
+                f"{at_most(most / len(s.frequencies_hz) / self.rate)} s here)",
+            )
             return []
         pieces, definition = bb.multisine_parts(s, n, self.rate)
         name = s.name or bb.multisine_name(s)

@@ -333,3 +333,35 @@ def test_names_and_titles(tmp_path):
     assert "LFSR order 6, seed 5" in plan.steps[1].title
     assert "Schroeder" in plan.steps[2].title
     assert math.isclose(plan.steps[0].duration_s, 0.5)
+
+
+def test_a_multisine_too_large_to_synthesise_is_refused_before_any_work(tmp_path, monkeypatch):
+    """Lines x samples past the bound: refused at once (exit 2, the duration blamed, the
+    longest duration that passes offered), not computed for minutes; one sample under the
+    bound passes (checked with the bound lowered, so that the passing case is cheap)."""
+    import time
+
+    from labrig.core.errors import InputFileError
+    from labrig.protocol import broadband
+    from labrig.protocol.check import check_protocol
+
+    lines = [0.5 + 4 * k for k in range(100)]
+    rate = 100_000
+
+    def protocol(n_samples: int) -> Path:
+        p = tmp_path / f"m{n_samples}.yaml"
+        p.write_text(f"name: m\nrate_hz: {rate}\nsteps:\n  - kind: multisine\n    offset_V: 10\n"
+                     f"    amplitude_V: 1\n    frequencies_hz: {lines}\n"
+                     f"    duration_s: {n_samples / rate!r}\n")  # fmt: skip
+        return p
+
+    t0 = time.process_time()
+    with pytest.raises(InputFileError) as e:
+        check_protocol(protocol(40 * rate))  # 40 s at 100 kHz: minutes of work before
+    assert time.process_time() - t0 < 5.0  # refused before the work, not after it
+    msg = str(e.value)
+    assert "duration_s" in msg and "line-samples" in msg and "fewer lines" in msg
+    monkeypatch.setattr(broadband, "MAX_MULTISINE_LINE_SAMPLES", 100 * 20_000)
+    with pytest.raises(InputFileError, match="line-samples"):
+        check_protocol(protocol(20_001))
+    check_protocol(protocol(20_000))
