@@ -154,4 +154,6 @@ def import_(
         typer.echo(f"{e.name}: {e.voltage_V.size} samples at {e.rate_hz:g} Hz ({cols}{aux_text})")
         for note in conversion_notes(e.meta):
             typer.echo(f"  {note}")
+        for what in e.meta.get("skipped", []):  # e.g. a temperature column with a gap
+            typer.echo(f"  left out: {what}")
     typer.echo(str(out))

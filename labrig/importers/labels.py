@@ -13,12 +13,14 @@ like units (``mm/m`` stays a strain unit, ``force/disp`` a name).
 from __future__ import annotations
 
 import re
+import unicodedata
 from pathlib import Path
 
 #: units recognised after the last underscore of a label (``temperature_C``, ``disp_um``)
 SUFFIX_UNITS = frozenset((
     "s", "ms", "us", "ns", "min", "h", "V", "mV", "uV", "kV", "A", "mA", "uA", "nA", "ue",
-    "microstrain", "ppm", "pct", "percent", "um", "nm", "mm", "cm", "m", "degC", "C", "K",
+    "microstrain", "ppm", "pct", "percent", "um", "µm", "μm", "nm", "mm", "cm", "m", "degC",
+    "C", "K",
     "degF", "Hz", "kHz", "N", "kN", "Pa", "kPa", "MPa", "bar", "W", "mW", "ohm", "Ohm", "rad",
     "deg",
 ))  # fmt: skip
@@ -69,7 +71,9 @@ def _a_ratio(text: str) -> bool:
 def safe_name(text: str, fallback: str = "ch") -> str:
     """``text`` made HDF5-safe: other characters become ``_``; a name that does not start with a
     letter gets ``fallback_`` in front; cut to 63 characters."""
-    name = re.sub(r"[^A-Za-z0-9_]+", "_", text).strip("_")
+    # a letter with a mark keeps its base letter (ümlaut -> umlaut); one with none is dropped
+    plain = unicodedata.normalize("NFKD", text).encode("ascii", "ignore").decode("ascii")
+    name = re.sub(r"[^A-Za-z0-9_]+", "_", plain).strip("_")
     if not name or not name[0].isalpha():
         name = f"{fallback}_{name}" if name else fallback
     return name[:63].rstrip("_") or fallback

@@ -45,6 +45,10 @@ class Selection:
 def column_list(table: Table, limit: int = 12) -> str:
     """The columns for a message: ``1 time [s], 2 voltage [V], ...`` or how many there are."""
     shown = [c for c in table.columns if not c.is_axis]
+    if not shown:
+        return "the file holds no numeric signal" + (
+            f"; left out: {'; '.join(table.skipped[:3])}" if table.skipped else ""
+        )
     if not any(c.named for c in shown):
         return f"{len(shown)} columns, no names: give a number from 1 to {len(shown)}"
     parts = [

@@ -421,3 +421,27 @@ def test_a_complex_variable_of_a_v5_mat_file_is_left_out_not_cut_to_its_real_par
     out = tmp_path / "c.h5"
     res = CliRunner().invoke(app, ["import", str(tmp_path / "c.mat"), "--out", str(out)])
     assert res.exit_code == 2 and "which column is the voltage" in res.output, res.output
+
+
+def test_names_keep_base_letters_and_the_import_says_what_it_left_out(tmp_path: Path):
+    from labrig.importers.labels import safe_name
+
+    assert safe_name("ümlaut") == "umlaut" and safe_name("Temperatur °C") == "Temperatur_C"
+    assert split_label("dehnung_µm") == ("dehnung", "µm")
+    f = tmp_path / "gap.csv"
+    f.write_text("time [s],voltage [V],strain [ue],temperature [degC]\n0,1,2,25\n0.001,2,3,\n"
+                 "0.002,3,4,25\n")  # fmt: skip
+    res = CliRunner().invoke(app, ["import", str(f), "--out", str(tmp_path / "g.h5")])
+    assert res.exit_code == 0, res.output
+    assert "left out: column 4 (temperature)" in res.output
+
+
+def test_a_mat_file_without_signals_says_so(tmp_path: Path):
+    from scipy.io import savemat
+
+    savemat(tmp_path / "e.mat", {})
+    res = CliRunner().invoke(
+        app, ["import", str(tmp_path / "e.mat"), "--out", str(tmp_path / "e.h5")]
+    )
+    assert res.exit_code == 2 and "holds no numeric signal" in res.output, res.output
+    assert "from 1 to 0" not in res.output
