@@ -68,7 +68,9 @@ def run_with_progress(
             )
             return 2
         if not extras.resume.is_file():
-            typer.echo(f"error: --resume {extras.resume}: run file not found", err=True)
+            what = "a folder" if extras.resume.is_dir() else "not a regular file"
+            why = f"{what}, not a run file" if extras.resume.exists() else "run file not found"
+            typer.echo(f"error: --resume {extras.resume}: {why}", err=True)
             return 2
     resume = None
     named = out is not None

@@ -5,6 +5,7 @@ argument or option) exiting 64, distinct from a bad input file (2)."""
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -165,3 +166,17 @@ def test_the_package_says_it_is_typed():
     from importlib import resources
 
     assert resources.files("labrig").joinpath("py.typed").is_file()
+
+
+def test_resume_names_a_folder_or_a_pipe_as_such(tmp_path: Path) -> None:
+    """``--resume`` given something that exists but is no file says what it is (a missing
+    file is "not found")."""
+    sweep = Path(__file__).resolve().parents[2] / "experiments" / "sweep.yaml"
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    for target, says in ((tmp_path, "a folder, not a run file"),
+                         (fifo, "not a regular file, not a run file"),
+                         (tmp_path / "missing.h5", "run file not found")):  # fmt: skip
+        res = invoke("run", sweep, "--resume", target)
+        assert res.exit_code == 2, res.output
+        assert f"--resume {target}: {says}" in res.stderr, res.stderr
