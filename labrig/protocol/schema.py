@@ -442,10 +442,12 @@ class Protocol(_Base):
 
     @field_validator("name", "description")
     @classmethod
-    def _printable(cls, v: str | None) -> str | None:
+    def _printable(cls, v: str | None, info: ValidationInfo) -> str | None:
         """No control or format characters (a bell, a right-to-left override): the name is
-        printed on terminals and pages; a description may hold line breaks and tabs."""
-        bad = next((c for c in v or "" if not (c.isprintable() or c in "\n\t")), None)
+        printed on terminals and pages, on one line of a listing; a description may hold line
+        breaks and tabs."""
+        breaks = "\n\t" if info.field_name == "description" else ""
+        bad = next((c for c in v or "" if not (c.isprintable() or c in breaks)), None)
         if bad is not None:
             raise ValueError(f"must be printable text (found the control character {bad!r})")
         return v

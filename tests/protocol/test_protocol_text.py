@@ -1,6 +1,6 @@
 """A protocol's name and description are printable text (they are printed on terminals and
 pages): control and format characters are refused with their line; line breaks and tabs are
-allowed in a description."""
+allowed in a description, not in a name (one line of a listing)."""
 
 from __future__ import annotations
 
@@ -20,6 +20,9 @@ HOLD = "rate_hz: 500\nsteps:\n  - {kind: hold, voltage_V: 5, duration_s: 0.1}\n"
         ('name: "a \\x07 bell"\n', "name", "'\\x07'"),
         ('name: "a \\u202e override"\n', "name", "'\\u202e'"),
         ('name: ok\ndescription: "an \\x1b[31m escape"\n', "description", "'\\x1b'"),
+        # a name is one line of a listing: no line break or tab in it
+        ('name: "line1\\nline2"\n', "name", "'\\n'"),
+        ('name: "a\\ttab"\n', "name", "'\\t'"),
     ],
 )
 def test_control_characters_are_refused(tmp_path, head, field, shown):
