@@ -70,7 +70,16 @@ def export(
         raise typer.BadParameter(
             "Missing option '--out': give the folder for the CSV files", param_hint="--out"
         )
+    from labrig.store.reader import being_written
+
+    writer = being_written(run_file)
     written = export_csv(run_file, folder, overwrite, option="--csv" if csv else "--out")
+    if writer is not None:  # a run in progress: the CSVs end where the file did
+        typer.echo(
+            f"note: {run_file} is being written ({writer}): the CSV files hold what it held "
+            "when read; export again when the run has ended",
+            err=True,
+        )
     if as_json:
         typer.echo(json_text({"files": [str(p) for p in written]}))
         return

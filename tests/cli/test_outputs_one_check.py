@@ -185,3 +185,18 @@ def test_the_writer_probe_is_asked_only_about_existing_files(tmp_path: Path):
     assert asked == [idle, busy]
     with pytest.raises(OutputExistsError):
         check_outputs([idle], being_written=probe)
+
+
+def test_export_of_a_run_being_written_says_so(tmp_path: Path):
+    """The CSV files of a run still being written end where the file did when read: exit 0
+    (what is there is exported) with a note naming the writer; none for a finished run."""
+    target = tmp_path / "X.h5"
+    writer = start_writer(target)
+    try:
+        res = invoke("export", target, "--out", tmp_path / "csv")
+        assert res.exit_code == 0, res.output
+        assert "is being written" in res.stderr and f"process {writer.pid}" in res.stderr
+    finally:
+        stop_writer(writer)
+    res = invoke("export", target, "--out", tmp_path / "csv2")
+    assert res.exit_code == 0 and "being written" not in res.stderr, res.output
