@@ -118,7 +118,9 @@ def aux_channels(
         (k, ch) for (_, k), ch in zip(sel.requested, _requested(table, sel, n, taken), strict=True)
     ]
     skipped = []
-    for k in sel.candidates:
+    # a column named "temperature" is the temperature before any other in degC (`temp 1`)
+    named_so = [k for k in sel.candidates if safe_name(table.columns[k].label) == "temperature"]
+    for k in named_so + [k for k in sel.candidates if k not in named_so]:
         why = _unusable(table, k, n)
         if why is None:
             continue

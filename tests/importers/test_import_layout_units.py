@@ -445,3 +445,16 @@ def test_a_mat_file_without_signals_says_so(tmp_path: Path):
     )
     assert res.exit_code == 2 and "holds no numeric signal" in res.output, res.output
     assert "from 1 to 0" not in res.output
+
+
+def test_the_column_named_temperature_is_the_temperature(tmp_path: Path):
+    """Two columns in degC: the one named ``temperature`` is the channel the analysis reads,
+    whatever its place; the other keeps its own name."""
+    f = tmp_path / "t.csv"
+    rows = "".join(f"{i / 1000},{1 + i},{2 + i},{20 + i},25\n" for i in range(5))
+    f.write_text("time [s],voltage [V],strain [ue],temp 1 [degC],temperature [degC]\n" + rows)
+    res = CliRunner().invoke(app, ["import", str(f), "--out", str(tmp_path / "t.h5")])
+    assert res.exit_code == 0, res.output
+    (e,) = list(read_run(tmp_path / "t.h5"))
+    np.testing.assert_array_equal(e["temperature"], [25.0] * 5)
+    np.testing.assert_array_equal(e["temp_1"], [20.0, 21.0, 22.0, 23.0, 24.0])
