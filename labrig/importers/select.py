@@ -83,9 +83,14 @@ def _default(table: Table, role: str, taken: set[int]) -> int | None:
     """By name (:data:`DEFAULT_NAMES`), else the only free column in a unit of the role."""
     free = [k for k, c in enumerate(table.columns) if k not in taken and not c.is_axis]
     for name in DEFAULT_NAMES[role]:
-        for k in free:
-            if name in _names(table, k):
-                return k
+        hits = [k for k in free if name in _names(table, k)]
+        same = {(table.columns[k].label.lower(), table.columns[k].unit) for k in hits}
+        if len(same) < len(hits):  # "voltage [V]" twice: never the first one silently
+            places = ", ".join(table.place(k) for k in hits)
+            raise table.error(None, f"two columns could be the {role} ({places}): "
+                              f"give --{role} NUMBER")  # fmt: skip
+        if hits:
+            return hits[0]
     kinds = UNIT_KINDS.get(role, ())
     by_unit = [k for k in free if parse_unit(table.columns[k].unit).kind in kinds]
     return by_unit[0] if len(by_unit) == 1 else None

@@ -458,3 +458,19 @@ def test_the_column_named_temperature_is_the_temperature(tmp_path: Path):
     (e,) = list(read_run(tmp_path / "t.h5"))
     np.testing.assert_array_equal(e["temperature"], [25.0] * 5)
     np.testing.assert_array_equal(e["temp_1"], [20.0, 21.0, 22.0, 23.0, 24.0])
+
+
+def test_two_columns_of_one_name_and_unit_are_not_guessed(tmp_path: Path):
+    """``voltage [V]`` twice: refused naming both (the first was taken silently); a number
+    picks one; ``time_s`` beside ``time_ms`` (one quantity in two units) still takes the first."""
+    f = tmp_path / "v.csv"
+    f.write_text("time [s],voltage [V],strain [ue],voltage [V]\n"
+                 + "".join(f"{i / 1000},{1 + i},{2 + i},5\n" for i in range(5)))  # fmt: skip
+    res = CliRunner().invoke(app, ["import", str(f), "--out", str(tmp_path / "v.h5")])
+    assert res.exit_code == 2, res.output
+    assert "column 2 (voltage), column 4 (voltage)" in " ".join(res.output.split())
+    res = CliRunner().invoke(app, ["import", str(f), "--out", str(tmp_path / "v.h5"),
+                                   "--voltage", "4"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    (e,) = list(read_run(tmp_path / "v.h5"))
+    np.testing.assert_array_equal(e["command_voltage"], [5.0] * 5)
