@@ -82,7 +82,9 @@ class _Builder:
         return Where(field_name(path), line_of(path, self.lines))
 
     def issue(self, w: Where, msg: str) -> None:
-        self.issues.append(InputIssue(self.file, w.line, w.field, msg))
+        found = InputIssue(self.file, w.line, w.field, msg)
+        if found not in self.issues:  # a shared key (params:) read by every step: said once
+            self.issues.append(found)
 
     def n_of(self, seconds: float, w: Where, what: str) -> int | None:
         """Sample intervals for ``seconds`` at the protocol rate, or None (issue recorded)."""
@@ -666,9 +668,8 @@ def build_plan(
             rig_path = path.parent / rig_path
         if not rig_path.is_file():
             w = Where("rig", line_of(("rig",), lines))
-            raise InputFileError(
-                [InputIssue(file, w.line, w.field, f"rig file not found: {rig_path}")]
-            )
+            why = "not a file" if rig_path.exists() else "rig file not found"
+            raise InputFileError([InputIssue(file, w.line, w.field, f"{why}: {rig_path}")])
     return Plan(
         path=path,
         file=file,

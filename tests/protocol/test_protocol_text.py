@@ -66,3 +66,24 @@ def test_an_unquoted_date_is_named_as_a_date(tmp_path):
     assert said in str(e.value)
     p.write_text('name: "2026-01-01"\n' + HOLD)
     assert check_protocol(p).name == "2026-01-01"
+
+
+def test_a_bad_shared_params_file_is_said_once_and_a_rig_folder_is_named(tmp_path):
+    """Every strain step reads the protocol's ``params:``: a broken file is one issue, not one
+    per step; ``rig:`` naming a folder says so (not "not found")."""
+    (tmp_path / "bad.json").write_text("{not json")
+    steps = "".join(
+        f"  - {{kind: strain_sine, amplitude_ue: 100, frequency_hz: {f}, cycles: 2, "
+        "control: direct}\n"
+        for f in (1, 2, 3)
+    )
+    p = tmp_path / "p.yaml"
+    p.write_text("name: c\nrate_hz: 1000\nparams: bad.json\nsteps:\n" + steps)
+    with pytest.raises(InputFileError) as e:
+        check_protocol(p)
+    texts = [str(i) for i in e.value.issues]
+    assert len(texts) == 1 and "bad.json is not valid JSON" in texts[0], texts
+    (tmp_path / "rigdir").mkdir()
+    p.write_text("name: r\nrig: rigdir\n" + HOLD)
+    with pytest.raises(InputFileError, match="not a file"):
+        check_protocol(p)
