@@ -330,9 +330,13 @@ def _run_values(record: dict[str, Any], c: Condition) -> list[Any]:
         return [len(record.get("entries", []))]
     if c.key == "protocol":
         return [record.get("protocol"), record.get("protocol_file")]
-    if c.key == "file":  # as listed, and as an absolute path
+    if c.key == "file":  # as listed, and as an absolute path; file=PATH in any spelling
         path = record.get("path")
-        return [path, os.path.abspath(path)] if isinstance(path, str) else []
+        if not isinstance(path, str):
+            return []
+        if c.op.lstrip("!") == "=" and os.path.abspath(c.value) == os.path.abspath(path):
+            return [c.value]
+        return [path, os.path.abspath(path)]
     if c.key == "status":  # as the listing prints it (incomplete), and as the file stores it
         status = record.get("status")
         return [SHOWN_STATUS.get(str(status), status), status]

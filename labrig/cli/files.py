@@ -104,7 +104,9 @@ def import_(
     capture: list[str] = typer.Option(
         [], "--capture", help="ControlDesk capture to import: name or number (default: all)."
     ),
-    voltage_scale: float = typer.Option(1.0, help="Multiply the voltage (e.g. amplifier gain)."),
+    voltage_scale: float | None = typer.Option(
+        None, help="Multiply the voltage (e.g. amplifier gain; 1: raw numbers are volts)."
+    ),
     voltage_offset: float = typer.Option(0.0, help="Then add this (V)."),
     strain_scale: float = typer.Option(1.0, help="Multiply the strain (-1: flip its sign)."),
     strain_offset: float = typer.Option(0.0, help="Then add this (ue)."),

@@ -286,6 +286,17 @@ def _unit(r: Record, channel: str) -> str:
     return str(u) if u else ""
 
 
+def _in_volts(unit: str) -> bool:
+    """``""`` (the run file's unit), ``V``, or another spelling of volts (``v``, ``Vdc``: files
+    an earlier import kept as they were)."""
+    if unit in ("", "V"):
+        return True
+    from labrig.importers.units import parse_unit
+
+    u = parse_unit(unit)
+    return u.kind == "voltage" and u.pint_unit is not None and str(u.pint_unit) == "volt"
+
+
 def unit_issues(records: Sequence[tuple[Path, Record]]) -> list[InputIssue]:
     """Units that make records unfit to fit or score together (each with its file): a voltage
     not in V (the model's input is volts), and strains in more than one unit (one model, one
@@ -293,7 +304,7 @@ def unit_issues(records: Sequence[tuple[Path, Record]]) -> list[InputIssue]:
     as V and ue, the run file's units."""
     out = []
     for path, r in records:
-        if _unit(r, "command_voltage") not in ("", "V"):
+        if not _in_volts(_unit(r, "command_voltage")):
             out.append(
                 InputIssue(
                     str(path),

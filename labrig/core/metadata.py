@@ -120,9 +120,12 @@ def check_value(key: str, value: object) -> MetaValue:
 def parse_value(key: str, text: str) -> MetaValue:
     """A command-line value: a number, ``true``/``false`` or text (module docstring)."""
     if key not in TEXT_KEYS:
+        digits = text.lstrip("+-")
+        if digits.isdigit() and (len(digits) > 19 or (len(digits) > 1 and digits[0] == "0")):
+            return check_value(key, text)  # a barcode, a lot "007": an identifier, kept as text
         if _INT.fullmatch(text):  # never a float: 99999999999999999999999 is no 1e+23
-            if len(text) > 40:
-                raise MetadataError(f"{key}: whole numbers must fit in 64 bits")
+            if not -(2**63) <= int(text) < 2**63:
+                return check_value(key, text)  # 20 digits: an identifier, not a number
             return check_value(key, int(text))
         if _FLOAT.fullmatch(text):
             return check_value(key, float(text))

@@ -30,7 +30,7 @@ class ImportOptions:
     rate_hz: float | None = None
     window: str | None = None
     captures: list[str] = field(default_factory=list)
-    voltage_scale: float = 1.0
+    voltage_scale: float | None = None  # None: not given (1); given, even 1: raw numbers as V
     voltage_offset: float = 0.0
     strain_scale: float = 1.0
     strain_offset: float = 0.0
@@ -141,8 +141,10 @@ def parse_scales(opt: ImportOptions) -> dict[str, float]:
             )
         scales[name.strip()] = factor
     for role, value in (("voltage", opt.voltage_scale), ("strain", opt.strain_scale)):
+        if value is None:
+            continue
         _finite(f"--{role}-scale", value, nonzero=True)
-        if value != 1.0:
+        if value != 1.0 or role == "voltage":  # --voltage-scale 1 says: these are volts
             if role in scales:
                 raise option_error(f"--{role}-scale", f"and --scale {role}=...: give one of them")
             scales[role] = value

@@ -43,7 +43,15 @@ class Selection:
 
 
 def column_list(table: Table, limit: int = 12) -> str:
-    """The columns for a message: ``1 time [s], 2 voltage [V], ...`` or how many there are."""
+    """The columns for a message: ``1 time [s], 2 voltage [V], ...`` or how many there are,
+    and what the reader left out (a complex or logical variable, a text column)."""
+    listed = _listed(table, limit)
+    if table.skipped and table.columns:
+        listed += f"; left out: {'; '.join(table.skipped[:3])}"
+    return listed
+
+
+def _listed(table: Table, limit: int) -> str:
     shown = [c for c in table.columns if not c.is_axis]
     if not shown:
         return "the file holds no numeric signal" + (

@@ -348,8 +348,9 @@ class _Builder:
         if work > most:  # its peak search and its samples would take minutes to compute
             self.issue(
                 where["length"],
-                f"{len(s.frequencies_hz)} lines over {n} samples ({work:.3g} line-samples) are "
-                f"more than a multisine may have ({most:.3g}; each sample sums every line): "
+                f"{len(s.frequencies_hz)} lines over {n + 1} samples ({work:.3g} "
+                f"line-samples) are more than a multisine may have ({most:.3g}; each sample "
+                "sums every line): "
                 f"use fewer lines, a shorter duration_s or a lower rate_hz (at most "
                 f"{at_most(most / len(s.frequencies_hz) / self.rate)} s here)",
             )

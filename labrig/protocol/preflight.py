@@ -9,7 +9,10 @@ For each entry of a plan:
 - peak current ``i = C_eff dV/dt`` (``C_eff = capacitance_F * large_signal_factor``) at most
   ``i_peak_A``;
 - mean ``|i|`` over a sliding window at most ``i_avg_A``; the window is one carrier cycle for
-  sines and envelopes, :data:`AVG_WINDOW_S` otherwise (0 V assumed before the entry starts).
+  sines and envelopes, :data:`AVG_WINDOW_S` otherwise (0 V assumed before the entry starts);
+  the mean is the grid's total variation over the window (each interval's own change), and for
+  sines, offset sines and triangles of constant amplitude the formula's current when larger
+  (:func:`continuous_load`).
 
 The measurement is :func:`labrig.rig.drive_load.measure_load`, one
 :class:`~labrig.rig.drive_load.DriveLoad` per entry (the record the controller's
@@ -128,14 +131,20 @@ def measure(
 def continuous_load(step: PlannedStep, chk: DriveLoad, limits: RigLimits) -> DriveLoad:
     """``chk`` with its peak and mean currents raised to what the waveform's formula gives, for
     the kinds of constant amplitude that have one (unipolar sine ``pi C A f`` and ``2 C A f``,
-    offset sine ``2 pi C A f`` and ``4 C A f``, triangle ``4 C A f`` for both). The fine grid
+    offset sine ``2 pi C A f`` and ``4 C A f``, triangle ``4 C A f`` for both), when the entry
+    holds at least one whole cycle at constant amplitude (an envelope that grows or vanishes,
+    or half a cycle, never draws the cycle's mean: the grid's value stands). The fine grid
     reads a triangle's corner or a sine's crest between its points a little low (a triangle at
     20 samples a cycle by up to 2.5 %), so without this the verdict near a limit would depend on
     the sample rate."""
-    a = step.definition.get("amplitude_V") if isinstance(step.definition, dict) else None
-    f = step.frequency_hz
+    d = step.definition if isinstance(step.definition, dict) else {}
+    a, f, cycles = d.get("amplitude_V"), step.frequency_hz, d.get("cycles")
     if not isinstance(a, int | float) or not f:
         return chk
+    if d.get("envelope", "constant") != "constant":
+        return chk  # a growing or vanishing envelope reaches the formula's current nowhere
+    if not isinstance(cycles, int | float) or cycles < 1:
+        return chk  # under a period the window's mean is not the cycle's (half a triangle)
     c = limits.effective_capacitance_F
     formulas = {
         "sine": (math.pi * c * a * f, 2.0 * c * a * f),

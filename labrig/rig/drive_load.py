@@ -11,9 +11,11 @@ The current into the stack is ``i = C_eff dV/dt`` (:meth:`RigLimits.current_A`: 
 capacitance_F * large_signal_factor``, ``dV/dt`` by central differences). It is taken on a grid
 :data:`OVERSAMPLE` times finer than the output rate: the finer grid sees the slope the amplifier
 follows after the DAQ's reconstruction, independent of the rate (a 100 V, 56 Hz sine sampled at
-1 kHz underestimates its peak slope by 2 %). The mean current is the mean of ``|i|`` over a
-sliding window of :func:`averaging_window_s` (one period of a periodic drive, else
-:data:`AVG_WINDOW_S`), with 0 A before the drive starts. For a unipolar sine of amplitude ``A``
+1 kHz underestimates its peak slope by 2 %). The peak uses the central differences; the mean
+current over a sliding window of :func:`averaging_window_s` (one period of a periodic drive,
+else :data:`AVG_WINDOW_S`), with 0 A before the drive starts, uses each interval's own change
+``C_eff |V[j+1] - V[j]| / dt`` (the window's total variation: a central difference reads 0 at a
+triangle's corner). For a unipolar sine of amplitude ``A``
 (V) and frequency ``f`` (Hz) this gives ``i_peak = pi C_eff A f`` and a period mean
 ``2 C_eff A f``.
 

@@ -193,6 +193,10 @@ def test_where_file_equals_the_path_as_listed_or_absolute(folder: Path):
     assert listed(cli(str(folder), "--json", "--where", f"file={absolute}")) == {"c.h5"}
     listed_as = str(folder / "d.h5")
     assert listed(cli(str(folder), "--json", "--where", f"file={listed_as}")) == {"d.h5"}
+    dotted = f"{folder}/./sub/../b.h5"  # another spelling of the same path
+    assert listed(cli(str(folder), "--json", "--where", f"file={dotted}")) == {"b.h5"}
+    assert listed(cli(str(folder), "--json", "--where", f"file!={dotted}")) == {
+        "a.h5", "c.h5", "d.h5"}  # fmt: skip
 
 
 def test_listing_shows_status_protocol_date_metadata_and_entries(folder: Path):

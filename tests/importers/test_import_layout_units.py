@@ -474,3 +474,51 @@ def test_two_columns_of_one_name_and_unit_are_not_guessed(tmp_path: Path):
     assert res.exit_code == 0, res.output
     (e,) = list(read_run(tmp_path / "v.h5"))
     np.testing.assert_array_equal(e["command_voltage"], [5.0] * 5)
+
+
+@pytest.mark.parametrize("unit", ["v", "Vdc", "V DC", "volt", "Volts"])
+def test_spellings_of_volts_are_volts(tmp_path: Path, unit: str):
+    f = _write(tmp_path / "v.csv", f"time [s];voltage [{unit}];strain [ue]")
+    res = CliRunner().invoke(app, ["import", str(f), "--out", str(tmp_path / "v.h5")])
+    assert res.exit_code == 0, res.output
+    (e,) = list(read_run(tmp_path / "v.h5"))
+    assert e.units["command_voltage"] == "V"
+    assert float(np.max(e["command_voltage"])) == pytest.approx(100.0, abs=1e-3)
+
+
+def test_voltage_scale_1_takes_raw_numbers_as_volts_and_ue_spelled_with_mu(tmp_path: Path):
+    f = _write(tmp_path / "c.csv", "time [s];voltage [counts];strain [µe]")
+    res = CliRunner().invoke(app, ["import", str(f), "--out", str(tmp_path / "c.h5"),
+                                   "--voltage-scale", "1"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    (e,) = list(read_run(tmp_path / "c.h5"))
+    assert e.units["command_voltage"] == "V" and e.units["strain"] == "ue"
+    assert float(np.max(e["command_voltage"])) == pytest.approx(100.0, abs=1e-3)
+
+
+def test_a_run_file_an_earlier_import_wrote_in_v_is_still_fitted(tmp_path: Path):
+    """Files written before the voltage's unit was checked may say ``v`` or ``Vdc``: volts;
+    ``mV`` is a voltage but not in volts: refused (the model's input is volts)."""
+    from labrig.commands.prepare import unit_issues
+
+    f = _write(tmp_path / "a.csv", "time [s];voltage [V];strain [ue]")
+    out = tmp_path / "a.h5"
+    assert CliRunner().invoke(app, ["import", str(f), "--out", str(out)]).exit_code == 0
+    (r,) = records_from_run(out)
+    assert r.meta["units"]["command_voltage"] == "V"
+    for unit, ok in (("Vdc", True), ("v", True), ("", True), ("mV", False), ("raw", False)):
+        r.meta["units"]["command_voltage"] = unit
+        issues = unit_issues([(out, r)])
+        assert (issues == []) == ok, (unit, issues)
+
+
+def test_a_complex_voltage_variable_is_named_when_the_voltage_is_missing(tmp_path: Path):
+    from scipy.io import savemat
+
+    t = np.arange(500) / 1000
+    savemat(tmp_path / "c.mat", {"time_s": t, "voltage_V": (5 * t) + 0j * t + 1j * (t > 2),
+                                 "strain_ue": 40 * t})  # fmt: skip
+    res = CliRunner().invoke(app, ["import", str(tmp_path / "c.mat"), "--out",
+                                   str(tmp_path / "c.h5")])  # fmt: skip
+    assert res.exit_code == 2, res.output
+    assert "left out: variable voltage_V: complex values" in " ".join(res.output.split())

@@ -119,3 +119,35 @@ def test_the_current_limits_do_not_depend_on_the_sample_rate(tmp_path, kind: str
         else:
             msg = str(refusal(tmp_path, text))
             assert "on average" in msg or "peak" in msg, msg
+
+
+@pytest.mark.parametrize(
+    "step",
+    [
+        # half and three quarters of a triangle cycle over the cycle's limit: their window's
+        # mean is what the grid measures (0.071 and 0.102 A), not the cycle's 0.13 A
+        "{kind: triangle, amplitude_V: 50, offset_V: 50, start: low, frequency_hz: 65, "
+        "cycles: 0.5}",
+        "{kind: triangle, amplitude_V: 50, offset_V: 50, start: low, frequency_hz: 65, "
+        "cycles: 0.75}",
+    ],
+)
+def test_less_than_a_cycle_is_judged_by_what_it_draws(tmp_path, step: str):
+    passes(tmp_path, f"name: r\nrate_hz: 10000\nsteps:\n  - {step}\n")
+
+
+def test_a_vanishing_offset_sine_is_judged_by_what_it_draws(tmp_path):
+    """Over its constant-amplitude limit, but vanishing: its measured mean stays under the
+    average limit (0.095 A against 0.12 A on a rig of 0.30 A peak), so it passes; the same
+    sine at constant amplitude is refused."""
+    from labrig.rig.limits import RigLimits
+
+    lim = RigLimits(i_peak_A=0.30)
+    body = ("name: r\nrate_hz: 10000\nsteps:\n  - {kind: offset_sine, offset_V: 50, "
+            "amplitude_V: 50, frequency_hz: 62, cycles: 2, envelope: %s}\n")  # fmt: skip
+    p = tmp_path / "p.yaml"
+    p.write_text(body % "vanishing")
+    check_protocol(p, lim)
+    p.write_text(body % "constant")
+    with pytest.raises(InputFileError, match="on average"):
+        check_protocol(p, lim)
