@@ -149,13 +149,18 @@ class Record:
         )
 
 
+def unit_of(r: Record, channel: str) -> str:
+    """A channel's unit as the record states it (``meta["units"][channel]``, which the run-file
+    reader sets), ``""`` when it states none."""
+    units = r.meta.get("units") if isinstance(r.meta, dict) else None
+    u = units.get(channel) if isinstance(units, dict) else None
+    return str(u) if u else ""
+
+
 def strain_unit(records: Iterable[Record]) -> str:
-    """The strain's unit as the records state it (``meta["units"]["strain"]``, which the
-    run-file reader sets: ``ue``, or what an import kept, e.g. ``raw``); ``ue`` when none does.
-    """
+    """The strain's unit as the records state it (:func:`unit_of`: ``ue``, or what an import
+    kept, e.g. ``raw``); ``ue`` when none does."""
     for r in records:
-        units = r.meta.get("units") if isinstance(r.meta, dict) else None
-        u = units.get("strain") if isinstance(units, dict) else None
-        if u:
-            return str(u)
+        if u := unit_of(r, "strain"):
+            return u
     return "ue"

@@ -40,7 +40,7 @@ import numpy as np
 
 from labrig.analysis import load
 from labrig.analysis.metrics import drive_frequency_hz
-from labrig.analysis.records import Record
+from labrig.analysis.records import Record, unit_of
 from labrig.analysis.split import split_entries
 from labrig.core.errors import InputFileError, InputIssue, LabrigError, option_error
 from labrig.model import ModelParams
@@ -280,12 +280,6 @@ def check_records(
         raise InputFileError(issues)
 
 
-def _unit(r: Record, channel: str) -> str:
-    units = r.meta.get("units") if isinstance(r.meta, dict) else None
-    u = units.get(channel) if isinstance(units, dict) else None
-    return str(u) if u else ""
-
-
 def _in_volts(unit: str) -> bool:
     """``""`` (the run file's unit), ``V``, or another spelling of volts (``v``, ``Vdc``: files
     an earlier import kept as they were)."""
@@ -304,18 +298,18 @@ def unit_issues(records: Sequence[tuple[Path, Record]]) -> list[InputIssue]:
     as V and ue, the run file's units."""
     out = []
     for path, r in records:
-        if not _in_volts(_unit(r, "command_voltage")):
+        if not _in_volts(unit_of(r, "command_voltage")):
             out.append(
                 InputIssue(
                     str(path),
                     None,
                     f"{r.name}/command_voltage",
-                    f"in {_unit(r, 'command_voltage')!r}, not V: the model's input is volts "
+                    f"in {unit_of(r, 'command_voltage')!r}, not V: the model's input is volts "
                     "(labrig import converts mV and kV, and --voltage-scale turns raw numbers "
                     "into volts)",
                 )
             )
-    strain = {(path, r.name): _unit(r, "strain") or "ue" for path, r in records}
+    strain = {(path, r.name): unit_of(r, "strain") or "ue" for path, r in records}
     if len(set(strain.values())) > 1:
         (p0, n0), u0 = next(iter(strain.items()))
         for (path, name), u in strain.items():

@@ -247,7 +247,6 @@ def _core(table: Table, sel: Selection, checked: Checked, n: int) -> dict:
         _column(table, k, n, role, sel.voltage)
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             values, stored, note = _in_unit(table, k, role, unit, checked)
-        with np.errstate(over="ignore", invalid="ignore"):
             values, how = _scaled(role, values, checked, offset)
         if not np.all(np.isfinite(values)):  # finite in the file: the conversion overflowed
             i = int(np.flatnonzero(~np.isfinite(values))[0])

@@ -30,7 +30,7 @@ from labrig.importers.limits import (
     MAX_MAT_VALUES,
     MAX_STRUCT_DEPTH,
 )
-from labrig.importers.table import bad
+from labrig.importers.table import EXACT_INTEGER, bad
 
 #: a MATLAB file's tree: variable name -> value
 Tree = dict[str, Any]
@@ -63,7 +63,7 @@ def _depth(path: str, depth: int) -> None:
 def _numeric(a: np.ndarray) -> np.ndarray:
     """float64, except integers past 2**53 (kept as they are, so that
     :class:`~labrig.importers.table.Column` counts them exactly from their first value)."""
-    if a.dtype.kind in "iu" and a.size and (int(a.max()) > 2**53 or int(a.min()) < -(2**53)):
+    if a.dtype.kind in "iu" and a.size and max(int(a.max()), -int(a.min())) > EXACT_INTEGER:
         return a
     return np.asarray(a, dtype=np.float64)
 

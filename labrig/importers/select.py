@@ -46,17 +46,13 @@ def column_list(table: Table, limit: int = 12) -> str:
     """The columns for a message: ``1 time [s], 2 voltage [V], ...`` or how many there are,
     and what the reader left out (a complex or logical variable, a text column)."""
     listed = _listed(table, limit)
-    if table.skipped and table.columns:
-        listed += f"; left out: {'; '.join(table.skipped[:3])}"
-    return listed
+    return f"{listed}; left out: {'; '.join(table.skipped[:3])}" if table.skipped else listed
 
 
 def _listed(table: Table, limit: int) -> str:
     shown = [c for c in table.columns if not c.is_axis]
     if not shown:
-        return "the file holds no numeric signal" + (
-            f"; left out: {'; '.join(table.skipped[:3])}" if table.skipped else ""
-        )
+        return "the file holds no numeric signal"
     if not any(c.named for c in shown):
         return f"{len(shown)} columns, no names: give a number from 1 to {len(shown)}"
     parts = [

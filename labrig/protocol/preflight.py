@@ -145,15 +145,13 @@ def continuous_load(step: PlannedStep, chk: DriveLoad, limits: RigLimits) -> Dri
         return chk  # a growing or vanishing envelope reaches the formula's current nowhere
     if not isinstance(cycles, int | float) or cycles < 1:
         return chk  # under a period the window's mean is not the cycle's (half a triangle)
-    c = limits.effective_capacitance_F
-    formulas = {
-        "sine": (math.pi * c * a * f, 2.0 * c * a * f),
-        "offset_sine": (2.0 * math.pi * c * a * f, 4.0 * c * a * f),
-        "triangle": (4.0 * c * a * f, 4.0 * c * a * f),
-    }
-    if step.kind not in formulas:
+    if step.kind not in ("sine", "offset_sine", "triangle"):
         return chk
-    peak, mean = formulas[step.kind]
+    peak, mean = sine_currents_A(a, f, limits)
+    if step.kind == "offset_sine":  # the swing is 2 A, not A
+        peak, mean = 2.0 * peak, 2.0 * mean
+    elif step.kind == "triangle":  # a slope of 4 A f throughout
+        peak = mean = 4.0 * limits.effective_capacitance_F * a * f
     return dataclasses.replace(
         chk,
         peak_current_A=max(chk.peak_current_A, peak),
