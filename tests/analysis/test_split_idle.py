@@ -124,3 +124,25 @@ def test_the_noise_band_is_capped_at_five_percent_of_the_span(a_pct, idle) -> No
     a = a_pct / 100 * 300.0
     v = a * np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
     assert (idle_lead(idle_then_sine(v)) > 0) is idle
+
+
+def test_the_diagnosis_names_where_its_worst_part_lies_in_the_record() -> None:
+    """A diagnosis of a cut record names its worst part with the stretch of the record it
+    covers (the record's own time): a user cannot find "run_part3" in their file. 12 s of
+    drive at 200 Hz in four parts of whole periods: part 3 is t = 6-9 s; the prediction's
+    error is put on that stretch only, so it is the worst."""
+    from labrig.analysis.diagnose.evidence import collect_evidence
+
+    rec = driven_then_held(12.0, 0.0)
+    parts = split_entries([rec], 4)
+    preds = {p.name: p.strain_ue.copy() for p in parts}
+    rng = np.random.default_rng(1)
+    for p in parts:
+        preds[p.name] += 1e-3 * rng.standard_normal(p.n)
+    preds["run_part3"] += 0.5 * np.sin(2 * np.pi * 3.0 * parts[2].time_s)
+    ev = collect_evidence(parts, preds)
+    worst = next(s for s in ev.sentences if s.startswith("worst entry"))
+    assert worst.startswith("worst entry run_part3 (t = 6-9 s of run): ")
+    assert ev.entries["run_part1"].part_of == "t = 0-3 s of run"
+    whole = collect_evidence([rec], {"run": rec.strain_ue + 1e-3})
+    assert whole.entries["run"].part_of is None

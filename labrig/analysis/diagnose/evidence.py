@@ -59,6 +59,9 @@ class EntryEvidence:
     lines: list[dict[str, float]] = field(default_factory=list)  # non-synchronous lines
     temperature_rise_K: float | None = None
     amp_departure_V: float | None = None
+    #: for a part of a record cut into entries (``meta["split_of"]``): the stretch of that
+    #: record it covers, e.g. "t = 62.5-125 s of real50k" (the record's own time, s)
+    part_of: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {k: v for k, v in self.__dict__.items()}
@@ -165,7 +168,19 @@ def _entry_evidence(r: Record, m: NDArray, p: NDArray) -> EntryEvidence:
         e.temperature_rise_K = float(np.median(T[-50:]) - np.median(T[:50]))
     if "amplifier_voltage" in r.aux:
         e.amp_departure_V = float(np.max(np.abs(r.aux["amplifier_voltage"] - r.voltage_V)))
+    e.part_of = _part_of(r)
     return e
+
+
+def _part_of(r: Record) -> str | None:
+    """Where a part of a cut record (:func:`labrig.analysis.split.split_entries`) lies in the
+    record it was cut from, in that record's time (s, its last sample's interval included), or
+    ``None`` for an entry of its own."""
+    src = r.meta.get("split_of")
+    if src is None or r.n == 0:
+        return None
+    t0, t1 = float(r.time_s[0]), float(r.time_s[-1]) + 1.0 / r.rate_hz
+    return f"t = {t0:.4g}-{t1:.4g} s of {src}"
 
 
 #: entries whose frequencies (or amplitudes) all lie within this share of the largest are one
@@ -256,8 +271,9 @@ def _sentences(ev: Evidence) -> list[str]:
     ]
     lst = list(ev.entries.values())
     worst = max(lst, key=lambda e: e.nrmse_pct / max(e.floor_pct, 1e-12))
+    where = f" ({worst.part_of})" if worst.part_of else ""
     out.append(
-        f"worst entry {worst.name}: {worst.nrmse_pct:.3g} % "
+        f"worst entry {worst.name}{where}: {worst.nrmse_pct:.3g} % "
         f"({worst.nrmse_pct / max(worst.floor_pct, 1e-12):.2g} x its floor)"
     )
     cf = f.get("excess_vs_log_frequency")
