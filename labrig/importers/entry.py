@@ -146,20 +146,23 @@ def _time_base(
     """(time in s from the first sample, rate in Hz, metadata, the first sample's time in s as
     the file gives it) of the record. The time column is counted from its first value before
     its unit is converted: stamps of large magnitude (nanoseconds since 1970) keep their steps
-    (their differences are exact; 9e15 ns converted first would keep steps of 2e-5 s to 1e-4)."""
+    (their differences are exact; 9e15 ns converted first would keep steps of 2e-5 s to 1e-4),
+    and so do decimal stamps far from zero (seconds since 1970 with µs digits: counted from
+    the text, :meth:`~labrig.importers.table.Table.count_exactly`)."""
     lo, hi = RATE_RANGE_HZ
     rate_opt = checked.opt.rate_hz
     if sel.time is None:
         if rate_opt is None:
             raise table.error(None, "no time column: give the sample rate with --rate-hz")
         return np.arange(n) / rate_opt, float(rate_opt), {"rate_from": "--rate-hz"}, 0.0
+    table.count_exactly(sel.time)  # before the checks: they see the values stored
     _column(table, sel.time, n, "time", sel.voltage)
     c = table.columns[sel.time]
     assert c.values is not None
     first = float(c.values[0])
     c.values = c.values - first  # exact for stamps of one binade, and for integer counts
     t, stored, note = _in_unit(table, sel.time, "time", c.unit, checked)
-    start_s = float(convert(np.array([c.origin + first]), parse_unit(c.unit), "time")[0][0])
+    start_s = float(convert(np.array([float(c.origin) + first]), parse_unit(c.unit), "time")[0][0])
     if stored != "s":
         raise table.error(sel.time, f"{note}: a time column needs a time unit (s, ms...)")
     dt = np.diff(t)
@@ -191,7 +194,7 @@ def _time_base(
         raise table.error(
             sel.time, f"--rate-hz {rate_opt:g} disagrees with the time column ({rate:.9g} Hz)"
         )
-    if c.origin:  # integers past 2**53: counted from the first in integers (read exactly)
+    if c.origin:  # integers past 2**53, decimals far from zero: counted exactly from the first
         note = "; ".join(x for x in (f"counted from its first value {c.origin}", note) if x)
     meta = {"rate_from": "time column"} | ({"time_conversion": note} if note else {})
     return t, rate, meta, start_s

@@ -6,11 +6,17 @@ and only for the columns an import uses, so that memory stays near the size of t
 Blank lines and ``#`` comments inside the data are skipped; a row with more fields than the data
 has columns, or a field that is not a number in a column the import needs, is an error naming
 the line. A column that holds text (a date, a comment) and is not needed is left out and said so.
+A quoted field is read like an unquoted one (``"1,5"`` with a decimal comma, spaces before the
+quote allowed), as the layout was found.
+
+A time column far from zero against its steps (time stamps since 1970 with µs digits) is read a
+second time, as text, and counted from its first value exactly (:meth:`_Reader.recount`).
 """
 
 from __future__ import annotations
 
 import re
+from decimal import Decimal
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +26,9 @@ from numpy.typing import NDArray
 from labrig.importers.limits import CHUNK_ROWS, MAX_COLUMNS, MAX_ROWS, SNIFF_BYTES
 from labrig.importers.sniff import Layout, LayoutError, find_layout
 from labrig.importers.table import Column, Table, bad, exact_floats, relative_to
+
+#: where the values of a column are counted from: column -> origin (:func:`_counted`)
+Origins = dict[int, int | Decimal]
 
 
 def read_layout(
@@ -56,7 +65,14 @@ def text_table(path: Path, layout: Layout) -> Table:
         )
     locator = _Locator(path, layout)
     reader = _Reader(path, layout, locator)
-    return Table(path, columns, layout=layout.describe(), locate=locator.line, loader=reader.load)
+    return Table(
+        path,
+        columns,
+        layout=layout.describe(),
+        locate=locator.line,
+        loader=reader.load,
+        recount=reader.recount,
+    )
 
 
 class _Locator:
@@ -131,6 +147,7 @@ class _Reader:
 
     def __init__(self, path: Path, layout: Layout, locator: _Locator) -> None:
         self.path, self.layout, self.locator = path, layout, locator
+        self.integers: set[int] = set()  # columns read as integers: exact already
 
     def load(self, table: Table, indices: list[int], required: set[int]) -> None:
         try:
@@ -143,7 +160,10 @@ class _Reader:
             table.layout["notes"].append("not UTF-8 throughout: read as cp1252")
             self._load(table, indices, required, "cp1252")
 
-    def _chunks(self, encoding: str) -> pd.io.parsers.TextFileReader:
+    def _chunks(self, encoding: str, text: int | None = None) -> pd.io.parsers.TextFileReader:
+        """The data in blocks of rows: every column (numbers where they parse), or only column
+        ``text`` as it is written (its texts, for :meth:`recount`). Spaces after a separator are
+        skipped, so that a quoted field after them is read as the sniffer read it."""
         lay = self.layout
         return pd.read_csv(
             self.path,
@@ -151,11 +171,14 @@ class _Reader:
             decimal=lay.decimal,
             header=None,
             names=list(range(lay.width)),
+            usecols=None if text is None else [text],
+            dtype=None if text is None else {text: object},
             index_col=False,
             skiprows=lay.first_data_line - 1,
             encoding=encoding,
             comment="#",
             skip_blank_lines=False,
+            skipinitialspace=True,
             chunksize=CHUNK_ROWS,
             engine="c",
         )
@@ -165,7 +188,7 @@ class _Reader:
         columns = {k: _Growing(capacity) for k in indices}
         blank_rows: list[NDArray[np.int64]] = []
         text_columns: set[int] = set()
-        origins: dict[int, int] = {}  # integer columns past 2**53: counted from their first value
+        origins: Origins = {}  # integer columns (past 2**53: counted from their first value)
         start = 0
         try:
             for chunk in self._chunks(enc):
@@ -191,6 +214,7 @@ class _Reader:
         except pd.errors.EmptyDataError:
             raise bad(self.path, "no data lines", self.layout.first_data_line) from None
         self.locator.blank = np.concatenate(blank_rows) if blank_rows else np.zeros(0, np.int64)
+        self.integers |= set(origins)
         for k in indices:
             if k in text_columns:
                 table.skipped.append(f"{table.place(k)}: text, not numbers")
@@ -199,6 +223,24 @@ class _Reader:
             table.columns[k].values = values
             table.columns[k].length = int(values.size)
             table.columns[k].origin = origins.get(k, 0)
+
+    def recount(self, table: Table, k: int) -> None:
+        """Column ``k`` read again, as text, and counted from its first value exactly (decimal
+        arithmetic on the digits as written: ``1764480000.000100`` s is 1e-4 s after
+        ``1764480000.000000`` s, where float64 gives 0.999e-4 s, and 1.001e-4 s for other
+        steps). Rows are kept as the first reading kept them (blank lines dropped). A column
+        read as integers is exact already and left as it is."""
+        c = table.columns[k]
+        if k in self.integers or c.values is None:
+            return
+        counted = _Growing(c.values.size + self.locator.blank.size)
+        origins: Origins = {}
+        for chunk in self._chunks(self.layout.encoding, text=k):
+            counted.add(_counted(_decimal_texts(chunk[k], self.layout.decimal), origins, k))
+        values = np.delete(counted.result(), self.locator.blank)
+        if values.size != c.values.size:  # the file changed between the readings
+            raise bad(self.path, f"changed while read ({table.place(k)}): import it again")
+        c.values, c.origin = values, origins[k]
 
     def _not_a_number(self, table: Table, col: pd.Series, k: int, start: int) -> Exception:
         text = col.astype("string").str.strip()
@@ -225,22 +267,36 @@ class _Reader:
         return bad(self.path, f"cannot parse as delimited text: {str(e).strip()[:200]}")
 
 
-def _numbers(col: pd.Series, origins: dict[int, int], k: int) -> NDArray[np.float64] | None:
+def _numbers(col: pd.Series, origins: Origins, k: int) -> NDArray[np.float64] | None:
     """Column ``k`` of one block as float64, or None if it holds text. An integer column is
-    counted from ``origins[k]``, set by its first block (:func:`exact_floats`), so that time
-    stamps past 2**53 (nanoseconds since 1970) keep their steps exact."""
+    counted from ``origins[k]`` (:func:`_counted`), so that time stamps past 2**53
+    (nanoseconds since 1970) keep their steps exact."""
     if pd.api.types.is_bool_dtype(col) or not pd.api.types.is_numeric_dtype(col):
         if col.isna().all():
             return np.full(len(col), np.nan)
         return None
     if pd.api.types.is_integer_dtype(col):
-        raw = col.to_numpy()
-        if k not in origins:
-            values, origins[k] = exact_floats(raw)
-            return values
-        return relative_to(raw, origins[k])
+        return _counted(col.to_numpy(), origins, k)
     values = col.to_numpy(dtype=np.float64, na_value=np.nan)
     return values - float(origins[k]) if origins.get(k) else values
+
+
+def _counted(raw: NDArray, origins: Origins, k: int) -> NDArray[np.float64]:
+    """One block of column ``k`` (integers, or decimal texts) as float64 counted from
+    ``origins[k]``, which its first block sets (:func:`~labrig.importers.table.exact_floats`:
+    the first value, or 0 where float64 holds the values exactly)."""
+    if k not in origins:
+        values, origins[k] = exact_floats(raw)
+        return values
+    return relative_to(raw, origins[k])
+
+
+def _decimal_texts(col: pd.Series, decimal: str) -> NDArray[np.object_]:
+    """One block of a column read as text: its cells as decimal texts with ``.`` as the mark
+    (``nan`` where a cell is empty)."""
+    if decimal == ",":
+        col = col.str.replace(",", ".", regex=False)
+    return col.to_numpy(dtype=object, na_value="nan")
 
 
 def read_text(
