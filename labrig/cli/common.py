@@ -21,7 +21,7 @@ import sys
 from collections.abc import Callable, Sequence
 from enum import StrEnum
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, NoReturn, TypeVar
+from typing import IO, TYPE_CHECKING, Any, NoReturn, TypeVar
 
 import typer
 
@@ -40,19 +40,33 @@ E = TypeVar("E", bound=StrEnum)
 OUTPUT_ERRNOS = frozenset({errno.ENOSPC, errno.EPIPE, errno.EIO, errno.EFBIG, errno.EDQUOT})
 
 
-def _stdout_to_devnull() -> None:
-    """Point the standard output at /dev/null, so that Python's last flush at the exit does not
-    fail again on what is still buffered."""
-    with contextlib.suppress(OSError, ValueError, AttributeError):
-        null = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(null, sys.stdout.fileno())
-        os.close(null)
+def to_devnull(*streams: IO[Any]) -> None:
+    """Point ``streams`` (``sys.stdout``, ``sys.stderr``) at /dev/null when one cannot be
+    written (full, closed, a terminal gone), so that later writes, and Python's last flush at
+    the exit (exit 120 when it fails on what is still buffered), cannot fail and change the
+    exit code. A stream that is no file descriptor (a test's) is left as it is."""
+    for stream in streams:
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            null = os.open(os.devnull, os.O_WRONLY)
+            try:
+                os.dup2(null, stream.fileno())
+            finally:
+                os.close(null)
+
+
+def echo_error(text: str) -> None:
+    """A line on the standard error; when that cannot be written, it is dropped
+    (:func:`to_devnull`): the command's exit code stays its own."""
+    try:
+        typer.echo(text, err=True)
+    except OSError:
+        to_devnull(sys.stderr)
 
 
 def _symlink_loop(where: object) -> NoReturn:
     """The one message of a loop of symbolic links (an ``OSError`` ELOOP, or pathlib's
     ``RuntimeError`` from ``resolve()``): exit 2."""
-    typer.echo(f"error: {where}: a loop of symbolic links (no file at its end)", err=True)
+    echo_error(f"error: {where}: a loop of symbolic links (no file at its end)")
     raise typer.Exit(2)
 
 
@@ -66,26 +80,25 @@ def friendly(fn: Callable) -> Callable:
             sys.stdout.flush()  # a full or closed output fails here, not at the exit
             return result
         except LabrigError as e:
-            typer.echo(f"error: {e}", err=True)
+            echo_error(f"error: {e}")
             raise typer.Exit(e.exit_code) from None
         except FileExistsError as e:
-            typer.echo(f"error: {e}", err=True)
+            echo_error(f"error: {e}")
             raise typer.Exit(2) from None
         except OSError as e:
             if e.errno == errno.ELOOP:
                 _symlink_loop(e.filename)
             if e.filename is None and e.errno in OUTPUT_ERRNOS:  # stdout: full, closed, failing
-                _stdout_to_devnull()
-                typer.echo(f"error: the standard output cannot be written: {e.strerror}", err=True)
+                to_devnull(sys.stdout)
+                echo_error(f"error: the standard output cannot be written: {e.strerror}")
                 raise typer.Exit(2) from None
             # a path the system cannot even look up (Python 3.11's Path.exists() raises it)
             if e.errno != errno.ENAMETOOLONG:
                 raise
             name = Path(str(e.filename)).name
-            typer.echo(
+            echo_error(
                 f"error: {e.filename}: file name too long ({len(os.fsencode(name))} bytes in one "
-                "name; file systems allow 255)",
-                err=True,
+                "name; file systems allow 255)"
             )
             raise typer.Exit(2) from None
         except RuntimeError as e:  # pathlib's resolve() on a loop of symbolic links
@@ -93,7 +106,7 @@ def friendly(fn: Callable) -> Callable:
                 raise
             _symlink_loop(str(e).removeprefix("Symlink loop from ").strip("'\""))
         except KeyboardInterrupt:
-            typer.echo("interrupted", err=True)
+            echo_error("interrupted")
             raise typer.Exit(130) from None
 
     return wrapper

@@ -17,6 +17,8 @@ META_HELP = (
 )
 OPERATOR_HELP = "Who runs it (NXuser name; same as --meta operator=NAME)."
 SAMPLE_HELP = "The sample (actuator) id, e.g. 'P-888 #3' (NXsample name; --meta sample=ID)."
+#: the longest ``--live-hold`` (s): a day; longer, or until Ctrl-C, is the option left out
+LIVE_HOLD_MAX_S = 86400.0
 
 
 def checked_meta(values: list[str]) -> list[str]:
@@ -29,6 +31,19 @@ def checked_meta(values: list[str]) -> list[str]:
         except MetadataError as e:
             raise typer.BadParameter(str(e)) from None
     return values
+
+
+def checked_live_hold(value: float | None) -> float | None:
+    """``--live-hold``: seconds from 0 to :data:`LIVE_HOLD_MAX_S`; anything else (negative,
+    ``nan``, ``inf``, longer) is a usage error naming the option and the range."""
+    import math
+
+    if value is None or (math.isfinite(value) and 0 <= value <= LIVE_HOLD_MAX_S):
+        return value
+    raise typer.BadParameter(
+        f"{value:g}: must be a number of seconds from 0 to {LIVE_HOLD_MAX_S:g} (a day); leave "
+        "--live-hold out to serve the finished run until Ctrl-C"
+    )
 
 
 def meta_options() -> tuple:
@@ -98,9 +113,10 @@ def run(
     live_hold: float | None = typer.Option(
         None,
         "--live-hold",
-        min=0,
-        help="After a run that ended by itself, serve the finished run this long (implies "
-        "--live; default: until Ctrl-C; 0: stop once an open page has it).",
+        callback=checked_live_hold,
+        help="After a run that ended by itself, serve the finished run this long, 0 to "
+        f"{LIVE_HOLD_MAX_S:g} s (implies --live; default: until Ctrl-C; 0: stop once an "
+        "open page has it).",
         metavar="SECONDS",
     ),
 ) -> None:

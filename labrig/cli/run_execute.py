@@ -8,8 +8,7 @@ SIGQUIT 131); 1 anything unexpected. Every path that energised the output ramped
 
 from __future__ import annotations
 
-import contextlib
-import os
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +18,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-from labrig.cli.common import plural
+from labrig.cli.common import echo_error, plural, to_devnull
 from labrig.core.interrupts import STOP_SIGNALS, Interrupted, exit_code_for, interrupt_once
 from labrig.core.metadata import RunMetadata
 from labrig.protocol.plan import Plan
@@ -63,14 +62,12 @@ def run_with_progress(
     plan, rig_path = preflight(protocol, rig)
     if extras.resume is not None:
         if out is not None or overwrite:
-            typer.echo(
-                "error: --resume continues FILE in place: give no --out or --overwrite", err=True
-            )
+            echo_error("error: --resume continues FILE in place: give no --out or --overwrite")
             return 2
         if not extras.resume.is_file():
             what = "a folder" if extras.resume.is_dir() else "not a regular file"
             why = f"{what}, not a run file" if extras.resume.exists() else "run file not found"
-            typer.echo(f"error: --resume {extras.resume}: {why}", err=True)
+            echo_error(f"error: --resume {extras.resume}: {why}")
             return 2
     resume = None
     named = out is not None
@@ -80,9 +77,10 @@ def run_with_progress(
     else:  # before anything is shown or energised: damage, another protocol, being written
         resume = check_resume_of(plan, extras.resume)
     where = escape(f"rig {rig_path}") if rig_path else "the simulated rig"
-    console.print(
+    _say(
+        console,
         f"[bold]{escape(plan.name)}[/]: {plural(len(plan.steps), 'entry')}, "
-        f"{plan.total_duration_s:.1f} s of protocol time on {where}"
+        f"{plan.total_duration_s:.1f} s of protocol time on {where}",
     )
     live = _start_live(console, extras)
     # SIGINT, SIGTERM, SIGHUP and SIGQUIT stop the run once (ramp to 0 V, file closed);
@@ -109,6 +107,7 @@ def run_with_progress(
         finally:
             if live is not None:
                 with guard.defer():
+                    tell_if_live_stopped(console, live, "")
                     live.end(outcome.path if outcome is not None else None)
                     if outcome is None:  # no run to show
                         live.close()
@@ -127,8 +126,17 @@ def _start_live(console: Console, extras: RunExtras):
     from labrig.live.launch import LiveProcess
 
     live = LiveProcess(extras.live_port, extras.params)
-    console.print(f"live view: {live.url}")
+    _say(console, f"live view: {live.url}")
     return live
+
+
+def tell_if_live_stopped(console: Console, live, then: str = "; the run goes on") -> None:
+    """Say once, on the terminal, that the live view stopped by itself and why
+    (:meth:`labrig.live.launch.LiveProcess.stopped`), followed by ``then``; the run is not
+    affected (its data come first)."""
+    why = live.stopped()
+    if why:
+        _say(console, f"[yellow]live view stopped[/]: {escape(why)}{then}")
 
 
 def serve_finished_run(console: Console, live, outcome: RunOutcome, hold: float | None) -> None:
@@ -167,27 +175,18 @@ def _report(console: Console, outcome: RunOutcome) -> None:
         _say(console, f"[red]run {outcome.status}[/]: {escape(outcome.reason)}")
     try:
         typer.echo(str(outcome.path))
-    except OSError:
-        _terminal_gone()
+    except OSError:  # the terminal closed (SIGHUP), a full or closed output
+        to_devnull(sys.stdout)
 
 
 def _say(console: Console, text: str) -> None:
-    """Print to the terminal if it is still there (after SIGHUP it may not be)."""
+    """Print to the terminal if it can be written: after SIGHUP (the terminal gone) or on a
+    full or closed standard error, what cannot be said is dropped (:func:`to_devnull`); the
+    run, its file and its exit code do not depend on it."""
     try:
         console.print(text)
     except OSError:
-        _terminal_gone()
-
-
-def _terminal_gone() -> None:
-    """The terminal closed (SIGHUP, a dropped SSH session): send stdout and stderr to the null
-    device, so that later writes, and Python's flush at exit, cannot fail and change the exit
-    code (Python exits 120 when that flush fails)."""
-    with contextlib.suppress(OSError):
-        null = os.open(os.devnull, os.O_WRONLY)
-        for fd in (1, 2):
-            os.dup2(null, fd)
-        os.close(null)
+        to_devnull(console.file)
 
 
 def _execute_with_bar(
@@ -220,6 +219,8 @@ def _execute_with_bar(
             started: list[float] = []
 
             def progress(k: int, n: int, name: str, frac: float, left: float) -> None:
+                if live is not None:
+                    tell_if_live_stopped(console, live)
                 if not started:  # a resume plays only the entries it has left
                     started.append(left)
                     bar.update(task, total=left)
@@ -238,10 +239,10 @@ def _execute_with_bar(
                     default_name=default_name,
                 )
             )  # fmt: skip
-    except OSError:
+    except OSError:  # the bar's last drawing (stderr gone or full): the run is recorded
         if not done:
             raise
-        _terminal_gone()
+        to_devnull(console.file)
     except Interrupted:
         if not done:  # the run had not begun (see run_with_progress)
             raise

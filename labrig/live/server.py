@@ -20,7 +20,10 @@ HEAD (405 otherwise), request targets of at most :data:`MAX_TARGET` characters (
 starts the server before the run and names the file once it exists: :meth:`LiveServer.follow`).
 :meth:`LiveServer.close` tells the pages that the view is closing and keeps serving until a page
 has fetched the run's final state and that word (at most :data:`LINGER_S`), so a page open on
-the run shows how it ended and stops asking.
+the run shows how it ended and stops asking. A thread of the view that fails, or ends before
+:meth:`LiveServer.stop`, leaves the view unable to serve: :attr:`LiveServer.failure` says why
+and ``on_failure`` is told once (``python -m labrig.live`` then ends and tells ``labrig run``,
+which says so and goes on with the run: :mod:`labrig.live.launch`).
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import socket
 import threading
 import time
 from collections import OrderedDict
+from collections.abc import Callable
 from http import HTTPStatus
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
@@ -123,7 +127,13 @@ class EntryReadsBusyError(Exception):
 class LiveServer:
     """Serves the live view of one run file (module docstring)."""
 
-    def __init__(self, path: Path | None, params: Any = None, port: int = 0):
+    def __init__(
+        self,
+        path: Path | None,
+        params: Any = None,
+        port: int = 0,
+        on_failure: Callable[[str], None] | None = None,
+    ):
         self.state = LiveState(params, source=str(path or ""))
         self.params = params
         self.path = path
@@ -141,6 +151,9 @@ class LiveServer:
         self.entry_reads = threading.BoundedSemaphore(ENTRY_READS_AT_ONCE)
         self.httpd = _Server((HOST, port), _handler(self))
         self._threads: list[threading.Thread] = []
+        #: why the view stopped serving by itself ("" while it serves: :meth:`_guarded`)
+        self.failure = ""
+        self._on_failure = on_failure
 
     @property
     def port(self) -> int:
@@ -158,10 +171,32 @@ class LiveServer:
         return host.strip().lower() in {f"{h}:{self.port}" for h in HOST_NAMES}
 
     def start(self) -> None:
-        for target in (self.httpd.serve_forever, self._read_loop, self._entry_loop):
-            t = threading.Thread(target=target, daemon=True)
+        threads = {
+            "web server": self.httpd.serve_forever,
+            "file reader": self._read_loop,
+            "entry reader": self._entry_loop,
+        }
+        for what, target in threads.items():
+            t = threading.Thread(target=self._guarded, args=(what, target), daemon=True)
             t.start()
             self._threads.append(t)
+
+    def _guarded(self, what: str, target: Callable[[], None]) -> None:
+        """Run ``target``, the view's ``what`` thread; if it fails, or ends before
+        :meth:`stop`, the view cannot serve: record why in :attr:`failure` (the first cause
+        only) and tell ``on_failure``, instead of a traceback on the terminal."""
+        try:
+            target()
+        except BaseException as e:
+            why = f"its {what} failed: {_described(e)}"
+        else:
+            if self.stopping.is_set():
+                return
+            why = f"its {what} stopped"
+        with self.lock:
+            first, self.failure = not self.failure, self.failure or why
+        if first and self._on_failure is not None:
+            self._on_failure(why)
 
     def follow(self, path: Path) -> None:
         """Read ``path`` from now on (the run file once it exists, or where it was renamed)."""
@@ -340,6 +375,13 @@ class LiveServer:
             log.warning("live view: refused %s", what)
         if n == REFUSALS_LOGGED:
             log.warning("live view: further refused requests are counted only (page footer)")
+
+
+def _described(e: BaseException) -> str:
+    """An exception in one line: its type and its message's first line (at most 200
+    characters)."""
+    text = (str(e).strip().splitlines() or [""])[0][:200]
+    return f"{type(e).__name__}: {text}" if text else type(e).__name__
 
 
 def _json(doc: dict[str, Any]) -> bytes:

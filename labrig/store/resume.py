@@ -15,6 +15,11 @@ copy is closed: a resume that fails, or is killed, leaves the file as it was.
 - an entry of the plan that is in the file but not complete (aborted, failed, cut short by a
   crash) keeps its samples under a new name, ``<name>_partial<k>``, and the resume records it
   again under its planned name; complete entries are kept as they are;
+- an entry still ``running`` (its writer was killed or crashed while writing it: the file is
+  not being written, :func:`check_resume`) is ended ``aborted`` with the reason
+  :data:`ABANDONED`, its samples kept as recorded and sealed as final
+  (:func:`labrig.store.writer.end_abandoned_entry`): until a resume takes the file over, a
+  killed run's entry keeps reading ``running`` (incomplete), as a live writer's does;
 - ``/run/resumes/resume_<k>`` (NXcollection): ``number``, ``time``, ``entries`` (JSON list of
   the entries it runs), ``superseded`` (JSON: planned name -> the partial entry's new name),
   ``seed`` (the simulated rig's new seed, -1 none), ``software_version``, ``writer_pid``,
@@ -42,6 +47,7 @@ from labrig.store.isolated import IsolatedReadError, call_isolated
 from labrig.store.nexus import set_str, write_metadata_collection
 from labrig.store.parse import read_run_here
 from labrig.store.reader import read_run
+from labrig.store.writer import end_abandoned_entry
 
 #: records of earlier endings moved into the resume record: /run name -> name in the record
 _PREVIOUS = {
@@ -49,6 +55,13 @@ _PREVIOUS = {
     "final_amplifier_voltage_V": "previous_final_amplifier_voltage_V",
     "ramp_to_zero": "previous_ramp_to_zero",
 }
+
+
+#: why an entry a resume finds ``running`` ended (its writer is gone: :func:`record_resume`)
+ABANDONED = (
+    "the run's process ended while this entry was being written (killed or crashed, or its "
+    "end could not be recorded); the entry is kept as recorded"
+)
 
 
 @dataclass
@@ -173,6 +186,7 @@ def record_resume(
     """Write the resume into the open copy ``f`` (module docstring); the caller seals and
     flushes. Returns the resume record."""
     run = f["run"]
+    _end_abandoned(f, plan.number)
     for old, new in plan.superseded.items():
         f.move(old, new)
         set_str(f[new], "title", f"{_text(f[new], 'title') or old} (replaced by a resume)")
@@ -200,6 +214,14 @@ def record_resume(
     if options:
         write_metadata_collection(g, "metadata", options)
     return g
+
+
+def _end_abandoned(f: h5py.File, number: int) -> None:
+    """End every entry of ``f`` still ``running`` as abandoned by its writer
+    (:data:`ABANDONED`), saying which resume found it so."""
+    for name, g in f.items():
+        if name != "run" and isinstance(g, h5py.Group) and _text(g, "status") == "running":
+            end_abandoned_entry(g, f"{ABANDONED} (found so by resume {number})")
 
 
 def _text(g: h5py.Group, name: str) -> str:

@@ -94,13 +94,33 @@ def _renew_seal(obj: h5py.Group | h5py.Dataset, data: tuple[int, int] | None = N
         del attrs[LEGACY_SEAL_ATTR]
 
 
+def _samples_now(ds: h5py.Dataset) -> tuple[int, int]:
+    """The CRC-32 and number of the samples ``ds`` holds now (read whole)."""
+    values = ds[()]
+    return data_crc(values), len(values)
+
+
 def _renew_all(obj: h5py.Group | h5py.Dataset) -> None:
     data = None
     chunked = isinstance(obj, h5py.Dataset) and obj.chunks is not None
     if chunked and sealed_data(obj) is not None:  # sealed samples: sealed again as they are now
-        values = obj[()]
-        data = (data_crc(values), len(values))
+        data = _samples_now(obj)
     _renew_seal(obj, data)
+
+
+def end_abandoned_entry(g: h5py.Group, reason: str) -> None:
+    """Record the end of the entry ``g`` that its writer left ``running`` (its process was
+    killed or crashed, or could not record the end): ``aborted`` with ``reason``, and each
+    channel's samples, kept as they are, sealed as final (their CRC-32 in the seal, as for an
+    entry that ended). Only for a file no process writes: a resume's copy
+    (:func:`labrig.store.resume.record_resume`); the caller seals and flushes."""
+    set_str(g, "status_reason", reason)
+    set_str(g, "status", "aborted")
+    data = g.get("data")
+    channels = data.values() if isinstance(data, h5py.Group) else ()
+    for ds in channels:
+        if isinstance(ds, h5py.Dataset) and ds.chunks is not None:
+            _renew_seal(ds, _samples_now(ds))
 
 
 def seal_all(f: h5py.File) -> None:
