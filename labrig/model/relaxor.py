@@ -241,40 +241,20 @@ class Relaxor:
         u = v - float(rest_V)
         if u.size == 0:
             return u.copy(), u.copy(), u.copy()
-        modes, der = _modes(self.tau_s, self.lam, dt)
-        a, b0, b1 = hold_gains(modes.q, dt, hold)
-        m1, m2, dm1, dm2 = modes.direct_m1, modes.direct_m2, der.dm1, der.dm2
-        if hold == "zoh":  # the instantaneous gains on u[n-1] and u[n]
-            d0, d1, dd0, dd1 = m1, 0.0, dm1, np.zeros(2)
-        else:
-            d0, d1, dd0, dd1 = m2 / dt, m1 - m2 / dt, dm2 / dt, dm1 - dm2 / dt
-        bank = DiscreteBank.from_arrays(
-            np.r_[a, 0.0, 0.0], np.r_[b0, 1.0, 0.0], np.r_[b1, 0.0, 1.0], np.r_[modes.c, d0, d1]
-        )
-        extra = np.hstack([der.dc, dd0[:, None], dd1[:, None]])
-        y = run_bank_multi(bank, u[:, None], extra)[0][:, 0, :]
-        moving = np.flatnonzero(np.any(der.dq != 0, axis=0))
-        if moving.size:
-            da, db0, db1 = hold_gain_derivatives(modes.q[moving], dt, hold)
-            q, c = modes.q, modes.c
+        sp = _sensitivity_pass(self.tau_s, self.lam, dt, hold)
+        y = run_bank_multi(sp.bank, u[:, None], sp.extra)[0][:, 0, :]
+        if sp.moving:
             kern = kernels()
             dy = np.ascontiguousarray(y[:, 1:])
-            done: set[int] = set()
-            for j, i in enumerate(moving.tolist()):
-                if i in done:
-                    continue
-                weight = 1.0  # a conjugate pair adds twice the real part of one member
-                k = i + 1
-                if k < q.size and q[k] == np.conj(q[i]) and c[k] == np.conj(c[i]):
-                    weight = 2.0
-                    done.add(k)
-                g = weight * c[i] * der.dq[:, i]
+            for i, j, g in zip(sp.moving, sp.derivative_row, sp.weights, strict=True):
+                a, b0, b1 = sp.a[i], sp.b0[i], sp.b1[i]
+                da, db0, db1 = sp.da[j], sp.db0[j], sp.db1[j]
                 if kern is not None:
-                    kern.mode_derivative(u, a[i], b0[i], b1[i], da[j], db0[j], db1[j], g, dy)
+                    kern.mode_derivative(u, a, b0, b1, da, db0, db1, g, dy)
                     continue
-                x = _scipy_signal().lfilter([b1[i], b0[i]], [1.0, -a[i]], u)
-                rhs = da[j] * np.r_[0.0, x[:-1]] + db0[j] * np.r_[0.0, u[:-1]] + db1[j] * u
-                z = _scipy_signal().lfilter([1.0], [1.0, -a[i]], rhs)
+                x = _scipy_signal().lfilter([b1, b0], [1.0, -a], u)
+                rhs = da * np.r_[0.0, x[:-1]] + db0 * np.r_[0.0, u[:-1]] + db1 * u
+                z = _scipy_signal().lfilter([1.0], [1.0, -a], rhs)
                 dy += (g[None, :] * z[:, None]).real
             y[:, 1:] = dy
         return y[:, 0] + rest_V, y[:, 1], y[:, 2]
@@ -685,6 +665,67 @@ def diffusive_modes(tau_s: float, lam: float, dt: float) -> ContinuousModes:
 @lru_cache(maxsize=64)
 def _bank(tau_s: float, lam: float, dt: float, hold: str) -> DiscreteBank:
     return diffusive_modes(tau_s, lam, dt).discretise(dt, hold)
+
+
+@dataclass(frozen=True)
+class _SensitivityPass:
+    """What :meth:`Relaxor.filter_sensitivities` needs besides the input: the bank with the
+    instantaneous gains as two more modes, the output rows of the derivatives (``extra``), and
+    for each mode whose pole moves with the parameters (``moving``, a conjugate pair once) its
+    discretised gains, their derivatives (row ``derivative_row`` of ``da``, ``db0``, ``db1``)
+    and its weighted residue derivative ``weights`` (twice the real part of a pair's member).
+    It depends on the parameters, the sample period and the hold only: every entry of a fit
+    at one rate shares it (:func:`_sensitivity_pass` keeps it)."""
+
+    bank: DiscreteBank
+    extra: NDArray[np.complex128]
+    a: NDArray[np.complex128]
+    b0: NDArray[np.complex128]
+    b1: NDArray[np.complex128]
+    moving: tuple[int, ...]
+    derivative_row: tuple[int, ...]
+    weights: tuple[NDArray[np.complex128], ...]
+    da: NDArray[np.complex128]
+    db0: NDArray[np.complex128]
+    db1: NDArray[np.complex128]
+
+
+@lru_cache(maxsize=64)
+def _sensitivity_pass(tau_s: float, lam: float, dt: float, hold: str) -> _SensitivityPass:
+    """The :class:`_SensitivityPass` of ``(tau_s, lam)`` at sample period ``dt`` (s)."""
+    modes, der = _modes(tau_s, lam, dt)
+    a, b0, b1 = hold_gains(modes.q, dt, hold)
+    m1, m2, dm1, dm2 = modes.direct_m1, modes.direct_m2, der.dm1, der.dm2
+    if hold == "zoh":  # the instantaneous gains on u[n-1] and u[n]
+        d0, d1, dd0, dd1 = m1, 0.0, dm1, np.zeros(2)
+    else:
+        d0, d1, dd0, dd1 = m2 / dt, m1 - m2 / dt, dm2 / dt, dm1 - dm2 / dt
+    bank = DiscreteBank.from_arrays(
+        np.r_[a, 0.0, 0.0], np.r_[b0, 1.0, 0.0], np.r_[b1, 0.0, 1.0], np.r_[modes.c, d0, d1]
+    )
+    extra = np.hstack([der.dc, dd0[:, None], dd1[:, None]])
+    moving = np.flatnonzero(np.any(der.dq != 0, axis=0))
+    empty = np.zeros(0, dtype=np.complex128)
+    da, db0, db1 = hold_gain_derivatives(modes.q[moving], dt, hold) if moving.size else (empty,) * 3
+    q, c = modes.q, modes.c
+    kept: list[int] = []
+    rows: list[int] = []
+    weights: list[NDArray[np.complex128]] = []
+    done: set[int] = set()
+    for j, i in enumerate(moving.tolist()):
+        if i in done:
+            continue
+        weight = 1.0  # a conjugate pair adds twice the real part of one member
+        k = i + 1
+        if k < q.size and q[k] == np.conj(q[i]) and c[k] == np.conj(c[i]):
+            weight = 2.0
+            done.add(k)
+        kept.append(i)
+        rows.append(j)
+        weights.append(weight * c[i] * der.dq[:, i])
+    return _SensitivityPass(
+        bank, extra, a, b0, b1, tuple(kept), tuple(rows), tuple(weights), da, db0, db1
+    )
 
 
 def check_inverse_stable(bank: DiscreteBank) -> float:
