@@ -8,6 +8,9 @@ no fit has seen:
 - ``dynamic+effects``: our model refitted on the training records with the effects
   ``labrig diagnose`` accepted on them (a ``diagnosis.json`` given with ``effects_from``, or
   a diagnosis run now with ``run_diagnosis``; :func:`~labrig.commands.fit.fit_with_effects`);
+  when the diagnosis adopted its empirical sparse ODE (``sparse_ode``, an alternative base in
+  place of the model), that ODE with its coefficients, run free from rest as the diagnosis runs
+  it, and labelled EMPIRICAL (:func:`sparse_ode_row`);
 - the peers Prandtl-Ishlinskii, Bouc-Wen and SINDy (:func:`~labrig.commands.fit.fit_base`),
   on the same training records with the same chain, warm-up and offsets.
 
@@ -29,7 +32,8 @@ of every command).
 
 Several training files are fitted together when each entry is simulated on its own (imported
 data); a recorded run is one chain and is the only training (or test) file of its side. A file
-given both as training and as test data, or twice, is refused (exit code 2).
+given both as training and as test data, or twice, is refused (exit code 2), and so is a test
+record whose samples are contained in a training record, or contain one (:func:`check_unseen`).
 
 **Leave one record out** (:func:`validate_leave_one_out`, ``--leave-one-out FILE...``): of N
 files, each in turn is the test file and the other N - 1 are the training files; every model
@@ -51,6 +55,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from labrig.analysis.baselines import KINDS, BaselineResult
+from labrig.analysis.diagnose.sparse_ode import NAME as SPARSE_ODE
+from labrig.analysis.diagnose.sparse_ode import (
+    SparseOdeEffect,
+    equation_text,
+    model_from_params,
+)
 from labrig.analysis.metrics import nrmse_pct, second_half_nrmse_pct
 from labrig.analysis.records import Record
 from labrig.commands.fit import (
@@ -71,7 +81,7 @@ from labrig.commands.prepare import (
 from labrig.core.errors import InputFileError, InputIssue
 from labrig.core.jsonsafe import json_safe
 from labrig.core.outputs import same_file
-from labrig.core.samples import samples_digest
+from labrig.core.samples import EXPORT_ROUNDING, contained_at
 from labrig.model import ModelParams
 from labrig.model.effects import Effect
 
@@ -83,6 +93,7 @@ __all__ = [
     "Validation",
     "accepted_effects",
     "score_entry",
+    "sparse_ode_row",
     "validate_leave_one_out",
     "validate_runs",
 ]
@@ -103,6 +114,13 @@ SCORING = (
 )
 #: a diagnosis' parameter names of empirical terms start with this
 _TERM_PREFIX = "c_"
+#: how far a training rate may be from a whole multiple of a sparse ODE's working rate (relative)
+RATE_TOLERANCE = 1e-9
+#: the tolerance of :func:`check_unseen`, in words
+_ROUNDING_WORDS = (
+    f"voltage and strain equal to within the rounding of `labrig export`, {EXPORT_ROUNDING:.1g} "
+    "of each value"
+)
 
 
 @dataclass
@@ -279,8 +297,10 @@ def accepted_effects(doc: Any, path: Path | str, records: Sequence[Record]) -> l
     """The effects of a diagnosis (``diagnosis.json``'s ``effects_added``, or
     :meth:`labrig.analysis.diagnose.Diagnosis.to_json`) configured for the training
     ``records``: library effects by name, empirical terms rebuilt from their parameter names
-    (``c_<term>``) with the training records' scales. Anything else is an
-    :class:`~labrig.core.errors.InputFileError` naming the file and the field."""
+    (``c_<term>``) with the training records' scales, the adopted sparse ODE (at most one) from
+    its terms and coefficients (:func:`~labrig.analysis.diagnose.sparse_ode.model_from_params`).
+    Anything else is an :class:`~labrig.core.errors.InputFileError` naming the file and the
+    field."""
     from labrig.analysis.extended import effect_context
     from labrig.analysis.terms import TermScales, empirical_effect
     from labrig.model.effects import library
@@ -309,13 +329,20 @@ def accepted_effects(doc: Any, path: Path | str, records: Sequence[Record]) -> l
                 out.append(empirical_effect(keys, TermScales.from_records(records)))
             except ValueError as e:
                 raise _issue(path, f"empirical terms: {e}", fld) from None
+        elif name == SPARSE_ODE:
+            if any(isinstance(e, SparseOdeEffect) for e in out):
+                raise _issue(path, f"{SPARSE_ODE} given twice (a diagnosis adopts one)", fld)
+            try:
+                out.append(SparseOdeEffect(model_from_params(params)))
+            except ValueError as e:
+                raise _issue(path, f"{SPARSE_ODE}: {e}", fld) from None
         elif name in lib:
             out.append(lib[name])
         else:
             raise _issue(
                 path,
                 f"{name!r} is not an effect of the library; known: {', '.join(lib)}, "
-                "empirical_terms",
+                f"empirical_terms, {SPARSE_ODE}",
                 fld,
             )
     return out
@@ -382,28 +409,75 @@ def _floor(tests: Sequence[Setup], ours: ValidatedModel) -> tuple[float | None, 
     return float(np.mean(vals)), f"{SOURCE} (our model on the test records)"
 
 
-def check_unseen(train: Setup, tests: Sequence[Setup]) -> None:
-    """No test record holds the very samples of a training record: the same capture imported
-    twice under two names, or a file gathering several captures one of which is also tested,
-    would score a model on data it was identified on (:func:`check_files` catches the same
-    file only). Records are compared by their voltage and strain samples
-    (:func:`~labrig.core.samples.samples_digest`)."""
-    seen: dict[bytes, str] = {}
-    for r in train.records:
-        seen.setdefault(samples_digest(r.voltage_V, r.strain_ue), r.name)
-    issues = [
-        InputIssue(
-            str(s.path),
-            None,
-            "--on",
-            f"its record {r.name!r} holds the same samples as the training record "
-            f"{seen[d]!r}: a model would be scored on data it was identified on; test on a "
-            "record that no training file holds",
+def _constant(r: Record) -> bool:
+    """A record whose voltage and strain are each one value throughout (it holds nothing a
+    model could have learnt: such stretches are common to every record at rest)."""
+    return r.n > 0 and np.ptp(r.voltage_V) == 0 and np.ptp(r.strain_ue) == 0
+
+
+def _identical(a: Record, b: Record) -> bool:
+    """The same voltage and strain samples, bit for bit."""
+    return np.array_equal(a.voltage_V, b.voltage_V) and np.array_equal(a.strain_ue, b.strain_ue)
+
+
+def _shared(train: Record, test: Record) -> tuple[str, str] | None:
+    """How the ``test`` record shares the ``train`` record's samples, in words (a verb and the
+    detail in brackets), or ``None``: the same samples (bit for bit, or to within ``labrig
+    export``'s rounding), contained in it, or containing it
+    (:func:`~labrig.core.samples.contained_at`, voltage and strain together)."""
+    a, b = (train.voltage_V, train.strain_ue), (test.voltage_V, test.strain_ue)
+    if _identical(train, test):
+        return "holds the same samples as", ""
+    if not _constant(test) and (k := contained_at(a, b)) is not None:
+        if train.n == test.n:
+            return "holds the same samples as", f" ({_ROUNDING_WORDS})"
+        where = f"its samples are that record's samples {k} to {k + test.n - 1} of {train.n}"
+        return "is contained in", f" ({where}, {_ROUNDING_WORDS})"
+    if not _constant(train) and (k := contained_at(b, a)) is not None:
+        return (
+            "contains",
+            f" (as its samples {k} to {k + train.n - 1} of {test.n}, {_ROUNDING_WORDS})",
         )
-        for s in tests
-        for r in s.records
-        if (d := samples_digest(r.voltage_V, r.strain_ue)) in seen
-    ]
+    return None
+
+
+def _training_file(train: Setup, record: Record, files: Sequence[Path]) -> str:
+    """The training file that holds ``record`` of ``train`` (the one file, or among several
+    the one whose records include its very samples; read again: only when one is refused)."""
+    files = list(files) or [train.path]
+    if len(files) > 1:
+        for p in files:
+            if any(_identical(r, record) for r in prepare(p).records):
+                return str(p)
+    return ", ".join(str(p) for p in files)
+
+
+def check_unseen(train: Setup, tests: Sequence[Setup], train_files: Sequence[Path] = ()) -> None:
+    """No test record shares its samples with a training record: the same capture imported
+    twice under two names, a slice of it (``labrig import --window``), either written out by
+    ``labrig export`` and imported again, or a file gathering several captures one of which is
+    also tested, would score a model on data it was identified on (:func:`check_files` catches
+    the same file only). A test record is refused when its voltage and strain together are
+    contained in a training record, or contain one, as a contiguous stretch equal to within the
+    rounding of ``labrig export`` (:func:`~labrig.core.samples.contained_at`: 5e-10 of each
+    value, far below any capture's noise); records constant throughout are not compared.
+    ``train_files``: the training files, to name the one holding the record (default: the
+    setup's own file). Raises :class:`~labrig.core.errors.InputFileError` naming the test file,
+    its record, the training record and its file."""
+    issues = []
+    for s in tests:
+        for r in s.records:
+            for a in train.records:
+                how = _shared(a, r)
+                if how is None:
+                    continue
+                where = _training_file(train, a, train_files)
+                verb, detail = how
+                msg = f"its record {r.name!r} {verb} the training record {a.name!r} of {where}"
+                msg += f"{detail}: a model would be scored on data it was identified on; test on "
+                msg += "a record that no training file holds"
+                issues.append(InputIssue(str(s.path), None, "--on", msg))
+                break
     if issues:
         raise InputFileError(issues)
 
@@ -444,7 +518,7 @@ def validate_runs(
     doc = _read_diagnosis(Path(effects_from)) if effects_from is not None else None
     tr = training_setup(train_p, warmup_s, offset)
     tests = [prepare(p, None, warmup_s, offset) for p in test_p]
-    check_unseen(tr, tests)
+    check_unseen(tr, tests, train_p)
     mixed = unit_issues(
         [(Path(s.path), r) for s in (tr, *tests) for r in s.scored_records]
     )  # each file is checked alone by prepare; here the training and test files together
@@ -472,6 +546,11 @@ def validate_runs(
         models["dynamic"] = ours
         if effects is not None:
             models["dynamic+effects"] = _with_effects(tr, tests, base, effects, progress)
+            notes += [
+                f"diagnose adopted an EMPIRICAL sparse ODE: {equation_text(e.model)}"
+                for e in effects
+                if isinstance(e, SparseOdeEffect)
+            ]
         for kind in KINDS:
             models[kind] = _peer(tr, tests, kind, progress)
     floor, floor_source = _floor(tests, ours)
@@ -668,8 +747,12 @@ def _with_effects(
     tr: Setup, tests: Sequence[Setup], base: Any, effects: list[Effect], progress: Any
 ) -> ValidatedModel:
     """Our model refitted on the training records with ``effects`` (nothing accepted: the
-    base model again, said in its note)."""
+    base model again, said in its note); when they hold the sparse ODE diagnose adopted, that
+    ODE in place of our model (:func:`sparse_ode_row`)."""
     key = "dynamic+effects"
+    ode = next((e for e in effects if isinstance(e, SparseOdeEffect)), None)
+    if ode is not None:
+        return sparse_ode_row(tr, tests, ode, effects)
     if not effects:
         m = ValidatedModel(key, MODEL_LABELS[key], base.to_json()["params"])
         m.note = "diagnose accepted no effect on the training data: the same as ours"
@@ -698,14 +781,68 @@ def _peer(tr: Setup, tests: Sequence[Setup], kind: str, progress: Any) -> Valida
         m.note = str(e)
         return m
     m.params = res.params
+    _score_simulated(m, res, tests)
+    return m
+
+
+def _score_simulated(m: ValidatedModel, res: BaselineResult, tests: Sequence[Setup]) -> None:
+    """Score ``res``'s model, simulated on every test record as the SINDy peer is
+    (:meth:`~labrig.analysis.baselines.BaselineResult.simulate`: chained as a recorded run,
+    at each record's own rate), into ``m``; a prediction that is not finite is ``m``'s note
+    instead."""
     raw = {}
     for s in tests:
         sim = res.simulate(s.records, s.chain)
         raw[s.path] = {n: sim[n] for n in s.scored}
     if not all(np.all(np.isfinite(p)) for d in raw.values() for p in d.values()):
         m.note = "its prediction of the test records diverges (non-finite)"
-        return m
+        return
     _score(m, tests, raw)
+
+
+def _not_carried(ode: SparseOdeEffect, tr: Setup) -> str | None:
+    """Why the sparse ODE of a diagnosis cannot be scored as identified on the training records
+    of ``tr``, or ``None``: its working rate (Hz) must be a training record's rate divided by a
+    whole number (the decimation of its identification, :func:`~labrig.analysis.diagnose.
+    sparse_ode.decimation`), else it was identified on other records."""
+    work = ode.model.rate_hz
+    for r in tr.scored_records:
+        q = r.rate_hz / work
+        if round(q) < 1 or abs(q - round(q)) > RATE_TOLERANCE * q:
+            return (
+                f"left out: the diagnosis' sparse ODE was identified at {work:.10g} Hz, which "
+                f"is not the training record {r.name!r}'s rate ({r.rate_hz:.10g} Hz) divided by "
+                "a whole number (the decimation of its identification): it was identified on "
+                "other records, and its coefficients, carried as numbers, would not have been "
+                "identified on these"
+            )
+    return None
+
+
+def sparse_ode_row(
+    tr: Setup, tests: Sequence[Setup], ode: SparseOdeEffect, effects: Sequence[Effect]
+) -> ValidatedModel:
+    """The row of what diagnose accepts when it adopted its sparse ODE: the ODE replaces the
+    model (the effects accepted before it other than nuisance ones are not applied), its
+    coefficients as identified (not refitted), run free from rest on each test record's
+    voltage (:meth:`~labrig.analysis.sindy.SindyBaseline.predict`, as the diagnosis and the
+    SINDy peer run it) and scored by the one rule with the nuisance effects accepted before it
+    (and the offset). Labelled EMPIRICAL; left out, with the reason as its note, when its
+    working rate says it was not identified on these training records (:func:`_not_carried`)."""
+    replaced = [e.name for e in effects if e is not ode and e.where != "nuisance"]
+    in_place = " + ".join(["ours", *replaced])
+    m = ValidatedModel(
+        "dynamic+effects",
+        f"sparse ODE, EMPIRICAL (diagnose's, in place of {in_place})",
+        {**ode.model.params(), "empirical": True, "in_place_of": in_place},
+    )
+    m.nuisance = [e for e in effects if e.where == "nuisance"]
+    m.note = _not_carried(ode, tr)
+    if m.note is not None:
+        return m
+    _score_simulated(m, BaselineResult("sindy", ode.model, math.nan, {}, None, []), tests)
+    if m.note is None:
+        m.note = "EMPIRICAL: found in the training records, not a mechanism; run free from rest"
     return m
 
 

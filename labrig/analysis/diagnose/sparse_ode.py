@@ -117,6 +117,7 @@ __all__ = [
     "identify",
     "inner_folds",
     "inner_score",
+    "model_from_params",
     "offset_columns",
     "refine",
     "settles",
@@ -163,6 +164,35 @@ class SparseOdeEffect(Effect):
 
     def describe(self, p: Mapping[str, float], sd: Mapping[str, float | None]) -> str:
         return f"{EMPIRICAL_NOTE}: {equation_text(self.model)}"
+
+
+def _finite(x: Any, what: str) -> float:
+    """``x`` as a float when it is a finite number (not a bool), else a ``ValueError``."""
+    if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
+        raise ValueError(f"{what} is not a finite number: {x!r}")
+    return float(x)
+
+
+def model_from_params(params: Mapping[str, Any]) -> SindyBaseline:
+    """The sparse ODE that ``effects_added``'s ``sparse_ode`` describes (its ``params``, as
+    :func:`adopt` writes them: ``terms``, ``coefficients`` and ``rate_hz``, the working rate it
+    was identified at, Hz; ``threshold`` optional), to run free as the diagnosis ran it
+    (:meth:`~labrig.analysis.sindy.SindyBaseline.predict`). Raises ``ValueError`` saying what is
+    wrong: a term not of :data:`~labrig.analysis.sindy.LIBRARY` or given twice, a coefficient
+    that is not a finite number or one too many or too few, a rate that is not a positive
+    number."""
+    terms, coefs = params.get("terms"), params.get("coefficients")
+    if not isinstance(terms, list) or not isinstance(coefs, list) or len(terms) != len(coefs):
+        raise ValueError("'terms' and 'coefficients' must be two lists of the same length")
+    xi = [0.0] * len(_TERMS)
+    for k, (t, c) in enumerate(zip(terms, coefs, strict=True)):
+        if t not in _TERMS or t in terms[:k]:
+            raise ValueError(f"term {t!r} is not one of {', '.join(_TERMS)} or is given twice")
+        xi[_TERMS.index(t)] = _finite(c, f"the coefficient of {t!r}")
+    rate = _finite(params.get("rate_hz"), "'rate_hz'")
+    if rate <= 0.0:
+        raise ValueError(f"'rate_hz' must be positive, got {rate!r}")
+    return SindyBaseline(tuple(xi), rate, _finite(params.get("threshold", 0.0), "'threshold'"))
 
 
 def equation_text(model: SindyBaseline) -> str:
