@@ -25,6 +25,10 @@ Formulas (A amplitude, f frequency, t local time in s):
 - raised-cosine ramp: ``V = V0 + (V1 - V0) (1 - cos(pi t/D))/2``: zero slope at both ends;
 - ramp: ``V = V0 + (V1 - V0) t/D``; hold: ``V = V0``;
 - table (CSV): linear interpolation between the samples.
+
+A piece that repeats says so (:attr:`Segment.repeat_hz`: a unipolar sine, an offset sine of
+constant envelope, a triangle, a hold), so that the preflight may measure its edges and enough
+of it instead of every point (:func:`labrig.rig.drive_load.repeat_skip`).
 """
 
 from __future__ import annotations
@@ -66,7 +70,10 @@ class Segment:
 
     ``role`` is ``"main"`` for the waveform the protocol asked for and ``"edge"`` for ramps
     inserted to reach 0 V; ``field`` names the protocol key that controls the piece (preflight
-    uses it to point at the right line).
+    uses it to point at the right line). ``repeat_hz``: the piece repeats at this frequency
+    (Hz), ``func(t + k / repeat_hz) = func(t)`` for every whole ``k`` in exact arithmetic, its
+    value a function of the phase ``repeat_hz t`` alone (0: a constant; None: it does not
+    repeat); ``sinusoid``: it is ``c + a cos(2 pi repeat_hz t + phi)`` (a constant too).
     """
 
     kind: str
@@ -74,6 +81,8 @@ class Segment:
     func: Callable[[Array], Array] = field(repr=False)
     field: str = ""
     role: str = "main"
+    repeat_hz: float | None = None
+    sinusoid: bool = False
 
     def value(self, tau: Array) -> Array:
         return np.asarray(self.func(np.asarray(tau, dtype=float)), dtype=float)
@@ -84,7 +93,15 @@ class Segment:
 
 
 def sine_segment(amplitude_V: float, frequency_hz: float, n: int, field: str = "") -> Segment:
-    return Segment("sine", n, lambda t: unipolar_sine(t, amplitude_V, frequency_hz), field)
+    """The unipolar sine ``A/2 (1 - cos 2 pi f t)`` over ``n`` sample intervals (repeats at f)."""
+    return Segment(
+        "sine",
+        n,
+        lambda t: unipolar_sine(t, amplitude_V, frequency_hz),
+        field,
+        repeat_hz=frequency_hz,
+        sinusoid=True,
+    )
 
 
 def vanishing_segment(
@@ -124,7 +141,8 @@ def offset_sine_segment(
     rate_hz: float,
     field: str = "",
 ) -> Segment:
-    """``V = offset + e(t) A sin(2 pi f t)`` over ``n`` sample intervals (``T = n / rate_hz``)."""
+    """``V = offset + e(t) A sin(2 pi f t)`` over ``n`` sample intervals (``T = n / rate_hz``);
+    a constant envelope repeats at f."""
     length_s = n / rate_hz
     e = ENVELOPES[envelope_name]
 
@@ -132,7 +150,9 @@ def offset_sine_segment(
         t = np.asarray(t, dtype=float)
         return offset_V + e(t, length_s) * amplitude_V * np.sin(2.0 * np.pi * frequency_hz * t)
 
-    return Segment("offset_sine", n, f, field)
+    constant = envelope_name == "constant"
+    repeat = frequency_hz if constant else None
+    return Segment("offset_sine", n, f, field, repeat_hz=repeat, sinusoid=constant)
 
 
 def raised_cosine_segment(
@@ -150,7 +170,9 @@ def raised_cosine_segment(
 
 
 def const_segment(voltage_V: float, n: int, field: str = "", kind: str = "hold") -> Segment:
-    return Segment(kind, n, lambda t: np.full(np.shape(t), float(voltage_V)), field)
+    """``voltage_V`` held over ``n`` sample intervals (a constant: ``repeat_hz`` 0)."""
+    v = float(voltage_V)
+    return Segment(kind, n, lambda t: np.full(np.shape(t), v), field, repeat_hz=0.0, sinusoid=True)
 
 
 def ramp_segment(
@@ -207,6 +229,11 @@ class Waveform:
 
     def segment_start(self, seg: Segment) -> int:
         return int(self._starts[self.segments.index(seg)])
+
+    def pieces(self) -> list[tuple[int, Segment]]:
+        """Each segment with its first sample index, in order (samples ``start .. start + n``;
+        the last of them is the next segment's first)."""
+        return [(int(a), s) for a, s in zip(self._starts, self.segments, strict=False)]
 
     def at_index(self, u: Array) -> Array:
         """Values at (possibly fractional) sample indices ``u`` in ``[0, n_samples - 1]``."""
