@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from labrig.analysis.engine import LAM_GAP, LoopScale, Problem, chord_refit, orthonormal, solve
+from labrig.analysis.fit_uncertainty import fit_covariance
 from labrig.analysis.metrics import second_half_nrmse_pct
 from labrig.analysis.parallel import map_tasks
 from labrig.analysis.records import Record
@@ -247,20 +248,12 @@ class ExtendedProblem(Problem):
                 at_bound.setdefault(who, []).append(n)
         return FitOutcome(base, eff, sd, base_sd, per, cost, at_bound, z, nfev)
 
-    def _sd(self, z, base0, r) -> NDArray:
-        """1-sigma of the free parameters in native units (base first, then the effects'):
-        ``s^2 (J^T J)^-1`` in the coordinates, carried to native units by ``T``."""
-        J = self.jacobian(z, base0)
-        dof = max(r.size - z.size, 1)
-        s2 = float(r @ r) / dof
-        try:
-            scale = np.linalg.norm(J, axis=0)
-            scale[scale == 0] = 1.0
-            cov = np.linalg.pinv((J / scale).T @ (J / scale)) / np.outer(scale, scale)
-            T = self.coords.native_jacobian(z, base0)
-            return np.sqrt(np.clip(np.diag(T @ cov @ T.T) * s2, 0, None))
-        except np.linalg.LinAlgError:
-            return np.full(z.size, np.nan)
+    def _sd(self, z: NDArray, base0: Mapping[str, float], r: NDArray) -> NDArray:
+        """1-sigma of the free parameters in native units (base first, then the effects'),
+        ``NaN`` for one the data do not determine: the pooled ``s^2 (J^T J)^+``
+        (:func:`~labrig.analysis.fit_uncertainty.fit_covariance`; ``labrig fit --effect``
+        takes the per-entry estimate of a plain fit instead)."""
+        return fit_covariance(self, z, base0, residual=r, pooled=True).sd
 
     # -- held-out -----------------------------------------------------------------------------
     def fold(self, scored: Sequence[str]) -> ExtendedProblem:

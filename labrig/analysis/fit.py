@@ -14,10 +14,13 @@ every scored entry is periodic at one frequency, ``G_d`` is not identifiable and
 staged procedure's negligible value.
 
 Uncertainty: one standard deviation from the Jacobian at the optimum, in the native parameters,
-by the per-entry sandwich ``A^-1 (sum_e s_e^2 J_e^T J_e) A^-1``, ``A = J^T J``, ``s_e^2`` entry
+by the per-entry sandwich ``A^+ (sum_e s_e^2 J_e^T J_e) A^+``, ``A = J^T J``, ``s_e^2`` entry
 ``e``'s residual variance (entries are weighted differently, so a single pooled variance would
-be wrong). Residuals of a free-run model are correlated in time when the model is not exact, so
-on real data these are lower bounds; the correlations are the informative part.
+be wrong), computed from the SVD of the weighted Jacobian so that the covariance is symmetric
+and the correlations within [-1, 1]; a parameter the data do not determine has none
+(:mod:`labrig.analysis.fit_uncertainty`). Residuals of a free-run model are correlated in time
+when the model is not exact, so on real data these are lower bounds; the correlations are the
+informative part.
 
 Held-out NRMSE: leave-one-entry-out; the same method refitted without each entry (warm-started
 from the full fit) and scored on it; the mean over entries. With ``offset`` the held-out entry's
@@ -40,9 +43,10 @@ from numpy.typing import NDArray
 from scipy import optimize
 
 from labrig.analysis.engine import Coordinates, Problem, base_problem, best_of, chord_refit
+from labrig.analysis.fit_uncertainty import bound_notes, bounds_reached, fit_covariance
 from labrig.analysis.metrics import nrmse_pct, scores_json, second_half_nrmse_pct
 from labrig.analysis.parallel import map_tasks
-from labrig.analysis.records import Record
+from labrig.analysis.records import Record, warmup_samples
 from labrig.analysis.simulate import (
     DEFAULT_BOUNDS,
     PARAM_NAMES,
@@ -100,6 +104,9 @@ class FitResult:
     predictions: dict[str, NDArray[np.float64]] = field(default_factory=dict, repr=False)
     jacobian: NDArray[np.float64] | None = field(default=None, repr=False)
     free: tuple[str, ...] = ()
+    #: the free parameters that ended on a bound, with their values
+    #: (:func:`~labrig.analysis.fit_uncertainty.bounds_reached`)
+    at_bound: dict[str, float] = field(default_factory=dict)
     #: the stroke (V) of the operator's loop coordinates (the records' largest peak-to-peak
     #: voltage; :class:`~labrig.analysis.engine.LoopScale`), ``None`` without them
     loop_span_V: float | None = None
@@ -120,7 +127,12 @@ class FitResult:
             ),
             "train_files": None if self.train_files is None else list(self.train_files),
             "identifiability": identifiability(
-                params, self.uncertainty, self.correlation, self.loop_span_V
+                params,
+                self.uncertainty,
+                self.correlation,
+                self.loop_span_V,
+                free=self.free,
+                at_bound=self.at_bound,
             ),
         }
 
@@ -156,52 +168,6 @@ def predict_record(params: ModelParams, record: Record) -> NDArray[np.float64]:
         return DynamicHysteresisModel(params).predict(
             record.voltage_V, record.rate_hz, method="fast", hold=record.hold, rest_V=record.rest_V
         )
-
-
-def _uncertainty(
-    J: NDArray,
-    r: NDArray,
-    sizes: Sequence[int],
-    free: Sequence[str],
-    nuisance_per_entry: int,
-    T: NDArray,
-) -> tuple[dict[str, float | None], dict[str, dict[str, float]]]:
-    """1-sigma and correlations in native units from the z-space Jacobian (module doc);
-    ``T = d(native parameters) / dz`` (:meth:`~labrig.analysis.engine.Coordinates
-    .native_jacobian`), so the native Jacobian is ``J T^-1``.
-
-    The weighted residual's variance differs between entries (each is scaled by its span and
-    length), so the covariance is the per-entry sandwich ``A^-1 (sum_e s_e^2 J_e^T J_e) A^-1``,
-    ``A = J^T J``, with ``s_e^2`` the mean squared weighted residual of entry ``e`` corrected
-    for the degrees of freedom the fit used (its share of the parameters, and its nuisance
-    offset if any).
-    """
-    Jn = J @ np.linalg.inv(T)
-    p, n_tot = len(free), r.size
-    # pseudo-inverse of A through the SVD of a column-scaled Jacobian (well conditioned)
-    scale = np.linalg.norm(Jn, axis=0)
-    scale[scale == 0] = 1.0
-    _, sv, vt = np.linalg.svd(Jn / scale, full_matrices=False)
-    keep = sv > sv[0] * 1e-12
-    inv = ((vt[keep].T / sv[keep] ** 2) @ vt[keep]) / np.outer(scale, scale)
-    B = np.zeros((p, p))
-    pos = 0
-    for m in sizes:
-        re, Je = r[pos : pos + m], Jn[pos : pos + m]
-        dof = max(m - p * m / n_tot - nuisance_per_entry, 1.0)
-        B += (float(re @ re) / dof) * (Je.T @ Je)
-        pos += m
-    cov = inv @ B @ inv
-    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
-    unc: dict[str, float | None] = dict.fromkeys(PARAM_NAMES)
-    corr: dict[str, dict[str, float]] = {}
-    for i, a in enumerate(free):
-        unc[a] = float(sd[i])
-        corr[a] = {
-            b: float(cov[i, j] / (sd[i] * sd[j])) if sd[i] > 0 and sd[j] > 0 else 0.0
-            for j, b in enumerate(free)
-        }
-    return unc, corr
 
 
 def _one_frequency(records: Sequence[Record]) -> float | None:
@@ -342,10 +308,9 @@ def fit_model(
         z = camp.coords.z(th, strict=True)
         J = camp.jacobian(z, th)
         r = camp.residual_at(th)
-        sizes = [g.measured_ue.size for segs in camp.segments for g in segs]
-        free = camp.coords.base_free
-        T = camp.coords.native_jacobian(z, th)
-        unc, corr = _uncertainty(J, r, sizes, free, 1 if offset else 0, T)
+        cov = fit_covariance(camp, z, th, J, r)
+        unc = {**dict.fromkeys(PARAM_NAMES), **cov.uncertainty()}
+        at_bound = bounds_reached(camp.coords, z, th)
         per_entry, offsets, preds = _in_sample(camp, th, offset)
         elapsed = time.perf_counter() - t0
         if progress:
@@ -355,13 +320,14 @@ def fit_model(
         if heldout and len(scored) >= 2:
             held_per = _heldout(records, scored, common, th, progress, camp, workers)
         held_elapsed = time.perf_counter() - t1
-    optimality = _optimality(J, r, camp.coords, th, messages)  # notes parameters on a bound
+    optimality = _optimality(J, r, camp.coords, th)
+    messages += bound_notes(at_bound)
     if res is None:  # the staged procedure ends with no converged least-squares run
         optimality = float("nan")
     return FitResult(
         params=family.params(th),
         uncertainty=unc,
-        correlation=corr,
+        correlation=cov.correlations(),
         nrmse_pct=float(np.mean(list(per_entry.values()))),
         per_entry=per_entry,
         heldout_nrmse_pct=None if held_per is None else float(np.mean(list(held_per.values()))),
@@ -379,7 +345,8 @@ def fit_model(
         messages=messages,
         predictions=preds,
         jacobian=J,
-        free=free,
+        free=camp.coords.base_free,
+        at_bound=at_bound,
         loop_span_V=camp.loop.span_V if camp.loop is not None else None,
     )
 
@@ -453,23 +420,15 @@ def _chord_fold(
     return None if got is None else sub.coords.unpack(got[0], th)[0]
 
 
-def _optimality(
-    J: NDArray, r: NDArray, coords: Coordinates, th: dict[str, float], messages: list[str]
-) -> float:
+def _optimality(J: NDArray, r: NDArray, coords: Coordinates, th: dict[str, float]) -> float:
     """First-order optimality (largest gradient component, those pushing against an active
-    bound excluded); notes each parameter that ended on a bound."""
+    bound excluded)."""
     g = J.T @ r
     z = coords.z(th, strict=True)
     on = coords.at_bound(z)
     mid = 0.5 * (coords.lo + coords.hi)
     # a gradient pushing against an active bound is optimal (J^T r > 0 means "decrease z")
     g[on & (((z < mid) & (g > 0)) | ((z > mid) & (g < 0)))] = 0.0
-    for j, name in enumerate(coords.base_free):
-        if on[j]:
-            messages.append(
-                f"{name} ended at a bound ({th[name]:.4g}): the data do not determine it "
-                "within the bounds (see its uncertainty)"
-            )
     return float(np.max(np.abs(g)))
 
 
@@ -487,7 +446,7 @@ def _score_heldout(
         p = parent.subset([rec.name]).predictions(params.model_dump(), nuisance=False)[rec.name]
     else:
         p = predict_record(params, rec)
-    i0 = round(max(warmup_s, 0.0) * rec.rate_hz)
+    i0 = warmup_samples(rec, warmup_s)
     m, p = rec.strain_ue[i0:], p[i0:]
     if not offset:
         return nrmse_pct(m, p)

@@ -7,9 +7,17 @@ ExtendedProblem`, the numerics ``labrig diagnose`` uses), from the base fit and 
 starts (:meth:`~labrig.model.effects.Effect.refit_starts`, every combination; each start fitted
 loosely, the best cost then fitted to convergence).
 
+The free base parameters are the base fit's (``G_d`` stays fixed where the base fit fixed it).
+Uncertainties, correlations, the parameters that ended on a bound and the identifiability
+judgement are a plain fit's, over the base's and the effects' parameters together
+(:func:`~labrig.analysis.fit_uncertainty.fit_covariance`,
+:func:`~labrig.analysis.identifiability.identifiability`); an effect's parameter is named
+``"effect.param"`` there.
+
 Held-out scoring is ``labrig diagnose``'s (leave-one-entry-out; the left-out entry scored on the
 second half of its samples, its nuisance terms fitted on the first half), computed for the model
-with **and** without the effects, so the two held-out NRMSE compare like with like.
+with **and** without the effects, so the two held-out NRMSE compare like with like; the JSON's
+``heldout_scoring`` says so (:data:`HELDOUT_SCORING`).
 
 Use it for an effect ``labrig diagnose`` found, to carry it into control:
 ``labrig fit RUN --effect viscoelastic_creep --out params.json`` gives a parameter file whose
@@ -20,18 +28,28 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from labrig.analysis.extended import ExtendedProblem, FitOutcome, effect_context
 from labrig.analysis.fit import PARAM_NAMES, FitResult
+from labrig.analysis.fit_uncertainty import (
+    Covariance,
+    bound_notes,
+    bounds_reached,
+    fit_covariance,
+)
+from labrig.analysis.identifiability import identifiability
 from labrig.analysis.records import Record
 from labrig.model import ModelParams
 from labrig.model.effects import FIT_EFFECT_NAMES, Effect, library
 
-__all__ = ["EffectsFit", "fit_effects", "known_effects", "resolve_effects"]
+__all__ = ["HELDOUT_SCORING", "EffectsFit", "fit_effects", "known_effects", "resolve_effects"]
+
+#: how ``labrig fit --effect`` takes its held-out NRMSE (the JSON's ``heldout_scoring``)
+HELDOUT_SCORING = "leave-one-entry-out, second half of the left-out entry"
 
 
 def known_effects() -> list[str]:
@@ -43,11 +61,15 @@ def known_effects() -> list[str]:
 
 @dataclass
 class EffectsFit:
-    """The joint fit and its comparison with the base model (same scoring)."""
+    """The joint fit and its comparison with the base model (same scoring).
+
+    ``uncertainty`` holds the base's parameters (``None``: fixed or not determined), each
+    item of ``effects`` its effect's; ``correlation``, ``free`` and ``at_bound`` cover the
+    base's and the effects' free parameters together (an effect's as ``"effect.param"``)."""
 
     params: ModelParams
     uncertainty: dict[str, float | None]
-    effects: list[dict[str, Any]]  # {effect, params, uncertainty, description}, in order
+    effects: list[dict[str, Any]]  # {effect, params, uncertainty, correlation, description}
     nrmse_pct: float
     per_entry: dict[str, float]
     heldout_nrmse_pct: float | None
@@ -57,16 +79,34 @@ class EffectsFit:
     entries: list[str]
     context: dict  # how the effects were configured (effect_context): saved for predictions
     train_files: list[str] | None = None  # as FitResult.train_files
+    correlation: dict[str, dict[str, float]] = field(default_factory=dict)
+    free: tuple[str, ...] = ()
+    at_bound: dict[str, float] = field(default_factory=dict)
+    messages: list[str] = field(default_factory=list)
+    loop_span_V: float | None = None  # as FitResult.loop_span_V
+
+    def _flat(self) -> tuple[dict[str, Any], dict[str, float | None]]:
+        """The parameters and their 1-sigma, the base's and the effects' in one mapping (an
+        effect's parameter as ``"effect.param"``)."""
+        params: dict[str, Any] = self.params.model_dump()
+        sd: dict[str, float | None] = dict(self.uncertainty)
+        for e in self.effects:
+            for k, v in e["params"].items():
+                params[f"{e['effect']}.{k}"] = v
+                sd[f"{e['effect']}.{k}"] = e["uncertainty"].get(k)
+        return params, sd
 
     def to_json(self) -> dict[str, Any]:
+        params, sd = self._flat()
         return {
             "params": self.params.model_dump(),
             "uncertainty": dict(self.uncertainty),
+            "correlation": _between(self.correlation, PARAM_NAMES),
             "effects": self.effects,
             "nrmse_pct": float(self.nrmse_pct),
             "per_entry": {k: float(v) for k, v in self.per_entry.items()},
             "heldout_nrmse_pct": self.heldout_nrmse_pct,
-            "heldout_scoring": "leave-one-entry-out, second half of the left-out entry",
+            "heldout_scoring": HELDOUT_SCORING,
             "without_effects": {
                 "nrmse_pct": float(self.base_nrmse_pct),
                 "heldout_nrmse_pct": self.base_heldout_nrmse_pct,
@@ -75,7 +115,24 @@ class EffectsFit:
             "entries": list(self.entries),
             "train_files": None if self.train_files is None else list(self.train_files),
             "effects_context": dict(self.context),
+            "identifiability": identifiability(
+                params,
+                sd,
+                self.correlation,
+                self.loop_span_V,
+                free=self.free,
+                at_bound=self.at_bound,
+            ),
         }
+
+
+def _between(
+    correlation: dict[str, dict[str, float]], names: Sequence[str]
+) -> dict[str, dict[str, float]]:
+    """The correlations between ``names`` only."""
+    keep = set(names)
+    rows = {a: row for a, row in correlation.items() if a in keep}
+    return {a: {b: r for b, r in row.items() if b in keep} for a, row in rows.items()}
 
 
 def resolve_effects(names: Sequence[str], context: dict | None = None) -> list[Effect]:
@@ -137,6 +194,7 @@ def fit_effects(
         scored=scored,
         warmup_s=warmup_s,
         offset=offset,
+        base_free=base.free or PARAM_NAMES,
     )
     prob = ExtendedProblem(records, effects, **common)
     base0 = {n: float(getattr(base.params, n)) for n in PARAM_NAMES}
@@ -149,7 +207,10 @@ def fit_effects(
         if progress:
             progress("effects", k + 1, len(starts) + 1)
     assert best is not None
-    best = prob.fit(best.base, best.effects)  # the best start, to convergence
+    best = prob.fit(best.base, best.effects, sd=False)  # the best start, to convergence
+    assert best.z is not None
+    cov = fit_covariance(prob, best.z, best.base)
+    at_bound = bounds_reached(prob.coords, best.z, best.base, best.effects)
     if progress:
         progress("effects", len(starts) + 1, len(starts) + 1)
     plain = ExtendedProblem(records, [], **common)
@@ -164,21 +225,11 @@ def fit_effects(
         base_held = plain.heldout(plain_fit)
         if progress:
             progress("heldout", n, n)
-    listed = []
-    for e in effects:
-        p, sd = best.effects.get(e.name, {}), best.sd.get(e.name, {})
-        listed.append(
-            {
-                "effect": e.name,
-                "params": {k: float(v) for k, v in p.items()},
-                "uncertainty": dict(sd),
-                "description": e.describe(p, sd),
-            }
-        )
+    base_notes = set(bound_notes(base.at_bound))  # the base fit's: judged again here
     return EffectsFit(
         params=best.params(base.params.shape, base.params.memory),
-        uncertainty=dict(best.base_sd),
-        effects=listed,
+        uncertainty={n: cov.uncertainty().get(n) for n in PARAM_NAMES},
+        effects=[_listed(e, best, cov) for e in effects],
         nrmse_pct=best.nrmse_pct,
         per_entry=dict(best.per_entry),
         heldout_nrmse_pct=_mean(held),
@@ -187,4 +238,25 @@ def fit_effects(
         base_heldout_nrmse_pct=_mean(base_held),
         entries=list(prob.scored),
         context=context,
+        correlation=cov.correlations(),
+        free=cov.names,
+        at_bound=at_bound,
+        messages=[m for m in base.messages if m not in base_notes] + bound_notes(at_bound),
+        loop_span_V=prob.loop.span_V if prob.loop is not None else None,
     )
+
+
+def _listed(effect: Effect, fit: FitOutcome, cov: Covariance) -> dict[str, Any]:
+    """The JSON item of one fitted effect: its parameters, their 1-sigma (``None``: not
+    determined), their correlations with every free parameter, its description."""
+    p = {k: float(v) for k, v in fit.effects.get(effect.name, {}).items()}
+    sd, corr = cov.uncertainty(), cov.correlations()
+    own = {k: f"{effect.name}.{k}" for k in p}
+    unc = {k: sd.get(q) for k, q in own.items()}
+    return {
+        "effect": effect.name,
+        "params": p,
+        "uncertainty": unc,
+        "correlation": {k: corr[q] for k, q in own.items() if q in corr},
+        "description": effect.describe(p, unc),
+    }

@@ -10,7 +10,12 @@ A free parameter ``p`` with estimate ``x_p``, standard uncertainty ``s_p`` and c
   data determine a combination of the two, not each one.
 
 Both limits are strict: exactly 100 % or exactly 0.99 passes. A parameter held fixed (its
-uncertainty ``None``) is not judged.
+uncertainty ``None``, not among the fit's free parameters) is not judged. Two more cases are
+unidentifiable whatever the numbers say, when the fit names them: a free parameter the data do
+not determine at all (its uncertainty ``None``: the residual does not depend on it, or only
+through a combination the Jacobian cannot resolve, :mod:`labrig.analysis.fit_uncertainty`),
+and one that ended on a bound of the fit (its 1-sigma is a local estimate that ignores the
+bound: not meaningful).
 
 The operator's ``gamma`` and ``Vc`` are strongly correlated on loops much narrower than
 ``Vc``; what the data do determine is the loop's opening at mid-stroke ``W`` (ue) and its
@@ -23,7 +28,7 @@ from the covariance of ``(gamma, Vc)`` by the Jacobian of the map:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from typing import Any
 
 import numpy as np
@@ -31,7 +36,9 @@ import numpy as np
 from labrig.analysis.engine import LOOP_CURVATURE, LOOP_WIDTH, LoopScale
 
 __all__ = [
+    "AT_BOUND",
     "CORRELATION_LIMIT",
+    "NOT_DETERMINED",
     "REL_SD_LIMIT",
     "RULE",
     "identifiability",
@@ -46,41 +53,81 @@ CORRELATION_LIMIT = 0.99
 #: the rule, in words (the JSON's ``rule``)
 RULE = (
     f"unidentifiable: relative standard uncertainty over {100 * REL_SD_LIMIT:g} % or "
-    f"|correlation| over {CORRELATION_LIMIT:g} with another free parameter"
+    f"|correlation| over {CORRELATION_LIMIT:g} with another free parameter; also a free "
+    "parameter not determined by the data at all, and one that ended at a bound of the fit"
 )
+#: the reason given for a free parameter without an uncertainty
+NOT_DETERMINED = "not determined by these data"
+#: the reason given for a parameter that ended on a bound
+AT_BOUND = "ended at a bound of the fit: its uncertainty is not meaningful"
 
 
 def unidentifiable(
     params: Mapping[str, Any],
     uncertainty: Mapping[str, float | None],
     correlation: Mapping[str, Mapping[str, float]],
+    *,
+    free: Collection[str] = (),
+    at_bound: Collection[str] = (),
 ) -> dict[str, str]:
-    """The unidentifiable parameters (module docstring) and why, in words: ``{name:
-    "relative uncertainty 140 %"}``, ``{name: "|correlation| 0.995 with vc_V"}`` or both,
-    joined by ``; ``."""
+    """The unidentifiable parameters (module docstring) and why, in words.
+
+    Parameters
+    ----------
+    params : mapping
+        Parameter to its estimate (native units).
+    uncertainty : mapping
+        Parameter to its 1-sigma (same unit), ``None`` for one held fixed or not determined.
+    correlation : mapping
+        Parameter to parameter to the correlation of their estimates (a parameter that is not
+        determined has no row).
+    free : collection of str
+        The fit's free parameters: one of them without an uncertainty is not determined by
+        the data (without ``free``, a parameter without an uncertainty is taken as fixed).
+    at_bound : collection of str
+        The parameters that ended on a bound of the fit.
+
+    Returns
+    -------
+    dict
+        ``{name: "relative uncertainty 140 %"}``, ``{name: "|correlation| 0.995 with vc_V"}``,
+        :data:`NOT_DETERMINED`, :data:`AT_BOUND`, or several joined by ``; ``.
+    """
     out: dict[str, str] = {}
     for name, sd in uncertainty.items():
+        why = [AT_BOUND] if name in at_bound else []
         if sd is None:
-            continue
-        why = []
-        x = params.get(name)
-        if isinstance(x, int | float) and math.isfinite(sd):
-            rel = math.inf if x == 0 else sd / abs(float(x))
-            if rel > REL_SD_LIMIT:
-                why.append(f"relative uncertainty {100 * rel:.3g} %")
-        elif not math.isfinite(sd):
-            why.append("uncertainty not finite")
-        row = correlation.get(name, {})
-        worst = max(
-            ((abs(r), q) for q, r in row.items() if q != name and math.isfinite(r)),
-            default=None,
-        )
-        if worst is not None and worst[0] > CORRELATION_LIMIT:
-            r = row[worst[1]]
-            why.append(f"|correlation| {abs(r):.4g} with {worst[1]}")
+            why += [NOT_DETERMINED] if name in free else []
+        else:
+            why += _spread(params.get(name), sd) + _correlated(correlation.get(name) or {}, name)
         if why:
             out[name] = "; ".join(why)
     return out
+
+
+def _spread(x: Any, sd: float) -> list[str]:
+    """Why a 1-sigma ``sd`` of the estimate ``x`` is too large (module docstring), if it is."""
+    if not math.isfinite(sd):
+        return ["uncertainty not finite"]
+    if not isinstance(x, int | float):
+        return []
+    rel = math.inf if x == 0 else sd / abs(float(x))
+    return [f"relative uncertainty {100 * rel:.3g} %"] if rel > REL_SD_LIMIT else []
+
+
+def _correlated(row: Mapping[str, float | None], name: str) -> list[str]:
+    """Why the correlations ``row`` of parameter ``name`` make it unidentifiable, if they do."""
+    worst = max(
+        (
+            (abs(r), q)
+            for q, r in row.items()
+            if q != name and isinstance(r, int | float) and math.isfinite(r)
+        ),
+        default=None,
+    )
+    if worst is None or worst[0] <= CORRELATION_LIMIT:
+        return []
+    return [f"|correlation| {worst[0]:.4g} with {worst[1]}"]
 
 
 def loop_coordinates(
@@ -111,7 +158,7 @@ def loop_coordinates(
     sg, sv = uncertainty.get("gamma_ue_per_V"), uncertainty.get("vc_V")
     if sg is None or sv is None:
         return out
-    r = float(correlation.get("gamma_ue_per_V", {}).get("vc_V", 0.0))
+    r = float((correlation.get("gamma_ue_per_V") or {}).get("vc_V") or 0.0)
     cov = np.array([[sg * sg, r * sg * sv], [r * sg * sv, sv * sv]])
     # LoopScale.jacobian is d(gamma, vc) / d(W, ln q); its inverse, with d q = q d ln q
     G = np.linalg.inv(scale.jacobian(w, q)) * np.array([[1.0], [q]])
@@ -126,12 +173,35 @@ def identifiability(
     uncertainty: Mapping[str, float | None],
     correlation: Mapping[str, Mapping[str, float]],
     span_V: float | None,
+    *,
+    free: Collection[str] = (),
+    at_bound: Mapping[str, float] | None = None,
 ) -> dict[str, Any]:
-    """The JSON of ``labrig fit``'s ``identifiability``: the ``rule``, the ``unidentifiable``
-    parameters with their reasons, and the operator's ``loop`` coordinates
-    (:func:`loop_coordinates`)."""
+    """The JSON of ``labrig fit``'s ``identifiability`` (with or without ``--effect``).
+
+    Parameters
+    ----------
+    params, uncertainty, correlation : mapping
+        As for :func:`unidentifiable` (an effect's parameters named ``"effect.param"``).
+    span_V : float or None
+        The stroke (V) of the operator's loop coordinates (:func:`loop_coordinates`).
+    free : collection of str
+        The fit's free parameters.
+    at_bound : mapping, optional
+        The parameters that ended on a bound of the fit, with their values.
+
+    Returns
+    -------
+    dict
+        ``rule``; the ``unidentifiable`` parameters with their reasons; ``at_bound``
+        (parameter to the bound it ended on); the operator's ``loop`` coordinates.
+    """
+    bound = dict(at_bound or {})
     return {
         "rule": RULE,
-        "unidentifiable": unidentifiable(params, uncertainty, correlation),
+        "unidentifiable": unidentifiable(
+            params, uncertainty, correlation, free=free, at_bound=bound
+        ),
+        "at_bound": bound,
         "loop": loop_coordinates(params, uncertainty, correlation, span_V),
     }

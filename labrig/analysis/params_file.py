@@ -9,7 +9,11 @@ configured with. ``diagnose`` also takes a bare ``ModelParams`` object. A baseli
 
 Every problem is an :class:`~labrig.core.errors.InputFileError` (exit code 2) naming the file, the
 field and what would be valid; the file is read within bounds (:data:`MAX_PARAMS_BYTES`,
-:func:`labrig.core.jsonsafe.loads_bounded`: nesting, digits).
+:func:`labrig.core.jsonsafe.loads_bounded`: nesting, digits). For ``report --params``
+(:func:`read_fit_output`) every other section the report uses is checked too, every problem at
+once (:func:`fit_output_issues`): ``uncertainty``, ``correlation``, ``identifiability``,
+``heldout_nrmse_pct``, ``method``, ``entries``, ``train_files``; and the fitted effects'
+parameters against the bounds each effect declares (:func:`fitted_effects`).
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ from labrig.core.errors import InputFileError, InputIssue
 from labrig.core.jsonsafe import loads_bounded
 from labrig.core.textfile import read_text_bounded
 from labrig.model import ModelParams
-from labrig.model.effects import Effect, RunContext
+from labrig.model.effects import Effect, Param, RunContext
 
 #: the largest parameter file read (``labrig fit`` writes a few kB)
 MAX_PARAMS_BYTES = 10_000_000
@@ -38,11 +42,25 @@ CONTEXT_TYPES: dict[str, type] = RunContext.types()
 #: ``effects_context`` fields added after files were first written: a file may lack them (the
 #: effects then take :class:`RunContext`'s default)
 CONTEXT_ADDED_LATER: frozenset[str] = frozenset({"rate_hz"})
+#: an effect's parameter this far (relative to ``max(1, |bound|)``) past a bound is rounding
+#: (a fit in log coordinates ends on ``exp(log(bound))``)
+BOUND_SLACK = 1e-9
 
 
 def file_issue(path: Path, message: str, field: str = "") -> InputFileError:
     """One problem with the file ``path`` (no line: JSON files are read whole)."""
     return InputFileError([InputIssue(str(path), None, field, message)])
+
+
+def is_number(value: Any) -> bool:
+    """A finite JSON number (``true`` and ``false`` are not numbers)."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _shown(value: Any) -> str:
+    """A JSON value in a message, cut to 40 characters."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 @dataclass
@@ -99,12 +117,151 @@ def _model_params(raw: Any, path: Path, field: str) -> ModelParams:
 
 def read_fit_output(path: Path) -> dict[str, Any]:
     """The ``labrig fit --json`` output in ``path`` for ``labrig report --params``: the model's
-    parameters checked, and the names of the effects fitted with them (their parameters are
-    checked with the records, :func:`fitted_effects`)."""
+    parameters checked, every other section the report uses (:func:`fit_output_issues`), and
+    the names of the effects fitted with them (their parameters are checked with the records,
+    :func:`fitted_effects`)."""
     doc = read_params_file(path, "the report").doc
     assert doc is not None  # bare_ok=False
+    issues = fit_output_issues(doc, path)
+    if issues:
+        raise InputFileError(issues)
     fitted_effects(doc, path, check_params=False)
     return doc
+
+
+def fit_output_issues(doc: dict[str, Any], path: Path) -> list[InputIssue]:
+    """What in the sections of a ``labrig fit`` output besides ``params`` and ``effects`` the
+    report cannot use, each problem naming its field and what would be valid. Every section may
+    be absent or ``null`` (a baseline's or an effects fit's file has no ``correlation`` nor
+    ``identifiability``; a file written by hand may hold ``params`` alone)."""
+    found: list[tuple[str, str]] = []
+    for key, check in _SECTIONS.items():
+        if doc.get(key) is not None:
+            found += check(doc[key], key)
+    return [InputIssue(str(path), None, fld, msg) for fld, msg in found]
+
+
+def _uncertainty(value: Any, key: str) -> list[tuple[str, str]]:
+    """``uncertainty``: parameter -> its 1 sigma (>= 0; ``null``: held fixed or not
+    determined). The names are not checked: the report shows the model's and ignores others."""
+    if not isinstance(value, dict):
+        return [(key, f"{_shown(value)} is not an object; expected {{parameter: 1 sigma}}")]
+    out = []
+    for name, sd in value.items():
+        if sd is not None and not (is_number(sd) and sd >= 0):
+            what = "is negative" if is_number(sd) else "is not a number"
+            out.append(
+                (
+                    f"{key}.{name}",
+                    f"{_shown(sd)} {what}; expected a standard uncertainty >= 0, in the "
+                    "parameter's unit (null for one held fixed or not determined)",
+                )
+            )
+    return out
+
+
+def _correlation(value: Any, key: str) -> list[tuple[str, str]]:
+    """``correlation``: parameter -> parameter -> a number (-1 to 1 but for rounding)."""
+    if not isinstance(value, dict):
+        return [
+            (key, f"{_shown(value)} is not an object; expected {{parameter: {{parameter: r}}}}")
+        ]
+    out = []
+    for name, row in value.items():
+        if not isinstance(row, dict):
+            out.append((f"{key}.{name}", f"{_shown(row)} is not an object of correlations"))
+            continue
+        for other, r in row.items():
+            # not bounded to +-1: on data that barely determine a parameter, files of earlier
+            # labrig fits hold up to 1.04 (rounding); the report flags any |r| over 0.99
+            if not is_number(r):
+                out.append(
+                    (
+                        f"{key}.{name}.{other}",
+                        f"{_shown(r)} is not a number; expected the correlation of the two "
+                        "estimates (-1 to 1)",
+                    )
+                )
+    return out
+
+
+def _identifiability(value: Any, key: str) -> list[tuple[str, str]]:
+    """``identifiability``: an object whose ``unidentifiable`` maps parameters to texts (the
+    fit's judgement) and whose ``loop`` (``null`` for the linear shape) holds numbers (``*_sd``
+    may be ``null``), its stroke ``span_V`` above 0 V."""
+    if not isinstance(value, dict):
+        return [(key, f"{_shown(value)} is not an object; expected {{rule, unidentifiable, loop}}")]
+    judged = value.get("unidentifiable", {})
+    if not isinstance(judged, dict) or not all(isinstance(v, str) for v in judged.values()):
+        return [
+            (
+                f"{key}.unidentifiable",
+                f"{_shown(judged)} is not an object of texts; expected parameter -> why it is "
+                "unidentifiable (labrig fit writes it)",
+            )
+        ]
+    loop = value.get("loop")
+    if loop is None:
+        return []
+    if not isinstance(loop, dict):
+        return [
+            (
+                f"{key}.loop",
+                f"{_shown(loop)} is not an object; expected span_V (V), loop_width_ue and "
+                "loop_curvature with their *_sd, or null",
+            )
+        ]
+    out = []
+    for name, v in loop.items():
+        if v is None and name != "span_V":
+            continue
+        if not is_number(v) or (name == "span_V" and v <= 0):
+            out.append(
+                (
+                    f"{key}.loop.{name}",
+                    f"{_shown(v)} is not a "
+                    + ("voltage above 0 V (the loop's stroke)" if name == "span_V" else "number"),
+                )
+            )
+    return out
+
+
+def _nrmse(value: Any, key: str) -> list[tuple[str, str]]:
+    """An NRMSE: a number >= 0 (%)."""
+    if is_number(value) and value >= 0:
+        return []
+    return [(key, f"{_shown(value)} is not an NRMSE; expected a number >= 0 (%) or null")]
+
+
+def _text(value: Any, key: str) -> list[tuple[str, str]]:
+    """A string (``method``: how the parameters were fitted)."""
+    if isinstance(value, str):
+        return []
+    return [(key, f"{_shown(value)} is not a string; expected the fit's method, e.g. 'global'")]
+
+
+def _names(value: Any, key: str) -> list[tuple[str, str]]:
+    """A non-empty list of distinct non-empty strings (``entries``, ``train_files``)."""
+    what = "entry names" if key == "entries" else "run file paths"
+    if (
+        not isinstance(value, list)
+        or not value
+        or not all(isinstance(v, str) and v for v in value)
+        or len(set(value)) != len(value)
+    ):
+        return [(key, f"{_shown(value)}: expected a list of distinct {what}, each a string")]
+    return []
+
+
+_SECTIONS: dict[str, Callable[[Any, str], list[tuple[str, str]]]] = {
+    "uncertainty": _uncertainty,
+    "correlation": _correlation,
+    "identifiability": _identifiability,
+    "heldout_nrmse_pct": _nrmse,
+    "method": _text,
+    "entries": _names,
+    "train_files": _names,
+}
 
 
 def start_params(path: Path, say: Callable[[str], None] = print) -> ModelParams:
@@ -155,15 +312,37 @@ def fitted_effects(
     values: dict[str, dict[str, float]] = {}
     if not check_params:
         return effects, values
-    for eff, item in zip(effects, listed, strict=True):
+    issues: list[InputIssue] = []
+    for i, (eff, item) in enumerate(zip(effects, listed, strict=True)):
         want = [q.name for q in eff.params]
         p = item["params"]
-        if sorted(p) != sorted(want) or not all(
-            isinstance(p[k], int | float) and math.isfinite(p[k]) for k in want
-        ):
-            raise file_issue(path, f"{eff.name} needs numeric params {', '.join(want)}", "effects")
+        if sorted(p) != sorted(want) or not all(is_number(p[k]) for k in want):
+            raise file_issue(
+                path, f"{eff.name} needs numeric params {', '.join(want)}", f"effects[{i}].params"
+            )
+        issues += [
+            InputIssue(str(path), None, f"effects[{i}].params.{q.name}", why)
+            for q in eff.params
+            if (why := _outside(eff.name, q, p[q.name]))
+        ]
         values[eff.name] = {k: float(p[k]) for k in want}
+    if issues:
+        raise InputFileError(issues)
     return effects, values
+
+
+def _outside(effect: str, q: Param, value: float) -> str:
+    """Why ``value`` is not a value of the effect's parameter ``q`` (outside the bounds it
+    declares, which its fit keeps to), or ``""``."""
+    lo = q.lo - BOUND_SLACK * max(1.0, abs(q.lo))
+    hi = q.hi + BOUND_SLACK * max(1.0, abs(q.hi))
+    if lo <= value <= hi:
+        return ""
+    unit = f" {q.unit}" if q.unit else ""
+    return (
+        f"{value:g} is outside {effect}'s range for {q.name}: {q.lo:g} to {q.hi:g}{unit} "
+        "(the bounds its fit keeps to)"
+    )
 
 
 def _is_context(context: Any) -> bool:

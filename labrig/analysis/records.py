@@ -149,6 +149,24 @@ class Record:
         )
 
 
+def warmup_samples(record: Record, warmup_s: float) -> int:
+    """The samples at the start of ``record`` simulated but not scored.
+
+    Parameters
+    ----------
+    record : Record
+        A record (its sample rate ``rate_hz``, Hz).
+    warmup_s : float
+        The warm-up (s); a negative one is none.
+
+    Returns
+    -------
+    int
+        ``round(max(warmup_s, 0) * rate_hz)``: the record's scored samples are the others.
+    """
+    return round(max(warmup_s, 0.0) * record.rate_hz)
+
+
 def unit_of(r: Record, channel: str) -> str:
     """A channel's unit as the record states it (``meta["units"][channel]``, which the run-file
     reader sets), ``""`` when it states none."""

@@ -161,6 +161,23 @@ def number(v: float | None, digits: int = 4) -> str:
     return f"{v:.{digits}g}"
 
 
+def parameter_cells(v: float, u: float | None, why: str | None) -> tuple[str, str, str]:
+    """A parameter's value, 1-sigma and relative 1-sigma cells: ``fixed`` when it was held
+    fixed, and, when it is unidentifiable (``why``, :mod:`labrig.analysis.identifiability`),
+    the value flagged with the reason and no 1-sigma when it has none or is not meaningful (a
+    parameter that ended at a bound)."""
+    from labrig.analysis.identifiability import AT_BOUND
+
+    shown = number(v, 5)
+    if why is None:
+        rel = "fixed" if u is None else (f"{100 * u / abs(v):.2g} %" if v else "—")
+        return shown, number(u, 2), rel
+    shown = f"unidentifiable (fitted {shown}; {why})"
+    if u is None or AT_BOUND in why:
+        return shown, "—", "—"
+    return shown, number(u, 2), f"{100 * u / abs(v):.2g} %" if v else "—"
+
+
 def summary_tables(
     res: FitResult | BaselineResult | EffectsFit, model: str, strain_unit: str = "ue"
 ) -> list[Table]:
@@ -180,14 +197,11 @@ def summary_tables(
         ident = j.get("identifiability") or {}
         flagged = ident.get("unidentifiable") or {}
         for name in PARAM_NAMES:
-            v = j["params"][name]
-            u = j["uncertainty"].get(name)
-            rel = "fixed" if u is None else (f"{100 * u / abs(v):.2g} %" if v else "—")
-            shown = number(v, 5)
-            if name in flagged:
-                shown = f"unidentifiable (fitted {shown}; {flagged[name]})"
+            shown, sd, rel = parameter_cells(
+                j["params"][name], j["uncertainty"].get(name), flagged.get(name)
+            )
             unit = UNITS.get(name, "").replace("ue", strain_unit)
-            t.add_row(name, escape(shown), number(u, 2), rel, Text(unit))
+            t.add_row(name, escape(shown), sd, rel, Text(unit))
         t.add_row("shape", str(j["params"]["shape"]), "", "", "")
         t.add_row("memory", str(j["params"]["memory"]), "", "", "")
         loop = ident.get("loop")
@@ -229,8 +243,11 @@ def effects_table(res: EffectsFit) -> Table:
     t = Table(title="effects fitted with the model")
     t.add_column("effect")
     t.add_column("parameters")
+    flagged = res.to_json()["identifiability"]["unidentifiable"]
     for e in res.effects:
-        t.add_row(e["effect"], escape(e["description"]))
+        own = [(k, f"{e['effect']}.{k}") for k in e["params"]]
+        notes = [f"{k}: unidentifiable ({flagged[q]})" for k, q in own if q in flagged]
+        t.add_row(e["effect"], escape("; ".join([e["description"], *notes])))
     held = (
         f"{number(res.base_heldout_nrmse_pct, 3)} % -> {number(res.heldout_nrmse_pct, 3)} %"
         if res.heldout_nrmse_pct is not None

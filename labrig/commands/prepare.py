@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,7 +41,7 @@ import numpy as np
 
 from labrig.analysis import load
 from labrig.analysis.metrics import drive_frequency_hz
-from labrig.analysis.records import Record, unit_of
+from labrig.analysis.records import Record, unit_of, warmup_samples
 from labrig.analysis.split import split_entries
 from labrig.core.errors import InputFileError, InputIssue, LabrigError, option_error
 from labrig.model import ModelParams
@@ -188,9 +189,7 @@ def prepare(
     check_records(path, records, scored, alone=not chain)
     warmup = _warmup(path, records, chain, warmup_s, notes)
     offset = _offset(imported, offset, notes)
-    short = [r.name for r in records if r.name in scored and r.duration_s <= warmup * 1.01]
-    if short:
-        raise _issue(path, f"the warm-up of {warmup:g} s leaves nothing of {short[0]!r} to score")
+    _check_scored_samples(path, [r for r in records if r.name in set(scored)], warmup)
     return Setup(path, run, records, scored, chain, warmup, offset, imported, notes)
 
 
@@ -401,8 +400,33 @@ def _check_entries(path: Path, names: list[str], entries: list[str] | None) -> N
             f"no entry {', '.join(map(repr, missing))} (entries: {', '.join(names)})",
             "--entries",
         )
-    if len(set(entries)) != len(entries):
-        raise _issue(path, "an entry is named twice", "--entries")
+    twice = sorted(n for n, k in Counter(entries).items() if k > 1)
+    if twice:
+        raise _issue(path, f"{', '.join(map(repr, twice))} named twice; name each entry once",
+                     "--entries")  # fmt: skip
+
+
+def _check_scored_samples(path: Path, scored: Sequence[Record], warmup_s: float) -> None:
+    """Every scored record keeps at least :data:`MIN_SAMPLES` samples after the warm-up
+    (:func:`~labrig.analysis.records.warmup_samples`); else an
+    :class:`~labrig.core.errors.InputFileError` naming each that does not, the samples it
+    keeps and the minimum."""
+    issues = []
+    for r in scored:
+        left = r.n - warmup_samples(r, warmup_s)
+        if left < MIN_SAMPLES:
+            issues.append(
+                InputIssue(
+                    str(path),
+                    None,
+                    f"{r.name}/data",
+                    f"the warm-up of {warmup_s:g} s leaves {max(left, 0)} of its {r.n} samples "
+                    f"to score; an entry to fit needs at least {MIN_SAMPLES} (a shorter "
+                    "--warmup-s)",
+                )
+            )
+    if issues:
+        raise InputFileError(issues)
 
 
 def _warmup(

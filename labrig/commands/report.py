@@ -33,8 +33,15 @@ from labrig.commands.fit import (
     fit_base,
     fit_dynamic,
 )
-from labrig.commands.prepare import AnalysisError, Setup, prepare
+from labrig.commands.prepare import (
+    AnalysisError,
+    Setup,
+    prepare,
+    training_setup,
+    unit_issues,
+)
 from labrig.core.blas import single_thread_blas
+from labrig.core.errors import InputFileError, InputIssue
 from labrig.core.jsonsafe import MAX_JSON_BYTES, json_safe, loads_bounded
 from labrig.core.outputs import same_file
 from labrig.core.textfile import read_text_bounded
@@ -84,6 +91,13 @@ class FittedModels:
     #: the run files the peers are identified on (our model's training files), else ``None``
     #: (the report's own records)
     peers_on: list[Path] | None = None
+    #: the records the peers are identified on when not the report's own: our model's
+    #: training records (its training files, the entries it was fitted on)
+    peers_setup: Setup | None = None
+    #: the report's entries every model was identified on (its NRMSE there is in-sample; on
+    #: the others out-of-sample); ``None`` when that differs between the models (our model's
+    #: training records are not known: the peers are fitted on the report's own)
+    in_sample: list[str] | None = None
 
 
 @dataclass
@@ -177,11 +191,13 @@ def _fitted_now(
         j["correlation"],
         res.method,
         loop_span_V=res.loop_span_V,
+        unidentifiable=j["identifiability"]["unidentifiable"],
     )
     return FittedModels(
         {"dynamic": model},
         f"fitted now ({res.method}, {res.elapsed_s:.1f} s)",
         [f"fit: {m}" for m in res.messages],
+        in_sample=list(setup.scored),
     )
 
 
@@ -207,17 +223,14 @@ def named_training_files(params_file: Path | None) -> list[Path]:
     return training_files(doc, Path(params_file)) or []
 
 
-def _peers_elsewhere(setup: Setup, train: list[Path], kind: str, progress: Progress) -> Fitted:
-    """The peer ``kind`` identified on the run files ``train`` (as ``labrig validate`` does)
-    and predicting the report's records (each entry's offset fitted as for our model)."""
-    from labrig.commands.prepare import training_setup
-
-    tr = training_setup(train)
+def _peers_elsewhere(setup: Setup, tr: Setup, kind: str, progress: Progress) -> Fitted:
+    """The peer ``kind`` identified on the training records ``tr`` (as ``labrig validate``
+    does) and predicting the report's records (each entry's offset fitted as for our model)."""
     b = fit_base(tr, kind, False, progress)
     sim = b.simulate(setup.records, setup.chain)
     preds = with_offsets({n: sim[n] for n in setup.scored}, setup)
     return Fitted(
-        kind, preds, None, None, b.params, method=f"{kind} (identified on the training files)"
+        kind, preds, None, None, b.params, method=f"{kind} (identified on the training records)"
     )
 
 
@@ -249,30 +262,37 @@ def _from_file(
     progress: Progress | None = None,
     peers: Sequence[str] = KINDS,
 ) -> FittedModels:
-    """Our model with the parameters (and effects) of a ``labrig fit`` file. The file gives
-    its held-out NRMSE as a mean only; with ``heldout`` (and two scored entries or more, no
-    effects) the held-out NRMSE of each entry is measured now, leave-one-entry-out as
-    ``labrig fit`` does (each fold fits the other entries), so the report keeps its column."""
+    """Our model with the parameters (and effects) of a ``labrig fit`` file, and where the
+    peers are to be identified (:func:`_where_identified`). The file gives its held-out NRMSE
+    as a mean only; with ``heldout`` (and two scored entries or more, no effects) the held-out
+    NRMSE of each entry is measured now, leave-one-entry-out as ``labrig fit`` does (each fold
+    fits the other entries), so the report keeps its column."""
     params = ModelParams(**doc["params"])
     effects = fitted_effects(doc, params_file, setup.records)
+    source = f"from {params_file}"
+    if effects[0]:
+        source += " with the effects fitted with it: " + "; ".join(
+            _described(e.name, doc) for e in effects[0]
+        )
+    out = FittedModels({}, source)
+    _where_identified(out, setup, doc, params_file, peers)  # before any fit
     held_per, held_mean = None, doc.get("heldout_nrmse_pct")
-    notes = []
     if heldout and len(setup.scored) >= 2 and not effects[0]:
         method = str(doc.get("method", "global"))
         method = method if method in ("global", "staged") else "global"
         res = fit_dynamic(setup, method, True, progress, params.memory)
         held_per, held_mean = res.heldout_per_entry, res.heldout_nrmse_pct
-        notes.append(
+        out.notes.append(
             "held-out NRMSE per entry: leave-one-entry-out fits made now "
             f"({method}; the parameters file gives its mean only)"
         )
     else:
-        notes.append(
+        out.notes.append(
             "held-out NRMSE per entry not available with --params here (the file gives its "
             "mean only; it is measured now with --heldout, two scored entries or more and no "
             "effects)"
         )
-    model = Fitted(
+    out.models["dynamic"] = Fitted(
         "dynamic",
         predict_entries(params, setup, effects),
         held_per,
@@ -282,37 +302,131 @@ def _from_file(
         doc.get("correlation") or {},
         str(doc.get("method", "")),
         loop_span_V=_loop_span(doc, setup),
+        unidentifiable=(doc.get("identifiability") or {}).get("unidentifiable"),
     )
-    source = f"from {params_file}"
-    if effects[0]:
-        source += " with the effects fitted with it: " + "; ".join(
-            _described(e.name, doc) for e in effects[0]
-        )
-    fitted_on = doc.get("entries")
-    if isinstance(fitted_on, list) and fitted_on != setup.scored:
-        notes.insert(
-            0,
-            f"the parameters were fitted on {', '.join(map(str, fitted_on))}; this "
-            f"report scores {', '.join(setup.scored)}",
-        )
-    out = FittedModels({"dynamic": model}, source, notes)
+    return out
+
+
+def _where_identified(
+    out: FittedModels,
+    setup: Setup,
+    doc: dict[str, Any],
+    params_file: Path,
+    peers: Sequence[str],
+) -> None:
+    """Where our model of ``params_file`` was identified, and so the peers: its training
+    records when the file names them (:func:`_identified_elsewhere`; the report's own records
+    need nothing), else the report's records for the peers, in-sample, with a caveat."""
+    fitted_on = doc.get("entries")  # checked when read: a list of names, or absent
     train = training_files(doc, params_file)
     if train is None or any(not p.is_file() for p in train):
+        if fitted_on is not None and fitted_on != setup.scored:
+            out.notes.append(
+                f"the parameters were fitted on {', '.join(fitted_on)}; this "
+                f"report scores {', '.join(setup.scored)}"
+            )
         if train is not None:
             missing = [str(p) for p in train if not p.is_file()]
-            notes.append(f"the training files of {params_file} are not found: {', '.join(missing)}")
+            out.notes.append(
+                f"the training files of {params_file} are not found: {', '.join(missing)}"
+            )
         out.caveat = peers_caveat(params_file, fitted_on, setup.path, peers)
-    elif not (len(train) == 1 and same_file(train[0], setup.path)):
-        out.peers_on = train
-        names = ", ".join(p.name for p in train)
-        who = "our model and the peers are" if peers else "our model is"
-        does = "predict" if peers else "predicts"
-        notes.insert(
-            0,
-            f"{who} identified on {names} (the training files of {params_file.name}) and "
-            f"{does} the records of this report",
+    elif _own_records(train, fitted_on, setup):
+        out.in_sample = list(setup.scored)  # the peers are fitted on them too
+    else:
+        _identified_elsewhere(out, setup, train, fitted_on, params_file, peers)
+
+
+def _own_records(train: list[Path], fitted_on: list[str] | None, setup: Setup) -> bool:
+    """Whether our model was identified on the report's own records: its one training file is
+    the report's, and it was fitted on the entries the report scores (or does not say which)."""
+    return (
+        len(train) == 1
+        and same_file(train[0], setup.path)
+        and (fitted_on is None or set(fitted_on) == set(setup.scored))
+    )
+
+
+def _identified_elsewhere(
+    out: FittedModels,
+    setup: Setup,
+    train: list[Path],
+    fitted_on: list[str] | None,
+    params_file: Path,
+    peers: Sequence[str],
+) -> None:
+    """Our model was identified on other records than the report's (other files, or other
+    entries of the same file): the peers are identified on those same records
+    (:func:`training_records`) and ``out`` says so, with which of the report's entries are then
+    in-sample (those of the training records, when the file is the report's own)."""
+    tr = training_records(train, fitted_on, params_file, setup)
+    out.peers_on, out.peers_setup = train, tr
+    own = len(train) == 1 and same_file(train[0], setup.path)
+    seen = set(tr.scored) if own else set()
+    out.in_sample = [n for n in setup.scored if n in seen]
+    names = ", ".join(p.name for p in train)
+    where = f"{', '.join(tr.scored)} of {names}" if fitted_on is not None else names
+    who = "our model and the peers are" if peers else "our model is"
+    does = "predict" if peers else "predicts"
+    if not out.in_sample:
+        scope = ", out-of-sample"
+    elif out.in_sample == setup.scored:
+        scope = ", in-sample"
+    else:
+        scope = f": in-sample on {', '.join(out.in_sample)}, out-of-sample on the others"
+    out.notes.append(
+        f"{who} identified on {where} (the training files of {params_file.name}) and "
+        f"{does} the records of this report{scope}"
+    )
+
+
+def training_records(
+    train: list[Path], fitted_on: list[str] | None, params_file: Path, setup: Setup
+) -> Setup:
+    """The records our model of ``params_file`` was identified on: its training files
+    ``train``, of one file the entries it was fitted on (``fitted_on``; every complete entry
+    when it does not say), as ``labrig fit`` prepares them. An
+    :class:`~labrig.core.errors.InputFileError` naming the parameter file's field when they
+    cannot be read, or when their strain is in another unit than the report's records
+    (:func:`~labrig.commands.prepare.unit_issues`: a model predicts in the unit it was
+    identified in)."""
+    try:
+        tr = prepare(train[0], fitted_on) if len(train) == 1 else training_setup(train)
+    except InputFileError as e:
+        field = "entries" if any(i.field == "--entries" for i in e.issues) else "train_files"
+        raise InputFileError(
+            [
+                InputIssue(
+                    str(params_file),
+                    None,
+                    field,
+                    "its training records cannot be read as they are named:",
+                ),
+                *e.issues,
+            ]
+        ) from None
+    mixed = unit_issues(
+        [(Path(tr.path), r) for r in tr.scored_records]
+        + [(Path(setup.path), r) for r in setup.scored_records]
+    )
+    if mixed:
+        unit, theirs = strain_unit(tr.scored_records), strain_unit(setup.scored_records)
+        raise InputFileError(
+            [
+                InputIssue(
+                    str(params_file),
+                    None,
+                    "train_files",
+                    f"its model was identified on strain in {unit!r} "
+                    f"({', '.join(p.name for p in train)}) and predicts in {unit!r}; the "
+                    f"report's records are in {theirs!r}: fit the model on records in "
+                    f"{theirs!r} (labrig fit {Path(setup.path).name}), or bring them in "
+                    f"{unit!r} (labrig import --strain-units, --strain-scale)",
+                ),
+                *mixed,
+            ]
         )
-    return out
+    return tr
 
 
 def checked_peers(peers: Sequence[str] | None) -> tuple[str, ...]:
@@ -354,8 +468,8 @@ def fit_report_models(
         fitted.notes.append("no peers fitted (peers: none)")
     for kind in peers:
         try:
-            if fitted.peers_on is not None:
-                fitted.models[kind] = _peers_elsewhere(setup, fitted.peers_on, kind, progress)
+            if fitted.peers_setup is not None:
+                fitted.models[kind] = _peers_elsewhere(setup, fitted.peers_setup, kind, progress)
                 continue
             b = fit_base(setup, kind, heldout, progress)
         except AnalysisError as e:
@@ -420,6 +534,7 @@ def report_data(setup: Setup, fitted: FittedModels, heldout: bool, from_file: bo
         "offset": setup.offset,
         "params_source": fitted.source,
         "comparison": fitted.caveat or "",
+        "in_sample": fitted.in_sample,
         "fit_time": f"{fitted.elapsed_s:.1f} s ({fit_time})",
     }
     return build_report(

@@ -6,7 +6,9 @@ our model and of the baselines, and the run's provenance into a :class:`ReportDa
 
 Metrics (one definition each, :mod:`labrig.analysis.metrics`), per entry and per model:
 
-- ``nrmse_pct``: NRMSE over the scored samples (after the warm-up), in-sample;
+- ``nrmse_pct``: NRMSE over the scored samples (after the warm-up): in-sample on the entries the
+  models were identified on, out-of-sample on the others (``labrig report --params`` from
+  another file or other entries; ``settings["in_sample"]`` names the former);
 - ``heldout_nrmse_pct``: the same for a fit that did not use the entry (leave-one-entry-out);
 - ``max_error_ue``: ``max |measured - predicted|`` over the scored samples;
 - ``loop_area_error_pct``: predicted minus measured loop area over the last full period,
@@ -54,9 +56,10 @@ MODEL_SHORT: dict[str, str] = {
     "sindy": "SINDy",
 }
 
-#: the metrics table: key, heading, unit
+#: the metrics table: key, heading, unit (the NRMSE's heading says whether it is in-sample:
+#: :func:`labrig.report.html.nrmse_scope`)
 METRICS: tuple[tuple[str, str, str], ...] = (
-    ("nrmse_pct", "NRMSE in-sample", "%"),
+    ("nrmse_pct", "NRMSE", "%"),
     ("heldout_nrmse_pct", "NRMSE held-out", "%"),
     ("max_error_ue", "max error", "ue"),
     ("loop_area_error_pct", "loop-area error", "%"),
@@ -97,6 +100,9 @@ class Fitted:
     note: str | None = None
     #: the stroke (V) of our model's loop coordinates (labrig.analysis.identifiability)
     loop_span_V: float | None = None
+    #: our model's unidentifiable parameters as its fit judged them (parameter -> why: its
+    #: free parameters and bounds known there), or ``None`` to judge them from the numbers
+    unidentifiable: dict[str, str] | None = None
 
     @property
     def label(self) -> str:
@@ -169,9 +175,10 @@ class ReportData:
 
 
 def amplitude_of(record: Record, frequency_hz: float | None) -> float:
-    """The drive's peak-to-peak voltage: ``meta["amplitude_V"]`` if stated, else the span of
-    the last period at ``frequency_hz`` (or of the whole record without one), rounded to 3
-    significant digits."""
+    """The drive's peak-to-peak voltage (V): ``meta["amplitude_V"]`` if stated, else the span
+    of the last period at ``frequency_hz`` (or of the whole record without one: pass ``None``
+    when the last periods do not repeat, a vanishing envelope whose last period is a fraction
+    of its drive), rounded to 3 significant digits."""
     a = record.meta.get("amplitude_V")
     try:
         if a is not None and float(a) > 0:
@@ -187,13 +194,15 @@ def drive_of(record: Record) -> tuple[float | None, bool, float]:
     """The drive as a report states it: its frequency (Hz; stated in ``meta``, else estimated
     from the voltage and kept only when the last two periods at it repeat), whether they repeat
     (:func:`~labrig.analysis.metrics.is_periodic`) and the peak-to-peak voltage
-    (:func:`amplitude_of`). A step sequence or a PRBS has a strongest spectral line but no
-    period: an estimate there would describe it as a fast drive of one period's span."""
+    (:func:`amplitude_of`: of the last period when the periods repeat there, else of the whole
+    record). A step sequence or a PRBS has a strongest spectral line but no period: an estimate
+    there would describe it as a fast drive of one period's span; a vanishing envelope's last
+    period spans a fraction of its drive (0.66 V of a drive up to 70 V)."""
     f = drive_frequency_hz(record)
     periodic = is_periodic(record.voltage_V, record.rate_hz, f)
     if record.frequency_hz is None and not periodic:
         f = None
-    return f, periodic, amplitude_of(record, f)
+    return f, periodic, amplitude_of(record, f if periodic else None)
 
 
 def build_report(

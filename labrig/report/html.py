@@ -27,7 +27,7 @@ from labrig.report.data import (
 from labrig.report.templating import render as render_template
 from labrig.report.templating import sig
 
-__all__ = ["fmt", "peers_and_rate", "render", "report_context"]
+__all__ = ["fmt", "nrmse_scope", "peers_and_rate", "render", "report_context"]
 
 #: the signed metrics, whose mean is of their absolute values
 SIGNED = ("loop_area_error_pct", "strain_shift_error_ue")
@@ -66,10 +66,65 @@ def _cells(keys: list[str], values: list[Any], metric: str, signed: bool) -> lis
     return out
 
 
+def nrmse_scope(data: ReportData) -> tuple[str, str, set[str]]:
+    """What the NRMSE column is: in-sample, out-of-sample, or by entry.
+
+    Parameters
+    ----------
+    data : ReportData
+        The report; ``data.settings["in_sample"]`` names its entries every model was
+        identified on (``None``: that differs between the models, or is not known; absent:
+        nothing is said).
+
+    Returns
+    -------
+    tuple
+        The column's heading, a sentence for the table's legend, and the entries to mark as
+        in-sample (only when the column mixes in- and out-of-sample entries).
+    """
+    names = [e.name for e in data.entries]
+    if "in_sample" not in data.settings:  # a report made without saying
+        return "NRMSE", "", set()
+    seen = data.settings["in_sample"]
+    if seen is None:
+        why = (
+            "The peers' NRMSE is in-sample (fitted on these records); ours is as “What this "
+            "page compares” says."
+            if data.settings.get("comparison")
+            else "In-sample or not: the parameter file does not say which records our model was "
+            "identified on."
+        )
+        return "NRMSE", why, set()
+    seen_set = set(seen) & set(names)
+    if seen_set == set(names):
+        return "NRMSE in-sample", "In-sample: every model was identified on these entries.", set()
+    if not seen_set:
+        return (
+            "NRMSE out-of-sample",
+            "Out-of-sample: every model was identified on other records and predicts these.",
+            set(),
+        )
+    return (
+        "NRMSE",
+        "In-sample on the entries marked “(training)”, which every model was identified on; "
+        "out-of-sample on the others.",
+        seen_set,
+    )
+
+
+def _label(data: ReportData, metric: str, label: str) -> str:
+    """A metric's heading (the NRMSE's says whether it is in-sample: :func:`nrmse_scope`)."""
+    return nrmse_scope(data)[0] if metric == "nrmse_pct" else label
+
+
 def summary_context(data: ReportData) -> dict[str, Any]:
     """The summary table: every model's mean of every metric."""
     head = [
-        {"label": label, "unit": unit, "stat": "mean |.|" if metric in SIGNED else "mean"}
+        {
+            "label": _label(data, metric, label),
+            "unit": unit,
+            "stat": "mean |.|" if metric in SIGNED else "mean",
+        }
         for metric, label, unit in METRICS
     ]
     rows = []
@@ -88,6 +143,7 @@ def summary_context(data: ReportData) -> dict[str, Any]:
 def metrics_context(data: ReportData) -> dict[str, Any]:
     """The metrics table: per entry and model, then the means."""
     keys = list(data.models)
+    _, scope, marked = nrmse_scope(data)
     rows = []
     for e in data.entries:
         cells = []
@@ -97,6 +153,7 @@ def metrics_context(data: ReportData) -> dict[str, Any]:
         rows.append(
             {
                 "name": e.name,
+                "training": e.name in marked,
                 "frequency": sig(e.frequency_hz, 3) if e.frequency_hz else "—",
                 "amplitude": f"{e.amplitude_V:g}",
                 "cells": cells,
@@ -115,7 +172,11 @@ def metrics_context(data: ReportData) -> dict[str, Any]:
         for k in keys
     ]
     return {
-        "groups": [{"label": label, "unit": unit, "span": len(keys)} for _, label, unit in METRICS],
+        "groups": [
+            {"label": _label(data, metric, label), "unit": unit, "span": len(keys)}
+            for metric, label, unit in METRICS
+        ],
+        "scope": scope,
         "models": models,
         "rows": rows,
         "mean": mean,
@@ -140,13 +201,14 @@ def params_context(data: ReportData) -> dict[str, Any] | None:
     fm = data.models.get("dynamic")
     if fm is None or not fm.params:
         return None
-    flagged = unidentifiable(fm.params, fm.uncertainty, fm.correlation)
+    flagged = fm.unidentifiable
+    if flagged is None:
+        flagged = unidentifiable(fm.params, fm.uncertainty, fm.correlation)
     rows = []
     for name, symbol, unit in PARAM_ROWS:
         v, u = fm.params.get(name), fm.uncertainty.get(name)
-        rel = (
-            f"{100 * u / abs(v):.2g} %" if (u is not None and v) else "fixed" if u is None else "—"
-        )
+        held = u is None and name not in flagged  # no uncertainty: fixed, or not determined
+        rel = f"{100 * u / abs(v):.2g} %" if (u is not None and v) else "fixed" if held else "—"
         value = sig(v, 5)
         if name in flagged:
             value = f"unidentifiable (fitted {value}; {flagged[name]})"

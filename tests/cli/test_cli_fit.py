@@ -172,7 +172,7 @@ def test_fit_staged(small_run: Path) -> None:
         (["fit", "{missing}"], "run file not found"),
         (["fit", "{text}"], "not a readable HDF5 run file"),
         (["fit", "{run}", "--entries", "sine_50V_1Hz,nope"], "no entry 'nope'"),
-        (["fit", "{run}", "--warmup-s", "100"], "leaves nothing"),
+        (["fit", "{run}", "--warmup-s", "100"], "leaves 0 of its"),
         (["fit", "{run}", "--out", "{dir}"], "is a directory"),
         (["fit", "{run}", "--effect", "creep", "--effect", "creep"], "given twice"),
         (["fit", "{run}", "--model", "bouc_wen", "--effect", "creep"], "applies to the dynamic"),
