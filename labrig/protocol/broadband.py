@@ -83,7 +83,8 @@ def triangle_segment(
     def f(t: Array) -> Array:
         return offset_V + amplitude_V * triangle_wave(frequency_hz * np.asarray(t) + p)
 
-    return wf.Segment("triangle", n, f, "frequency_hz", repeat_hz=frequency_hz)
+    reach = (offset_V - abs(amplitude_V), offset_V + abs(amplitude_V))
+    return wf.Segment("triangle", n, f, "frequency_hz", repeat_hz=frequency_hz, extremes=reach)
 
 
 def triangle_name(s: TriangleStep) -> str:

@@ -142,6 +142,14 @@ def repeat_skips(wave: Waveform, oversample: int, window: int) -> list[tuple[int
     list of tuple of int
         ``[lo, hi)`` ranges of fine points, in order.
     """
+    return [skip for skip, _ in _repeating(wave, oversample, window)]
+
+
+def _repeating(
+    wave: Waveform, oversample: int, window: int
+) -> list[tuple[tuple[int, int], tuple[float, float] | None]]:
+    """:func:`repeat_skips`, each range with the extremes of its piece (V:
+    :attr:`~labrig.protocol.waveforms.Segment.extremes`)."""
     fine_rate = Fraction(wave.rate_hz) * oversample
     last = (wave.n_samples - 1) * oversample
     out = []
@@ -152,8 +160,27 @@ def repeat_skips(wave: Waveform, oversample: int, window: int) -> list[tuple[int
         r = Fraction(seg.repeat_hz) / fine_rate
         found = repeat_skip(first, stop, r, window, seg.sinusoid)
         if found is not None:
-            out.append(found)
+            out.append((found, seg.extremes))
     return out
+
+
+def _range_undecided(
+    load: DriveLoad, reach: list[tuple[float, float] | None], limits: RigLimits
+) -> bool:
+    """Whether the shortcut's voltage range (``load``: the scanned points) passes ``limits``
+    while the formula's extremes of the pieces it left out (``reach``: at least what any
+    left-out point reaches) do not. The scanned points reach a crest between them only to
+    within the shortcut's allowance (``REPEAT_RTOL`` of the amplitude, 5 nV at 100 V), which
+    the range's 1 nV tolerance does not cover; there the whole scan decides. A drive whose
+    formula stays within the range (an amplitude at the range's end included) never needs it."""
+    if load.beyond_range(limits) is not None:
+        return False  # the whole scan reaches at least what its subset of points reaches
+    lows = [lo for lo, _ in filter(None, reach)]
+    highs = [hi for _, hi in filter(None, reach)]
+    widened = dataclasses.replace(
+        load, v_min_V=min([load.v_min_V, *lows]), v_max_V=max([load.v_max_V, *highs])
+    )
+    return widened.beyond_range(limits) is not None
 
 
 def measure(
@@ -167,8 +194,10 @@ def measure(
     """What one entry asks of the amplifier (:func:`labrig.rig.drive_load.measure_load` on its
     waveform, ``chunk`` fine-grid points at a time: never the whole fine grid at once; times from
     the entry's start). The middle of a repeating piece is left out (:func:`repeat_skips`): its
-    figures are those of its ends, to ``REPEAT_RTOL`` of their scale; ``full``: scan every fine
-    point (the reference the shortcut is tested against)."""
+    figures are those of its ends, to ``REPEAT_RTOL`` of their scale; where that allowance could
+    turn a refusal of the voltage range into a pass, every point is scanned
+    (:func:`_range_undecided`); ``full``: scan every fine point (the reference the shortcut is
+    tested against)."""
     wave = step.waveform
     fine_rate = step.rate_hz * oversample
     w = window_points(averaging_window_s(step.frequency_hz), fine_rate)
@@ -177,8 +206,8 @@ def measure(
         return wave.at_index(np.arange(lo, hi, dtype=float) / oversample)
 
     n_points = (wave.n_samples - 1) * oversample + 1
-    skip = () if full else repeat_skips(wave, oversample, w)
-    return measure_load(
+    pieces = [] if full else _repeating(wave, oversample, w)
+    load = measure_load(
         voltage,
         n_points,
         fine_rate,
@@ -187,8 +216,11 @@ def measure(
         chunk,
         duration_s=step.duration_s,
         name=step.name,
-        skip=skip,
+        skip=[skip for skip, _ in pieces],
     )
+    if pieces and _range_undecided(load, [reach for _, reach in pieces], limits):
+        return measure(step, limits, oversample, chunk, full=True)
+    return load
 
 
 def continuous_load(step: PlannedStep, chk: DriveLoad, limits: RigLimits) -> DriveLoad:

@@ -73,7 +73,11 @@ class Segment:
     uses it to point at the right line). ``repeat_hz``: the piece repeats at this frequency
     (Hz), ``func(t + k / repeat_hz) = func(t)`` for every whole ``k`` in exact arithmetic, its
     value a function of the phase ``repeat_hz t`` alone (0: a constant; None: it does not
-    repeat); ``sinusoid``: it is ``c + a cos(2 pi repeat_hz t + phi)`` (a constant too).
+    repeat); ``sinusoid``: it is ``c + a cos(2 pi repeat_hz t + phi)`` (a constant too);
+    ``extremes``: for a repeating piece, its lowest and highest value over a period (V), from
+    its formula: at least what any of its points reaches (the preflight's shortcut over
+    repeating pieces scans every point when they would leave the rig's range and its scanned
+    points do not).
     """
 
     kind: str
@@ -83,6 +87,7 @@ class Segment:
     role: str = "main"
     repeat_hz: float | None = None
     sinusoid: bool = False
+    extremes: tuple[float, float] | None = None
 
     def value(self, tau: Array) -> Array:
         return np.asarray(self.func(np.asarray(tau, dtype=float)), dtype=float)
@@ -101,6 +106,7 @@ def sine_segment(amplitude_V: float, frequency_hz: float, n: int, field: str = "
         field,
         repeat_hz=frequency_hz,
         sinusoid=True,
+        extremes=(min(0.0, amplitude_V), max(0.0, amplitude_V)),
     )
 
 
@@ -152,7 +158,8 @@ def offset_sine_segment(
 
     constant = envelope_name == "constant"
     repeat = frequency_hz if constant else None
-    return Segment("offset_sine", n, f, field, repeat_hz=repeat, sinusoid=constant)
+    reach = (offset_V - abs(amplitude_V), offset_V + abs(amplitude_V)) if constant else None
+    return Segment("offset_sine", n, f, field, repeat_hz=repeat, sinusoid=constant, extremes=reach)
 
 
 def raised_cosine_segment(
@@ -172,7 +179,15 @@ def raised_cosine_segment(
 def const_segment(voltage_V: float, n: int, field: str = "", kind: str = "hold") -> Segment:
     """``voltage_V`` held over ``n`` sample intervals (a constant: ``repeat_hz`` 0)."""
     v = float(voltage_V)
-    return Segment(kind, n, lambda t: np.full(np.shape(t), v), field, repeat_hz=0.0, sinusoid=True)
+    return Segment(
+        kind,
+        n,
+        lambda t: np.full(np.shape(t), v),
+        field,
+        repeat_hz=0.0,
+        sinusoid=True,
+        extremes=(v, v),
+    )
 
 
 def ramp_segment(

@@ -33,6 +33,7 @@ from labrig.protocol.preflight import (
 )
 from labrig.protocol.schema import Protocol
 from labrig.rig.drive_load import (
+    RANGE_TOL_V,
     REPEAT_RTOL,
     DriveLoad,
     averaging_window_s,
@@ -371,3 +372,26 @@ def test_exact_repeats_take_the_grids_period():
     assert repeat_span(r, 10**8) == 4_000_000
     assert repeat_span(r, 7_000_000) is None
     assert repeat_span(r, 7_000_000, sinusoid=True) is not None
+
+
+def test_a_crest_just_past_the_range_is_refused_as_the_whole_scan_refuses_it() -> None:
+    """A review's case: a 100.0000000025 V sine at 38.9474 Hz (10 kHz, 20 s) on the default
+    rig (-20 .. 100 V, 1 nV tolerance). The whole scan reaches 100.0000000025 V and refuses it;
+    the shortcut's scanned points reached the crest to within 1.4e-6 cycles only (2e-9 V low)
+    and passed it. The formula's crest is past the range, so every point is scanned: refused
+    with the whole scan's figure. At 100 V exactly (the range's end) the shortcut stands."""
+    lim = RigLimits()
+    step = {"kind": "sine", "amplitude_V": 100.0000000025, "frequency_hz": 38.9474}
+    over = plan_of(10_000.0, {**step, "duration_s": 20})
+    (s,) = over.steps
+    assert left_out(s) > 0
+    full = measure(s, lim, full=True)
+    assert full.v_max_V > lim.v_max_V + RANGE_TOL_V  # what the whole scan says
+    assert measure(s, lim) == full
+    with pytest.raises(InputFileError, match=r"reaches 100\.000000002"):
+        preflight_checks(over, lim)
+    at_end = plan_of(10_000.0, {**step, "amplitude_V": 100.0, "duration_s": 20})
+    (e,) = at_end.steps
+    short = measure(e, lim)
+    assert left_out(e) > 0 and short.v_max_V <= lim.v_max_V
+    preflight_checks(at_end, lim)
