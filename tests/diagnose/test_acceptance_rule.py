@@ -169,3 +169,19 @@ def test_the_fold_rule_still_holds_near_the_floor():
     held, ref = folds([1.0, 1.0, 1.0, 1.0, 0.5], REF)
     a = accept(EFFECT, outcome(), held, ref, floor_pct=1.6)
     assert not a.accepted and any("better in 1" in r for r in a.reasons)
+
+
+def test_a_parameter_the_data_do_not_determine_is_a_caveat():
+    """A refit whose covariance has no direction moving the effect's parameter reports its
+    uncertainty as ``None`` (labrig.analysis.fit_uncertainty: never ``+- 0``): the candidate
+    is judged by the rule as before, and its parameter is said to be not determined (before,
+    a ``None`` passed without a word, while ``labrig fit`` called the same thing
+    unidentifiable). A parameter with a small uncertainty gets no such caveat."""
+    held, ref = folds([0.5] * 5)
+    fo = outcome()
+    fo.sd[EFFECT.name]["delay_s"] = None
+    a = accept(EFFECT, fo, held, ref)
+    assert a.accepted
+    assert any("delay_s = 0.001 is not determined by these data" in s for s in a.suspicious)
+    determined = accept(EFFECT, outcome(), held, ref)
+    assert not any("not determined" in s for s in determined.suspicious)

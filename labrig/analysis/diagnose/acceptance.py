@@ -127,6 +127,8 @@ def accept(
         scale = abs(v) if q.log else abs(v - q.null)
         if q.check_bounds and s is not None and s > 0.5 * scale:
             suspicious.append(f"{q.name} is poorly determined ({v:.3g} +- {s:.2g})")
+        elif q.name in sd and s is None:  # no direction of the fit moves it (fit_uncertainty)
+            suspicious.append(f"{q.name} = {v:.3g} is not determined by these data")
     reasons += eff.refusals(p, sd)
     suspicious += eff.caveats(p, span_s)
     return Acceptance(not reasons, gain, wins, losses, reasons, suspicious)
