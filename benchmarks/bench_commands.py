@@ -119,7 +119,8 @@ def short_entries(folder: Path, n: int = 20, samples: int = 60) -> list[Path]:
         v = a / 2 * (1 - np.cos(2 * np.pi * f * t))
         s = 8.9 * v + rng.normal(0.0, 2.0, samples)
         path = folder / f"m{k:02d}.csv"
-        rows = "".join(f"{x!r},{y!r},{z!r}\n" for x, y, z in zip(t, v, s, strict=True))
+        cols = zip(t.tolist(), v.tolist(), s.tolist(), strict=True)
+        rows = "".join(f"{x!r},{y!r},{z!r}\n" for x, y, z in cols)
         path.write_text("time_s,voltage_V,strain_ue\n" + rows)
         paths.append(path)
     return paths
