@@ -146,18 +146,21 @@ def _uncertainty(value: Any, key: str) -> list[tuple[str, str]]:
     determined). The names are not checked: the report shows the model's and ignores others."""
     if not isinstance(value, dict):
         return [(key, f"{_shown(value)} is not an object; expected {{parameter: 1 sigma}}")]
-    out = []
-    for name, sd in value.items():
-        if sd is not None and not (is_number(sd) and sd >= 0):
-            what = "is negative" if is_number(sd) else "is not a number"
-            out.append(
-                (
-                    f"{key}.{name}",
-                    f"{_shown(sd)} {what}; expected a standard uncertainty >= 0, in the "
-                    "parameter's unit (null for one held fixed or not determined)",
-                )
-            )
-    return out
+    expected = (
+        "a standard uncertainty >= 0, in the parameter's unit (null for one held fixed or not "
+        "determined)"
+    )
+    return [
+        _not_a(f"{key}.{name}", sd, expected, "is negative" if is_number(sd) else "")
+        for name, sd in value.items()
+        if sd is not None and not (is_number(sd) and sd >= 0)
+    ]
+
+
+def _not_a(field: str, value: Any, expected: str, what: str = "") -> tuple[str, str]:
+    """The issue of a field whose ``value`` is not what it should be: ``(field, "VALUE is not
+    a number; expected EXPECTED")`` (``what`` in place of "is not a number")."""
+    return field, f"{_shown(value)} {what or 'is not a number'}; expected {expected}"
 
 
 def _correlation(value: Any, key: str) -> list[tuple[str, str]]:
@@ -176,11 +179,7 @@ def _correlation(value: Any, key: str) -> list[tuple[str, str]]:
             # labrig fits hold up to 1.04 (rounding); the report flags any |r| over 0.99
             if not is_number(r):
                 out.append(
-                    (
-                        f"{key}.{name}.{other}",
-                        f"{_shown(r)} is not a number; expected the correlation of the two "
-                        "estimates (-1 to 1)",
-                    )
+                    _not_a(f"{key}.{name}.{other}", r, "the correlation of the two estimates (-1 to 1)")
                 )
     return out
 

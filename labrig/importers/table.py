@@ -24,9 +24,11 @@ from labrig.core.errors import InputFileError, InputIssue
 EXACT_INTEGER = 2**53
 #: a time column of decimals whose first value is more than this many of its steps from zero
 #: is counted from that value exactly, from its text (:meth:`Table.count_exactly`). As float64
-#: each value is rounded to 2**-53 of its magnitude: below this a step keeps 2**-32 (2e-10) of
-#: its size, and records that start late in a longer one read as they always have; time stamps
-#: since 1970 (1.7e9 s, or ms) are past it at every rate accepted (a step of at most 1000 s)
+#: each value is rounded to 2**-53 of its magnitude, k steps from zero to k 2**-53 of a step:
+#: below this the first value keeps 2**-33 of a step, and a record's last one (2**20 + n steps
+#: out, n its samples) 1e-9 past 4e6 rows, as it always has (records that start late in a
+#: longer one read as before); time stamps since 1970 (1.7e9 s, or ms) are past it at every
+#: rate accepted (a step of at most 1000 s)
 EXACT_STEPS = 2**20
 #: the arithmetic of decimal texts: a difference is exact up to 60 digits (rounded past them,
 #: to 1e-60 of itself); a text that is no number becomes NaN (nothing trapped)
