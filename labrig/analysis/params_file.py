@@ -179,7 +179,9 @@ def _correlation(value: Any, key: str) -> list[tuple[str, str]]:
             # labrig fits hold up to 1.04 (rounding); the report flags any |r| over 0.99
             if not is_number(r):
                 out.append(
-                    _not_a(f"{key}.{name}.{other}", r, "the correlation of the two estimates (-1 to 1)")
+                    _not_a(
+                        f"{key}.{name}.{other}", r, "the correlation of the two estimates (-1 to 1)"
+                    )
                 )
     return out
 
