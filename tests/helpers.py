@@ -27,6 +27,8 @@ from labrig.rig.limits import RigLimits
 #: the repository and its test data
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"
+#: the SmartHysteresis bipolar +-150 V, 1 Hz record kept in tests/data/real (its PROVENANCE.md)
+SMART_CSV = DATA / "real" / "chandratue-SmartHysteresis" / "hysteresis_v_150_1hz_2cycles_1khz.csv"
 
 #: the keys of ``labrig fit --model BASELINE --json``
 BASELINE_JSON_KEYS = (

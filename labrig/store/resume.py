@@ -17,9 +17,11 @@ copy is closed: a resume that fails, or is killed, leaves the file as it was.
   again under its planned name; complete entries are kept as they are;
 - an entry still ``running`` (its writer was killed or crashed while writing it: the file is
   not being written, :func:`check_resume`) is ended ``aborted`` with the reason
-  :data:`ABANDONED`, its samples kept as recorded and sealed as final
-  (:func:`labrig.store.writer.end_abandoned_entry`): until a resume takes the file over, a
-  killed run's entry keeps reading ``running`` (incomplete), as a live writer's does;
+  :data:`ABANDONED`, its samples kept as recorded and sealed as final, and the ``duration``
+  and ``end_time`` an ended entry has, reconstructed from its samples and ``start_time``
+  (``@reconstructed``; :func:`labrig.store.writer.end_abandoned_entry`): until a resume
+  takes the file over, a killed run's entry keeps reading ``running`` (incomplete), as a
+  live writer's does;
 - ``/run/resumes/resume_<k>`` (NXcollection): ``number``, ``time``, ``entries`` (JSON list of
   the entries it runs), ``superseded`` (JSON: planned name -> the partial entry's new name),
   ``seed`` (the simulated rig's new seed, -1 none), ``software_version``, ``writer_pid``,
@@ -218,7 +220,8 @@ def record_resume(
 
 def _end_abandoned(f: h5py.File, number: int) -> None:
     """End every entry of ``f`` still ``running`` as abandoned by its writer
-    (:data:`ABANDONED`), saying which resume found it so."""
+    (:data:`ABANDONED`), saying which resume found it so (its end time and duration
+    reconstructed, :func:`labrig.store.writer.end_abandoned_entry`)."""
     for name, g in f.items():
         if name != "run" and isinstance(g, h5py.Group) and _text(g, "status") == "running":
             end_abandoned_entry(g, f"{ABANDONED} (found so by resume {number})")

@@ -22,6 +22,7 @@ import math
 import os
 import re
 from collections.abc import Iterable, Mapping, Sequence
+from datetime import datetime, timedelta
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -94,33 +95,111 @@ def _renew_seal(obj: h5py.Group | h5py.Dataset, data: tuple[int, int] | None = N
         del attrs[LEGACY_SEAL_ATTR]
 
 
-def _samples_now(ds: h5py.Dataset) -> tuple[int, int]:
-    """The CRC-32 and number of the samples ``ds`` holds now (read whole)."""
-    values = ds[()]
-    return data_crc(values), len(values)
+#: samples read at a time to compute a stored channel's CRC-32 (:func:`samples_crc`): 8 MiB
+#: of float64, a whole number of chunks (:func:`labrig.store.space.chunk_length`)
+CRC_BLOCK_SAMPLES = 2**20
+
+
+def samples_crc(ds: h5py.Dataset, block: int = CRC_BLOCK_SAMPLES) -> tuple[int, int]:
+    """The CRC-32 (:func:`labrig.store.format.data_crc`, the value a seal records) and number
+    of the samples the 1-D dataset ``ds`` holds now, read ``block`` samples at a time: the
+    same CRC as ``data_crc(ds[()])`` without holding the channel in memory (a 499 s entry at
+    100 kHz is 400 MB of float64)."""
+    if block < 1:
+        raise ValueError(f"block must be at least 1 sample, not {block}")
+    n = len(ds)
+    buf = np.empty(min(block, n), dtype=ds.dtype)
+    crc = 0
+    for i in range(0, n, block):
+        m = min(block, n - i)
+        ds.read_direct(buf, np.s_[i : i + m], np.s_[0:m])
+        crc = data_crc(buf[:m], crc)
+    return crc, n
 
 
 def _renew_all(obj: h5py.Group | h5py.Dataset) -> None:
     data = None
     chunked = isinstance(obj, h5py.Dataset) and obj.chunks is not None
     if chunked and sealed_data(obj) is not None:  # sealed samples: sealed again as they are now
-        data = _samples_now(obj)
+        data = samples_crc(obj)
     _renew_seal(obj, data)
+
+
+#: what an entry's ``end_time`` and ``duration`` carry (``@reconstructed``) when a resume
+#: derived them from the samples kept instead of the writer recording them at the end
+#: (:func:`end_abandoned_entry`)
+RECONSTRUCTED_ATTR = "reconstructed"
+
+
+def _record_end(g: h5py.Group, end_time: str | None, n_samples: int, rate_hz: float) -> None:
+    """An entry's ``end_time`` (absent when ``None``) and ``duration``, the time from the first
+    to the last of its ``n_samples`` samples at ``rate_hz`` (s), as every ended entry has
+    them."""
+    if end_time is not None:
+        set_str(g, "end_time", end_time)
+    if "duration" not in g:
+        ds = g.create_dataset("duration", data=max(n_samples - 1, 0) / rate_hz)
+        ds.attrs["units"] = "s"
+        ds.attrs["long_name"] = "time from the first to the last sample"
+
+
+def _iso_plus(start: str, seconds: float) -> str | None:
+    """The ISO 8601 time ``seconds`` after ``start`` (as :func:`labrig.store.format.now_iso`
+    writes it: millisecond resolution, the offset of ``start``); ``None`` when ``start`` is
+    not such a time."""
+    try:
+        t = datetime.fromisoformat(start) + timedelta(milliseconds=round(seconds * 1000))
+    except (ValueError, OverflowError):
+        return None
+    return t.isoformat(timespec="milliseconds")
 
 
 def end_abandoned_entry(g: h5py.Group, reason: str) -> None:
     """Record the end of the entry ``g`` that its writer left ``running`` (its process was
-    killed or crashed, or could not record the end): ``aborted`` with ``reason``, and each
-    channel's samples, kept as they are, sealed as final (their CRC-32 in the seal, as for an
-    entry that ended). Only for a file no process writes: a resume's copy
-    (:func:`labrig.store.resume.record_resume`); the caller seals and flushes."""
+    killed or crashed, or could not record the end), as :meth:`EntryWriter.finish` records an
+    entry's end, from what the file holds: ``aborted`` with ``reason``; ``duration`` from the
+    samples kept (the shortest channel's ``n``: ``(n - 1) / sample_rate``, as the reader trims
+    the channels to their common length); ``end_time`` = ``start_time`` + ``duration`` (none
+    without a readable ``start_time``), both with ``@reconstructed`` saying so; the file's
+    ``@file_update_time``; and each channel's samples, kept as they are, sealed as final (their
+    CRC-32 in the seal, :func:`samples_crc`). Only for a file no process writes: a resume's
+    copy (:func:`labrig.store.resume.record_resume`); the caller seals and flushes."""
+    data = g.get("data")
+    channels = [
+        ds
+        for ds in (data.values() if isinstance(data, h5py.Group) else ())
+        if isinstance(ds, h5py.Dataset) and ds.chunks is not None
+    ]
+    n = min((len(ds) for ds in channels), default=0)
+    try:
+        rate = float(g["sample_rate"][()]) if "sample_rate" in g else math.nan
+    except (TypeError, ValueError):
+        rate = math.nan
+    start = g["start_time"][()] if "start_time" in g else b""
+    start = start.decode("utf-8", "replace") if isinstance(start, bytes) else str(start)
+    for name in ("end_time", "duration"):  # nothing the writer recorded of an end it never had
+        if name in g:
+            del g[name]
+    made: list[str] = []
+    if math.isfinite(rate) and rate > 0:
+        end = _iso_plus(start, max(n - 1, 0) / rate)
+        _record_end(g, end, n, rate)
+        why = f"by a resume: (n - 1) / sample_rate, n = {n} samples kept (the shortest channel)"
+        g["duration"].attrs[RECONSTRUCTED_ATTR] = why
+        made.append("duration")
+        if end is not None:
+            g["end_time"].attrs[RECONSTRUCTED_ATTR] = "by a resume: start_time + duration"
+            made.insert(0, "end_time")
+    if made:
+        reason += (
+            f"; its {' and '.join(made)} {'are' if len(made) > 1 else 'is'} reconstructed from "
+            "the samples kept, not recorded at its end"
+        )
     set_str(g, "status_reason", reason)
     set_str(g, "status", "aborted")
-    data = g.get("data")
-    channels = data.values() if isinstance(data, h5py.Group) else ()
+    g.file.attrs["file_update_time"] = now_iso()
     for ds in channels:
-        if isinstance(ds, h5py.Dataset) and ds.chunks is not None:
-            _renew_seal(ds, _samples_now(ds))
+        _renew_seal(ds, samples_crc(ds))
 
 
 def seal_all(f: h5py.File) -> None:
@@ -265,11 +344,7 @@ class EntryWriter:
             return
         g = self.group
         try:
-            set_str(g, "end_time", now_iso())
-            if "duration" not in g:
-                ds = g.create_dataset("duration", data=max(self._n - 1, 0) / self.rate_hz)
-                ds.attrs["units"] = "s"
-                ds.attrs["long_name"] = "time from the first to the last sample"
+            _record_end(g, now_iso(), self._n, self.rate_hz)
             set_str(g, "status_reason", reason or "")
             set_str(g, "status", status)
             self._run.entry_done()

@@ -12,7 +12,6 @@ ODE cross-validated, about 6 s of CPU) and the whole kept record (2 periods at 1
 
 from __future__ import annotations
 
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -35,13 +34,9 @@ from labrig.analysis.extended import FitOutcome
 from labrig.analysis.records import Record
 from labrig.analysis.sindy import LIBRARY, SindyBaseline
 
-SMART = (
-    Path(__file__).resolve().parents[1]
-    / "data"
-    / "real"
-    / "chandratue-SmartHysteresis"
-    / "hysteresis_v_150_1hz_2cycles_1khz.csv"
-)
+from helpers import SMART_CSV
+
+SMART = SMART_CSV
 
 
 def smart_records(step: int) -> list[Record]:

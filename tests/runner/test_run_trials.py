@@ -1,8 +1,9 @@
 """What a new user's trial of ``labrig run`` left open, mended:
 
 - a run killed (SIGKILL) in the middle of an entry, then resumed: the kept partial entry reads
-  ``aborted`` with a reason, not ``running``; before the resume the file reads as it did
-  (running, incomplete);
+  ``aborted`` with a reason, not ``running``, and has the ``end_time`` and ``duration`` of
+  its samples, marked reconstructed; before the resume the file reads as it did (running,
+  incomplete); the channels' CRC-32 for its seals is read in blocks, the whole array's;
 - ``--live-hold`` refuses what would hang or means nothing (``inf``, ``nan``, negative,
   longer than a day): a usage error naming the option and the range; a day is accepted;
 - a live view that stops during ``run --live`` (its process killed, or a thread of it failed)
@@ -23,6 +24,7 @@ import subprocess
 import sys
 import threading
 import time
+from datetime import datetime
 from pathlib import Path
 
 import h5py
@@ -30,7 +32,8 @@ import numpy as np
 import pytest
 
 from labrig.runner import execute as runner
-from labrig.store import read_run
+from labrig.store import RunFile, read_run
+from labrig.store.format import STRING_DTYPE as STR
 
 from helpers import fork_saying, invoke, reaped, slack
 
@@ -82,8 +85,12 @@ def killed_in_the_entry(proto: Path, out: Path) -> None:
     assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL
 
 
-def test_a_killed_entry_reads_aborted_once_a_resume_takes_the_file_over(tmp_path):
-    proto, out = protocol(tmp_path, 4.0), tmp_path / "run.h5"
+@pytest.fixture(scope="module")
+def resumed(tmp_path_factory) -> tuple[Path, RunFile]:
+    """A run SIGKILLed in its entry, then resumed: the file and how it read before the resume
+    (killed once per module: the run plays at the clock's pace)."""
+    where = tmp_path_factory.mktemp("killed")
+    proto, out = protocol(where, 4.0), where / "run.h5"
     killed_in_the_entry(proto, out)
     before = read_run(out)  # never resumed: reads as it did (running, incomplete)
     assert before.status == "running" and before.incomplete and not before.being_written
@@ -91,7 +98,12 @@ def test_a_killed_entry_reads_aborted_once_a_resume_takes_the_file_over(tmp_path
 
     res = invoke("run", proto, "--resume", out, "--seed", 2)
     assert res.exit_code == 0, res.output
+    return out, before
 
+
+def test_a_killed_entry_reads_aborted_once_a_resume_takes_the_file_over(resumed):
+    out, before = resumed
+    tmp_path = out.parent
     after = read_run(out)  # every sample and seal verified
     kept = after[f"{ENTRY}_partial1"]
     assert kept.status == "aborted"
@@ -107,6 +119,106 @@ def test_a_killed_entry_reads_aborted_once_a_resume_takes_the_file_over(tmp_path
     }
     info = invoke("info", out)
     assert "running" not in info.stdout and "aborted" in info.stdout
+
+
+def test_the_killed_entry_gets_the_end_time_and_duration_of_its_samples(resumed):
+    """The resume closes the abandoned entry as an ended one is closed: ``duration`` the time
+    from its first to its last kept sample, ``end_time`` its start plus that, both marked
+    reconstructed (``@reconstructed``, and in the reason)."""
+    out, before = resumed
+    kept = read_run(out)[f"{ENTRY}_partial1"]
+    n, rate = before[ENTRY].n_samples, before[ENTRY].rate_hz
+    assert kept.n_samples == n > 1
+    with h5py.File(out, "r") as f:
+        g, ended = f[f"{ENTRY}_partial1"], f[ENTRY]
+        assert set(g) == set(ended)  # every field an ended entry has
+        duration = g["duration"]
+        assert float(duration[()]) == pytest.approx((n - 1) / rate, abs=1e-12)
+        assert float(duration[()]) == pytest.approx(kept.time[-1] - kept.time[0], abs=1e-12)
+        for name in ("units", "long_name"):  # as finish() writes them
+            assert duration.attrs[name] == ended["duration"].attrs[name]
+        assert "reconstructed" not in ended["duration"].attrs
+        assert "reconstructed" not in ended["end_time"].attrs
+        assert "samples kept" in duration.attrs["reconstructed"]
+        assert "start_time + duration" in g["end_time"].attrs["reconstructed"]
+        started = datetime.fromisoformat(g["start_time"][()].decode())
+        recorded = str(g["start_time"][()].decode())
+    assert kept.end_time and kept.start_time == recorded
+    ended_at = datetime.fromisoformat(kept.end_time)
+    assert ended_at.utcoffset() == started.utcoffset()
+    # ISO 8601 to the millisecond, as every time in the file
+    assert abs((ended_at - started).total_seconds() - (n - 1) / rate) <= 0.0005
+    assert "end_time and duration are reconstructed from the samples kept" in kept.reason
+
+
+# -- 1b. a channel's CRC-32, read in blocks ------------------------------------------------------
+
+
+@pytest.mark.parametrize("n", [0, 1, 7, 8, 9, 15, 16, 17, 37])
+def test_a_channels_crc_read_in_blocks_is_the_whole_arrays(tmp_path, n):
+    """``samples_crc`` (the resume's and ``seal_all``'s seal of a channel) reads the samples
+    8 at a time here: lengths under, at and over one and two blocks give ``data_crc`` of the
+    whole array, the value the reader checks; chunks of 5 straddle the blocks."""
+    from labrig.store.format import data_crc
+    from labrig.store.writer import samples_crc
+
+    values = np.random.default_rng(n).normal(size=n) * 1e3
+    with h5py.File(tmp_path / "c.h5", "w") as f:
+        ds = f.create_dataset("x", data=values, chunks=(5,), maxshape=(None,), fletcher32=True)
+        assert samples_crc(ds, block=8) == (data_crc(values), n)
+        assert samples_crc(ds, block=8) == (data_crc(ds[()]), n)
+        assert samples_crc(ds) == samples_crc(ds, block=1) == (data_crc(values), n)
+        with pytest.raises(ValueError):
+            samples_crc(ds, block=0)
+
+
+def test_an_abandoned_entry_is_ended_and_sealed_a_block_at_a_time(tmp_path, monkeypatch):
+    """``end_abandoned_entry`` on a channel of one block and 3 samples (8 MB) and a shorter
+    one: no read of more than a block (2**20 samples) of a channel, by it or by the
+    ``seal_all`` after it; the seals the whole arrays' CRC; duration from the shortest
+    channel, end time from the start time (its UTC offset kept, to the millisecond)."""
+    from labrig.store.format import data_crc, sealed_data
+    from labrig.store.writer import end_abandoned_entry, seal_all
+
+    n, rate = 2**20 + 3, 3.0
+    values = np.random.default_rng(1).normal(size=n)
+    with h5py.File(tmp_path / "a.h5", "w") as f:
+        g = f.create_group("e")
+        g.create_dataset("sample_rate", data=rate)
+        g.create_dataset("start_time", data="2026-01-02T03:04:05.678+02:00", dtype=STR)
+        g.create_dataset("status", data="running", dtype=STR)
+        data = g.create_group("data")
+        for name, x in (("time", values), ("strain", values[:-2])):
+            data.create_dataset(name, data=x, chunks=(4096,), maxshape=(None,))
+        reads: list[int] = []
+        getitem, read_direct = h5py.Dataset.__getitem__, h5py.Dataset.read_direct
+
+        def counted_getitem(self, key, *args, **kwargs):
+            out = getitem(self, key, *args, **kwargs)
+            if self.parent.name == "/e/data":
+                reads.append(np.size(out))
+            return out
+
+        def counted_read_direct(self, dest, source_sel=None, dest_sel=None):
+            if self.parent.name == "/e/data":
+                reads.append(dest.size if dest_sel is None else dest[dest_sel].size)
+            return read_direct(self, dest, source_sel, dest_sel)
+
+        monkeypatch.setattr(h5py.Dataset, "__getitem__", counted_getitem)
+        monkeypatch.setattr(h5py.Dataset, "read_direct", counted_read_direct)
+        end_abandoned_entry(g, "gone")
+        seal_all(f)
+        monkeypatch.undo()
+        assert reads and max(reads) <= 2**20
+        assert sealed_data(data["time"]) == (data_crc(values), n)
+        assert sealed_data(data["strain"]) == (data_crc(values[:-2]), n - 2)
+        assert g["status"][()] == b"aborted"
+        assert g["status_reason"][()].decode().startswith("gone; its end_time and duration")
+        assert float(g["duration"][()]) == pytest.approx((n - 3) / rate, abs=1e-12)
+        assert g["duration"].attrs["units"] == "s"
+        end = g["end_time"][()].decode()
+    # 2**20 / 3 s = 349525.333 s = 4 d 1 h 5 min 25.333 s after the start
+    assert end == "2026-01-06T04:09:31.011+02:00"
 
 
 # -- 2. --live-hold ------------------------------------------------------------------------
