@@ -13,7 +13,9 @@
 
 Data: the two periods of the real SmartHysteresis record (chandratue, MIT licence,
 tests/data/real), each period imported on its own (1 000 rows at 1 kHz); the TINY protocol
-on the simulated rig.
+on the simulated rig; for the containment search itself (a review, 2026-11-30: quadratic on a
+periodic quantised record), a quantised tiled sine and small generated records checked against
+comparing every start.
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, example, given, settings
+from hypothesis import strategies as st
 
 import labrig
 from labrig.analysis.load import records_from_run
@@ -35,15 +39,9 @@ from labrig.core import samples
 from labrig.core.errors import InputFileError
 from labrig.studies.smart_standin import TRUTH_XI
 
-from helpers import TINY, invoke, run_protocol
+from helpers import SMART_CSV, TINY, invoke, run_protocol
 
-SMART = (
-    Path(__file__).resolve().parents[1]
-    / "data"
-    / "real"
-    / "chandratue-SmartHysteresis"
-    / "hysteresis_v_150_1hz_2cycles_1khz.csv"
-)
+SMART = SMART_CSV
 #: how the record's PROVENANCE.md imports it (time, displacement and voltage columns)
 COLUMNS = ("--time", "2", "--voltage", "4", "--strain", "3", "--strain-units", "raw")
 #: the largest rounding of ``labrig export``'s ``%.10g``, relative to the value
@@ -255,3 +253,142 @@ def test_the_check_is_cheap_on_a_million_samples() -> None:
         t0 = time.process_time()
         assert samples.contained_at(outer, inner) == at
         assert time.process_time() - t0 < 1.0
+
+
+def tiled(length: int, period: int) -> tuple[np.ndarray, np.ndarray]:
+    """The reviewer's record: a voltage and a strain repeating every ``period`` samples,
+    quantised (to 1 mV and 0.1 ue), ``length`` samples."""
+    t = np.arange(period)
+    per_v = np.round(50 * (1 - np.cos(2 * np.pi * t / period)) * 1000) / 1000
+    per_s = np.round((8.9 * per_v + 3 * np.sin(2 * np.pi * t / period)) * 10) / 10
+    reps = length // period + 1
+    return np.tile(per_v, reps)[:length], np.tile(per_s, reps)[:length]
+
+
+@pytest.mark.parametrize(("n", "period"), [(100_000, 20), (1_000_000, 100)])
+def test_a_periodic_quantised_record_one_step_off_is_not_compared_copy_by_copy(
+    n: int, period: int
+) -> None:
+    """A quantised record repeating every ``period`` samples, its first ``n`` samples with one
+    strain sample one step (0.1 ue) off at a sample the anchors do not look at: every start a
+    whole number of periods in survives the anchors (thousands of them), and each used to be
+    compared whole (9 s of CPU for the first size, 170 s for the second). Now the first
+    disagreement sifts them all: at most two candidates compared, fewer samples read than two
+    whole records. Unchanged, or shifted by a few samples, it is found."""
+    v, s = tiled(2 * n, period)
+    for off in (3, n // 2 + 7, n - 5):
+        inner = v[:n].copy(), s[:n].copy()
+        inner[1][off] += 0.1
+        c = samples.containment((v, s), inner)
+        assert c.at is None and samples.contained_at((v, s), inner) is None
+        assert c.candidates > n // period // 2, c  # what made it quadratic
+        assert c.compared <= 2 and c.samples <= 2 * n, c
+    for shift in (0, 7, period + 7):
+        c = samples.containment((v, s), (v[shift : shift + n], s[shift : shift + n]))
+        assert c.at == shift % period and c.compared == 1 and c.samples == n, c
+
+
+def test_copies_that_differ_at_one_sample_each_cost_one_comparison_each() -> None:
+    """The same record with ten of its period-aligned copies each one step off at a sample of
+    its own (1, 22, 43, ... 190): each of those copies is compared up to its own sample, which
+    sifts it out, and the eleventh copy (sample 200) is found: eleven comparisons, reading
+    little more than the one whole record."""
+    n, period = 100_000, 20
+    v, s = tiled(2 * n, period)
+    inner = v[:n].copy(), s[:n].copy()
+    s[[21 * p + 1 for p in range(10)]] += 0.1
+    c = samples.containment((v, s), inner)
+    assert c.at == 200 and c.compared == 11 and c.samples < n + 11 * 64, c
+    assert samples.contained_at((v, s), inner) == 200
+
+
+def every_start(outer: np.ndarray, inner: np.ndarray) -> int | None:
+    """The reference: the first start from which every channel agrees to within the export's
+    rounding, every start compared whole (channels along the first axis)."""
+    n = inner.shape[1]
+    if n == 0 or n > outer.shape[1]:
+        return None
+    windows = np.lib.stride_tricks.sliding_window_view(outer, n, axis=1)  # channel, start, j
+    a, b = windows, inner[:, None, :]
+    close = np.abs(a - b) <= samples.EXPORT_ROUNDING * np.maximum(np.abs(a), np.abs(b))
+    hits = np.flatnonzero(close.all(axis=(0, 2)))
+    return int(hits[0]) if hits.size else None
+
+
+@st.composite
+def record_pairs(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray]:
+    """An outer record (one or two channels, up to 300 samples): periodic (a pattern of a few
+    quantised values repeated), quantised (a few values, repeating at random) or noisy; the
+    inner one a stretch of it (possibly longer than it, or empty) or another record of the same
+    kind. Then a few samples of the outer record moved by a quantisation step, most of them in
+    copies of the inner stretch a whole number of periods before or after it (copies that
+    differ at one sample each), and at most one sample of the inner record changed: by 0.9 or
+    1.1 times the export's rounding (just inside, just outside), or by a quantisation step."""
+    channels = draw(st.integers(1, 2))
+    m = draw(st.integers(1, 300))
+    kind = draw(st.sampled_from(["periodic", "periodic", "quantised", "noisy"]))
+    period = draw(st.integers(1, 8)) if kind == "periodic" else m
+    offset = draw(st.sampled_from([0.0, 10.0]))
+
+    def values(size: int) -> np.ndarray:
+        if kind == "noisy":
+            x = st.floats(-100, 100, allow_nan=False, allow_infinity=False)
+            return np.array(draw(st.lists(x, min_size=size, max_size=size)))
+        return np.array(draw(st.lists(st.integers(-2, 2), min_size=size, max_size=size))) / 2
+
+    def record(length: int) -> np.ndarray:
+        pattern = values(channels * period).reshape(channels, period)
+        return offset + np.tile(pattern, length // period + 1)[:, :length]
+
+    outer = record(m)
+    n = draw(st.one_of(st.integers(0, m + 1), st.integers(m // 2, m + 1)))
+    k = draw(st.integers(0, max(0, m - n)))
+    inner = (
+        outer[:, k : k + n].copy() if n <= m and draw(st.sampled_from([1, 1, 1, 0])) else record(n)
+    )
+    moved = draw(st.lists(st.integers(0, m - 1), max_size=2))
+    if kind == "periodic":
+        copies = st.tuples(st.integers(0, m // period), st.integers(0, max(0, n - 1)))
+        moved += [k % period + c * period + j for c, j in draw(st.lists(copies, max_size=8))]
+    for i in moved:
+        if i < m:
+            outer[draw(st.integers(0, channels - 1)), i] += 0.5
+    change = draw(st.sampled_from(["none", "inside", "outside", "step"]))
+    if change != "none" and n:
+        c, i = draw(st.integers(0, channels - 1)), draw(st.integers(0, n - 1))
+        if change == "step":
+            inner[c, i] += 0.5
+        else:
+            inner[c, i] *= 1 + {"inside": 0.9, "outside": 1.1}[change] * samples.EXPORT_ROUNDING
+    return outer, inner
+
+
+def periodic_pair(
+    moved: list[tuple[int, int]], change: tuple[int, int, float] | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Two channels repeating every 4 samples (800 of them, offset by 10), the inner record
+    samples 400 to 599; ``moved``: (channel, sample) of the outer record moved by a step;
+    ``change``: (channel, sample, factor) of the inner record."""
+    outer = 10 + np.tile([[0.0, 0.5, 1.0, 0.5], [0.0, -0.5, 0.5, 1.0]], 200)
+    inner = outer[:, 400:600].copy()
+    for c, i in moved:
+        outer[c, i] += 0.5
+    if change:
+        inner[change[0], change[1]] *= change[2]
+    return outer, inner
+
+
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(record_pairs())
+# the strain (the last channel) just outside, just inside the rounding at a sample no anchor
+# looks at: none, 0
+@example(periodic_pair([], (1, 50, 1 + 1.1 * samples.EXPORT_ROUNDING)))
+@example(periodic_pair([], (1, 50, 1 + 0.9 * samples.EXPORT_ROUNDING)))
+# copies one step off at a sample of their own (1, 14, 27, ...), either channel: found at 380
+# after ten copies compared
+@example(periodic_pair([(p % 2, 13 * p + 1) for p in range(30)], None))
+def test_contained_at_is_comparing_every_start(pair: tuple[np.ndarray, np.ndarray]) -> None:
+    """On small generated records, contained and not, :func:`contained_at` finds what comparing
+    every start whole finds: the same first start, or none."""
+    outer, inner = pair
+    assert samples.contained_at(list(outer), list(inner)) == every_start(outer, inner)
