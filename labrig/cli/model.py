@@ -25,6 +25,9 @@ from labrig.cli.typer_app import LabrigTyper
 #: the most samples in all (about 80 MB of arrays)
 DEMO_MIN_SAMPLES_PER_PERIOD = 8
 DEMO_MAX_SAMPLES = 10_000_000
+#: the largest demo amplitude (V): a hundred times the presets' stacks' drives, far from
+#: where float64 overflows (the trial's 1e306 V printed a loop width of -6e306 ue)
+DEMO_MAX_AMPLITUDE_V = 1e4
 
 model_app = LabrigTyper(help="The dynamic hysteresis model: demo and the paper's figures.")
 
@@ -38,7 +41,9 @@ def demo(
         metavar="PRESET",
         help=f"Parameter preset: {one_of(Preset)}.",
     ),
-    amplitude_v: float = typer.Option(100.0, help="Peak of the unipolar sine (V, above 0)."),
+    amplitude_v: float = typer.Option(
+        100.0, help="Peak of the unipolar sine (V, above 0, at most 10 000)."
+    ),
     frequency_hz: float = typer.Option(1.0, help="Sine frequency (Hz, above 0)."),
     cycles: int = typer.Option(5, min=1, help="Number of cycles."),
     rate_hz: float = typer.Option(
@@ -131,6 +136,12 @@ def check_demo_sine(amplitude_v: float, frequency_hz: float, cycles: int, rate_h
     ):
         if not (math.isfinite(value) and value > 0):
             raise typer.BadParameter(f"{value:g}: must be a number above 0 {unit}", param_hint=name)
+    if amplitude_v > DEMO_MAX_AMPLITUDE_V:
+        raise typer.BadParameter(
+            f"{amplitude_v:g}: must be at most {DEMO_MAX_AMPLITUDE_V:g} V (the presets describe "
+            "stacks driven to 100-200 V; the strain of 1e306 V overflows)",
+            param_hint="--amplitude-v",
+        )
     low = DEMO_MIN_SAMPLES_PER_PERIOD * frequency_hz
     if not (math.isfinite(rate_hz) and rate_hz >= low):
         raise typer.BadParameter(

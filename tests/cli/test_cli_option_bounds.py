@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 
 import labrig
@@ -96,6 +97,8 @@ def test_draw_fleet_takes_its_bound_and_not_one_more(monkeypatch):
         ("--frequency-hz", "0"),
         ("--frequency-hz", "nan"),
         ("--amplitude-v", "-5"),
+        ("--amplitude-v", "10000.001"),  # just past DEMO_MAX_AMPLITUDE_V
+        ("--amplitude-v", "1e306"),  # a trial's: a loop width of -6e306 ue, exit 0
         ("--rate-hz", "7.99"),  # 8 samples a period of 1 Hz is the least
         ("--rate-hz", "inf"),
         ("--cycles", "0"),
@@ -113,6 +116,11 @@ def test_the_demo_sine_at_its_bounds():
     check_demo_sine(100.0, 1.0, DEMO_MAX_SAMPLES // 1000, 1000.0)
     with pytest.raises(Exception, match="samples in all"):
         check_demo_sine(100.0, 1.0, DEMO_MAX_SAMPLES // 1000 + 1, 1000.0)
+    # the amplitude bound: 10 000 V draws finite loops, its strain growing with the drive
+    top = invoke("model", "demo", "--amplitude-v", "10000", "--cycles", "1", "--json")
+    assert top.exit_code == 0, top.output
+    (cycle,) = json.loads(top.stdout)["cycles"]
+    assert all(np.isfinite(v) and v > 0 for k, v in cycle.items() if k != "cycle"), cycle
 
 
 def _path_params() -> list[tuple[list[str], str, bool]]:
