@@ -18,6 +18,7 @@ parameters against the bounds each effect declares (:func:`fitted_effects`).
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -29,7 +30,7 @@ from pydantic import ValidationError
 from labrig.analysis.baselines import KINDS
 from labrig.analysis.records import Record
 from labrig.core.errors import InputFileError, InputIssue
-from labrig.core.jsonsafe import loads_bounded
+from labrig.core.jsonsafe import JSONLimitError, loads_bounded
 from labrig.core.textfile import read_text_bounded
 from labrig.model import ModelParams
 from labrig.model.effects import Effect, Param, RunContext
@@ -97,21 +98,57 @@ def read_params_file(path: Path, who: str, *, bare_ok: bool = False) -> ParamsFi
         raw = loads_bounded(read_text_bounded(path, MAX_PARAMS_BYTES))
     except FileNotFoundError:
         raise file_issue(path, "parameter file not found") from None
+    except JSONLimitError as e:  # a number no parameter file holds, named where it is
+        raise file_issue(
+            path,
+            f"{e.what} ({e.limit}): no parameter file holds such a number; expected a number "
+            "as labrig fit writes it (a damaged or edited file?)",
+            e.where,
+        ) from None
     except (OSError, UnicodeDecodeError, ValueError) as e:  # JSONDecodeError is a ValueError
         raise file_issue(path, f"not a JSON parameter file ({e})") from None
-    if isinstance(raw, dict) and isinstance(raw.get("params"), dict):
+    expected = "the output of labrig fit --json: an object whose 'params' is an object of the "
+    expected += "model's parameters"
+    if bare_ok:
+        expected += " (or that object of parameters itself)"
+    if not isinstance(raw, dict):
+        raise file_issue(
+            path, f"the file holds {_json_what(raw)}, not an object; expected {expected}"
+        )
+    if "params" in raw and not isinstance(raw["params"], dict):
+        raise file_issue(
+            path,
+            f"{_json_what(raw['params'])}, not an object; expected "
+            "the model's parameters by name ({'alpha0_ue_per_V': ..., 'vc_V': ...}, as labrig "
+            "fit --json writes them)",
+            "params",
+        )
+    if isinstance(raw.get("params"), dict):
         refuse_baseline(raw, path, who)
         return ParamsFile(path, raw, _model_params(raw["params"], path, "params"))
     if not bare_ok:
-        raise file_issue(path, "no 'params' object (expected the output of labrig fit --json)")
+        raise file_issue(path, f"no 'params' object; expected {expected}")
     return ParamsFile(path, None, _model_params(raw, path, ""))
+
+
+def _json_what(value: Any) -> str:
+    """What a JSON value that is not an object is, in words, with the value as JSON spells it
+    (cut to 40 characters): ``a list ([1, 2])``, ``null``."""
+    if value is None:
+        return "null"
+    kind = {list: "a list", str: "a string", bool: "a boolean"}.get(type(value), "a number")
+    text = json.dumps(value)
+    return f"{kind} ({text if len(text) <= 40 else text[:37] + '...'})"
 
 
 def _model_params(raw: Any, path: Path, field: str) -> ModelParams:
     try:
         return ModelParams.model_validate(raw)
     except ValidationError as e:
-        why = "; ".join(f"{'.'.join(map(str, x['loc']))}: {x['msg']}" for x in e.errors())
+        why = "; ".join(
+            f"{'.'.join(map(str, x['loc'])) or field or 'the parameters'}: {x['msg']}"
+            for x in e.errors()
+        )
         raise file_issue(path, f"invalid model parameters: {why}", field) from None
 
 

@@ -25,7 +25,9 @@ a non-finite time, voltage or scored strain sample, or one beyond :data:`MAX_ABS
 :data:`MAX_ABS_STRAIN_UE`; a scored entry of fewer than
 :data:`MIN_SAMPLES` samples; a voltage that spans less than :data:`MIN_VOLTAGE_SPAN_V` over the
 scored entries (and over each entry simulated on its own); a scored strain that does not
-change; a step definition whose ``rest_after_s`` is not a number from 0 to :data:`MAX_REST_S`.
+change, or that does not follow the voltage (:func:`response_share` below
+:data:`MIN_RESPONSE_SHARE`); a step definition whose ``rest_after_s`` is not a number from 0 to
+:data:`MAX_REST_S`.
 """
 
 from __future__ import annotations
@@ -64,6 +66,13 @@ MAX_ABS_VOLTAGE_V = 1e5
 MAX_ABS_STRAIN_UE = 1e7
 #: a run file of a single entry is cut into this many parts for ``diagnose``
 DIAGNOSE_SPLIT = 4
+#: the least share of a scored strain's variance that a linear response to the voltage must
+#: explain (:func:`response_share`, adjusted R^2). Measured (docs/analysis.md, "A strain that
+#: does not follow the voltage"): every legitimate record 0.878 or more (the simulated
+#: experiments 0.978, the real records 0.9975), strains that ignore the drive 0.04 or less
+MIN_RESPONSE_SHARE = 0.25
+#: the longest stretch of samples :func:`response_share` reads at a time (bounds its memory)
+RESPONSE_CHUNK = 1 << 16
 
 
 class AnalysisError(LabrigError):
@@ -330,6 +339,55 @@ def unit_issues(records: Sequence[tuple[Path, Record]]) -> list[InputIssue]:
 LIMITS = {"command_voltage": (MAX_ABS_VOLTAGE_V, "V"), "strain": (MAX_ABS_STRAIN_UE, "ue")}
 
 
+def response_lags(n: int) -> list[int]:
+    """The delays (samples) of the voltage :func:`response_share` regresses on for a record of
+    ``n`` samples: 0 and the powers of two up to a quarter of the record."""
+    lags = [0]
+    while 2 * lags[-1] <= n // 4 and n >= 4:
+        lags.append(max(1, 2 * lags[-1]))
+    return lags
+
+
+def response_share(voltage: np.ndarray, strain: np.ndarray) -> float:
+    """The share of the strain's variance that a linear time-invariant response to the voltage
+    explains: the adjusted R^2 of the least-squares fit of ``strain`` by a constant and the
+    voltage delayed by each of :func:`response_lags` (an FIR response; before the first sample
+    the voltage is held at its first value). The delays let a response that lags the drive (a
+    loop's opening, a low-pass, a resonance, a 40 Hz sine through the harmonic relaxor, whose
+    strain is uncorrelated with the voltage at the same instant) count in full; adjusted for
+    the number of delays, so noise that ignores the drive scores about 0 (it can be slightly
+    negative). ``strain`` must not be constant."""
+    v = np.asarray(voltage, dtype=np.float64)
+    s = np.asarray(strain, dtype=np.float64)
+    n = v.size
+    v = (v - np.mean(v)) / (float(np.ptp(v)) or 1.0)
+    s = (s - np.mean(s)) / float(np.ptp(s))
+    lags = response_lags(n)
+    k = len(lags) + 1  # the delays and the constant
+    gram = np.zeros((k, k))
+    cross = np.zeros(k)
+    for i0 in range(0, n, RESPONSE_CHUNK):
+        i1 = min(n, i0 + RESPONSE_CHUNK)
+        x = np.column_stack([np.ones(i1 - i0), *(_delayed(v, d, i0, i1) for d in lags)])
+        gram += x.T @ x
+        cross += x.T @ s[i0:i1]
+    coef = np.linalg.lstsq(gram, cross, rcond=1e-12)[0]
+    total = float(s @ s)
+    explained = min(float(coef @ cross) / total, 1.0)
+    dof = n - k
+    if dof <= 0:
+        return explained
+    return 1.0 - (1.0 - explained) * (n - 1) / dof
+
+
+def _delayed(v: np.ndarray, d: int, i0: int, i1: int) -> np.ndarray:
+    """``v[i - d]`` for ``i`` from ``i0`` to ``i1 - 1``, ``v[0]`` before the first sample."""
+    if i0 >= d:
+        return v[i0 - d : i1 - d]
+    head = np.full(min(d, i1) - i0, v[0])
+    return np.concatenate([head, v[: max(i1 - d, 0)]])
+
+
 def _record_issues(path: Path, r: Record, scored: bool, alone: bool) -> list[InputIssue]:
     """What makes one record unfit to simulate (and, when ``scored``, to fit)."""
 
@@ -386,7 +444,48 @@ def _record_issues(path: Path, r: Record, scored: bool, alone: bool) -> list[Inp
                 f"needs at least {MIN_VOLTAGE_SPAN_V:g} V",
             )
         )
+    elif np.ptp(r.voltage_V) >= MIN_VOLTAGE_SPAN_V:
+        keep = _typical(r.voltage_V) & _typical(r.strain_ue)
+        if np.ptp(r.voltage_V[keep]) < MIN_VOLTAGE_SPAN_V or np.ptp(r.strain_ue[keep]) == 0:
+            keep = np.ones(r.n, dtype=bool)  # the drive (or the strain) is in the few: all
+        share = response_share(r.voltage_V[keep], r.strain_ue[keep])
+        if share < MIN_RESPONSE_SHARE:
+            out.append(issue("data/strain", _not_following(r, share)))
     return out
+
+
+#: a sample farther from its channel's median than this many of the channel's 10-90 %
+#: spread is an outlier for :func:`response_share` ...
+OUTLIER_SPREADS = 10.0
+#: ... when such samples are at most this share of the record (a damaged value or a spike
+#: that the magnitude bound lets through; more of them are the record)
+OUTLIER_SHARE = 0.01
+
+
+def _typical(x: np.ndarray) -> np.ndarray:
+    """The samples of ``x`` that are not lone outliers (:data:`OUTLIER_SPREADS`,
+    :data:`OUTLIER_SHARE`): whether the strain follows the voltage is judged without them, so
+    one spike of 1e7 ue in a 900 ue record does not read as a strain that ignores its drive
+    (the magnitude bound names such a sample when it is past it)."""
+    lo, med, hi = np.percentile(x, [10.0, 50.0, 90.0])
+    far = np.abs(x - med) > OUTLIER_SPREADS * (hi - lo)
+    if np.count_nonzero(far) > max(1, int(OUTLIER_SHARE * x.size)):
+        return np.ones(x.size, dtype=bool)
+    return ~far
+
+
+def _not_following(r: Record, share: float) -> str:
+    """Why a strain that does not follow its voltage (:func:`response_share`) is refused."""
+    unit = unit_of(r, "strain") or "ue"
+    return (
+        f"the strain does not follow the voltage: a linear response to the voltage (now and up "
+        f"to {response_lags(r.n)[-1]} samples earlier) explains {100 * max(share, 0.0):.1f} % "
+        f"of the strain's variance; at least {100 * MIN_RESPONSE_SHARE:g} % is needed (the "
+        f"voltage spans {np.ptp(r.voltage_V):.3g} V, the strain {np.ptp(r.strain_ue):.3g} "
+        f"{unit}). A driven actuator's strain rises and falls with its voltage: a sensor not "
+        "connected or not powered, the wrong column (labrig import --strain N, --voltage N) or "
+        "a record of noise alone gives this (fit and report: --entries leaves the entry out)"
+    )
 
 
 def _check_entries(path: Path, names: list[str], entries: list[str] | None) -> None:
@@ -501,6 +600,8 @@ def prepare_diagnosis(
                 "all); record a longer entry, or fit this one (`labrig fit`)",
                 f"{one.name}/data",
             )
+        # the entry as the file holds it first: a problem is named by the entry, not a part
+        check_records(path, records, [one.name], alone="rest_after_s" not in one.meta)
         records = split_entries(records, DIAGNOSE_SPLIT)
         idle = records[0].meta.get("idle_lead_s")
         if idle:

@@ -33,7 +33,9 @@ of every command).
 Several training files are fitted together when each entry is simulated on its own (imported
 data); a recorded run is one chain and is the only training (or test) file of its side. A file
 given both as training and as test data, or twice, is refused (exit code 2), and so is a test
-record whose samples are contained in a training record, or contain one (:func:`check_unseen`).
+record whose samples are contained in a training record, or contain one (:func:`check_unseen`;
+with ``--leave-one-out``, two of the files that share a record, before any fit:
+:func:`check_distinct_records`).
 
 **Leave one record out** (:func:`validate_leave_one_out`, ``--leave-one-out FILE...``): of N
 files, each in turn is the test file and the other N - 1 are the training files; every model
@@ -452,7 +454,12 @@ def _training_file(train: Setup, record: Record, files: Sequence[Path]) -> str:
     return ", ".join(str(p) for p in files)
 
 
-def check_unseen(train: Setup, tests: Sequence[Setup], train_files: Sequence[Path] = ()) -> None:
+def check_unseen(
+    train: Setup,
+    tests: Sequence[Setup],
+    train_files: Sequence[Path] = (),
+    option: str = "--on",
+) -> None:
     """No test record shares its samples with a training record: the same capture imported
     twice under two names, a slice of it (``labrig import --window``), either written out by
     ``labrig export`` and imported again, or a file gathering several captures one of which is
@@ -462,8 +469,10 @@ def check_unseen(train: Setup, tests: Sequence[Setup], train_files: Sequence[Pat
     rounding of ``labrig export`` (:func:`~labrig.core.samples.contained_at`: 5e-10 of each
     value, far below any capture's noise); records constant throughout are not compared.
     ``train_files``: the training files, to name the one holding the record (default: the
-    setup's own file). Raises :class:`~labrig.core.errors.InputFileError` naming the test file,
-    its record, the training record and its file."""
+    setup's own file); ``option``: the option that named the test files (``--leave-one-out``
+    in a fold of it, where the two files are both among its files). Raises
+    :class:`~labrig.core.errors.InputFileError` naming the test file, its record, the training
+    record and its file, and the option."""
     issues = []
     for s in tests:
         for r in s.records:
@@ -473,11 +482,46 @@ def check_unseen(train: Setup, tests: Sequence[Setup], train_files: Sequence[Pat
                     continue
                 where = _training_file(train, a, train_files)
                 verb, detail = how
-                msg = f"its record {r.name!r} {verb} the training record {a.name!r} of {where}"
-                msg += f"{detail}: a model would be scored on data it was identified on; test on "
-                msg += "a record that no training file holds"
-                issues.append(InputIssue(str(s.path), None, "--on", msg))
+                if option == "--leave-one-out":
+                    msg = f"its record {r.name!r} {verb} the record {a.name!r} of {where}"
+                    msg += f"{detail}, another of the files: the fold that tests either file "
+                    msg += "trains on the other, scoring the models on data they were "
+                    msg += "identified on; give each record to --leave-one-out once"
+                else:
+                    msg = f"its record {r.name!r} {verb} the training record {a.name!r} of "
+                    msg += f"{where}{detail}: a model would be scored on data it was identified "
+                    msg += "on; test on a record that no training file holds"
+                issues.append(InputIssue(str(s.path), None, option, msg))
                 break
+    if issues:
+        raise InputFileError(issues)
+
+
+def check_distinct_records(setups: Sequence[Setup]) -> None:
+    """``--leave-one-out``: no two of the files share a record's samples (a copy of a file under
+    another name, the same capture imported twice, a slice of another file's record: the fold
+    that tests one would train on the other; compared as :func:`check_unseen` compares). Raises
+    :class:`~labrig.core.errors.InputFileError` naming, for each file that shares a record with
+    an earlier one, its record, the earlier file and its record, and the option."""
+    issues = []
+    for k, s in enumerate(setups):
+        found = next(
+            (
+                (r, e, a, how)
+                for e in setups[:k]
+                for r in s.records
+                for a in e.records
+                if (how := _shared(a, r)) is not None
+            ),
+            None,
+        )
+        if found is None:
+            continue
+        r, e, a, (verb, detail) = found
+        msg = f"its record {r.name!r} {verb} the record {a.name!r} of {e.path}{detail}: the "
+        msg += "fold that tests either file would train on the other, scoring the models on data "
+        msg += "they were identified on; give each record to --leave-one-out once"
+        issues.append(InputIssue(str(s.path), None, "--leave-one-out", msg))
     if issues:
         raise InputFileError(issues)
 
@@ -495,13 +539,19 @@ def validate_runs(
     page: bool = False,
     out: Path | str | None = None,
     overwrite: bool = False,
+    test_option: str = "--on",
+    distinct_files: Sequence[Path | str] = (),
 ) -> Validation:
     """``labrig validate`` (module docstring): identify every model on the files ``train``,
     score each on the files ``on``. ``effects_from``: a ``diagnosis.json`` whose accepted
     effects are added to our model; ``run_diagnosis``: diagnose the training records now
     instead; ``page``: also draw the HTML page (:attr:`Validation.page`); ``out``: write it
     there (checked before any work by :func:`labrig.core.outputs.check_outputs`: never an
-    input, an existing file only with ``overwrite``; written beside, then renamed)."""
+    input, an existing file only with ``overwrite``; written beside, then renamed);
+    ``test_option``: the option that named the test files, in messages (``--leave-one-out`` in
+    a fold of :func:`validate_leave_one_out`); ``distinct_files``: files no two of which may
+    share a record (:func:`check_distinct_records`, before any fit: the files of a
+    leave-one-out, given to its first fold)."""
     from labrig.core.outputs import check_writable, write_text_output
     from labrig.store.reader import being_written
 
@@ -516,9 +566,11 @@ def validate_runs(
     if effects_from is not None and run_diagnosis:
         raise _issue(effects_from, "give --effects-from or --diagnose, not both", "--diagnose")
     doc = _read_diagnosis(Path(effects_from)) if effects_from is not None else None
+    if distinct_files:
+        check_distinct_records([prepare(Path(p), None, warmup_s, offset) for p in distinct_files])
     tr = training_setup(train_p, warmup_s, offset)
     tests = [prepare(p, None, warmup_s, offset) for p in test_p]
-    check_unseen(tr, tests, train_p)
+    check_unseen(tr, tests, train_p, test_option)
     mixed = unit_issues(
         [(Path(s.path), r) for s in (tr, *tests) for r in s.scored_records]
     )  # each file is checked alone by prepare; here the training and test files together
@@ -653,6 +705,8 @@ def validate_leave_one_out(
                 warmup_s=warmup_s,
                 offset=offset,
                 ui=ui,
+                test_option="--leave-one-out",
+                distinct_files=paths if k == 0 else (),
             )
         )
     return LeaveOneOut(paths, folds)
