@@ -49,25 +49,25 @@ from labrig.protocol.check import check_protocol, load_plan
 from labrig.protocol.preflight import measure
 from labrig.rig.limits import RigLimits
 
+
+def long_sweep(name: str, frequencies_hz: str) -> str:
+    """A protocol of 15 sines of 499 s at 100 kHz: 20, 50, 80 V at ``frequencies_hz``."""
+    return f"""name: {name}
+rate_hz: 100000
+steps:
+  - kind: sweep
+    amplitudes_V: [20, 50, 80]
+    frequencies_hz: [{frequencies_hz}]
+    cycles: 1
+    min_duration_s: 499
+"""
+
+
 PROTOCOLS = {
-    "sweep": """name: long sweep
-rate_hz: 100000
-steps:
-  - kind: sweep
-    amplitudes_V: [20, 50, 80]
-    frequencies_hz: [1, 5, 10, 20, 40]
-    cycles: 1
-    min_duration_s: 499
-""",
-    "sweep, two decimals": """name: long sweep, two decimals
-rate_hz: 100000
-steps:
-  - kind: sweep
-    amplitudes_V: [20, 50, 80]
-    frequencies_hz: [1.37, 5.13, 12.71, 23.49, 41.07]
-    cycles: 1
-    min_duration_s: 499
-""",
+    "sweep": long_sweep("long sweep", "1, 5, 10, 20, 40"),
+    "sweep, two decimals": long_sweep(
+        "long sweep, two decimals", "1.37, 5.13, 12.71, 23.49, 41.07"
+    ),
     "mixed": """name: long mixed
 rate_hz: 100000
 steps:
