@@ -1,7 +1,9 @@
 """The noise floor: the NRMSE a perfect model would reach on a set of records.
 
 One estimator serves every command that prints a floor (``labrig fit``, ``report``,
-``validate`` and ``diagnose``), so one file gets one floor. It is measured on a model's
+``validate`` and ``diagnose``), so one file and one model's residual get one floor (another
+model's residual, or our model identified on other records, can read a little differently). It
+is measured on a model's
 residual ``r = measured - predicted`` (ue), after the warm-up:
 
 - a periodic entry of period ``P`` samples holding at least :data:`MIN_PERIODS` periods: over
