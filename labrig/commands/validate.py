@@ -458,7 +458,6 @@ def check_unseen(
     train: Setup,
     tests: Sequence[Setup],
     train_files: Sequence[Path] = (),
-    option: str = "--on",
 ) -> None:
     """No test record shares its samples with a training record: the same capture imported
     twice under two names, a slice of it (``labrig import --window``), either written out by
@@ -469,10 +468,9 @@ def check_unseen(
     rounding of ``labrig export`` (:func:`~labrig.core.samples.contained_at`: 5e-10 of each
     value, far below any capture's noise); records constant throughout are not compared.
     ``train_files``: the training files, to name the one holding the record (default: the
-    setup's own file); ``option``: the option that named the test files (``--leave-one-out``
-    in a fold of it, where the two files are both among its files). Raises
-    :class:`~labrig.core.errors.InputFileError` naming the test file, its record, the training
-    record and its file, and the option."""
+    setup's own file). Raises :class:`~labrig.core.errors.InputFileError` naming the test file,
+    its record, the training record and its file (the files of a leave-one-out are compared
+    with each other before its first fold: :func:`check_distinct_records`)."""
     issues = []
     for s in tests:
         for r in s.records:
@@ -482,16 +480,10 @@ def check_unseen(
                     continue
                 where = _training_file(train, a, train_files)
                 verb, detail = how
-                if option == "--leave-one-out":
-                    msg = f"its record {r.name!r} {verb} the record {a.name!r} of {where}"
-                    msg += f"{detail}, another of the files: the fold that tests either file "
-                    msg += "trains on the other, scoring the models on data they were "
-                    msg += "identified on; give each record to --leave-one-out once"
-                else:
-                    msg = f"its record {r.name!r} {verb} the training record {a.name!r} of "
-                    msg += f"{where}{detail}: a model would be scored on data it was identified "
-                    msg += "on; test on a record that no training file holds"
-                issues.append(InputIssue(str(s.path), None, option, msg))
+                msg = f"its record {r.name!r} {verb} the training record {a.name!r} of "
+                msg += f"{where}{detail}: a model would be scored on data it was identified "
+                msg += "on; test on a record that no training file holds"
+                issues.append(InputIssue(str(s.path), None, "--on", msg))
                 break
     if issues:
         raise InputFileError(issues)
@@ -539,7 +531,6 @@ def validate_runs(
     page: bool = False,
     out: Path | str | None = None,
     overwrite: bool = False,
-    test_option: str = "--on",
     distinct_files: Sequence[Path | str] = (),
 ) -> Validation:
     """``labrig validate`` (module docstring): identify every model on the files ``train``,
@@ -548,8 +539,7 @@ def validate_runs(
     instead; ``page``: also draw the HTML page (:attr:`Validation.page`); ``out``: write it
     there (checked before any work by :func:`labrig.core.outputs.check_outputs`: never an
     input, an existing file only with ``overwrite``; written beside, then renamed);
-    ``test_option``: the option that named the test files, in messages (``--leave-one-out`` in
-    a fold of :func:`validate_leave_one_out`); ``distinct_files``: files no two of which may
+    ``distinct_files``: files no two of which may
     share a record (:func:`check_distinct_records`, before any fit: the files of a
     leave-one-out, given to its first fold)."""
     from labrig.core.outputs import check_writable, write_text_output
@@ -570,7 +560,7 @@ def validate_runs(
         check_distinct_records([prepare(Path(p), None, warmup_s, offset) for p in distinct_files])
     tr = training_setup(train_p, warmup_s, offset)
     tests = [prepare(p, None, warmup_s, offset) for p in test_p]
-    check_unseen(tr, tests, train_p, test_option)
+    check_unseen(tr, tests, train_p)
     mixed = unit_issues(
         [(Path(s.path), r) for s in (tr, *tests) for r in s.scored_records]
     )  # each file is checked alone by prepare; here the training and test files together
@@ -705,7 +695,6 @@ def validate_leave_one_out(
                 warmup_s=warmup_s,
                 offset=offset,
                 ui=ui,
-                test_option="--leave-one-out",
                 distinct_files=paths if k == 0 else (),
             )
         )
