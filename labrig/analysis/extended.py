@@ -35,7 +35,7 @@ from labrig.analysis.engine import LAM_GAP, LoopScale, Problem, chord_refit, ort
 from labrig.analysis.fit_uncertainty import fit_covariance
 from labrig.analysis.metrics import second_half_nrmse_pct
 from labrig.analysis.parallel import map_tasks
-from labrig.analysis.records import Record
+from labrig.analysis.records import Record, warmup_samples
 from labrig.analysis.simulate import (
     EXTENDED_CONVERGED,
     LOOSE,
@@ -318,7 +318,7 @@ class ExtendedProblem(Problem):
             one = Problem([seq], [[]], self.effects, self.family, shared=self._shared)
             with single_thread_blas(), np.errstate(over="ignore"):
                 y = one.strains(base, eff)[0]
-            i0 = round(max(self.warmup_s, 0.0) * rec.rate_hz)
+            i0 = warmup_samples(rec, self.warmup_s)
             a = seq.entries[name].start
             p = y[a + i0 : a + rec.n]
             m = rec.strain_ue[i0:]

@@ -36,7 +36,6 @@ import numpy as np
 from labrig.analysis.extended import ExtendedProblem, FitOutcome, effect_context
 from labrig.analysis.fit import PARAM_NAMES, FitResult
 from labrig.analysis.fit_uncertainty import (
-    Covariance,
     bound_notes,
     bounds_reached,
     fit_covariance,
@@ -226,10 +225,11 @@ def fit_effects(
         if progress:
             progress("heldout", n, n)
     base_notes = set(bound_notes(base.at_bound))  # the base fit's: judged again here
+    sd, corr = cov.uncertainty(), cov.correlations()
     return EffectsFit(
         params=best.params(base.params.shape, base.params.memory),
-        uncertainty={n: cov.uncertainty().get(n) for n in PARAM_NAMES},
-        effects=[_listed(e, best, cov) for e in effects],
+        uncertainty={n: sd.get(n) for n in PARAM_NAMES},
+        effects=[_listed(e, best, sd, corr) for e in effects],
         nrmse_pct=best.nrmse_pct,
         per_entry=dict(best.per_entry),
         heldout_nrmse_pct=_mean(held),
@@ -238,7 +238,7 @@ def fit_effects(
         base_heldout_nrmse_pct=_mean(base_held),
         entries=list(prob.scored),
         context=context,
-        correlation=cov.correlations(),
+        correlation=corr,
         free=cov.names,
         at_bound=at_bound,
         messages=[m for m in base.messages if m not in base_notes] + bound_notes(at_bound),
@@ -246,11 +246,16 @@ def fit_effects(
     )
 
 
-def _listed(effect: Effect, fit: FitOutcome, cov: Covariance) -> dict[str, Any]:
-    """The JSON item of one fitted effect: its parameters, their 1-sigma (``None``: not
-    determined), their correlations with every free parameter, its description."""
+def _listed(
+    effect: Effect,
+    fit: FitOutcome,
+    sd: dict[str, float | None],
+    corr: dict[str, dict[str, float]],
+) -> dict[str, Any]:
+    """The JSON item of one fitted effect: its parameters, their 1-sigma (``sd``, every free
+    parameter's: ``None``, not determined), their correlations with every free parameter
+    (``corr``), its description."""
     p = {k: float(v) for k, v in fit.effects.get(effect.name, {}).items()}
-    sd, corr = cov.uncertainty(), cov.correlations()
     own = {k: f"{effect.name}.{k}" for k in p}
     unc = {k: sd.get(q) for k, q in own.items()}
     return {

@@ -58,10 +58,14 @@ def is_number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
+def _cut(text: str) -> str:
+    """``text`` cut to 40 characters (the last three ``...``)."""
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 def _shown(value: Any) -> str:
     """A JSON value in a message, cut to 40 characters."""
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
+    return _cut(repr(value))
 
 
 @dataclass
@@ -138,7 +142,7 @@ def _json_what(value: Any) -> str:
         return "null"
     kind = {list: "a list", str: "a string", bool: "a boolean"}.get(type(value), "a number")
     text = json.dumps(value)
-    return f"{kind} ({text if len(text) <= 40 else text[:37] + '...'})"
+    return f"{kind} ({_cut(text)})"
 
 
 def _model_params(raw: Any, path: Path, field: str) -> ModelParams:
@@ -182,7 +186,7 @@ def _uncertainty(value: Any, key: str) -> list[tuple[str, str]]:
     """``uncertainty``: parameter -> its 1 sigma (>= 0; ``null``: held fixed or not
     determined). The names are not checked: the report shows the model's and ignores others."""
     if not isinstance(value, dict):
-        return [(key, f"{_shown(value)} is not an object; expected {{parameter: 1 sigma}}")]
+        return [_not_a(key, value, "{parameter: 1 sigma}", "is not an object")]
     expected = (
         "a standard uncertainty >= 0, in the parameter's unit (null for one held fixed or not "
         "determined)"
@@ -203,9 +207,7 @@ def _not_a(field: str, value: Any, expected: str, what: str = "") -> tuple[str, 
 def _correlation(value: Any, key: str) -> list[tuple[str, str]]:
     """``correlation``: parameter -> parameter -> a number (-1 to 1 but for rounding)."""
     if not isinstance(value, dict):
-        return [
-            (key, f"{_shown(value)} is not an object; expected {{parameter: {{parameter: r}}}}")
-        ]
+        return [_not_a(key, value, "{parameter: {parameter: r}}", "is not an object")]
     out = []
     for name, row in value.items():
         if not isinstance(row, dict):
@@ -228,7 +230,7 @@ def _identifiability(value: Any, key: str) -> list[tuple[str, str]]:
     fit's judgement) and whose ``loop`` (``null`` for the linear shape) holds numbers (``*_sd``
     may be ``null``), its stroke ``span_V`` above 0 V."""
     if not isinstance(value, dict):
-        return [(key, f"{_shown(value)} is not an object; expected {{rule, unidentifiable, loop}}")]
+        return [_not_a(key, value, "{rule, unidentifiable, loop}", "is not an object")]
     judged = value.get("unidentifiable", {})
     if not isinstance(judged, dict) or not all(isinstance(v, str) for v in judged.values()):
         return [
@@ -242,13 +244,8 @@ def _identifiability(value: Any, key: str) -> list[tuple[str, str]]:
     if loop is None:
         return []
     if not isinstance(loop, dict):
-        return [
-            (
-                f"{key}.loop",
-                f"{_shown(loop)} is not an object; expected span_V (V), loop_width_ue and "
-                "loop_curvature with their *_sd, or null",
-            )
-        ]
+        expected = "span_V (V), loop_width_ue and loop_curvature with their *_sd, or null"
+        return [_not_a(f"{key}.loop", loop, expected, "is not an object")]
     out = []
     for name, v in loop.items():
         if v is None and name != "span_V":

@@ -169,12 +169,12 @@ def parameter_cells(v: float, u: float | None, why: str | None) -> tuple[str, st
     from labrig.analysis.identifiability import AT_BOUND
 
     shown = number(v, 5)
-    if why is None:
-        rel = "fixed" if u is None else (f"{100 * u / abs(v):.2g} %" if v else "—")
-        return shown, number(u, 2), rel
-    shown = f"unidentifiable (fitted {shown}; {why})"
-    if u is None or AT_BOUND in why:
-        return shown, "—", "—"
+    if why is not None:
+        shown = f"unidentifiable (fitted {shown}; {why})"
+        if u is None or AT_BOUND in why:
+            return shown, "—", "—"
+    elif u is None:
+        return shown, "—", "fixed"
     return shown, number(u, 2), f"{100 * u / abs(v):.2g} %" if v else "—"
 
 

@@ -24,7 +24,7 @@ from labrig.analysis.baselines import KINDS
 from labrig.analysis.fit import FitResult, predict_record
 from labrig.analysis.noise_floor import noise_floor
 from labrig.analysis.params_file import fitted_effects, read_fit_output
-from labrig.analysis.records import strain_unit
+from labrig.analysis.records import strain_unit, warmup_samples
 from labrig.commands.fit import (
     CommandUI,
     FitOutcome,
@@ -165,7 +165,7 @@ def with_offsets(predictions: dict[str, np.ndarray], setup: Setup) -> dict[str, 
     out = dict(predictions)
     for r in setup.records:
         if r.name in out:
-            i0 = round(setup.warmup_s * r.rate_hz)
+            i0 = warmup_samples(r, setup.warmup_s)
             out[r.name] = out[r.name] + float(np.mean(r.strain_ue[i0:] - out[r.name][i0:]))
     return out
 
@@ -340,11 +340,14 @@ def _where_identified(
 def _own_records(train: list[Path], fitted_on: list[str] | None, setup: Setup) -> bool:
     """Whether our model was identified on the report's own records: its one training file is
     the report's, and it was fitted on the entries the report scores (or does not say which)."""
-    return (
-        len(train) == 1
-        and same_file(train[0], setup.path)
-        and (fitted_on is None or set(fitted_on) == set(setup.scored))
+    return _the_reports_file(train, setup) and (
+        fitted_on is None or set(fitted_on) == set(setup.scored)
     )
+
+
+def _the_reports_file(train: list[Path], setup: Setup) -> bool:
+    """Whether the training files ``train`` are the report's own file alone."""
+    return len(train) == 1 and same_file(train[0], setup.path)
 
 
 def _identified_elsewhere(
@@ -361,8 +364,7 @@ def _identified_elsewhere(
     in-sample (those of the training records, when the file is the report's own)."""
     tr = training_records(train, fitted_on, params_file, setup)
     out.peers_on, out.peers_setup = train, tr
-    own = len(train) == 1 and same_file(train[0], setup.path)
-    seen = set(tr.scored) if own else set()
+    seen = set(tr.scored) if _the_reports_file(train, setup) else set()
     out.in_sample = [n for n in setup.scored if n in seen]
     names = ", ".join(p.name for p in train)
     where = f"{', '.join(tr.scored)} of {names}" if fitted_on is not None else names
@@ -391,7 +393,11 @@ def training_records(
     (:func:`~labrig.commands.prepare.unit_issues`: a model predicts in the unit it was
     identified in)."""
     try:
-        tr = prepare(train[0], fitted_on) if len(train) == 1 else training_setup(train)
+        if len(train) > 1:
+            tr = training_setup(train)
+        else:  # the report's own file: the snapshot it has read
+            run = setup.run if _the_reports_file(train, setup) else None
+            tr = prepare(train[0], fitted_on, run=run)
     except InputFileError as e:
         field = "entries" if any(i.field == "--entries" for i in e.issues) else "train_files"
         raise InputFileError(
