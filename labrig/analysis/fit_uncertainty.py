@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from labrig.analysis.engine import LOOP_CURVATURE, LOOP_WIDTH, Coordinates, Problem
+from labrig.analysis.engine import Coordinates, Problem
 
 __all__ = [
     "NULL_TOL",
@@ -57,8 +57,6 @@ __all__ = [
 RCOND = float(np.sqrt(1e-15))
 #: a parameter whose row of the dropped directions has a norm over this is not determined
 NULL_TOL = 1e-6
-#: the native name of the operator's loop coordinates (:class:`~labrig.analysis.engine.LoopScale`)
-_LOOP_NATIVE = {LOOP_WIDTH: "gamma_ue_per_V", LOOP_CURVATURE: "vc_V"}
 
 
 def native_names(coords: Coordinates) -> list[str]:
@@ -285,14 +283,10 @@ def bounds_reached(
         Parameter (as :func:`native_names` names it) to its value there (its unit).
     """
     out: dict[str, float] = {}
-    for c, on in zip(coords.items, coords.at_bound(z), strict=True):
-        if not on:
-            continue
-        if c.who == "base":
-            name = _LOOP_NATIVE.get(c.name, c.name)
-            out[name] = float(base[name])
-        else:
-            out[f"{c.who}.{c.name}"] = float((effects or {})[c.who][c.name])
+    names = native_names(coords)  # one per coordinate, in order (a loop coordinate's native)
+    for name, c, on in zip(names, coords.items, coords.at_bound(z), strict=True):
+        if on:
+            out[name] = float(base[name] if c.who == "base" else (effects or {})[c.who][c.name])
     return out
 
 
